@@ -1,0 +1,52 @@
+"""Fluid loads on the manipulator's links: buoyancy and cross-flow drag by Gauss-Legendre quadrature.
+
+Drag (paper eq. 9, generalised by SPEC 3): along the link axis ``u`` (unit vector of ``s_i``),
+``f = -1/2 rho C_d D int_0^L |v_n(x)| v_n(x) dx`` and its moment about the frame origin
+``n = -1/2 rho C_d D int_0^L (x u) x (|v_n(x)| v_n(x)) dx``, with ``v(x) = v_i + w_i x (x u)`` and
+``v_n = v - (v.u) u``. ``D`` is the diameter (the paper's "cross-sectional area" is a slip, SPEC 3).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["gauss_legendre", "link_drag", "buoyancy_force"]
+
+
+@lru_cache(maxsize=None)
+def gauss_legendre(n: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Nodes and weights of the n-point Gauss-Legendre rule on [0, 1] (exact for degree 2n-1)."""
+    if not isinstance(n, int) or n < 1:
+        raise ValueError(f"n_quad: number of quadrature points must be an integer >= 1, got {n!r}")
+    xi, wi = np.polynomial.legendre.leggauss(n)
+    return tuple(0.5 * (xi + 1.0)), tuple(0.5 * wi)
+
+
+def link_drag(rho, Cd, diameter, s, v, w, n_quad: int):
+    """Drag force and moment (about the link frame's origin) on a cylinder along ``s``, in the link frame.
+
+    ``v``: velocity of the frame origin, ``w``: angular velocity, both in the link frame, through still water.
+    """
+    L = ca.norm_2(s)
+    u = s / L
+    nodes, weights = gauss_legendre(n_quad)
+    k = -0.5 * rho * Cd * diameter
+    f = 0
+    n = 0
+    for xi, wi in zip(nodes, weights):
+        x = L * xi
+        r = x * u
+        vx = v + ca.cross(w, r)
+        vn = vx - ca.dot(vx, u) * u
+        q = ca.sqrt(ca.dot(vn, vn)) * vn
+        f = f + (wi * L) * q
+        n = n + (wi * L) * ca.cross(r, q)
+    return k * f, k * n
+
+
+def buoyancy_force(rho, volume, g_i):
+    """Buoyancy of a submerged volume: -rho V g (opposes gravity ``g_i``, expressed in the same frame)."""
+    return -rho * volume * g_i

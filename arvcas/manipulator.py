@@ -1,0 +1,175 @@
+"""The 6-DOF deep-sea manipulator: modified DH kinematics and recursive Newton-Euler on a moving base.
+
+Paper eq. 7-11 with SPEC 3: Craig's modified DH (Table 1), link i spans origin {i} -> origin {i+1}
+(link 6: ``[0, 0, L_tool]`` along z6), centre of mass and of buoyancy at the middle of each link,
+solid-cylinder inertia, per-link buoyancy and quadrature drag, a point payload at the tool point.
+The base is the vehicle: frame {0} sits at ``P^b_0`` in {b} with ``R^b_0 = I``.
+
+Sign convention: :func:`arm_wrench` returns ``tau_m``, the wrench the arm exerts *on the vehicle*,
+in {b} about the COB (at rest and level its z force is the arm's weight in water, positive down).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from . import hydro
+from .spatial import Rx, Rz, Rzyx
+
+__all__ = [
+    "N_JOINTS", "dh", "link_vectors", "link_inertia", "forward_kinematics", "rnea", "arm_wrench",
+    "tool_position", "stow_pose", "trim_wrench",
+]
+
+N_JOINTS = 6
+_Z = ca.DM([0, 0, 1])
+
+
+def dh(P, i: int, q_i):
+    """Modified DH transform of joint i (1-based): T_{i-1,i} = RotX(alpha) TransX(a) RotZ(q) TransZ(d).
+
+    Returns (R^{i-1}_i, p^{i-1}_i).
+    """
+    a, d, al = P[f"arm.joint{i}.a"], P[f"arm.joint{i}.d"], P[f"arm.joint{i}.alpha"]
+    R = ca.mtimes(Rx(al), Rz(q_i))
+    p = ca.vertcat(a, -ca.sin(al) * d, ca.cos(al) * d)
+    return R, p
+
+
+def link_vectors(P):
+    """s_i = P^i_{i+1} for links 1..6 (SPEC 3); s_6 reaches the tool point along z6."""
+    s = []
+    for i in range(1, N_JOINTS):
+        a, al, d = P[f"arm.joint{i + 1}.a"], P[f"arm.joint{i + 1}.alpha"], P[f"arm.joint{i + 1}.d"]
+        s.append(ca.vertcat(a, -ca.sin(al) * d, ca.cos(al) * d))
+    s.append(ca.vertcat(0, 0, P["arm.tool.length"]))
+    return s
+
+
+def link_inertia(mass, diameter, s):
+    """Inertia about the centre of mass of a solid cylinder along ``s``, in the link frame."""
+    L2 = ca.dot(s, s)
+    uu = ca.mtimes(s, s.T) / L2
+    r2 = (0.5 * diameter) ** 2
+    I_ax = 0.5 * mass * r2
+    I_tr = mass * (3 * r2 + L2) / 12.0
+    return I_tr * (ca.DM.eye(3) - uu) + I_ax * uu
+
+
+def forward_kinematics(P, q):
+    """Pose of frames {1..6} in {0}: list of (R^0_i, p^0_i)."""
+    R, p = ca.DM.eye(3), ca.DM.zeros(3)
+    out = []
+    for i in range(1, N_JOINTS + 1):
+        Ri, pi = dh(P, i, q[i - 1])
+        p = p + ca.mtimes(R, pi)
+        R = ca.mtimes(R, Ri)
+        out.append((R, p))
+    return out
+
+
+def tool_position(P, q):
+    """Tool point in {b} (SPEC 3 mount, link 6 length)."""
+    R6, p6 = forward_kinematics(P, q)[-1]
+    mount = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
+    return mount + p6 + ca.mtimes(R6, ca.vertcat(0, 0, P["arm.tool.length"]))
+
+
+def rnea(P, q, qd, qdd, w0, wd0, v0, a0, g0, payload, n_quad: int = 5):
+    """Recursive Newton-Euler (paper eq. 7, 8, 10) on a base frame {0} moving with (w0, wd0, v0, a0).
+
+    All base quantities are in {0}: angular velocity/acceleration, velocity and absolute acceleration of
+    the origin, gravity vector ``g0`` (m/s^2). Returns (f_1, n_1, R^0_1, p^0_1): the force and moment the
+    base exerts on link 1 at origin {1}, in frame {1}.
+    """
+    rho, Cd = P["env.rho"], P["env.Cd"]
+    s_list = link_vectors(P)
+    w, wd, v, a, g = w0, wd0, v0, a0, g0
+    frames = []
+    kin = []
+    for i in range(1, N_JOINTS + 1):
+        Ri, pi = dh(P, i, q[i - 1])
+        RiT = Ri.T
+        # eq. 7: propagate to frame i (quantities of frame i-1 first moved by p_i)
+        a = ca.mtimes(RiT, a + ca.cross(wd, pi) + ca.cross(w, ca.cross(w, pi)))
+        v = ca.mtimes(RiT, v + ca.cross(w, pi))
+        w_prev = ca.mtimes(RiT, w)
+        w = w_prev + qd[i - 1] * _Z
+        wd = ca.mtimes(RiT, wd) + ca.cross(w_prev, qd[i - 1] * _Z) + qdd[i - 1] * _Z
+        g = ca.mtimes(RiT, g)
+        frames.append((Ri, pi))
+        kin.append((w, wd, v, a, g))
+
+    f_next, n_next = ca.DM.zeros(3), ca.DM.zeros(3)
+    for i in range(N_JOINTS, 0, -1):
+        w, wd, v, a, g = kin[i - 1]
+        s = s_list[i - 1]
+        m_i = P[f"arm.link{i}.mass"]
+        V_i = P[f"arm.link{i}.volume"]
+        D_i = P[f"arm.link{i}.diameter"]
+        c = 0.5 * s  # COM = COB at the middle of the link (SPEC 3)
+        a_c = a + ca.cross(wd, c) + ca.cross(w, ca.cross(w, c))
+        F = m_i * a_c  # eq. 8
+        Ic = link_inertia(m_i, D_i, s)
+        N = ca.mtimes(Ic, wd) + ca.cross(w, ca.mtimes(Ic, w))
+        ext_c = m_i * g + hydro.buoyancy_force(rho, V_i, g)  # weight + buoyancy, both at c
+        f_d, n_d = hydro.link_drag(rho, Cd, D_i, s, v, w, n_quad)
+        if i < N_JOINTS:
+            R_next, p_next = frames[i]
+            f_child = ca.mtimes(R_next, f_next)
+            n_child = ca.mtimes(R_next, n_next) + ca.cross(p_next, f_child)
+        else:
+            # payload: point mass at the tool point, scaled by payload in [0, 1] (SPEC 3)
+            t = s
+            a_t = a + ca.cross(wd, t) + ca.cross(w, ca.cross(w, t))
+            mp, Vp = P["payload.mass"], P["payload.volume"]
+            f_child = payload * (mp * a_t - mp * g - hydro.buoyancy_force(rho, Vp, g))
+            n_child = ca.cross(t, f_child)
+        # eq. 10 with explicit external loads: what the parent must supply
+        f_next = f_child + F - ext_c - f_d
+        n_next = n_child + N + ca.cross(c, F - ext_c) - n_d
+    R1, p1 = frames[0]
+    return f_next, n_next, R1, p1
+
+
+def arm_wrench(P, eta, nu, nud, q, qd, qdd, payload, n_quad: int = 5):
+    """tau_m of eq. 11: the arm's wrench on the vehicle in {b} about the COB (SPEC 3 sign).
+
+    ``nud`` is Fossen's nu_dot (time derivative of the body-frame velocity components).
+    """
+    pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])  # R^b_0 = I (SPEC 3)
+    v_b, w_b = nu[0:3], nu[3:6]
+    a_b = nud[0:3] + ca.cross(w_b, v_b)  # absolute acceleration of the COB, in {b}
+    wd_b = nud[3:6]
+    w0, wd0 = w_b, wd_b
+    v0 = v_b + ca.cross(w_b, pb0)
+    a0 = a_b + ca.cross(wd_b, pb0) + ca.cross(w_b, ca.cross(w_b, pb0))
+    R = Rzyx(eta[3], eta[4], eta[5])
+    g0 = ca.mtimes(R.T, ca.vertcat(0, 0, P["env.g"]))
+    f1, n1, R1, p1 = rnea(P, q, qd, qdd, w0, wd0, v0, a0, g0, payload, n_quad)
+    f0 = ca.mtimes(R1, f1)
+    n0 = ca.mtimes(R1, n1) + ca.cross(p1, f0)
+    f_b = f0
+    n_b = n0 + ca.cross(pb0, f0)
+    return -ca.vertcat(f_b, n_b)
+
+
+def stow_pose(P):
+    """q0 of section 4.2, the pose at which the vehicle is trimmed (SPEC 3)."""
+    return ca.vertcat(*[P[f"arm.stow.q{i}"] for i in range(1, N_JOINTS + 1)])
+
+
+def trim_wrench(P, eta, n_quad: int = 5):
+    """The fixed trim buoyancy of SPEC 3, in {b}.
+
+    ``[0, 0, F_z, M_x, M_y, 0]`` = tau_m at q0, level, at rest, no payload; a world-vertical upward
+    force F_z at r_t = [-M_y/F_z, M_x/F_z, 0]: ``f_t = R' [0, 0, -F_z]``, ``m_t = r_t x f_t``.
+    """
+    z6 = ca.DM.zeros(6)
+    tm = arm_wrench(P, z6, z6, z6, stow_pose(P), z6, z6, 0, n_quad)
+    Fz, Mx, My = tm[2], tm[3], tm[4]
+    r_t = ca.vertcat(-My / Fz, Mx / Fz, 0)
+    R = Rzyx(eta[3], eta[4], eta[5])
+    f_t = ca.mtimes(R.T, ca.vertcat(0, 0, -Fz))
+    return ca.vertcat(f_t, ca.cross(r_t, f_t))
+

@@ -1,0 +1,97 @@
+"""The coupled vehicle + manipulator and the public plant functions as named CasADi SX Functions.
+
+Inputs are dense columns with the parameter vector ``p`` (``Params.vector()``) last, so every model
+number is a runtime input. The coupling is exact (SPEC 3): the arm's wrench is affine in the vehicle
+acceleration, ``tau_m = tau_m0 + J_m nu_dot``, so the coupled vehicle solves
+``(M - J_m(q)) nu_dot = tau + tau_m0 + tau_trim - C nu - D nu - g`` with no lagged acceleration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+
+from . import manipulator, thrusters, vehicle
+from .params import SCHEMA
+from .spatial import J
+
+__all__ = ["ModelOptions", "coupled_accel", "uvms_xdot", "plant_functions", "PUBLIC_FUNCTIONS"]
+
+NP = len(SCHEMA)
+
+PUBLIC_FUNCTIONS = ("vehicle_rhs", "arm_wrench", "uvms_rhs", "allocate", "thrust")
+
+
+@dataclass(frozen=True)
+class ModelOptions:
+    """Build options: they change the graph's structure, so they are part of the compile-cache key."""
+
+    n_quad: int = 5  # Gauss-Legendre points per link for the drag integral (SPEC 3)
+
+    def __post_init__(self):
+        if not isinstance(self.n_quad, int) or isinstance(self.n_quad, bool) or not 1 <= self.n_quad <= 64:
+            raise ValueError(f"ModelOptions.n_quad: must be an integer in [1, 64], got {self.n_quad!r}")
+
+    def tag(self) -> str:
+        return f"nq{self.n_quad}"
+
+
+def coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions):
+    """nu_dot of the exactly coupled vehicle + arm (paper eq. 1 with eq. 11, SPEC 3).
+
+    ``tau_extra``: further body wrench at the COB (the trim buoyancy of SPEC 3).
+    """
+    nud_s = ca.SX.sym("nud", 6)
+    tm = manipulator.arm_wrench(P, eta, nu, nud_s, q, qd, qdd, payload, opts.n_quad)
+    Jm = ca.jacobian(tm, nud_s)  # exact: tau_m is affine in nu_dot
+    tm0 = ca.substitute(tm, nud_s, ca.DM.zeros(6))
+    A = vehicle.M(P) - Jm
+    b = tau + tm0 + tau_extra - vehicle.forces(P, eta, nu)
+    return ca.solve(A, b)
+
+
+def uvms_xdot(P, x, tau, q, qd, qdd, payload, opts: ModelOptions, trim=None):
+    """xdot = [J(eta) nu; nu_dot] of the coupled system; ``trim`` defaults to SPEC 3's trim at q0."""
+    eta, nu = x[0:6], x[6:12]
+    if trim is None:
+        trim = manipulator.trim_wrench(P, eta, opts.n_quad)
+    nud = coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, trim, opts)
+    return ca.vertcat(ca.mtimes(J(eta), nu), nud)
+
+
+def plant_functions(opts: ModelOptions = ModelOptions()) -> dict[str, ca.Function]:
+    """The public plant functions (issue 2), as SX Functions, by their exact names and input orders."""
+    from .params import view
+
+    p = ca.SX.sym("p", NP)
+    P = view(p)
+    x = ca.SX.sym("x", 12)
+    tau = ca.SX.sym("tau", 6)
+    eta, nu, nud = ca.SX.sym("eta", 6), ca.SX.sym("nu", 6), ca.SX.sym("nud", 6)
+    q, qd, qdd = ca.SX.sym("q", 6), ca.SX.sym("qd", 6), ca.SX.sym("qdd", 6)
+    payload = ca.SX.sym("payload", 1)
+    u = ca.SX.sym("u", 6)
+
+    fns = {
+        "vehicle_rhs": ca.Function(
+            "vehicle_rhs", [x, tau, p], [vehicle.rhs(P, x, tau)], ["x", "tau", "p"], ["xdot"]
+        ),
+        "arm_wrench": ca.Function(
+            "arm_wrench",
+            [eta, nu, nud, q, qd, qdd, payload, p],
+            [manipulator.arm_wrench(P, eta, nu, nud, q, qd, qdd, payload, opts.n_quad)],
+            ["eta", "nu", "nud", "q", "qd", "qdd", "payload", "p"],
+            ["tau_m"],
+        ),
+        "uvms_rhs": ca.Function(
+            "uvms_rhs",
+            [x, tau, q, qd, qdd, payload, p],
+            [uvms_xdot(P, x, tau, q, qd, qdd, payload, opts)],
+            ["x", "tau", "q", "qd", "qdd", "payload", "p"],
+            ["xdot"],
+        ),
+        "allocate": ca.Function("allocate", [tau, p], [thrusters.allocate(P, tau)], ["tau", "p"], ["u"]),
+        "thrust": ca.Function("thrust", [u, p], [thrusters.thrust(P, u)], ["u", "p"], ["tau"]),
+    }
+    return fns
