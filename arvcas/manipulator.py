@@ -14,11 +14,11 @@ from __future__ import annotations
 import casadi as ca
 
 from . import hydro
-from .spatial import Rx, Rz, Rzyx
+from .spatial import Rx, Rz, Rzyx, skew
 
 __all__ = [
     "N_JOINTS", "dh", "link_vectors", "link_inertia", "forward_kinematics", "rnea", "arm_wrench",
-    "tool_position", "stow_pose", "trim_wrench",
+    "tool_position", "stow_pose", "trim_wrench", "trim_static", "trim_from_static", "base_inertia",
 ]
 
 N_JOINTS = 6
@@ -154,22 +154,58 @@ def arm_wrench(P, eta, nu, nud, q, qd, qdd, payload, n_quad: int = 5):
     return -ca.vertcat(f_b, n_b)
 
 
+def base_inertia(P, q, payload):
+    """Composite spatial inertia of the arm (+ payload) about the COB in {b}: M_arm(q).
+
+    The arm's wrench on the vehicle is affine in the vehicle acceleration,
+    ``tau_m = tau_m(nu_dot = 0) - M_arm(q) nu_dot`` (exact), and the coupled vehicle solves
+    ``(M + M_arm) nu_dot = ...`` (SPEC 3). Each body with mass m, centre c (in {b}) and inertia I_c
+    about c contributes ``[[m I, -m S(c)], [m S(c), I_c - m S(c) S(c)]]``.
+    """
+    pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
+    s_list = link_vectors(P)
+    Mm = ca.SX.zeros(6, 6) if isinstance(q, ca.SX) else ca.DM.zeros(6, 6)
+    bodies = []
+    for i, (R, p) in enumerate(forward_kinematics(P, q), start=1):
+        s = s_list[i - 1]
+        m_i = P[f"arm.link{i}.mass"]
+        Ic = ca.mtimes([R, link_inertia(m_i, P[f"arm.link{i}.diameter"], s), R.T])
+        bodies.append((m_i, pb0 + p + ca.mtimes(R, 0.5 * s), Ic))
+        if i == N_JOINTS:
+            bodies.append((payload * P["payload.mass"], pb0 + p + ca.mtimes(R, s), 0))
+    for m_i, c, Ic in bodies:
+        S = skew(c)
+        Mm = Mm + ca.vertcat(
+            ca.horzcat(m_i * ca.DM.eye(3), -m_i * S),
+            ca.horzcat(m_i * S, Ic - m_i * ca.mtimes(S, S)),
+        )
+    return Mm
+
+
 def stow_pose(P):
     """q0 of section 4.2, the pose at which the vehicle is trimmed (SPEC 3)."""
     return ca.vertcat(*[P[f"arm.stow.q{i}"] for i in range(1, N_JOINTS + 1)])
 
 
-def trim_wrench(P, eta, n_quad: int = 5):
-    """The fixed trim buoyancy of SPEC 3, in {b}.
-
-    ``[0, 0, F_z, M_x, M_y, 0]`` = tau_m at q0, level, at rest, no payload; a world-vertical upward
-    force F_z at r_t = [-M_y/F_z, M_x/F_z, 0]: ``f_t = R' [0, 0, -F_z]``, ``m_t = r_t x f_t``.
-    """
+def trim_static(P, n_quad: int = 5):
+    """(F_z, M_x, M_y) of tau_m at q0, level, at rest, without payload (SPEC 3 trim)."""
     z6 = ca.DM.zeros(6)
     tm = arm_wrench(P, z6, z6, z6, stow_pose(P), z6, z6, 0, n_quad)
-    Fz, Mx, My = tm[2], tm[3], tm[4]
+    return tm[2], tm[3], tm[4]
+
+
+def trim_from_static(Fz, Mx, My, eta):
+    """The fixed trim buoyancy of SPEC 3 in {b}, from the static wrench at q0.
+
+    A world-vertical upward force F_z at r_t = [-M_y/F_z, M_x/F_z, 0]:
+    ``f_t = R' [0, 0, -F_z]``, ``m_t = r_t x f_t``.
+    """
     r_t = ca.vertcat(-My / Fz, Mx / Fz, 0)
     R = Rzyx(eta[3], eta[4], eta[5])
     f_t = ca.mtimes(R.T, ca.vertcat(0, 0, -Fz))
     return ca.vertcat(f_t, ca.cross(r_t, f_t))
 
+
+def trim_wrench(P, eta, n_quad: int = 5):
+    """The trim of SPEC 3 at attitude ``eta``, computed from the same parameters (follows rho, links)."""
+    return trim_from_static(*trim_static(P, n_quad), eta)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-__all__ = ["skew", "Rx", "Rz", "Rzyx", "Ttheta", "J", "J_inv"]
+__all__ = ["skew", "Rx", "Rz", "Rzyx", "Ttheta", "J", "J_inv", "J_dot"]
 
 
 def skew(a):
@@ -72,3 +72,15 @@ def J_inv(eta):
     )
     Z = ca.DM.zeros(3, 3)
     return ca.vertcat(ca.horzcat(R.T, Z), ca.horzcat(Z, Tinv))
+
+
+_JDOT: ca.Function | None = None
+
+
+def J_dot(eta, eta_dot):
+    """dJ(eta)/dt along eta_dot (forward-mode AD of J), for eq. 3's C_eta term."""
+    global _JDOT
+    if _JDOT is None:
+        e, ed = ca.SX.sym("eta", 6), ca.SX.sym("eta_dot", 6)
+        _JDOT = ca.Function("J_dot", [e, ed], [ca.jtimes(J(e), e, ed)])
+    return _JDOT(eta, eta_dot)

@@ -2,8 +2,8 @@
 
 Inputs are dense columns with the parameter vector ``p`` (``Params.vector()``) last, so every model
 number is a runtime input. The coupling is exact (SPEC 3): the arm's wrench is affine in the vehicle
-acceleration, ``tau_m = tau_m0 + J_m nu_dot``, so the coupled vehicle solves
-``(M - J_m(q)) nu_dot = tau + tau_m0 + tau_trim - C nu - D nu - g`` with no lagged acceleration.
+acceleration, ``tau_m = tau_m0 - M_arm(q) nu_dot``, so the coupled vehicle solves
+``(M + M_arm(q)) nu_dot = tau + tau_m0 + tau_trim - C nu - D nu - g`` with no lagged acceleration.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from . import manipulator, thrusters, vehicle
 from .params import SCHEMA
 from .spatial import J
 
-__all__ = ["ModelOptions", "coupled_accel", "uvms_xdot", "plant_functions", "PUBLIC_FUNCTIONS"]
+__all__ = ["ModelOptions", "coupled_terms", "coupled_accel", "uvms_xdot", "plant_functions", "PUBLIC_FUNCTIONS"]
 
 NP = len(SCHEMA)
 
@@ -37,18 +37,22 @@ class ModelOptions:
         return f"nq{self.n_quad}"
 
 
-def coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions):
-    """nu_dot of the exactly coupled vehicle + arm (paper eq. 1 with eq. 11, SPEC 3).
+def coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions):
+    """(nu_dot, tau_m) of the exactly coupled vehicle + arm (paper eq. 1 with eq. 11, SPEC 3).
 
-    ``tau_extra``: further body wrench at the COB (the trim buoyancy of SPEC 3).
+    ``tau``: body wrench at the COB (thrust + disturbance); ``tau_extra``: further body wrench (the
+    trim buoyancy of SPEC 3). ``tau_m`` is the arm's wrench on the vehicle at this acceleration.
     """
-    nud_s = ca.SX.sym("nud", 6)
-    tm = manipulator.arm_wrench(P, eta, nu, nud_s, q, qd, qdd, payload, opts.n_quad)
-    Jm = ca.jacobian(tm, nud_s)  # exact: tau_m is affine in nu_dot
-    tm0 = ca.substitute(tm, nud_s, ca.DM.zeros(6))
-    A = vehicle.M(P) - Jm
+    tm0 = manipulator.arm_wrench(P, eta, nu, ca.DM.zeros(6), q, qd, qdd, payload, opts.n_quad)
+    Mb = manipulator.base_inertia(P, q, payload)  # tau_m = tm0 - M_arm nu_dot, exact
     b = tau + tm0 + tau_extra - vehicle.forces(P, eta, nu)
-    return ca.solve(A, b)
+    nud = ca.solve(vehicle.M(P) + Mb, b)
+    return nud, tm0 - ca.mtimes(Mb, nud)
+
+
+def coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions):
+    """nu_dot of the exactly coupled vehicle + arm (see :func:`coupled_terms`)."""
+    return coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts)[0]
 
 
 def uvms_xdot(P, x, tau, q, qd, qdd, payload, opts: ModelOptions, trim=None):

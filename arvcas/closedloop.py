@@ -1,0 +1,333 @@
+"""The whole closed-loop experiment as one CasADi function (SPEC 4-6).
+
+One controller sample k (t_k = k h) of :func:`step`:
+
+1. sensors: ``y_k = [eta; nu](t_k) + noise_k`` (noise is an input: a seeded sequence);
+2. EKF update on ``[eta; nu]`` (measuring both; its prediction for k+1 ends the step);
+3. ATD reference ``(y1, y2)``, errors ``e = eta_hat - y1``, ``e_dot = eta_dot_hat - y2``,
+   ``s = e_dot + c e`` (eq. 17);
+4. the controller: GSTA (eq. 18, 21) with its adaptive law, plus the RESO (proposed, eq. 20) or the
+   nominal model (AGSTA), ``tau_v = J^T tau_eta``;
+5. thrust allocation and saturation (eq. 2, App. B), held over the sample;
+6. plant: ``h / h_plant`` RK4 steps of the exactly coupled vehicle + arm with the prescribed arm
+   trajectory, payload ramp and disturbance eq. 41.
+
+The run is ``step.fold(N + 1)`` (metrics only: CHAT and RMSE accumulated in the state) or
+``step.mapaccum(N + 1)`` (a trace of every sample). Gains, noise, nominal-model factors,
+disturbance phases and model parameters are inputs: a new gain set or seed never recompiles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from . import gains as gains_mod
+from . import manipulator, scenario, thrusters, vehicle
+from .controllers import atd, gsta, reso
+from .params import SCHEMA, view
+from .scenario import ScenarioConfig
+from .spatial import J, J_dot, J_inv
+from .uvms import ModelOptions, coupled_terms
+
+__all__ = ["Layout", "build_step", "build_run", "TRACE_FIELDS", "derived_constants"]
+
+NP = len(SCHEMA)
+
+# the per-sample trace (name, width): stored in result files
+TRACE_FIELDS: tuple[tuple[str, int], ...] = (
+    ("t", 1), ("eta", 6), ("nu", 6), ("eta_hat", 6), ("eta_ref", 6), ("tau_cmd", 6), ("thrust", 6),
+    ("s", 6), ("k1", 6), ("k2", 6), ("f_hat", 6), ("f_true", 6), ("q", 6), ("payload", 1), ("ok", 1),
+)
+
+
+class Layout:
+    """Named slices of a flat column vector (the loop state is one column for fold/mapaccum)."""
+
+    def __init__(self, spec):
+        self.slices: dict[str, slice] = {}
+        i = 0
+        for name, n in spec:
+            self.slices[name] = slice(i, i + n)
+            i += n
+        self.size = i
+
+    def get(self, v, name):
+        return v[self.slices[name]]
+
+    def pack(self, values: dict):
+        return ca.vertcat(*[values[name] for name in self.slices])
+
+    def unpack_np(self, arr: np.ndarray, axis: int = 0) -> dict[str, np.ndarray]:
+        return {k: np.take(arr, range(s.start, s.stop), axis=axis) for k, s in self.slices.items()}
+
+
+def state_layout(n_gains: int) -> Layout:
+    return Layout([
+        ("x", 12),  # true plant state [eta; nu]
+        ("xh", 12), ("Pc", 144),  # EKF prior for this sample
+        ("y1", 6), ("y2", 6), ("r0", 6),  # ATD
+        ("z1", 6), ("z2", 6), ("tau_eta_prev", 6),  # RESO (+ the previous sample's tau_eta)
+        ("w", 6), ("k1", 6),  # GSTA integral state and adaptive gain
+        ("tau_prev", 6), ("u_hold", 6),  # previous command (CHAT) and held realised thrust
+        ("chat_sum", 6), ("e2_sum", 6), ("ok", 1), ("t_fail", 1),
+        # constants of the run carried through the loop
+        ("gains", n_gains), ("unc", 4), ("phase", 6), ("p", NP), ("consts", 9),
+    ])
+
+
+def derived_constants(P, opts: ModelOptions):
+    """Per-run constants computed once from p: trim static wrench (F_z, M_x, M_y) and Mhat = diag(M)."""
+    Fz, Mx, My = manipulator.trim_static(P, opts.n_quad)
+    return ca.vertcat(Fz, Mx, My, ca.diag(vehicle.M(P)))
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    controller: str
+    cfg: ScenarioConfig
+    opts: ModelOptions = ModelOptions()
+    reso_rule: str = "spec"
+
+
+def _nominal_force(P, unc, eta, nu, tau_m_plus_trim):
+    """f_n of the AGSTA baseline in {n} (SPEC 5), eq. 3 mapping, with the nominal factors ``unc``.
+
+    ``C_n,eta eta_dot + D_n,eta eta_dot + g_n,eta - a (tau_m + trim)_eta`` with
+    ``C_eta eta_dot = J^-T (C_n nu - M J^-1 Jdot nu)``.
+    """
+    Ji = J_inv(eta)
+    eta_dot = ca.mtimes(J(eta), nu)
+    Jdot = J_dot(eta, eta_dot)  # dJ/dt along the motion
+    Jdot_nu = ca.mtimes(Jdot, nu)
+    body = (
+        unc[0] * ca.mtimes(vehicle.C_RB(P, nu), nu)
+        - ca.mtimes(vehicle.M(P), ca.mtimes(Ji, Jdot_nu))
+        + unc[1] * ca.mtimes(vehicle.D(P, nu), nu)
+        + unc[2] * vehicle.g_vec(P, eta)
+        - unc[3] * tau_m_plus_trim
+    )
+    return ca.mtimes(Ji.T, body)
+
+
+def build_step(spec: RunSpec) -> tuple[ca.Function, Layout]:
+    """The SX function of one controller sample: (S, t_k, noise_k) -> (S_next, trace_k)."""
+    controller, cfg, opts = spec.controller, spec.cfg, spec.opts
+    gains_mod.check_controller(controller)
+    ng = gains_mod.n_gains(controller)
+    L = state_layout(ng)
+    S = ca.SX.sym("S", L.size)
+    tk = ca.SX.sym("t_k")
+    noise = ca.SX.sym("noise", 12)
+    g = L.get(S, "gains")
+    G = {k: ca.vertcat(*v) for k, v in gains_mod.unpack(controller, g).items()}
+    P = view(L.get(S, "p"))
+    consts = L.get(S, "consts")
+    Fz, Mx, My, Mhat = consts[0], consts[1], consts[2], consts[3:9]
+    unc, phase = L.get(S, "unc"), L.get(S, "phase")
+    h, hp, n_sub = cfg.time_h, cfg.time_h_plant, cfg.substeps
+    first = tk < 0.5 * h
+    ok = L.get(S, "ok")
+    eta_d = ca.DM(cfg.initial_eta_d)
+    q0 = manipulator.stow_pose(P)
+
+    x = L.get(S, "x")
+    # 1. sensors
+    y = x + noise
+    # 2. EKF update (H = I, R = sensor covariance); the first sample starts from y_0 with P = R
+    Rn = ca.diag(ca.DM(cfg.sensor_variances))
+    xh = ca.if_else(first, y, L.get(S, "xh"))
+    Pc = ca.if_else(first, Rn, ca.reshape(L.get(S, "Pc"), 12, 12))
+    Sinn = Pc + Rn
+    K = ca.solve(Sinn, Pc).T  # K = P S^-1 (P, S symmetric)
+    IK = ca.DM.eye(12) - K
+    xh = xh + ca.mtimes(K, y - xh)
+    Pc = ca.mtimes([IK, Pc, IK.T]) + ca.mtimes([K, Rn, K.T])  # Joseph form
+    eta_hat, nu_hat = xh[0:6], xh[6:12]
+    eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
+
+    # 3. ATD (SPEC 5): y1(0) = eta_hat(0), y2(0) = 0, A = max(|eta_d - eta_hat(0)|, A_min)
+    r0_first, h0 = atd.atd_params(eta_d - eta_hat, cfg.atd_T, h, cfg.atd_A_min)
+    r0 = ca.if_else(first, r0_first, L.get(S, "r0"))
+    y1 = ca.if_else(first, eta_hat, L.get(S, "y1"))
+    y2 = ca.if_else(first, ca.DM.zeros(6), L.get(S, "y2"))
+    e = eta_hat - y1
+    e_dot = eta_dot_hat - y2
+    s = e_dot + G["c"] * e  # eq. 17
+
+    # 4. controller
+    k1 = ca.if_else(first, G["k1_0"], L.get(S, "k1"))
+    w = ca.if_else(first, ca.DM.zeros(6), L.get(S, "w"))
+    k2 = gsta.k2_of_k1(k1, G["eps"], G["beta"])  # eq. 19
+    if controller == "implicit":
+        v, w_next = gsta.gsta_implicit(s, w, k1, k2, G["mu1"], G["mu2"], h)  # SPEC 5b
+    else:
+        v, w_next = gsta.gsta_explicit(s, w, k1, k2, G["mu1"], G["mu2"], h)  # eq. 21
+
+    # the true state's coupled terms at t_k with the held thrust: f_true (eq. 6) and the AGSTA's tau_m
+    q, qd, qdd = scenario.joint_trajectory(cfg, q0, tk)
+    pl = scenario.payload_profile(cfg, tk)
+    eta, nu = x[0:6], x[6:12]
+    u_hold = L.get(S, "u_hold")
+    tau_real_held = ca.mtimes(thrusters.B_T(P), u_hold)
+    trim = manipulator.trim_from_static(Fz, Mx, My, eta)
+    tau_dist = scenario.disturbance(cfg, tk, phase)
+    nud_true, tau_m_true = coupled_terms(P, eta, nu, tau_real_held + tau_dist, q, qd, qdd, pl, trim, opts)
+
+    if controller == "agsta":
+        # SPEC 5: tau_eta = Mhat (eta_ddot_d - c e_dot + v) + f_n, nominal model in place of the RESO
+        f_n = _nominal_force(P, unc, eta_hat, nu_hat, tau_m_true + trim)
+        tau_eta = Mhat * (-G["c"] * e_dot + v) + f_n
+        z1 = L.get(S, "z1")
+        z2 = L.get(S, "z2")
+        f_hat = -f_n  # the nominal model's estimate of the total disturbance, force units
+    else:
+        # RESO (SPEC 5): update with eta_dot_k and the previous sample's tau_eta, then chi2_hat = z2
+        beta1, beta2 = reso.reso_gains(G["omega"], spec.reso_rule)
+        z1 = ca.if_else(first, eta_dot_hat, L.get(S, "z1"))
+        z2 = ca.if_else(first, ca.DM.zeros(6), L.get(S, "z2"))
+        tprev = ca.if_else(first, ca.DM.zeros(6), L.get(S, "tau_eta_prev"))
+        z1, z2 = reso.reso_step(z1, z2, eta_dot_hat, tprev, 1 / Mhat, beta1, beta2, h)
+        # eq. 20 with the sign of c e_dot fixed (SPEC 5), eta_ddot_d = 0
+        tau_eta = Mhat * (-G["c"] * e_dot - z2 + v)
+        f_hat = Mhat * z2
+    tau_v = ca.mtimes(J(eta_hat).T, tau_eta)  # eq. 20: tau_v = J^T tau_eta
+
+    # adaptive law for the next sample
+    if controller == "agsta":
+        k1_next = gsta.k1_next_agsta(k1, s, G["sigma"], G["l"], h)
+    elif controller == "traditional":
+        k1_next = gsta.k1_next_traditional(k1, s, G["sigma"], G["l"], G["k1min"], h)
+    else:
+        k1_next = gsta.k1_next_proposed(k1, s, G["sigma"], G["l"], G["r"], G["k1min"], h)
+
+    # 5. allocation and saturation
+    u_cmd = thrusters.allocate(P, tau_v)
+    u_sat = thrusters.saturate(P, u_cmd)
+    tau_real = ca.mtimes(thrusters.B_T(P), u_sat)
+
+    # f_true, eq. 6, at t_k: f = Mhat eta_ddot - tau_eta,real (eq. 5), eta_ddot = J nu_dot + Jdot nu
+    Jdot = J_dot(eta, ca.mtimes(J(eta), nu))
+    eta_ddot = ca.mtimes(J(eta), nud_true) + ca.mtimes(Jdot, nu)
+    f_true = Mhat * eta_ddot - ca.mtimes(J_inv(eta).T, tau_real_held)
+
+    # metrics (SPEC 6) and divergence of the controller part
+    e_true = eta - y1
+    chat_sum = L.get(S, "chat_sum") + ca.if_else(first, 0, ca.fabs(tau_v - L.get(S, "tau_prev")))
+    # RMSE over k = 0..N-1 (eq. 43); the last sample k = N only closes CHAT's last difference
+    last = tk > cfg.time_duration - 0.5 * h
+    e2_sum = L.get(S, "e2_sum") + ca.if_else(last, 0, e_true**2)
+    lim = ca.DM([cfg.limits_e_position] * 3 + [cfg.limits_e_attitude] * 3)
+    ok_c = ca.logic_and(ok, ca.logic_and(ca.mmax(ca.fabs(e_true) / lim) < 1, ca.mmax(ca.fabs(tau_v)) < 1e12))
+    y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
+    C = L.pack({
+        "x": x, "xh": _ekf_f(xh, h), "Pc": ca.vec(_ekf_cov(xh, Pc, h, cfg)),
+        "y1": y1n, "y2": y2n, "r0": r0, "z1": z1, "z2": z2, "tau_eta_prev": tau_eta,
+        "w": w_next, "k1": k1_next, "tau_prev": tau_v, "u_hold": u_sat,
+        "chat_sum": chat_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
+        "gains": g, "unc": unc, "phase": phase, "p": L.get(S, "p"), "consts": consts,
+    })
+    trace = ca.vertcat(tk, eta, nu, eta_hat, y1, tau_v, u_sat, s, k1, k2, f_hat, f_true, q, pl, ok)
+    ctrl = ca.Function(f"cl_ctrl_{controller}", [S, tk, noise], [C, tau_real, trace])
+
+    # 6. plant: one RK4 substep as its own Function, called h / h_plant times by the MX step
+    xs, ts, tr_s = ca.SX.sym("x", 12), ca.SX.sym("t"), ca.SX.sym("tau", 6)
+    p_s, c_s, ph_s = ca.SX.sym("p", NP), ca.SX.sym("consts", 9), ca.SX.sym("phase", 6)
+    Ps = view(p_s)
+    q0s = manipulator.stow_pose(Ps)
+
+    def f_plant(xx, t):
+        qq, qqd, qqdd = scenario.joint_trajectory(cfg, q0s, t)
+        pp = scenario.payload_profile(cfg, t)
+        ee, nn = xx[0:6], xx[6:12]
+        tr = manipulator.trim_from_static(c_s[0], c_s[1], c_s[2], ee)
+        nud, _ = coupled_terms(Ps, ee, nn, tr_s + scenario.disturbance(cfg, t, ph_s), qq, qqd, qqdd, pp, tr, opts)
+        return ca.vertcat(ca.mtimes(J(ee), nn), nud)
+
+    k_1 = f_plant(xs, ts)
+    k_2 = f_plant(xs + 0.5 * hp * k_1, ts + 0.5 * hp)
+    k_3 = f_plant(xs + 0.5 * hp * k_2, ts + 0.5 * hp)
+    k_4 = f_plant(xs + hp * k_3, ts + hp)
+    rk4 = ca.Function(
+        "cl_rk4", [xs, ts, tr_s, p_s, c_s, ph_s], [xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4)],
+        ["x", "t", "tau", "p", "consts", "phase"], ["x_next"],
+    )
+
+    # finalize: a run that diverges (non-finite state, error bound) is frozen with ok = 0, t_fail set
+    Cs, Ss, xn, tks = ca.SX.sym("C", L.size), ca.SX.sym("S", L.size), ca.SX.sym("xn", 12), ca.SX.sym("t")
+    ok_n = ca.logic_and(L.get(Cs, "ok"), ca.mmax(ca.fabs(xn)) < 1e6)
+    Cn = ca.vertcat(Cs[: L.slices["x"].start], xn, Cs[L.slices["x"].stop:])
+    Sfail = ca.vertcat(Ss[: L.slices["ok"].start], 0, ca.if_else(L.get(Ss, "ok"), tks, L.get(Ss, "t_fail")),
+                       Ss[L.slices["t_fail"].stop:])
+    fin = ca.Function("cl_finalize", [Cs, Ss, xn, tks], [ca.if_else(ok_n, Cn, Sfail)])
+
+    Sm, tkm, nm = ca.MX.sym("S", L.size), ca.MX.sym("t"), ca.MX.sym("noise", 12)
+    Cm, tau_m_real, tr_m = ctrl(Sm, tkm, nm)
+    xm = Sm[L.slices["x"]]
+    pm, cm, phm = Sm[L.slices["p"]], Sm[L.slices["consts"]], Sm[L.slices["phase"]]
+    for i in range(n_sub):
+        xm = rk4(xm, tkm + i * hp, tau_m_real, pm, cm, phm)
+    Snext = fin(Cm, Sm, xm, tkm)
+    fn = ca.Function(f"cl_step_{controller}", [Sm, tkm, nm], [Snext, tr_m], ["S", "t", "noise"], ["S_next", "trace"])
+    return fn, L
+
+
+def _ekf_f(xh, h):
+    """Kinematic (constant-velocity) transition of SPEC 4: eta+ = eta + h J(eta) nu, nu+ = nu."""
+    return ca.vertcat(xh[0:6] + h * ca.mtimes(J(xh[0:6]), xh[6:12]), xh[6:12])
+
+
+def _ekf_cov(xh, Pc, h, cfg: ScenarioConfig):
+    """P+ = F P F' + Q with F the AD Jacobian of the transition (SPEC 4)."""
+    xs = ca.SX.sym("xs", 12)
+    F = ca.substitute(ca.jacobian(_ekf_f(xs, h), xs), xs, xh)
+    Q = ca.diag(ca.DM([cfg.ekf_q_eta] * 6 + [cfg.ekf_q_nu] * 6))
+    return ca.mtimes([F, Pc, F.T]) + Q
+
+
+def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
+    """The whole run as one MX Function of (gains, noise 12x(N+1), unc[4], phase[6], p).
+
+    ``trace=False``: outputs (chat[6], rmse[6], ok, t_fail); ``trace=True``: also the per-sample trace.
+    """
+    step, L = build_step(spec)
+    cfg = spec.cfg
+    n = scenario.n_samples(cfg)
+    ng = gains_mod.n_gains(spec.controller)
+    G = ca.MX.sym("gains", ng)
+    noise = ca.MX.sym("noise", 12, n)
+    unc = ca.MX.sym("unc", 4)
+    phase = ca.MX.sym("phase", 6)
+    p = ca.MX.sym("p", NP)
+    consts = _consts_fn(spec.opts)(p)
+    x0 = ca.DM(list(cfg.initial_eta0) + list(cfg.initial_nu0))
+    z = lambda k: ca.MX.zeros(k)  # noqa: E731
+    S0 = ca.vertcat(
+        x0, z(12), z(144), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6),
+        ca.MX(1), ca.MX(-1), G, unc, phase, p, consts,
+    )
+    assert S0.shape[0] == L.size
+    tgrid = ca.DM(np.arange(n) * cfg.time_h).T
+    N = n - 1
+    if trace:
+        S_all, tr = step.mapaccum(n)(S0, tgrid, noise)
+        Sf = S_all[:, -1]
+    else:
+        step_s = ca.Function(step.name() + "_s", [step.mx_in(0), step.mx_in(1), step.mx_in(2)],
+                             [step(step.mx_in(0), step.mx_in(1), step.mx_in(2))[0]])
+        Sf = step_s.fold(n)(S0, tgrid, noise)
+    chat = Sf[L.slices["chat_sum"]] / N
+    rmse = ca.sqrt(Sf[L.slices["e2_sum"]] / N)
+    ok = Sf[L.slices["ok"]]
+    t_fail = Sf[L.slices["t_fail"]]
+    outs = [chat, rmse, ok, t_fail] + ([tr] if trace else [])
+    names = ["chat", "rmse", "ok", "t_fail"] + (["trace"] if trace else [])
+    name = f"run_{spec.controller}" + ("_trace" if trace else "")
+    return ca.Function(name, [G, noise, unc, phase, p], outs, ["gains", "noise", "unc", "phase", "p"], names)
+
+
+def _consts_fn(opts: ModelOptions) -> ca.Function:
+    p = ca.SX.sym("p", NP)
+    return ca.Function("derived_constants", [p], [derived_constants(view(p), opts)])
