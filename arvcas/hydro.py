@@ -29,22 +29,24 @@ def link_drag(rho, Cd, diameter, s, v, w, n_quad: int):
     """Drag force and moment (about the link frame's origin) on a cylinder along ``s``, in the link frame.
 
     ``v``: velocity of the frame origin, ``w``: angular velocity, both in the link frame, through still water.
+    The normal velocity is affine along the axis: ``v_n(x) = a + x b`` with ``a = v - (v.u) u`` and
+    ``b = w x u`` (already normal to u), and the moment is ``u x int x |v_n| v_n dx``.
     """
     L = ca.norm_2(s)
     u = s / L
     nodes, weights = gauss_legendre(n_quad)
-    k = -0.5 * rho * Cd * diameter
+    a = v - ca.dot(v, u) * u
+    b = ca.cross(w, u)
     f = 0
-    n = 0
+    m = 0
     for xi, wi in zip(nodes, weights):
         x = L * xi
-        r = x * u
-        vx = v + ca.cross(w, r)
-        vn = vx - ca.dot(vx, u) * u
-        q = ca.sqrt(ca.dot(vn, vn)) * vn
-        f = f + (wi * L) * q
-        n = n + (wi * L) * ca.cross(r, q)
-    return k * f, k * n
+        vn = a + x * b
+        q = (wi * L) * ca.norm_2(vn) * vn
+        f = f + q
+        m = m + x * q
+    k = -0.5 * rho * Cd * diameter
+    return k * f, k * ca.cross(u, m)
 
 
 def buoyancy_force(rho, volume, g_i):

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import casadi as ca
 
 from . import manipulator, thrusters, vehicle
+from .linalg import solve_nopivot
 from .params import SCHEMA
 from .spatial import J
 
@@ -46,7 +47,7 @@ def coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOp
     tm0 = manipulator.arm_wrench(P, eta, nu, ca.DM.zeros(6), q, qd, qdd, payload, opts.n_quad)
     Mb = manipulator.base_inertia(P, q, payload)  # tau_m = tm0 - M_arm nu_dot, exact
     b = tau + tm0 + tau_extra - vehicle.forces(P, eta, nu)
-    nud = ca.solve(vehicle.M(P) + Mb, b)
+    nud = solve_nopivot(vehicle.M(P) + Mb, b)  # M + M_arm is diagonally dominant
     return nud, tm0 - ca.mtimes(Mb, nud)
 
 
