@@ -1,0 +1,545 @@
+"""Generate -> hash -> compile -> cache -> load: the only place in arvcas that runs a C compiler.
+
+A CasADi Function is turned into C with :class:`casadi.CodeGenerator`, compiled to a shared library
+with ``cc`` and loaded with :func:`casadi.external`. Builds are cached between processes
+(STYLE rule 4):
+
+* **keyed by content**: key = sha256 over (generated C text, ``cc --version`` first line, full
+  compiler flag list, CasADi version, arvcas version). The C symbol names are prefixed by the
+  function's name (CasADi's ``CASADI_PREFIX``), so several libraries live in one process.
+* **verified**: an artifact ``<cache>/<name>-<key[:20]>.so`` is loaded only if its manifest
+  ``<name>-<key[:20]>.json`` exists, holds the same key, and the sha256 of the ``.so`` bytes matches
+  the manifest. A truncated, tampered or foreign file is rebuilt, never loaded.
+* **written atomically**: each build happens in a temporary directory inside the cache, then
+  ``os.replace`` publishes the ``.so`` and, last, the manifest.
+* **locked**: an ``fcntl.flock`` lock file per key (exclusive to build, shared to verify and load),
+  so two processes building the same function at once compile it once and both succeed. Waiting is
+  bounded: on timeout the function is built privately in a temporary directory and not published.
+
+Generating C for ``uvms_rhs`` (6-9k instructions) takes 15-40 ms: a few per cent of compiling it
+(0.3 s at -O0, 1-2 s at -O2) and less than building its SX graph, which a cache hit in a new process
+pays anyway. So there is no cheaper first-level key; a per-process memo makes a repeated
+:func:`build` of the same Function object cost a dictionary lookup (no disk access, no hashing).
+
+Besides ``opt_level`` and ``flags``, ``-ffp-contract=off`` is always passed: GCC contracts ``a*b+c``
+into FMA by default wherever the target has FMA (aarch64, ``-march=native``), which changes the last
+bits against CasADi's VM and between machines. Flags that change the numbers (``-Ofast``,
+``-ffast-math`` and its parts) are refused.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import fcntl
+import hashlib
+import json
+import logging
+import os
+import shutil
+import stat
+import subprocess
+import tempfile
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import casadi as ca
+
+__all__ = [
+    "CacheError",
+    "CompileError",
+    "Artifact",
+    "cache_dir",
+    "build",
+    "compiled",
+    "artifact_of",
+    "cache_info",
+    "stats",
+]
+
+log = logging.getLogger(__name__)
+
+CC = "cc"
+BASE_FLAGS = ("-shared", "-fPIC")
+FIXED_FLAGS = ("-ffp-contract=off",)  # no FMA contraction: same numbers on every target
+LIBS = ("-lm",)
+FORBIDDEN_FLAGS = (
+    "-Ofast",
+    "-ffast-math",
+    "-funsafe-math-optimizations",
+    "-fassociative-math",
+    "-freciprocal-math",
+    "-ffinite-math-only",
+    "-fno-signed-zeros",
+    "-ffp-contract=fast",
+    "-ffp-contract=on",
+)
+LOCK_TIMEOUT_S = 300.0  # longest wait for another process's build of the same key
+COMPILE_TIMEOUT_S = 1800.0
+MANIFEST_FORMAT = 1
+_STALE_TMP_S = 24 * 3600.0
+_CODEGEN_OPTS = {"casadi_real": "double", "casadi_int": "long long int", "with_header": False}
+
+
+class CacheError(ValueError):
+    """The build cache cannot be used safely (one line, saying how to fix it)."""
+
+
+class CompileError(ValueError):
+    """The C compiler is missing or failed (one line; the log path is in the message)."""
+
+
+@dataclass(frozen=True)
+class Artifact:
+    """One cached library, as listed by :func:`cache_info`."""
+
+    name: str
+    path: Path
+    size_bytes: int
+    compile_time_s: float
+    flags: tuple[str, ...]
+    key: str
+    verified: bool  # manifest present, key consistent, .so sha256 matches
+
+
+# ---------------------------------------------------------------------------------------------
+# process state
+
+_LOCK = threading.RLock()
+_MEMO: dict[tuple, tuple[ca.Function, ca.Function]] = {}  # (fn identity, flags, dir) -> (fn, lib)
+_MANIFESTS: dict[int, dict] = {}  # hash of a returned external Function -> its manifest
+_KEEP: list[ca.Function] = []  # keeps returned Functions alive so _MANIFESTS keys stay unique
+_PLANT: dict[str, dict[str, ca.Function]] = {}
+_COMPILED: dict[tuple[str, str], ca.Function] = {}
+_STATS: Counter = Counter()
+_PRIVATE_DIRS: list[Path] = []
+
+
+def stats() -> dict[str, int]:
+    """Counters of this process: ``compile``, ``disk_hit``, ``memo_hit``, ``private``, ``rejected``."""
+    with _LOCK:
+        return {k: _STATS[k] for k in ("compile", "disk_hit", "memo_hit", "private", "rejected")}
+
+
+# ---------------------------------------------------------------------------------------------
+# cache directory
+
+
+def _cache_path() -> Path:
+    """Where the cache is, from the environment (no checks, no disk access)."""
+    env = os.environ.get("ARVCAS_CACHE")
+    if env:
+        d = Path(env).expanduser()
+    else:
+        xdg = os.environ.get("XDG_CACHE_HOME")
+        base = Path(xdg) if xdg and os.path.isabs(xdg) else Path.home() / ".cache"
+        d = base / "arvcas"
+    return Path(os.path.abspath(d))
+
+
+def cache_dir() -> Path:
+    """The build cache: ``$ARVCAS_CACHE``, else ``$XDG_CACHE_HOME/arvcas`` or ``~/.cache/arvcas``.
+
+    Created with mode 0o700. Raises :class:`CacheError` if it is not a directory, not owned by the
+    current user, or writable by group or others (anyone who can write there could plant code that
+    this process would then load).
+    """
+    d = _cache_path()
+    try:
+        d.mkdir(mode=0o700, parents=True, exist_ok=True)
+        st = os.stat(d)
+    except OSError as e:
+        raise CacheError(
+            f"cannot create cache directory {d} ({e.strerror}); set ARVCAS_CACHE to a writable directory"
+        ) from None
+    if not stat.S_ISDIR(st.st_mode):
+        raise CacheError(f"cache path {d} is not a directory; set ARVCAS_CACHE to a directory")
+    if st.st_uid != os.geteuid():
+        raise CacheError(
+            f"cache directory {d} is owned by uid {st.st_uid}, not by you; set ARVCAS_CACHE to a directory of your own"
+        )
+    if st.st_mode & 0o022:
+        raise CacheError(
+            f"cache directory {d} is writable by group or others (mode {stat.S_IMODE(st.st_mode):o}); "
+            f"fix it with: chmod go-w {d}"
+        )
+    return d
+
+
+# ---------------------------------------------------------------------------------------------
+# flags, compiler, key
+
+
+def _check_flags(opt_level: str, flags) -> list[str]:
+    if isinstance(flags, str) or not isinstance(flags, (tuple, list)):
+        raise ValueError(f"flags: expected a tuple of strings, got {flags!r}")
+    if not isinstance(opt_level, str) or not opt_level.startswith("-O"):
+        raise ValueError(f"opt_level: expected -O0, -O1, -O2, -O3, -Os or -Og, got {opt_level!r}")
+    for f in (opt_level, *flags):
+        if not isinstance(f, str) or not f.strip():
+            raise ValueError(f"flags: every flag must be a non-empty string, got {f!r}")
+        if f.startswith("-Ofast") or f in FORBIDDEN_FLAGS:
+            raise ValueError(f"compiler flag {f} changes the numbers (no IEEE semantics); use -O0..-O3")
+    return [*BASE_FLAGS, opt_level, *FIXED_FLAGS, *flags, *LIBS]  # LIBS last: _compile relies on it
+
+
+_CC_ID: dict[str, str] = {}
+
+
+def _compiler_id() -> str:
+    """First line of ``cc --version`` (memoized per process)."""
+    with _LOCK:
+        if CC not in _CC_ID:
+            try:
+                r = subprocess.run([CC, "--version"], capture_output=True, text=True, timeout=60)
+            except FileNotFoundError:
+                raise CompileError(f"C compiler '{CC}' not found on PATH; install gcc or clang") from None
+            except subprocess.TimeoutExpired:
+                raise CompileError(f"'{CC} --version' did not answer within 60 s") from None
+            lines = r.stdout.strip().splitlines()
+            if r.returncode != 0 or not lines:
+                raise CompileError(f"'{CC} --version' failed (exit {r.returncode})")
+            _CC_ID[CC] = lines[0].strip()
+        return _CC_ID[CC]
+
+
+def _key(c_text: str, compiler: str, cmd_flags: list[str]) -> str:
+    from . import __version__ as arvcas_version  # late: arvcas/__init__ may import this module
+
+    h = hashlib.sha256()
+    for part in ("arvcas-build-1", c_text, compiler, "\0".join(cmd_flags), ca.__version__, arvcas_version):
+        b = part.encode()
+        h.update(len(b).to_bytes(8, "little"))
+        h.update(b)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class _Plan:
+    name: str
+    n_instructions: int
+    c_text: str
+    codegen_s: float
+    compiler: str
+    cmd_flags: tuple[str, ...]
+    key: str
+
+    def stem(self) -> str:
+        return f"{self.name}-{self.key[:20]}"
+
+
+def _plan(fn: ca.Function, cmd_flags: list[str]) -> _Plan:
+    name = fn.name()
+    if not name.isidentifier() or not name.isascii():
+        raise ValueError(f"function name {name!r} is not a C identifier")
+    t0 = time.perf_counter()
+    cg = ca.CodeGenerator(name, _CODEGEN_OPTS)  # CASADI_PREFIX(ID) = <name>_ID: symbols prefixed by name
+    cg.add(fn)
+    text = cg.dump()
+    codegen_s = time.perf_counter() - t0
+    try:
+        n_ins = int(fn.n_instructions())
+    except RuntimeError:  # not an SX/MX Function
+        n_ins = -1
+    compiler = _compiler_id()
+    return _Plan(name, n_ins, text, codegen_s, compiler, tuple(cmd_flags), _key(text, compiler, cmd_flags))
+
+
+# ---------------------------------------------------------------------------------------------
+# locking, verification, building
+
+
+@contextlib.contextmanager
+def _flock(path: Path, exclusive: bool, timeout: float) -> Iterator[bool]:
+    """Hold an flock on ``path``; yields False if it could not be had within ``timeout`` seconds."""
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
+    except OSError as e:
+        log.warning("cannot open lock file %s (%s)", path, e.strerror)
+        yield False
+        return
+    try:
+        op = (fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH) | fcntl.LOCK_NB
+        deadline = time.monotonic() + timeout
+        pause = 0.005
+        while True:
+            try:
+                fcntl.flock(fd, op)
+                break
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    yield False
+                    return
+                time.sleep(pause)
+                pause = min(2 * pause, 0.2)
+        try:
+            yield True
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
+def _sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _verify(plan: _Plan, so: Path, man: Path) -> tuple[dict | None, str]:
+    """(manifest, "") if the artifact may be loaded, else (None, reason); reason "" means absent."""
+    if not so.exists() and not man.exists():
+        return None, ""
+    try:
+        m = json.loads(man.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None, "no manifest"
+    except (OSError, ValueError) as e:
+        return None, f"unreadable manifest ({e})"
+    if not isinstance(m, dict) or m.get("key") != plan.key or m.get("name") != plan.name:
+        return None, "manifest does not match the key"
+    try:
+        st = os.lstat(so)
+    except FileNotFoundError:
+        return None, "no library"
+    if not stat.S_ISREG(st.st_mode):
+        return None, "library is not a regular file"
+    if st.st_uid != os.geteuid() or st.st_mode & 0o022:
+        return None, "library is writable by others or not owned by you"
+    if _sha256_file(so) != m.get("so_sha256"):
+        return None, "library sha256 does not match the manifest"
+    return m, ""
+
+
+def _compile(plan: _Plan, work: Path) -> tuple[Path, float]:
+    src = work / f"{plan.name}.c"
+    out = work / f"{plan.name}.so"
+    src.write_text(plan.c_text, encoding="utf-8")
+    compile_flags = plan.cmd_flags[: len(plan.cmd_flags) - len(LIBS)]
+    cmd = [CC, *compile_flags, "-o", str(out), str(src), *LIBS]
+    log.info("compiling %s (%d instructions) with %s %s ...", plan.name, plan.n_instructions, CC, " ".join(compile_flags))
+    t0 = time.perf_counter()
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=COMPILE_TIMEOUT_S, cwd=work)
+    except FileNotFoundError:
+        raise CompileError(f"C compiler '{CC}' not found on PATH; install gcc or clang") from None
+    except subprocess.TimeoutExpired:
+        raise CompileError(f"compiling {plan.name} took longer than {COMPILE_TIMEOUT_S:.0f} s") from None
+    dt = time.perf_counter() - t0
+    if r.returncode != 0:
+        first = next((ln for ln in r.stderr.splitlines() if "error" in ln), r.stderr.strip()[:200])
+        raise CompileError(f"{CC} failed compiling {plan.name} (exit {r.returncode}): {first.strip()}")
+    os.chmod(out, 0o755)
+    with _LOCK:
+        _STATS["compile"] += 1
+    log.info("compiling %s (%d instructions) ... done in %.2f s", plan.name, plan.n_instructions, dt)
+    return out, dt
+
+
+def _manifest(plan: _Plan, so_sha256: str, compile_s: float) -> dict:
+    from . import __version__ as arvcas_version
+
+    return {
+        "format": MANIFEST_FORMAT,
+        "name": plan.name,
+        "key": plan.key,
+        "so_sha256": so_sha256,
+        "flags": list(plan.cmd_flags),
+        "compiler": plan.compiler,
+        "compile_time_s": round(compile_s, 4),
+        "codegen_time_s": round(plan.codegen_s, 4),
+        "n_instructions": plan.n_instructions,
+        "casadi_version": ca.__version__,
+        "arvcas_version": arvcas_version,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+def _publish(plan: _Plan, d: Path, so: Path, man: Path) -> dict:
+    work = Path(tempfile.mkdtemp(prefix=".build-", dir=d))
+    try:
+        out, dt = _compile(plan, work)
+        m = _manifest(plan, _sha256_file(out), dt)
+        tmp_man = work / "manifest.json"
+        tmp_man.write_text(json.dumps(m, indent=1) + "\n", encoding="utf-8")
+        os.chmod(tmp_man, 0o644)
+        os.replace(out, so)
+        os.replace(tmp_man, man)  # manifest last: a reader never sees a manifest for a missing .so
+        return m
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _build_private(plan: _Plan, d: Path) -> ca.Function:
+    work = Path(tempfile.mkdtemp(prefix=".private-", dir=d))
+    with _LOCK:
+        if not _PRIVATE_DIRS:
+            atexit.register(_remove_private_dirs)
+        _PRIVATE_DIRS.append(work)
+        _STATS["private"] += 1
+    out, dt = _compile(plan, work)
+    return _load(plan, out, _manifest(plan, _sha256_file(out), dt) | {"private": True})
+
+
+def _remove_private_dirs() -> None:
+    for p in _PRIVATE_DIRS:
+        shutil.rmtree(p, ignore_errors=True)
+
+
+def _sweep(d: Path) -> None:
+    """Remove build directories left by crashed processes (older than a day)."""
+    now = time.time()
+    try:
+        entries = list(os.scandir(d))
+    except OSError:
+        return
+    for e in entries:
+        if e.name.startswith((".build-", ".private-")) and e.is_dir(follow_symlinks=False):
+            try:
+                if now - e.stat(follow_symlinks=False).st_mtime > _STALE_TMP_S:
+                    shutil.rmtree(e.path, ignore_errors=True)
+            except OSError:
+                pass
+
+
+def _load(plan: _Plan, so: Path, manifest: dict) -> ca.Function:
+    f = ca.external(plan.name, str(so))
+    with _LOCK:
+        _KEEP.append(f)
+        _MANIFESTS[f.__hash__()] = dict(manifest, path=str(so))
+    return f
+
+
+def build(
+    fn: ca.Function,
+    *,
+    opt_level: str = "-O2",
+    flags: tuple[str, ...] = (),
+    lock_timeout: float = LOCK_TIMEOUT_S,
+) -> ca.Function:
+    """``fn`` compiled to C and loaded with :func:`casadi.external` (same name, inputs, outputs).
+
+    ``opt_level`` is passed to ``cc`` as is (``-O0``..``-O3``, ``-Os``, ``-Og``), then ``flags``.
+    Raises ValueError for ``-Ofast``/``-ffast-math`` and kin, :class:`CacheError` for an unsafe cache
+    directory, :class:`CompileError` if ``cc`` is missing or fails.
+    """
+    if not isinstance(fn, ca.Function):
+        raise TypeError(f"build: expected a casadi.Function, got {type(fn).__name__}")
+    cmd_flags = _check_flags(opt_level, flags)
+    mkey = (fn.__hash__(), fn.name(), tuple(cmd_flags), str(_cache_path()))
+    with _LOCK:
+        hit = _MEMO.get(mkey)
+        if hit is not None:  # already loaded in this process: no disk access at all
+            _STATS["memo_hit"] += 1
+            return hit[1]
+        f = _build(fn, cmd_flags, cache_dir(), lock_timeout)
+        _MEMO[mkey] = (fn, f)  # holding fn keeps its identity from being reused
+        return f
+
+
+def _build(fn: ca.Function, cmd_flags: list[str], d: Path, lock_timeout: float) -> ca.Function:
+    plan = _plan(fn, cmd_flags)
+    so, man, lock = d / f"{plan.stem()}.so", d / f"{plan.stem()}.json", d / f"{plan.stem()}.lock"
+    with _flock(lock, exclusive=False, timeout=lock_timeout) as got:
+        if got:
+            m, why = _verify(plan, so, man)
+            if m is not None:
+                _STATS["disk_hit"] += 1
+                return _load(plan, so, m)
+    with _flock(lock, exclusive=True, timeout=lock_timeout) as got:
+        if not got:
+            log.warning("lock %s busy for %.0f s: building %s privately", lock, lock_timeout, plan.name)
+            return _build_private(plan, d)
+        m, why = _verify(plan, so, man)  # another process may have built it meanwhile
+        if m is not None:
+            _STATS["disk_hit"] += 1
+            return _load(plan, so, m)
+        if why:
+            _STATS["rejected"] += 1
+            log.warning("cached %s rejected (%s): rebuilding", so.name, why)
+        _sweep(d)
+        m = _publish(plan, d, so, man)
+        return _load(plan, so, m)
+
+
+def artifact_of(f: ca.Function) -> dict | None:
+    """The manifest (key, so_sha256, flags, path, ...) of a Function returned by :func:`build`.
+
+    Result files store ``key`` so a run can be traced to the exact compiled code.
+    """
+    with _LOCK:
+        m = _MANIFESTS.get(f.__hash__())
+        return dict(m) if m is not None else None
+
+
+# ---------------------------------------------------------------------------------------------
+# the plant
+
+
+def compiled(name: str, opts=None) -> ca.Function:
+    """The public plant function ``name`` (see :data:`arvcas.uvms.PUBLIC_FUNCTIONS`), compiled to C.
+
+    ``opts`` is an :class:`arvcas.uvms.ModelOptions` (default: ``ModelOptions()``). Memoized per
+    process by ``(name, opts.tag())``; the library comes from the build cache when it is there.
+    """
+    from .uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
+
+    if name not in PUBLIC_FUNCTIONS:
+        raise ValueError(f"unknown plant function {name!r}; allowed: {', '.join(PUBLIC_FUNCTIONS)}")
+    if opts is None:
+        opts = ModelOptions()
+    if not isinstance(opts, ModelOptions):
+        raise ValueError(f"opts: expected arvcas.uvms.ModelOptions, got {type(opts).__name__}")
+    tag = opts.tag()
+    with _LOCK:
+        f = _COMPILED.get((name, tag))
+        if f is None:
+            if tag not in _PLANT:
+                _PLANT[tag] = plant_functions(opts)
+            f = build(_PLANT[tag][name])
+            _COMPILED[(name, tag)] = f
+        return f
+
+
+# ---------------------------------------------------------------------------------------------
+# inspection
+
+
+def cache_info() -> tuple[Path, list[Artifact]]:
+    """The cache directory and its artifacts (each verified against its manifest)."""
+    d = cache_dir()
+    out = []
+    for man in sorted(d.glob("*.json")):
+        try:
+            m = json.loads(man.read_text(encoding="utf-8"))
+            name, key = str(m["name"]), str(m["key"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        so = man.with_suffix(".so")
+        try:
+            st = os.lstat(so)
+        except FileNotFoundError:
+            continue
+        ok = (
+            stat.S_ISREG(st.st_mode)
+            and man.stem == f"{name}-{key[:20]}"
+            and _sha256_file(so) == m.get("so_sha256")
+        )
+        out.append(
+            Artifact(
+                name=name,
+                path=so,
+                size_bytes=st.st_size,
+                compile_time_s=float(m.get("compile_time_s", float("nan"))),
+                flags=tuple(m.get("flags", ())),
+                key=key,
+                verified=ok,
+            )
+        )
+    return d, out
