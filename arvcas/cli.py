@@ -65,7 +65,7 @@ def _add_cache(p: argparse.ArgumentParser) -> None:
 
 
 def _run_cache(a: argparse.Namespace) -> int:
-    from .compiled import cache_info
+    from .codegen import cache_info
 
     d, arts = cache_info()
     print(f"cache: {d}")
@@ -109,7 +109,7 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
     """
     import numpy as np
 
-    from .compiled import compiled
+    from .codegen import compiled
     from .params import load
 
     p = load(params_path).vector()

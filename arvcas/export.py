@@ -1,6 +1,6 @@
 """Export the public plant functions as a standalone C library with a Makefile, an example and a README.
 
-Nothing here runs a compiler (that is :mod:`arvcas.compiled`'s job): the output directory holds
+Nothing here runs a compiler (that is :mod:`arvcas.codegen`'s job): the output directory holds
 sources only, and ``make`` there builds ``libarvcas_plant.so`` and ``example``.
 """
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from . import __version__, closedloop, compiled, gains as gains_mod, scenario
+from . import __version__, closedloop, codegen, gains as gains_mod, scenario
 from .params import Params, load as load_params
 from .scenario import ScenarioConfig
 from .uvms import ModelOptions
@@ -84,7 +84,7 @@ def run_function(controller: str, cfg: ScenarioConfig, trace: bool, opts: ModelO
     key = (controller, cfg.text, cfg.time_h, cfg.time_duration, trace, opts)
     fn = _RUN_CACHE.get(key)
     if fn is None:
-        fn = compiled.build(closedloop.build_run(closedloop.RunSpec(controller, cfg, opts), trace=trace))
+        fn = codegen.build(closedloop.build_run(closedloop.RunSpec(controller, cfg, opts), trace=trace))
         _RUN_CACHE[key] = fn
     return fn
 

@@ -169,7 +169,7 @@ def test_demo_table(cache, plant, capsys):
 
 
 def test_cache_command(cache, plant, capsys):
-    from arvcas.compiled import build
+    from arvcas.codegen import build
 
     build(plant["arm_wrench"])  # into this module's cache (compiled() may be memoized from elsewhere)
     assert cli.main(["cache"]) == 0

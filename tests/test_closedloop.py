@@ -1,0 +1,163 @@
+"""The closed-loop run: compiled vs VM, metrics vs trace, batch vs single, EKF, bad input, divergence."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from arvcas import closedloop, codegen, gains, metrics, scenario
+from arvcas.params import load as load_params
+from arvcas.simulation import SimulationError, simulate, simulate_batch
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return scenario.load_scenario()
+
+
+@pytest.fixture(scope="module")
+def run_proposed(cfg):
+    return simulate("proposed", seed=0, cfg=cfg)
+
+
+def test_compiled_run_equals_vm(cfg):
+    """The generated C of the whole run reproduces CasADi's VM on the same graph (SPEC 4)."""
+    P = load_params()
+    F = closedloop.build_run(closedloop.RunSpec("proposed", cfg), trace=False)
+    args = (gains.default_gains("proposed"), scenario.noise_sequence(cfg, 1), cfg.uncertainty,
+            np.array(cfg.disturbance_phase), P.vector())
+    vm = [np.array(o) for o in F(*args)]
+    cc = [np.array(o) for o in codegen.build(F)(*args)]
+    for a, b in zip(vm, cc):
+        np.testing.assert_allclose(b, a, rtol=1e-10, atol=1e-14)
+
+
+def test_metrics_of_trace_equal_accumulators(run_proposed):
+    """CHAT/RMSE accumulated in the loop equal eq. 42/43 recomputed from the stored series."""
+    r = run_proposed
+    n = len(r.t) - 1
+    assert n == 1000 and r.t[-1] == pytest.approx(100.0)
+    np.testing.assert_allclose(metrics.chat(r.tau_cmd), r.chat, rtol=1e-12)
+    np.testing.assert_allclose(metrics.rmse(r.e[:n]), r.rmse, rtol=1e-12)
+
+
+def test_batch_equals_single_and_gains_are_inputs(cfg, run_proposed):
+    """simulate_batch rows equal simulate; new gain sets and seeds do not recompile."""
+    g0 = gains.default_gains("proposed")
+    G = np.stack([g0, g0 * 1.05, g0 * 0.97])
+    before = codegen.stats()["compile"]
+    chat, rmse = simulate_batch("proposed", G, seed=0, cfg=cfg)
+    np.testing.assert_allclose(chat[0], run_proposed.chat, rtol=1e-12)
+    np.testing.assert_allclose(rmse[0], run_proposed.rmse, rtol=1e-12)
+    assert not np.allclose(chat[1], chat[0])
+    other = simulate("proposed", seed=7, cfg=cfg)
+    assert codegen.stats()["compile"] == before  # run functions already built by the fixtures
+    assert not np.allclose(other.chat, run_proposed.chat)
+
+
+def test_same_seed_same_result(cfg, run_proposed):
+    again = simulate("proposed", seed=0, cfg=cfg)
+    np.testing.assert_array_equal(again.chat, run_proposed.chat)
+    np.testing.assert_array_equal(again.eta, run_proposed.eta)
+
+
+def test_ekf_reduces_measurement_error(run_proposed, cfg):
+    """The EKF estimate is closer to the truth than the raw measurements (section 4.1)."""
+    r = run_proposed
+    noise = scenario.noise_sequence(cfg, r.seed)[:6].T
+    raw = np.sqrt(np.mean(noise[10:] ** 2, axis=0))
+    est = np.sqrt(np.mean((r.eta_hat - r.eta)[10:] ** 2, axis=0))
+    assert (est < 0.5 * raw).all(), (est, raw)
+
+
+def test_station_keeping_and_references(run_proposed):
+    """The vehicle is held: errors of the order of Table 3, the ATD reference converges to eta_d."""
+    r = run_proposed
+    assert r.ok
+    assert np.all(r.rmse < 1e-2)
+    assert np.abs(r.eta_ref[-1]).max() < 1e-6  # ATD y1 -> eta_d = 0 well within T
+    assert np.abs(r.eta[-100:]).max() < 0.02
+    # the arm moves and the payload ramps as SPEC 4 says
+    assert r.payload[0] == 0 and r.payload[-1] == 1
+    i = np.searchsorted(r.t, 20.0)
+    np.testing.assert_allclose(np.degrees(r.q[i]), [60, 60, -60, 0, 60, 0], atol=1e-9)
+
+
+def test_thrusts_respect_saturation(run_proposed):
+    P = load_params()
+    assert run_proposed.thrust.min() >= P["thrusters.u_min"] - 1e-9
+    assert run_proposed.thrust.max() <= P["thrusters.u_max"] + 1e-9
+
+
+
+
+def test_traditional_law_zigzags_proposed_does_not(cfg):
+    """Fig. 10: the traditional decreasing law steps +-h l around k1min even while |s| <= sigma;
+    the proposed law raises k1 only when s leaves the neighbourhood."""
+    trad = simulate("traditional", seed=0, cfg=cfg)
+    prop = simulate("proposed", seed=0, cfg=cfg)
+    G = gains.unpack("proposed", gains.default_gains("proposed"))
+    k1min, sigma = np.array(G["k1min"]), np.array(G["sigma"])
+
+    def rises_inside(r):  # k1 increased although |s_k| <= sigma at that sample
+        return int(((np.diff(r.k1, axis=0) > 0) & (np.abs(r.s[:-1]) <= sigma)).sum())
+
+    def reversals_near_min(r):
+        near = np.abs(r.k1[1:-1] - k1min) < 0.2 * k1min
+        d = np.sign(np.diff(r.k1, axis=0))
+        return int(((d[1:] * d[:-1] < 0) & near).sum())
+
+    assert rises_inside(trad) > 100
+    assert rises_inside(prop) == 0
+    assert reversals_near_min(trad) > 20 * max(reversals_near_min(prop), 1)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"controller": "pid"}, "unknown 'pid'"),
+        ({"gains": np.ones(5)}, "takes 66 gains"),
+        ({"gains": -gains.default_gains("proposed")}, "must be > 0"),
+        ({"gains": np.full(66, np.nan)}, "not finite"),
+    ],
+)
+def test_bad_input_one_line_errors(kwargs, match):
+    kw = {"controller": "proposed"} | kwargs
+    with pytest.raises(ValueError, match=match) as ei:
+        simulate(**kw)
+    assert "\n" not in str(ei.value)
+
+
+def test_reso_stability_checked_before_running():
+    g = gains.default_gains("proposed").copy()
+    g[gains.gain_names("proposed").index("z.omega")] = 25.0  # h omega = 2.5
+    with pytest.raises(ValueError, match="h\\*omega = 2.5 >= 2"):
+        simulate("proposed", gains=g)
+
+
+def test_joint_targets_outside_limits_refused(cfg):
+    bad = dataclasses.replace(cfg, arm_qg=tuple(np.radians([60, 60, -60, 0, 120, 0])))
+    with pytest.raises(ValueError, match="joint 5 target 120.00 deg outside Table 1 limits"):
+        simulate("proposed", cfg=bad)
+
+
+def test_params_type_checked():
+    with pytest.raises(SimulationError, match="params: expected"):
+        simulate("proposed", params={"env.rho": 1.0})
+
+
+def test_divergence_is_reported_not_raised(cfg):
+    """Gains that destabilise the loop end with ok = False, a failure time and NaN metrics."""
+    g = gains.default_gains("agsta").copy()
+    names = gains.gain_names("agsta")
+    for d in gains.DOFS:
+        g[names.index(f"{d}.mu2")] = 50.0  # a huge linear GSTA term: explicit Euler at h = 0.1 goes unstable
+    r = simulate("agsta", gains=g, cfg=cfg)
+    assert not r.ok and r.t_fail is not None and 0 <= r.t_fail < 100
+    chat, rmse, ok, t_fail = simulate_batch("agsta", np.stack([gains.default_gains("agsta"), g]), cfg=cfg,
+                                             return_status=True)
+    assert ok.tolist() == [True, False]
+    assert np.isnan(chat[1]).all() and np.isfinite(chat[0]).all()
+    assert t_fail[1] == pytest.approx(r.t_fail)
