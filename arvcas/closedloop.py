@@ -74,7 +74,7 @@ def state_layout(n_gains: int) -> Layout:
         ("tau_prev", 6), ("u_hold", 6),  # previous command (CHAT) and held realised thrust
         ("chat_sum", 6), ("e2_sum", 6), ("ok", 1), ("t_fail", 1),
         # constants of the run carried through the loop
-        ("gains", n_gains), ("unc", 4), ("phase", 6), ("p", NP), ("consts", 9),
+        ("gains", n_gains), ("unc", 4), ("phase", 6), ("ekf", 5), ("p", NP), ("consts", 9),
     ])
 
 
@@ -142,10 +142,12 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout]:
     # 1. sensors
     y = x + noise
     # 2. EKF update (H = I, R = sensor covariance); the first sample starts from y_0 with P = R
-    Rn = ca.diag(ca.DM(cfg.sensor_variances))
+    ekf = L.get(S, "ekf")  # [q_eta, q_nu, var_position, var_attitude, var_velocity]
+    r_meas = ca.vertcat(ca.repmat(ekf[2], 3, 1), ca.repmat(ekf[3], 3, 1), ca.repmat(ekf[4], 6, 1))
+    Rn = ca.diag(r_meas)
     xh = ca.if_else(first, y, L.get(S, "xh"))
     Pc = ca.if_else(first, Rn, ca.reshape(L.get(S, "Pc"), 12, 12))
-    xh, Pc = _ekf_update(xh, Pc, y, cfg.sensor_variances)
+    xh, Pc = _ekf_update(xh, Pc, y, r_meas)
     eta_hat, nu_hat = xh[0:6], xh[6:12]
     eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
 
@@ -224,11 +226,11 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout]:
     ok_c = ca.logic_and(ok, ca.logic_and(ca.mmax(ca.fabs(e_true) / lim) < 1, ca.mmax(ca.fabs(tau_v)) < 1e12))
     y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
     C = L.pack({
-        "x": x, "xh": _ekf_f(xh, h), "Pc": ca.vec(_ekf_cov(xh, Pc, h, cfg)),
+        "x": x, "xh": _ekf_f(xh, h), "Pc": ca.vec(_ekf_cov(xh, Pc, h, ekf[0], ekf[1])),
         "y1": y1n, "y2": y2n, "r0": r0, "z1": z1, "z2": z2, "tau_eta_prev": tau_eta,
         "w": w_next, "k1": k1_next, "tau_prev": tau_v, "u_hold": u_sat,
         "chat_sum": chat_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
-        "gains": g, "unc": unc, "phase": phase, "p": L.get(S, "p"), "consts": consts,
+        "gains": g, "unc": unc, "phase": phase, "ekf": ekf, "p": L.get(S, "p"), "consts": consts,
     })
     tr_vec = ca.vertcat(tk, eta, nu, eta_hat, y1, tau_v, u_sat, s, k1, k2, f_hat, f_true, q, pl, ok)
     outs = [C, tau_real] + ([tr_vec] if trace else [])
@@ -301,16 +303,19 @@ def _ekf_f(xh, h):
     return ca.vertcat(xh[0:6] + h * ca.mtimes(J(xh[0:6]), xh[6:12]), xh[6:12])
 
 
-def _ekf_cov(xh, Pc, h, cfg: ScenarioConfig):
-    """P+ = F P F' + Q with F the AD Jacobian of the transition (SPEC 4)."""
+def _ekf_cov(xh, Pc, h, q_eta, q_nu):
+    """P+ = F P F' + Q with F the AD Jacobian of the transition (SPEC 4), Q = diag(q_eta I6, q_nu I6)."""
     xs = ca.SX.sym("xs", 12)
     F = ca.substitute(ca.jacobian(_ekf_f(xs, h), xs), xs, xh)
-    Q = ca.diag(ca.DM([cfg.ekf_q_eta] * 6 + [cfg.ekf_q_nu] * 6))
+    Q = ca.diag(ca.vertcat(ca.repmat(q_eta, 6, 1), ca.repmat(q_nu, 6, 1)))
     return ca.mtimes([F, Pc, F.T]) + Q
 
 
 def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
-    """The whole run as one MX Function of (gains, noise 12x(N+1), unc[4], phase[6], p).
+    """The whole run as one MX Function of (gains, noise 12x(N+1), unc[4], phase[6], ekf[5], p).
+
+    ``ekf = [q_eta, q_nu, var_position, var_attitude, var_velocity]``: EKF process noise per step and
+    the sensor variances its R assumes (the noise input itself is drawn outside).
 
     ``trace=False``: outputs (chat[6], rmse[6], ok, t_fail); ``trace=True``: also the per-sample trace.
     """
@@ -322,13 +327,14 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     noise = ca.MX.sym("noise", 12, n)
     unc = ca.MX.sym("unc", 4)
     phase = ca.MX.sym("phase", 6)
+    ekf = ca.MX.sym("ekf", 5)
     p = ca.MX.sym("p", NP)
     consts = _consts_fn(spec.opts)(p)
     x0 = ca.DM(list(cfg.initial_eta0) + list(cfg.initial_nu0))
     z = lambda k: ca.MX.zeros(k)  # noqa: E731
     S0 = ca.vertcat(
         x0, z(12), z(144), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6),
-        ca.MX(1), ca.MX(-1), G, unc, phase, p, consts,
+        ca.MX(1), ca.MX(-1), G, unc, phase, ekf, p, consts,
     )
     assert S0.shape[0] == L.size
     tgrid = ca.DM(np.arange(n) * cfg.time_h).T
@@ -345,7 +351,7 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     outs = [chat, rmse, ok, t_fail] + ([tr] if trace else [])
     names = ["chat", "rmse", "ok", "t_fail"] + (["trace"] if trace else [])
     name = f"run_{spec.controller}" + ("_trace" if trace else "")
-    return ca.Function(name, [G, noise, unc, phase, p], outs, ["gains", "noise", "unc", "phase", "p"], names)
+    return ca.Function(name, [G, noise, unc, phase, ekf, p], outs, ["gains", "noise", "unc", "phase", "ekf", "p"], names)
 
 
 def _consts_fn(opts: ModelOptions) -> ca.Function:

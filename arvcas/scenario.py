@@ -124,6 +124,19 @@ class ScenarioConfig:
         return np.array([self.sensors_var_position] * 3 + [self.sensors_var_attitude] * 3
                         + [self.sensors_var_velocity] * 6)
 
+    @property
+    def ekf_vector(self) -> np.ndarray:
+        """[q_eta, q_nu, var_position, var_attitude, var_velocity]: the run's ``ekf`` input."""
+        return np.array([self.ekf_q_eta, self.ekf_q_nu, self.sensors_var_position,
+                         self.sensors_var_attitude, self.sensors_var_velocity])
+
+    def graph_key(self) -> "ScenarioConfig":
+        """The fields that shape the compiled graph (values that are run inputs zeroed)."""
+        return replace(self, text="", path="", ekf_q_eta=0.0, ekf_q_nu=0.0, sensors_var_position=0.0,
+                       sensors_var_attitude=0.0, sensors_var_velocity=0.0, disturbance_phase=(0.0,) * 6,
+                       uncertainty_C_factor=0.0, uncertainty_D_factor=0.0, uncertainty_g_factor=0.0,
+                       uncertainty_arm_factor=0.0)
+
     def with_h(self, h: float) -> "ScenarioConfig":
         """The same scenario at another controller sampling period (plant unchanged)."""
         cfg = replace(self, time_h=float(h))

@@ -81,7 +81,7 @@ _RUN_CACHE: dict = {}
 
 def run_function(controller: str, cfg: ScenarioConfig, trace: bool, opts: ModelOptions = ModelOptions()) -> ca.Function:
     """The compiled run (memoised per process; the C library is cached on disk by content hash)."""
-    key = (controller, cfg.text, cfg.time_h, cfg.time_duration, trace, opts)
+    key = (controller, cfg.graph_key(), trace, opts)
     fn = _RUN_CACHE.get(key)
     if fn is None:
         fn = codegen.build(closedloop.build_run(closedloop.RunSpec(controller, cfg, opts), trace=trace))
@@ -119,7 +119,7 @@ def simulate(controller: str, gains=None, seed: int = 0, params: Params | None =
     """Run the 100 s station-keeping experiment once (compiled) and return its :class:`Result`."""
     cfg, params, g, noise, unc, ph = _prepare(controller, gains, seed, params, cfg, uncertainty, phase, batch=False)
     fn = run_function(controller, cfg, trace=True, opts=opts)
-    chat, rmse, ok, t_fail, tr = (np.array(o) for o in fn(g, noise, unc, ph, params.vector()))
+    chat, rmse, ok, t_fail, tr = (np.array(o) for o in fn(g, noise, unc, ph, cfg.ekf_vector, params.vector()))
     cols = {}
     i = 0
     for name, n in closedloop.TRACE_FIELDS:
@@ -163,7 +163,7 @@ def simulate_batch(controller: str, gains, seed: int = 0, params: Params | None 
     fn = run_function(controller, cfg, trace=False, opts=opts)
     nt = min(_n_threads(n_threads), n)
     mapped = _mapped(fn, n, nt)
-    chat, rmse, ok, t_fail = (np.array(o) for o in mapped(g.T, noise, unc, ph, params.vector()))
+    chat, rmse, ok, t_fail = (np.array(o) for o in mapped(g.T, noise, unc, ph, cfg.ekf_vector, params.vector()))
     ok = ok.ravel() > 0.5
     chat, rmse = chat.T.copy(), rmse.T.copy()
     chat[~ok] = np.nan

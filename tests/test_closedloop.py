@@ -27,7 +27,7 @@ def test_compiled_run_equals_vm(cfg):
     P = load_params()
     F = closedloop.build_run(closedloop.RunSpec("proposed", cfg), trace=False)
     args = (gains.default_gains("proposed"), scenario.noise_sequence(cfg, 1), cfg.uncertainty,
-            np.array(cfg.disturbance_phase), P.vector())
+            np.array(cfg.disturbance_phase), cfg.ekf_vector, P.vector())
     vm = [np.array(o) for o in F(*args)]
     cc = [np.array(o) for o in codegen.build(F)(*args)]
     for a, b in zip(vm, cc):
