@@ -160,26 +160,39 @@ def base_inertia(P, q, payload):
     The arm's wrench on the vehicle is affine in the vehicle acceleration,
     ``tau_m = tau_m(nu_dot = 0) - M_arm(q) nu_dot`` (exact), and the coupled vehicle solves
     ``(M + M_arm) nu_dot = ...`` (SPEC 3). Each body with mass m, centre c (in {b}) and inertia I_c
-    about c contributes ``[[m I, -m S(c)], [m S(c), I_c - m S(c) S(c)]]``.
+    about c contributes ``[[m I, -m S(c)], [m S(c), I_c - m S(c) S(c)]]``; summed through the first
+    moment ``sum m c`` and ``-sum m S(c)^2 = sum m (|c|^2 I - c c')``. A link's cylinder inertia is
+    ``I_c = I_tr I + (I_ax - I_tr) w w'`` with ``w`` its unit axis in {b}.
     """
     pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
     s_list = link_vectors(P)
-    Mm = ca.SX.zeros(6, 6) if isinstance(q, ca.SX) else ca.DM.zeros(6, 6)
-    bodies = []
+    mass = 0
+    first = 0  # sum m c
+    J = 0  # sum of rotational inertia about the COB (3x3 symmetric)
     for i, (R, p) in enumerate(forward_kinematics(P, q), start=1):
         s = s_list[i - 1]
         m_i = P[f"arm.link{i}.mass"]
-        Ic = ca.mtimes([R, link_inertia(m_i, P[f"arm.link{i}.diameter"], s), R.T])
-        bodies.append((m_i, pb0 + p + ca.mtimes(R, 0.5 * s), Ic))
+        L2 = ca.dot(s, s)
+        r2 = (0.5 * P[f"arm.link{i}.diameter"]) ** 2
+        I_ax = 0.5 * m_i * r2
+        I_tr = m_i * (3 * r2 + L2) / 12.0
+        Rs = ca.mtimes(R, s)
+        c = pb0 + p + 0.5 * Rs
+        bodies = [(m_i, c, I_tr, (I_ax - I_tr) / L2, Rs)]
         if i == N_JOINTS:
-            bodies.append((payload * P["payload.mass"], pb0 + p + ca.mtimes(R, s), 0))
-    for m_i, c, Ic in bodies:
-        S = skew(c)
-        Mm = Mm + ca.vertcat(
-            ca.horzcat(m_i * ca.DM.eye(3), -m_i * S),
-            ca.horzcat(m_i * S, Ic - m_i * ca.mtimes(S, S)),
-        )
-    return Mm
+            bodies.append((payload * P["payload.mass"], pb0 + p + Rs, 0, 0, None))
+        for m, c, i_tr, k_ax, Rs_ in bodies:
+            mass = mass + m
+            mc = m * c
+            first = first + mc
+            J = J + (ca.dot(mc, c) + i_tr) * ca.DM.eye(3) - ca.mtimes(mc, c.T)
+            if Rs_ is not None:
+                J = J + k_ax * ca.mtimes(Rs_, Rs_.T)
+    S1 = skew(first)
+    return ca.vertcat(
+        ca.horzcat(mass * ca.DM.eye(3), -S1),
+        ca.horzcat(S1, J),
+    )
 
 
 def stow_pose(P):
