@@ -20,7 +20,7 @@ import casadi as ca
 import numpy as np
 
 __all__ = [
-    "ScenarioConfig", "ScenarioError", "load_scenario", "default_scenario_path",
+    "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
     "quintic", "joint_trajectory", "payload_profile", "disturbance", "noise_sequence",
     "check_joint_limits", "n_samples",
 ]
@@ -169,12 +169,19 @@ def load_scenario(path: str | Path | None = None) -> ScenarioConfig:
         raw = p.read_bytes()
     except FileNotFoundError:
         raise ScenarioError(f"{where}: file not found") from None
+    except IsADirectoryError:
+        raise ScenarioError(f"{where}: is a directory, expected a scenario TOML file") from None
     except OSError as e:
         raise ScenarioError(f"{where}: cannot read file ({e.strerror})") from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
         raise ScenarioError(f"{where}: not UTF-8 text (byte {e.start})") from None
+    return loads_scenario(text, where)
+
+
+def loads_scenario(text: str, where: str = "<scenario text>") -> ScenarioConfig:
+    """Validate scenario TOML text (e.g. stored in a result file); ``where`` names it in errors."""
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
