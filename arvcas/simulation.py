@@ -17,7 +17,7 @@ from .params import Params, load as load_params
 from .scenario import ScenarioConfig
 from .uvms import ModelOptions
 
-__all__ = ["Result", "simulate", "simulate_batch", "default_gains", "run_function", "SimulationError"]
+__all__ = ["Result", "simulate", "simulate_batch", "simulate_many", "default_gains", "run_function", "SimulationError"]
 
 
 class SimulationError(ValueError):
@@ -171,6 +171,46 @@ def simulate_batch(controller: str, gains, seed: int = 0, params: Params | None 
     if return_status:
         return chat, rmse, ok, np.where(ok, np.nan, t_fail.ravel())
     return chat, rmse
+
+
+def simulate_many(controller: str, gains, seeds, uncertainty=None, phase=None, params: Params | None = None,
+                  cfg: ScenarioConfig | None = None, n_threads: int | None = None,
+                  opts: ModelOptions = ModelOptions()):
+    """Run n draws in one call: row i has its own gains, noise seed, uncertainty factors and phases.
+
+    ``gains``: (n_gains,) shared, or (n, n_gains); ``seeds``: (n,) non-negative integers;
+    ``uncertainty``: None (the scenario's factors), (4,) shared, or (n, 4); ``phase``: None, (6,) or (n, 6).
+    Returns ``(chat (n x 6), rmse (n x 6), ok (n,), t_fail (n,))`` (NaN metrics for diverged runs).
+    This is the Monte Carlo path; :func:`simulate_batch` is the common-random-numbers path of tuning.
+    """
+    seeds = np.asarray(seeds)
+    if seeds.ndim != 1 or seeds.size == 0:
+        raise SimulationError(f"seeds: expected a non-empty 1-D sequence of integers, got shape {seeds.shape}")
+    n = seeds.size
+    cfg, params, g, _noise, unc0, ph0 = _prepare(controller, gains, int(seeds[0]), params, cfg, None, None, batch=True)
+    if g.shape[0] not in (1, n):
+        raise SimulationError(f"gains: {g.shape[0]} gain sets for {n} seeds (give 1 or {n})")
+    G = np.broadcast_to(g, (n, g.shape[1]))
+
+    def rows(v, default, k, name):
+        a = np.asarray(default if v is None else v, dtype=float)
+        if a.shape == (k,):
+            a = np.broadcast_to(a, (n, k))
+        if a.shape != (n, k) or not np.isfinite(a).all():
+            raise SimulationError(f"{name}: expected ({k},) or ({n}, {k}) finite values, got shape {a.shape}")
+        return a
+
+    U = rows(uncertainty, unc0, 4, "uncertainty")
+    PH = rows(phase, ph0, 6, "phase")
+    noise = np.hstack([scenario.noise_sequence(cfg, int(sd)) for sd in seeds])
+    fn = run_function(controller, cfg, trace=False, opts=opts)
+    mapped = _mapped(fn, n, min(_n_threads(n_threads), n))
+    chat, rmse, ok, t_fail = (np.array(o) for o in mapped(G.T, noise, U.T, PH.T, cfg.ekf_vector, params.vector()))
+    ok = ok.ravel() > 0.5
+    chat, rmse = chat.T.copy(), rmse.T.copy()
+    chat[~ok] = np.nan
+    rmse[~ok] = np.nan
+    return chat, rmse, ok, np.where(ok, np.nan, t_fail.ravel())
 
 
 _MAP_CACHE: dict = {}

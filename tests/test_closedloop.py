@@ -161,3 +161,19 @@ def test_divergence_is_reported_not_raised(cfg):
     assert ok.tolist() == [True, False]
     assert np.isnan(chat[1]).all() and np.isfinite(chat[0]).all()
     assert t_fail[1] == pytest.approx(r.t_fail)
+
+
+def test_simulate_many_rows_equal_single_runs(cfg):
+    """Monte Carlo batch: each row reproduces the single run with its own seed, factors and phases."""
+    from arvcas.simulation import simulate_many
+
+    seeds = [0, 5, 9]
+    U = np.array([cfg.uncertainty, [1.2, 0.8, 0.9, 0.5], [1.0, 1.0, 1.0, 1.0]])
+    PH = np.array([cfg.disturbance_phase, np.zeros(6), np.full(6, 1.0)])
+    chat, rmse, ok, _ = simulate_many("agsta", gains.default_gains("agsta"), seeds, uncertainty=U, phase=PH, cfg=cfg)
+    assert ok.all()
+    for i, sd in enumerate(seeds):
+        r = simulate("agsta", seed=sd, cfg=cfg, uncertainty=U[i], phase=PH[i])
+        np.testing.assert_array_equal(chat[i], r.chat)
+        np.testing.assert_array_equal(rmse[i], r.rmse)
+    assert len({tuple(c) for c in chat}) == 3
