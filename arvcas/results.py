@@ -1,0 +1,356 @@
+"""Result files: the HDF5 layout of one closed-loop run, in one place.
+
+:func:`write_result` stores a :class:`arvcas.simulation.Result`; :func:`read_result` gives it back,
+field for field (arrays bit for bit).
+
+Layout (``format = "arvcas-result"``, ``format_version = 1``)
+------------------------------------------------------------
+Datasets, one row per controller sample ``t_k = k h``, ``k = 0..N`` (float64), each with the
+attributes ``units``, ``description``, ``columns`` (comma-separated column names) and, where a
+frame matters, ``frame`` (``{n}`` NED inertial, ``{b}`` body at the COB):
+
+====== ======= ================================================================================
+name   shape   content
+====== ======= ================================================================================
+t      (N+1,)  sample time, s
+eta    (N+1,6) true pose [x y z phi theta psi], m and rad, {n}
+nu     (N+1,6) true body velocity [u v w p q r], m/s and rad/s, {b}
+eta_hat(N+1,6) EKF estimate of eta, {n}
+eta_ref(N+1,6) ATD reference y1 (eq. 12-13), {n}
+tau_cmd(N+1,6) commanded tau_v (before allocation and saturation), N and N m, {b}
+thrust (N+1,6) thrust per thruster after saturation, N
+s      (N+1,6) sliding variable s = e_dot + c e (eq. 17), m/s and rad/s, {n}
+k1, k2 (N+1,6) adaptive GSTA gains (eq. 19)
+f_hat  (N+1,6) total-disturbance estimate, N and N m, {n}
+f_true (N+1,6) total disturbance of eq. 6, N and N m, {n}
+q      (N+1,6) joint angles, rad
+payload(N+1,)  payload fraction in [0, 1]
+====== ======= ================================================================================
+
+Root attributes: ``format``, ``format_version``, ``controller``, ``chat`` and ``rmse`` (6 each,
+eq. 42-43; with ``chat_units``, ``rmse_units``, ``dofs``), ``seed``, ``gains`` and ``gain_names``,
+``config`` (the scenario file's text), ``params`` and ``param_names``, ``uncertainty`` ([C, D, g, arm]
+factors), ``phase`` (disturbance phases, rad), ``h`` (s), ``ok``, ``t_fail`` (s; NaN when ok),
+``status`` (one sentence), ``arvcas_version``, ``casadi_version``, ``created`` (ISO 8601, UTC) and
+``meta`` (JSON text of ``Result.meta``). ``params``/``param_names``, ``uncertainty`` and ``phase``
+are absent when the Result has none.
+
+Writing is atomic: the file is built under a temporary name in the target directory, flushed and
+fsync'ed, then renamed over the final name (``os.replace``); an interrupted write leaves any previous
+file untouched and no partial file under the final name.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import stat
+import tempfile
+from pathlib import Path
+
+import casadi as ca
+import h5py
+import numpy as np
+
+from . import gains as gains_mod
+from .closedloop import TRACE_FIELDS
+from .params import SCHEMA as PARAM_SCHEMA
+from .simulation import Result
+
+__all__ = ["ResultsError", "write_result", "read_result", "check_dir", "FORMAT", "FORMAT_VERSION", "DATASETS"]
+
+FORMAT = "arvcas-result"
+FORMAT_VERSION = 1
+
+_DOFS = "x, y, z, phi, theta, psi"
+_POSE_UNITS = "m, m, m, rad, rad, rad"
+_RATE_UNITS = "m/s, m/s, m/s, rad/s, rad/s, rad/s"
+_WRENCH_UNITS = "N, N, N, N m, N m, N m"
+_THRUSTERS = "stern_left, stern_right, side_bow, side_stern, vertical_port, vertical_starboard"
+_GAIN_NOTE = ("dimensionless gain as in Table 2; the GSTA term k1 phi1(s) of eq. 21 is an acceleration "
+              "(m/s^2, rad/s^2)")
+
+# name -> (width, units, frame or "", columns, description). Order = write order.
+DATASETS: dict[str, tuple[int, str, str, str, str]] = {
+    "t": (1, "s", "", "t", "time of controller sample k, t_k = k h"),
+    "eta": (6, _POSE_UNITS, "{n}", _DOFS, "true pose eta = [x y z phi theta psi] (ZYX Euler angles)"),
+    "nu": (6, _RATE_UNITS, "{b}", "u, v, w, p, q, r", "true body velocity nu = [u v w p q r] about the COB"),
+    "eta_hat": (6, _POSE_UNITS, "{n}", _DOFS, "EKF estimate of eta (the controller's input)"),
+    "eta_ref": (6, _POSE_UNITS, "{n}", _DOFS, "ATD reference y1 (eq. 12-13) tracked by the controller"),
+    "tau_cmd": (6, _WRENCH_UNITS, "{b}", "X, Y, Z, K, M, N",
+                "commanded tau_v = J(eta_hat)^T tau_eta (eq. 20), before allocation and saturation; CHAT's input"),
+    "thrust": (6, "N", "", _THRUSTERS,
+               "thrust per thruster after saturation to [u_min, u_max], held over the sample (App. B)"),
+    "s": (6, _RATE_UNITS, "{n}", _DOFS, "sliding variable s = e_dot + c e (eq. 17), e = eta_hat - y1"),
+    "k1": (6, "1", "", _DOFS, "adaptive gain k1 (eq. 19): " + _GAIN_NOTE),
+    "k2": (6, "1", "", _DOFS, "gain k2 = 2 eps k1 + beta + 4 eps^2 (eq. 19): " + _GAIN_NOTE),
+    "f_hat": (6, _WRENCH_UNITS, "{n}", _DOFS,
+              "controller's total-disturbance estimate in force units: Mhat z2 of the RESO (proposed, "
+              "traditional, implicit) or -f_n of the nominal model (agsta)"),
+    "f_true": (6, _WRENCH_UNITS, "{n}", _DOFS,
+               "true total disturbance of eq. 6: Mhat eta_ddot - J^-T tau_v,realised"),
+    "q": (6, "rad", "", "q1, q2, q3, q4, q5, q6", "manipulator joint angles (prescribed trajectory)"),
+    "payload": (1, "1", "", "payload", "payload fraction in [0, 1] (ramped over 0.5 s)"),
+}
+
+_TRACE_WIDTH = dict(TRACE_FIELDS)
+assert all(_TRACE_WIDTH[k] == v[0] for k, v in DATASETS.items()), "results.DATASETS out of step with TRACE_FIELDS"
+
+_ROOT_ARRAYS_OPTIONAL = {"params": "params_vector", "uncertainty": "uncertainty", "phase": "phase"}
+
+
+class ResultsError(ValueError):
+    """A result file cannot be written or read (one line, naming the path)."""
+
+
+# ---------------------------------------------------------------------------------------------
+# writing
+
+
+def check_dir(d, what: str | None = None) -> Path:
+    """``d`` as a Path after checking that it is an existing, writable directory.
+
+    A directory without any write permission bit counts as read-only also for root (who bypasses
+    ``access()``). Raises :class:`ResultsError` (one line naming ``what``, default ``d``).
+    """
+    d = Path(d)
+    who = what if what is not None else str(d)
+    try:
+        st = os.stat(d)
+    except FileNotFoundError:
+        raise ResultsError(f"{who}: directory {d} does not exist") from None
+    except OSError as e:
+        raise ResultsError(f"{who}: cannot access directory {d} ({e.strerror})") from None
+    if not stat.S_ISDIR(st.st_mode):
+        raise ResultsError(f"{who}: {d} is not a directory")
+    if not os.access(d, os.W_OK | os.X_OK) or not st.st_mode & 0o222:
+        raise ResultsError(f"{who}: directory {d} is not writable (mode {stat.S_IMODE(st.st_mode):o})")
+    return d
+
+
+def _check_target(path: Path) -> Path:
+    """The final path, after checking that its directory exists and is writable (before any work)."""
+    check_dir(path.parent, str(path))
+    if path.is_dir():
+        raise ResultsError(f"{path}: is a directory")
+    return path
+
+
+def _series(result: Result, name: str, n: int | None) -> np.ndarray:
+    width = DATASETS[name][0]
+    a = np.asarray(getattr(result, name), dtype=float)
+    want = (a.shape[0],) if width == 1 else (a.shape[0], width)
+    if a.ndim == 0 or a.shape != want or (n is not None and a.shape[0] != n):
+        exp = f"({n if n is not None else 'N+1'}{'' if width == 1 else f', {width}'})"
+        raise ResultsError(f"Result.{name}: expected shape {exp}, got {a.shape}")
+    return a
+
+
+def _vector(result: Result, attr: str, n: int | None, where: str) -> np.ndarray:
+    a = np.asarray(getattr(result, attr), dtype=float).ravel()
+    if n is not None and a.shape != (n,):
+        raise ResultsError(f"Result.{where}: expected {n} values, got shape {a.shape}")
+    return a
+
+
+def _status(result: Result) -> str:
+    if result.ok:
+        return f"completed: {len(result.t)} controller samples to t = {float(result.t[-1]):g} s without divergence"
+    return (f"diverged at t = {result.t_fail:g} s (non-finite state or |eta - eta_ref| beyond the scenario's "
+            f"limits); samples after t_fail repeat the last valid state and are not meaningful")
+
+
+def _collect(result: Result) -> tuple[dict[str, np.ndarray], dict[str, object]]:
+    """Validate the Result and turn it into (datasets, root attributes); raises ResultsError."""
+    if not isinstance(result, Result):
+        raise ResultsError(f"write_result: expected arvcas.simulation.Result, got {type(result).__name__}")
+    try:
+        gains_mod.check_controller(result.controller)
+    except ValueError as e:
+        raise ResultsError(f"Result.controller: {e}") from None
+    n = len(np.asarray(result.t))
+    data = {name: _series(result, name, n) for name in DATASETS}
+    gain_names = gains_mod.gain_names(result.controller)
+    attrs: dict[str, object] = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "controller": result.controller,
+        "dofs": np.array(_DOFS.split(", "), dtype=object),
+        "chat": _vector(result, "chat", 6, "chat"),
+        "chat_units": "N (x, y, z), N m (phi, theta, psi) per controller sample; eq. 42 on tau_cmd",
+        "rmse": _vector(result, "rmse", 6, "rmse"),
+        "rmse_units": "m (x, y, z), rad (phi, theta, psi); eq. 43 on eta - eta_ref",
+        "seed": int(result.seed),
+        "gains": _vector(result, "gains", len(gain_names), "gains"),
+        "gain_names": np.array(gain_names, dtype=object),
+        "config": str(result.config_text),
+        "h": float(result.h),
+        "ok": bool(result.ok),
+        "t_fail": float("nan") if result.t_fail is None else float(result.t_fail),
+        "arvcas_version": str(result.version),
+        "casadi_version": ca.__version__,
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+    if not result.ok and result.t_fail is None:
+        raise ResultsError("Result: ok is False but t_fail is None")
+    attrs["status"] = _status(result)
+    if result.params_vector is not None:
+        p = _vector(result, "params_vector", None, "params_vector")
+        if p.shape != (len(PARAM_SCHEMA),):
+            raise ResultsError(f"Result.params_vector: expected {len(PARAM_SCHEMA)} values "
+                               f"(arvcas.params.SCHEMA), got {p.shape}")
+        attrs["params"] = p
+        attrs["param_names"] = np.array(list(PARAM_SCHEMA), dtype=object)
+    if result.uncertainty is not None:
+        attrs["uncertainty"] = _vector(result, "uncertainty", 4, "uncertainty")
+    if result.phase is not None:
+        attrs["phase"] = _vector(result, "phase", 6, "phase")
+    try:
+        attrs["meta"] = json.dumps(result.meta, sort_keys=True, allow_nan=True)
+    except (TypeError, ValueError) as e:
+        raise ResultsError(f"Result.meta: not JSON-serialisable ({e})") from None
+    return data, attrs
+
+
+def _put(f: h5py.File, name: str, data: np.ndarray) -> None:
+    """One dataset with its attributes (the writer's unit of work)."""
+    _, units, frame, columns, description = DATASETS[name]
+    ds = f.create_dataset(name, data=data, dtype="f8")
+    ds.attrs["units"] = units
+    ds.attrs["description"] = description
+    ds.attrs["columns"] = columns
+    if frame:
+        ds.attrs["frame"] = frame
+
+
+def _fsync_path(path: Path, directory: bool = False) -> None:
+    fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_result(result: Result, path) -> Path:
+    """Write ``result`` to the HDF5 file ``path`` atomically; returns the path.
+
+    The directory must exist and be writable; an existing file is replaced only once the new one is
+    complete on disk. Raises :class:`ResultsError` (one line) before any work when it cannot.
+    """
+    path = _check_target(Path(path))
+    data, attrs = _collect(result)
+    try:
+        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as e:
+        raise ResultsError(f"{path}: cannot create a file in {path.parent} ({e.strerror})") from None
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        with h5py.File(tmp, "w") as f:
+            for k, v in attrs.items():
+                f.attrs[k] = v
+            for name, a in data.items():
+                _put(f, name, a)
+            f.flush()
+        _fsync_path(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException as e:
+        tmp.unlink(missing_ok=True)
+        if isinstance(e, OSError):
+            raise ResultsError(f"{path}: write failed ({e.strerror or e})") from None
+        raise
+    try:
+        _fsync_path(path.parent, directory=True)
+    except OSError:  # pragma: no cover - some filesystems refuse fsync on directories
+        pass
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# reading
+
+
+def _str(v) -> str:
+    return v.decode("utf-8") if isinstance(v, bytes) else str(v)
+
+
+def _strs(v) -> list[str]:
+    return [_str(x) for x in np.asarray(v).ravel()]
+
+
+def read_result(path) -> Result:
+    """Read a file written by :func:`write_result` back into a :class:`Result`.
+
+    Raises :class:`ResultsError` (one line, naming the path) for a missing file, a file that is not
+    HDF5, not an arvcas result (no or another ``format`` attribute, newer ``format_version``), or
+    damaged (truncated, missing datasets, inconsistent shapes).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise ResultsError(f"{path}: no such file")
+    if not path.is_file():
+        raise ResultsError(f"{path}: not a regular file")
+    try:
+        with open(path, "rb") as fh:
+            sig = fh.read(8)
+    except OSError as e:
+        raise ResultsError(f"{path}: cannot read ({e.strerror})") from None
+    if sig != b"\x89HDF\r\n\x1a\n":
+        raise ResultsError(f"{path}: not an HDF5 file")
+    try:
+        with h5py.File(path, "r") as f:
+            return _read(f, path)
+    except ResultsError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError) as e:
+        msg = " ".join(str(e).split()) or type(e).__name__
+        raise ResultsError(f"{path}: damaged or truncated HDF5 file ({msg})") from None
+
+
+def _read(f: h5py.File, path: Path) -> Result:
+    a = f.attrs
+    fmt = _str(a["format"]) if "format" in a else None
+    if fmt != FORMAT:
+        what = "no 'format' attribute" if fmt is None else f"format is '{fmt}'"
+        raise ResultsError(f"{path}: not an arvcas result file ({what}, expected '{FORMAT}')")
+    ver = int(a.get("format_version", -1))
+    if not 1 <= ver <= FORMAT_VERSION:
+        raise ResultsError(f"{path}: format_version {ver} is not supported (this arvcas reads 1..{FORMAT_VERSION})")
+    missing = [k for k in DATASETS if k not in f]
+    if missing:
+        raise ResultsError(f"{path}: damaged result file: missing dataset(s) {', '.join(missing)}")
+    cols = {k: np.array(f[k][()], dtype=float) for k in DATASETS}
+    n = cols["t"].shape[0]
+    for k, (w, *_rest) in DATASETS.items():
+        want = (n,) if w == 1 else (n, w)
+        if cols[k].shape != want:
+            raise ResultsError(f"{path}: damaged result file: dataset {k} has shape {cols[k].shape}, expected {want}")
+    controller = _str(a["controller"])
+    gains = np.array(a["gains"], dtype=float)
+    try:
+        expect_names = gains_mod.gain_names(controller)
+    except ValueError:
+        raise ResultsError(f"{path}: unknown controller '{controller}'") from None
+    if _strs(a["gain_names"]) != expect_names:
+        raise ResultsError(f"{path}: gain_names do not match controller '{controller}' of this arvcas version")
+    opt = {}
+    for key, field in _ROOT_ARRAYS_OPTIONAL.items():
+        opt[field] = np.array(a[key], dtype=float) if key in a else None
+    if opt["params_vector"] is not None and _strs(a["param_names"]) != list(PARAM_SCHEMA):
+        raise ResultsError(f"{path}: param_names differ from this arvcas version's parameter schema")
+    t_fail = float(a["t_fail"])
+    ok = bool(a["ok"])
+    return Result(
+        controller=controller, gains=gains, seed=int(a["seed"]),
+        **cols,
+        chat=np.array(a["chat"], dtype=float), rmse=np.array(a["rmse"], dtype=float),
+        ok=ok, t_fail=None if ok or math.isnan(t_fail) else t_fail,
+        config_text=_str(a["config"]), h=float(a["h"]), version=_str(a["arvcas_version"]),
+        meta=json.loads(_str(a["meta"])) if "meta" in a else {},
+        **opt,
+    )
