@@ -124,6 +124,24 @@ class ScenarioConfig:
         return np.array([self.sensors_var_position] * 3 + [self.sensors_var_attitude] * 3
                         + [self.sensors_var_velocity] * 6)
 
+    def to_toml(self) -> str:
+        """The effective configuration as scenario TOML (SI values): ``loads_scenario`` gives it back.
+
+        Stored in result files, so a run made with a modified config (``dataclasses.replace``,
+        :meth:`with_h`) records what it really used, not the text of the file it started from.
+        """
+        lines = ["# arvcas scenario, effective values in SI units (angles in rad)"]
+        section = None
+        for name, (n, _rule) in _SCHEMA.items():
+            sec, key = name.split(".")
+            if sec != section:
+                lines.append(f"\n[{sec}]")
+                section = sec
+            v = getattr(self, _field(name))
+            val = "[" + ", ".join(repr(float(x)) for x in v) + "]" if n else repr(float(v))
+            lines.append(f'{key} = {{ value = {val}, unit = "SI", source = "effective value" }}')
+        return "\n".join(lines) + "\n"
+
     @property
     def ekf_vector(self) -> np.ndarray:
         """[q_eta, q_nu, var_position, var_attitude, var_velocity]: the run's ``ekf`` input."""

@@ -133,8 +133,16 @@ def simulate(controller: str, gains=None, seed: int = 0, params: Params | None =
         tau_cmd=cols["tau_cmd"], thrust=cols["thrust"], s=cols["s"], k1=cols["k1"], k2=cols["k2"],
         f_hat=cols["f_hat"], f_true=cols["f_true"], q=cols["q"], payload=cols["payload"],
         chat=chat.ravel(), rmse=rmse.ravel(), ok=ok_b, t_fail=None if ok_b else float(t_fail.item()),
-        config_text=cfg.text, params_vector=params.vector(), uncertainty=unc, phase=ph, h=cfg.time_h,
+        config_text=cfg.to_toml(), params_vector=params.vector(), uncertainty=unc, phase=ph, h=cfg.time_h,
+        meta=_meta(fn, cfg),
     )
+
+
+def _meta(fn: ca.Function, cfg: ScenarioConfig) -> dict:
+    """Provenance stored with a result: the compiled artifact's key and the scenario file it came from."""
+    art = codegen.artifact_of(fn) or {}
+    return {"artifact_key": art.get("key"), "artifact_flags": art.get("flags"),
+            "scenario_file": cfg.path, "casadi_version": ca.__version__}
 
 
 def _n_threads(n_threads: int | None) -> int:
