@@ -38,11 +38,13 @@ def paper_run(tmp_path_factory, short_cfg):
 
 def test_files_written(paper_run):
     out, res, messages = paper_run
-    expected = ["proposed.h5", "agsta.h5", "traditional.h5", "table3.md"] + [f"{f}.png" for f in paper.FIGURE_FILES]
+    expected = ["proposed.h5", "agsta.h5", "traditional.h5", "table3.md", "ekf.md"] + [f"{f}.png" for f in paper.FIGURE_FILES]
     assert sorted(os.listdir(out)) == sorted(expected)  # and no temporary files left
     for name in expected:
         assert (out / name).stat().st_size > 0
-    assert set(res["files"]) == {"proposed", "agsta", "traditional", "table3", *paper.FIGURE_FILES}
+    assert set(res["files"]) == {"proposed", "agsta", "traditional", "table3", "ekf", *paper.FIGURE_FILES}
+    ekf = (out / "ekf.md").read_text()
+    assert ekf.count("\n| q_nu") + ekf.count("\n| no sensor noise") == len(paper.EKF_CASES)
     assert all(p.parent == out for p in res["files"].values())
     for name in paper.FIGURE_FILES:
         assert (out / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
