@@ -1,5 +1,13 @@
-"""arvcas: the Haidou-1 ARV and its manipulator as CasADi graphs, compiled to C."""
+"""arvcas: the Haidou-1 ARV and its manipulator as CasADi graphs, compiled to C.
+
+Entry points: :func:`compiled` (the plant functions backed by compiled C), :func:`simulate`,
+:func:`simulate_batch`, :func:`simulate_many` and :func:`default_gains` (the closed-loop experiment of
+the paper's section 4, one compiled function per controller).
+"""
 
 __version__ = "0.1.0"
 
-from .codegen import compiled  # noqa: E402  (the public entry to the compiled plant functions)
+from .codegen import compiled  # noqa: E402
+from .simulation import Result, default_gains, simulate, simulate_batch, simulate_many  # noqa: E402
+
+__all__ = ["__version__", "compiled", "simulate", "simulate_batch", "simulate_many", "default_gains", "Result"]
