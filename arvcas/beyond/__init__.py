@@ -1,0 +1,1 @@
+"""Beyond the paper: implicit GSTA closed loop, sampling-period sweep, Monte Carlo robustness, robust fronts."""

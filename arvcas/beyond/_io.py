@@ -1,0 +1,131 @@
+"""Atomic file writes and the provenance attributes every ``arvcas.beyond`` file carries."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import casadi as ca
+import h5py
+import numpy as np
+
+from .. import __version__
+from ..results import ResultsError, check_dir
+
+__all__ = ["atomic_write", "write_text", "provenance", "prepare_dir", "target", "str_attr", "check_format"]
+
+
+def atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp)`` on a temporary file next to ``path``, fsync it, then ``os.replace``.
+
+    An interrupted write leaves any previous ``path`` untouched and no partial file under its name.
+    """
+    path = Path(path)
+    try:
+        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as e:
+        raise ResultsError(f"{path}: cannot create a file in {path.parent} ({e.strerror})") from None
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        write(tmp)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException as e:
+        tmp.unlink(missing_ok=True)
+        if isinstance(e, OSError):
+            raise ResultsError(f"{path}: write failed ({e.strerror or e})") from None
+        raise
+    return path
+
+
+def write_text(path: Path, text: str) -> Path:
+    return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"))
+
+
+def provenance() -> dict[str, str]:
+    """Versions that decide the numbers (the run, the random streams) and the creation time."""
+    return {
+        "arvcas_version": __version__,
+        "casadi_version": ca.__version__,
+        "numpy_version": np.__version__,
+        "h5py_version": h5py.__version__,
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+def prepare_dir(d, what: str) -> Path:
+    """Create ``d`` if missing (its parent must exist) and check it is a writable directory."""
+    d = Path(d)
+    if not d.exists():
+        try:
+            d.mkdir()
+        except OSError as e:
+            raise ResultsError(f"{what}: cannot create directory {d} ({e.strerror})") from None
+    return check_dir(d, what)
+
+
+def target(path, what: str) -> Path:
+    """An output file path whose directory exists and is writable (checked before any work)."""
+    path = Path(path)
+    check_dir(path.parent if str(path.parent) else Path("."), what)
+    if path.is_dir():
+        raise ResultsError(f"{what}: {path} is a directory")
+    return path
+
+
+def str_attr(v) -> str:
+    return v.decode("utf-8") if isinstance(v, bytes) else str(v)
+
+
+def check_format(path: Path, f: h5py.File, fmt: str, version: int) -> None:
+    got = str_attr(f.attrs["format"]) if "format" in f.attrs else None
+    if got != fmt:
+        what = "no 'format' attribute" if got is None else f"format is '{got}'"
+        raise ResultsError(f"{path}: not an {fmt} file ({what})")
+    ver = int(f.attrs.get("format_version", -1))
+    if not 1 <= ver <= version:
+        raise ResultsError(f"{path}: format_version {ver} is not supported (this arvcas reads 1..{version})")
+
+
+def open_h5(path, fmt: str, version: int):
+    """Open an HDF5 file for reading after checking existence and signature; returns h5py.File."""
+    path = Path(path)
+    if not path.exists():
+        raise ResultsError(f"{path}: no such file")
+    if not path.is_file():
+        raise ResultsError(f"{path}: not a regular file")
+    with open(path, "rb") as fh:
+        sig = fh.read(8)
+    if sig != b"\x89HDF\r\n\x1a\n":
+        raise ResultsError(f"{path}: not an HDF5 file")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        raise ResultsError(f"{path}: damaged or truncated HDF5 file ({' '.join(str(e).split())})") from None
+    try:
+        check_format(path, f, fmt, version)
+    except BaseException:
+        f.close()
+        raise
+    return f
+
+
+def h5_format(path) -> str | None:
+    """The ``format`` attribute of an HDF5 file, or None if it is not HDF5 or has none."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(8) != b"\x89HDF\r\n\x1a\n":
+                return None
+        with h5py.File(path, "r") as f:
+            return str_attr(f.attrs["format"]) if "format" in f.attrs else None
+    except OSError:
+        return None

@@ -1,0 +1,145 @@
+"""Command-line entries of :mod:`arvcas.beyond`: ``sweep`` and ``montecarlo`` (and, with the tuning
+package, ``front robust`` and ``compare`` on Monte Carlo files).
+
+:func:`register` adds them to :data:`arvcas.cli.COMMANDS`; each ``_run_*`` parses nothing itself and
+calls a library function with typed arguments. Errors are ValueError/OSError (one line via arvcas.cli).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+__all__ = ["register"]
+
+
+def _floats(text: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got '{text}'") from None
+
+
+def _ints(text: str) -> list[int]:
+    try:
+        if ".." in text:  # a range A..B (inclusive)
+            a, b = text.split("..", 1)
+            return list(range(int(a), int(b) + 1))
+        return [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers or A..B, got '{text}'") from None
+
+
+def _names(text: str) -> list[str]:
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def _say(msg: str) -> None:
+    print(msg, flush=True)
+
+
+# ---- sweep -------------------------------------------------------------------------------------
+
+
+def _add_sweep(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--h", type=_floats, required=True, metavar="H1,H2,...",
+                   help="controller sampling periods in s (whole multiples of the plant step 0.01 s)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="writes DIR/sweep.h5, sweep.md, sweep.png")
+    p.add_argument("--controllers", type=_names, default=None, metavar="A,B,...",
+                   help="default: proposed, traditional, implicit, agsta")
+    p.add_argument("--seeds", type=_ints, default=[0], metavar="S1,S2|A..B", help="noise seeds (default 0)")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
+    p.add_argument("--params", type=Path, default=None, metavar="FILE", help="parameter file (default: packaged)")
+
+
+def _run_sweep(a: argparse.Namespace) -> int:
+    from .. import scenario
+    from ..params import load
+    from . import _io
+    from .sweep import CONTROLLERS, run_sweep, sweep_markdown, write_sweep_dir
+
+    _io.prepare_dir(a.out, f"--out {a.out}")
+    sw = run_sweep(a.h, a.controllers or CONTROLLERS, a.seeds, cfg=scenario.load_scenario(a.config),
+                   params=load(a.params), progress=_say)
+    files = write_sweep_dir(sw, a.out)
+    print(sweep_markdown(sw).split("\n## ", 1)[0])
+    for p in files.values():
+        print(f"wrote {p}")
+    return 0
+
+
+# ---- montecarlo --------------------------------------------------------------------------------
+
+
+def _add_montecarlo(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--controller", default=None, help="proposed, agsta, traditional or implicit")
+    p.add_argument("--runs", type=int, default=None, metavar="N", help="number of draws")
+    p.add_argument("--out", type=Path, default=None, metavar="FILE.h5",
+                   help="result file; a summary FILE.md is written next to it")
+    p.add_argument("--seed", type=int, default=0, help="master seed of the draws (default 0)")
+    p.add_argument("--spread", type=float, default=0.3,
+                   help="half-width of the nominal-model factors' uniform draw around 1 (default 0.3: +-30 %%)")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
+    p.add_argument("--params", type=Path, default=None, metavar="FILE", help="parameter file (default: packaged)")
+    p.add_argument("--from-front", type=Path, default=None, metavar="FRONT",
+                   help="use the gains of a tuning front member (with --index)")
+    p.add_argument("--index", default=None, help="front member: an integer, or 'knee'")
+    p.add_argument("--check", type=Path, default=None, metavar="FILE.h5",
+                   help="re-run a stored study from its file alone and compare bit for bit (no other option)")
+
+
+def _run_montecarlo(a: argparse.Namespace) -> int:
+    from .. import scenario
+    from ..params import load
+    from . import _io
+    from .montecarlo import read_montecarlo, reproduce, run_montecarlo, summary_markdown, write_montecarlo
+
+    if a.check is not None:
+        if any(v is not None for v in (a.controller, a.runs, a.out, a.from_front)):
+            raise ValueError("--check FILE re-runs the file's own configuration: give no other study option")
+        old = read_montecarlo(a.check)
+        _say(f"re-running {old.runs} runs of {old.controller} (master seed {old.draws.master_seed}) ...")
+        _new, diff = reproduce(a.check)
+        if diff:
+            print(f"{a.check}: NOT reproduced: {', '.join(diff)} differ")
+            return 1
+        print(f"{a.check}: reproduced bit for bit ({old.runs} runs: draws, chat, rmse, ok, t_fail)")
+        return 0
+    if a.runs is None or a.out is None:
+        raise ValueError("montecarlo: --runs N and --out FILE.h5 are required (or --check FILE.h5)")
+    out = _io.target(a.out, f"--out {a.out}")
+    cfg = scenario.load_scenario(a.config)
+    controller, gains, source = a.controller, None, None
+    if a.from_front is not None:
+        from .robust import front_member
+
+        if a.index is None:
+            raise ValueError("--from-front needs --index I (or --index knee)")
+        controller_f, gains, cfg_text, source = front_member(a.from_front, a.index)
+        if controller is not None and controller != controller_f:
+            raise ValueError(f"--controller {controller} differs from the front's controller {controller_f}")
+        controller = controller_f
+        if a.config is None and cfg_text:
+            cfg = scenario.loads_scenario(cfg_text, f"{a.from_front} (study scenario)")
+    if controller is None:
+        raise ValueError("--controller: required (proposed, agsta, traditional, implicit)")
+    mc = run_montecarlo(controller, a.runs, a.seed, gains=gains, spread=a.spread, cfg=cfg, params=load(a.params),
+                        gains_source=source, progress=_say)
+    write_montecarlo(mc, out)
+    md = summary_markdown(mc)
+    md_path = _io.write_text(out.with_suffix(".md"), md)
+    print(md)
+    print(f"wrote {out}\nwrote {md_path}")
+    return 0
+
+
+def register(commands: dict) -> None:
+    """Add this package's subcommands to the ``arvcas`` command registry (``arvcas.cli.COMMANDS``)."""
+    from ..cli import Command
+
+    commands["sweep"] = Command(
+        "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 (table, plot)",
+        _add_sweep, _run_sweep)
+    commands["montecarlo"] = Command(
+        "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance phases: CIs, failure rate",
+        _add_montecarlo, _run_montecarlo)

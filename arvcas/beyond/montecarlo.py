@@ -1,0 +1,413 @@
+"""Monte Carlo robustness of a controller: many noise, model-uncertainty and disturbance draws.
+
+The paper compares its controllers on one sensor-noise draw and one model-uncertainty draw. Here a
+master seed draws, for each run ``i`` independently,
+
+- a sensor-noise seed (the run's noise sequence is ``scenario.noise_sequence(cfg, seed_i)``);
+- the four nominal-model factors ``[C, D, g, arm]`` (SPEC 4), each uniform in ``[1 - spread, 1 + spread]``
+  (default ``spread = 0.3``: the nominal model is wrong by up to 30 % either way, each term
+  independently; the scenario file's fixed factors 1.4, 0.6, 0.7, 0.6 are one point partly outside
+  this box). Only the AGSTA baseline uses the nominal model; the RESO-based controllers (proposed,
+  traditional, implicit) know only ``Mhat = diag(M)``, which is not drawn;
+- the six disturbance phases of eq. 41, uniform in ``[0, 2 pi)``;
+
+and all runs go to the compiled run as one batch (:func:`arvcas.simulation.simulate_many`).
+
+Draw rule: ``numpy.random.SeedSequence(master_seed).spawn(runs)``; child ``i`` seeds
+``numpy.random.default_rng``, which then draws, in this order, ``integers(0, 2**62)`` (noise seed),
+``uniform(-1, 1, 4)`` (factors ``1 + spread u``) and ``uniform(0, 2 pi, 6)`` (phases). Run ``i``'s
+draw depends on ``(master_seed, i, spread)`` only: the first ``n`` runs of a larger study are the
+runs of a study of ``n``, and two controllers given the same ``--seed`` see the same draws (paired
+comparison, :func:`compare`).
+
+File layout (``format = "arvcas-montecarlo"``, ``format_version = 1``): datasets ``noise_seed``
+(n, int64), ``factors`` (n x 4), ``phase`` (n x 6, rad), ``chat`` (n x 6), ``rmse`` (n x 6),
+``ok`` (n, bool), ``t_fail`` (n, s, NaN when ok); root attributes ``controller``, ``gains``,
+``gain_names``, ``gains_source``, ``master_seed``, ``runs``, ``spread``, ``draw_rule``, ``config``
+(the effective scenario, :meth:`ScenarioConfig.to_toml`), ``scenario_file``, ``h``, ``params``,
+``param_names``, ``n_quad``, ``dofs``, units, ``artifact_key`` (content hash of the compiled run) and
+the versions of arvcas, CasADi, NumPy, h5py with the creation time. :func:`reproduce` re-runs a file
+from these alone and checks every number bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import codegen, gains as gains_mod, metrics, scenario
+from ..params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
+from ..results import ResultsError
+from ..scenario import ScenarioConfig
+from ..simulation import run_function, simulate_many
+from ..uvms import ModelOptions
+from . import _io
+from .stats import Interval, mean_ci, paired_ci, welch_ci, wilson
+
+__all__ = [
+    "Draws", "MonteCarlo", "draw", "run_montecarlo", "write_montecarlo", "read_montecarlo", "reproduce",
+    "summary", "summary_markdown", "compare", "compare_markdown", "FORMAT", "FORMAT_VERSION", "DRAW_RULE",
+    "is_montecarlo_file",
+]
+
+FORMAT = "arvcas-montecarlo"
+FORMAT_VERSION = 1
+DOFS = metrics.DOFS
+_DOF_MD = ("x", "y", "z", "φ", "θ", "ψ")
+DRAW_RULE = ("SeedSequence(master_seed).spawn(runs); run i: rng = default_rng(child_i); "
+             "noise_seed = rng.integers(0, 2**62); factors = 1 + spread * rng.uniform(-1, 1, 4) [C, D, g, arm]; "
+             "phase = rng.uniform(0, 2 pi, 6) rad")
+CHUNK = 200  # runs per compiled batch call (bounds the noise array in memory; results do not depend on it)
+
+
+@dataclass(frozen=True)
+class Draws:
+    """What one Monte Carlo study draws: per run a noise seed, [C, D, g, arm] factors, 6 phases."""
+
+    master_seed: int
+    spread: float
+    noise_seed: np.ndarray  # (n,) int64
+    factors: np.ndarray  # (n, 4)
+    phase: np.ndarray  # (n, 6) rad
+
+    @property
+    def runs(self) -> int:
+        return int(self.noise_seed.size)
+
+    def same_as(self, other: "Draws") -> bool:
+        return (self.noise_seed.shape == other.noise_seed.shape
+                and np.array_equal(self.noise_seed, other.noise_seed)
+                and np.array_equal(self.factors, other.factors) and np.array_equal(self.phase, other.phase))
+
+
+def _check_int(v, name: str, lo: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise ValueError(f"{name}: must be an integer >= {lo}, got {v!r}")
+    return int(v)
+
+
+def draw(runs: int, seed: int = 0, spread: float = 0.3) -> Draws:
+    """The draws of a study of ``runs`` runs from ``seed`` (module docstring: the draw rule)."""
+    runs = _check_int(runs, "runs", 1)
+    seed = _check_int(seed, "seed", 0)
+    if not (isinstance(spread, (int, float)) and math.isfinite(spread) and 0 <= spread < 1):
+        raise ValueError(f"spread: must be in [0, 1) (the factors' half-width), got {spread!r}")
+    ns = np.empty(runs, dtype=np.int64)
+    fac = np.empty((runs, 4))
+    ph = np.empty((runs, 6))
+    for i, child in enumerate(np.random.SeedSequence(seed).spawn(runs)):
+        rng = np.random.default_rng(child)
+        ns[i] = rng.integers(0, 2**62)
+        fac[i] = 1.0 + spread * rng.uniform(-1.0, 1.0, 4)
+        ph[i] = rng.uniform(0.0, 2.0 * math.pi, 6)
+    return Draws(seed, float(spread), ns, fac, ph)
+
+
+@dataclass
+class MonteCarlo:
+    """A Monte Carlo study of one controller and gain set: its draws and per-run metrics.
+
+    ``chat``, ``rmse``: (runs, 6), eq. 42 (N, N m per sample) and eq. 43 (m, rad); NaN for diverged
+    runs. ``ok``: (runs,) bool; ``t_fail``: (runs,) s, NaN when ok.
+    """
+
+    controller: str
+    gains: np.ndarray
+    draws: Draws
+    chat: np.ndarray
+    rmse: np.ndarray
+    ok: np.ndarray
+    t_fail: np.ndarray
+    config_text: str
+    params_vector: np.ndarray
+    h: float
+    n_quad: int = 5
+    gains_source: str = "Table 2"
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def runs(self) -> int:
+        return self.draws.runs
+
+    def objectives(self) -> np.ndarray:
+        """SPEC 7's normalised (f_chat, f_rmse) per run, shape (runs, 2) (NaN for diverged runs)."""
+        out = np.full((self.runs, 2), np.nan)
+        for i in np.flatnonzero(self.ok):
+            out[i] = metrics.normalised_objectives(self.chat[i], self.rmse[i])
+        return out
+
+
+def run_montecarlo(controller: str, runs: int, seed: int = 0, gains=None, spread: float = 0.3,
+                   cfg: ScenarioConfig | None = None, params: Params | None = None, n_quad: int = 5,
+                   n_threads: int | None = None, gains_source: str | None = None,
+                   progress: Callable[[str], None] | None = None) -> MonteCarlo:
+    """Draw ``runs`` (noise seed, factors, phases) from ``seed`` and run them as compiled batches.
+
+    ``gains`` defaults to Table 2. Diverged runs are results (``ok = False``), not errors.
+    """
+    gains_mod.check_controller(controller)
+    d = draw(runs, seed, spread)
+    cfg = cfg if cfg is not None else scenario.load_scenario()
+    params = params if params is not None else load_params()
+    g = gains_mod.default_gains(controller) if gains is None else np.asarray(gains, dtype=float)
+    g = gains_mod.check_gains(controller, g, h=cfg.time_h)
+    if g.ndim != 1:
+        raise ValueError(f"gains: a Monte Carlo study takes one gain vector, got shape {g.shape}")
+    opts = ModelOptions(n_quad=n_quad)
+    n = d.runs
+    chat, rmse = np.full((n, 6), np.nan), np.full((n, 6), np.nan)
+    ok, t_fail = np.zeros(n, dtype=bool), np.full(n, np.nan)
+    for a in range(0, n, CHUNK):
+        b = min(n, a + CHUNK)
+        if progress:
+            progress(f"{controller}: runs {a}..{b - 1} of {n}")
+        c_, r_, o_, t_ = simulate_many(controller, g, d.noise_seed[a:b], uncertainty=d.factors[a:b],
+                                       phase=d.phase[a:b], params=params, cfg=cfg, n_threads=n_threads, opts=opts)
+        chat[a:b], rmse[a:b], ok[a:b], t_fail[a:b] = c_, r_, o_, t_
+    src = gains_source if gains_source is not None else ("Table 2" if gains is None else "given")
+    art = codegen.artifact_of(run_function(controller, cfg, trace=False, opts=opts)) or {}
+    return MonteCarlo(controller, g, d, chat, rmse, ok, t_fail, cfg.to_toml(), params.vector(), cfg.time_h,
+                      n_quad, src, meta={"artifact_key": str(art.get("key", "")), "scenario_file": cfg.path})
+
+
+# ---------------------------------------------------------------------------------------------
+# file
+
+
+def write_montecarlo(mc: MonteCarlo, path) -> Path:
+    """Write ``mc`` to ``path`` (HDF5, atomic); returns the path."""
+    import h5py
+
+    path = _io.target(path, str(path))
+    d = mc.draws
+    attrs = {
+        "format": FORMAT, "format_version": FORMAT_VERSION,
+        "controller": mc.controller, "gains": np.asarray(mc.gains, float),
+        "gain_names": np.array(gains_mod.gain_names(mc.controller), dtype=object),
+        "gains_source": mc.gains_source, "master_seed": int(d.master_seed), "runs": int(d.runs),
+        "spread": float(d.spread), "draw_rule": DRAW_RULE,
+        "config": mc.config_text, "h": float(mc.h), "n_quad": int(mc.n_quad),
+        "params": np.asarray(mc.params_vector, float), "param_names": np.array(list(PARAM_SCHEMA), dtype=object),
+        "dofs": np.array(DOFS, dtype=object),
+        "chat_units": "N (x, y, z), N m (phi, theta, psi) per controller sample; eq. 42",
+        "rmse_units": "m (x, y, z), rad (phi, theta, psi); eq. 43",
+        "factors_columns": "C, D, g, arm (nominal-model factors of SPEC 4; used by agsta only)",
+        "artifact_key": str(mc.meta.get("artifact_key", "")), "scenario_file": str(mc.meta.get("scenario_file", "")),
+        **_io.provenance(),
+    }
+
+    def fill(tmp: Path) -> None:
+        with h5py.File(tmp, "w") as f:
+            for k, v in attrs.items():
+                f.attrs[k] = v
+            f.create_dataset("noise_seed", data=d.noise_seed.astype(np.int64))
+            f.create_dataset("factors", data=d.factors.astype(float))
+            f.create_dataset("phase", data=d.phase.astype(float))
+            f.create_dataset("chat", data=np.asarray(mc.chat, float))
+            f.create_dataset("rmse", data=np.asarray(mc.rmse, float))
+            f.create_dataset("ok", data=np.asarray(mc.ok, bool))
+            f.create_dataset("t_fail", data=np.asarray(mc.t_fail, float))
+            f["phase"].attrs["units"] = "rad"
+            f["t_fail"].attrs["units"] = "s (NaN when the run completed)"
+
+    return _io.atomic_write(path, fill)
+
+
+def is_montecarlo_file(path) -> bool:
+    return _io.h5_format(path) == FORMAT
+
+
+def read_montecarlo(path) -> MonteCarlo:
+    """Read a file written by :func:`write_montecarlo` (one-line ResultsError if it is not one)."""
+    path = Path(path)
+    f = _io.open_h5(path, FORMAT, FORMAT_VERSION)
+    try:
+        a = f.attrs
+        controller = _io.str_attr(a["controller"])
+        names = [_io.str_attr(x) for x in np.asarray(a["gain_names"]).ravel()]
+        try:
+            expect = gains_mod.gain_names(controller)
+        except ValueError:
+            raise ResultsError(f"{path}: unknown controller '{controller}'") from None
+        if names != expect:
+            raise ResultsError(f"{path}: gain_names do not match controller '{controller}' of this arvcas version")
+        d = Draws(int(a["master_seed"]), float(a["spread"]), np.array(f["noise_seed"][()], dtype=np.int64),
+                  np.array(f["factors"][()], float), np.array(f["phase"][()], float))
+        n = d.runs
+        arrays = {k: np.array(f[k][()]) for k in ("chat", "rmse", "ok", "t_fail")}
+        for k, shape in (("chat", (n, 6)), ("rmse", (n, 6)), ("ok", (n,)), ("t_fail", (n,))):
+            if arrays[k].shape != shape:
+                raise ResultsError(f"{path}: damaged file: {k} has shape {arrays[k].shape}, expected {shape}")
+        return MonteCarlo(
+            controller=controller, gains=np.array(a["gains"], float), draws=d,
+            chat=arrays["chat"].astype(float), rmse=arrays["rmse"].astype(float), ok=arrays["ok"].astype(bool),
+            t_fail=arrays["t_fail"].astype(float), config_text=_io.str_attr(a["config"]),
+            params_vector=np.array(a["params"], float), h=float(a["h"]), n_quad=int(a["n_quad"]),
+            gains_source=_io.str_attr(a["gains_source"]),
+            meta={k: _io.str_attr(a[k]) for k in ("arvcas_version", "casadi_version", "numpy_version", "created",
+                                                  "artifact_key", "scenario_file") if k in a},
+        )
+    except KeyError as e:
+        raise ResultsError(f"{path}: damaged file: missing {e}") from None
+    finally:
+        f.close()
+
+
+def reproduce(path, n_threads: int | None = None) -> tuple[MonteCarlo, list[str]]:
+    """Re-run the study stored in ``path`` from its stored configuration alone.
+
+    Returns the new study and the list of fields that differ from the file (empty: bit for bit).
+    """
+    old = read_montecarlo(path)
+    cfg = scenario.loads_scenario(old.config_text, f"{path} (stored scenario)")
+    names = list(PARAM_SCHEMA)
+    if old.params_vector.shape != (len(names),):
+        raise ResultsError(f"{path}: stored params do not match this arvcas version's parameter schema")
+    params = load_params().replace(dict(zip(names, old.params_vector.tolist())))
+    new = run_montecarlo(old.controller, old.runs, old.draws.master_seed, gains=old.gains, spread=old.draws.spread,
+                         cfg=cfg, params=params, n_quad=old.n_quad, n_threads=n_threads, gains_source=old.gains_source)
+    diff = []
+    if not new.draws.same_as(old.draws):
+        diff.append("draws")
+    for k in ("chat", "rmse", "ok", "t_fail"):
+        a, b = np.asarray(getattr(new, k)), np.asarray(getattr(old, k))
+        if a.shape != b.shape or not np.array_equal(a, b, equal_nan=a.dtype.kind == "f"):
+            diff.append(k)
+    return new, diff
+
+
+# ---------------------------------------------------------------------------------------------
+# summaries
+
+
+def _percentiles(x, q=(5, 50, 95)) -> tuple[float, ...]:
+    v = np.asarray(x, float)
+    v = v[np.isfinite(v)]
+    return tuple(float(np.percentile(v, p)) for p in q) if v.size else (float("nan"),) * len(q)
+
+
+def summary(mc: MonteCarlo) -> dict:
+    """Per DOF mean with 95 % t-interval and 5/50/95 percentiles of CHAT and RMSE over the runs that
+    completed; the same for SPEC 7's normalised objectives; the failure rate with its Wilson interval."""
+    out: dict = {"chat": {}, "rmse": {}, "objectives": {}}
+    for key in ("chat", "rmse"):
+        arr = getattr(mc, key)
+        for i, d in enumerate(DOFS):
+            out[key][d] = {"mean": mean_ci(arr[:, i]), "pct": _percentiles(arr[:, i])}
+    obj = mc.objectives()
+    for j, name in enumerate(("f_chat", "f_rmse")):
+        out["objectives"][name] = {"mean": mean_ci(obj[:, j]), "pct": _percentiles(obj[:, j])}
+    n_fail = int((~mc.ok).sum())
+    out["failures"] = wilson(n_fail, mc.runs)
+    out["n_fail"] = n_fail
+    return out
+
+
+def _ci(iv: Interval, fmt: str = ".4g") -> str:
+    if math.isnan(iv.lo):
+        return f"{iv.estimate:{fmt}}"
+    return f"{iv.estimate:{fmt}} [{iv.lo:{fmt}}, {iv.hi:{fmt}}]"
+
+
+def summary_markdown(mc: MonteCarlo, title: str | None = None) -> str:
+    s = summary(mc)
+    fr = s["failures"]
+    L = [f"# Monte Carlo: {mc.controller} ({mc.gains_source})" if title is None else f"# {title}", "",
+         f"{mc.runs} runs of {_duration(mc)} at h = {mc.h:g} s, master seed {mc.draws.master_seed}; per run a noise "
+         f"seed, nominal-model factors [C, D, g, arm] uniform in [{1 - mc.draws.spread:g}, {1 + mc.draws.spread:g}] "
+         "and disturbance phases uniform in [0, 2π). Mean over the completed runs with its 95 % t-interval "
+         "[lo, hi]; p5 / p50 / p95 = percentiles over the runs.", "",
+         f"Failures (diverged runs): {s['n_fail']} of {mc.runs} = {fr.estimate:.3g}, "
+         f"95 % Wilson interval [{fr.lo:.3g}, {fr.hi:.3g}].", "",
+         "| DOF | CHAT mean [95 % CI] | CHAT p5 / p50 / p95 | RMSE mean [95 % CI] | RMSE p5 / p50 / p95 |",
+         "|---|---:|---:|---:|---:|"]
+    for i, d in enumerate(DOFS):
+        c, r = s["chat"][d], s["rmse"][d]
+        L.append(f"| {_DOF_MD[i]} | {_ci(c['mean'])} | {' / '.join(f'{v:.4g}' for v in c['pct'])} "
+                 f"| {_ci(r['mean'])} | {' / '.join(f'{v:.4g}' for v in r['pct'])} |")
+    L += ["", "SPEC 7 objectives (per-DOF value / paper's AGSTA value, averaged over the 6 DOF):", ""]
+    for name, v in s["objectives"].items():
+        L.append(f"- {name}: {_ci(v['mean'])}; p5 / p50 / p95 {' / '.join(f'{x:.4g}' for x in v['pct'])}")
+    L.append("")
+    return "\n".join(L)
+
+
+def _duration(mc: MonteCarlo) -> str:
+    try:
+        return f"{scenario.loads_scenario(mc.config_text).time_duration:g} s"
+    except ValueError:
+        return "the stored scenario"
+
+
+def compare(a: MonteCarlo, b: MonteCarlo) -> dict:
+    """Per DOF ``a - b`` of CHAT and RMSE, and of the two SPEC 7 objectives.
+
+    Paired over the runs both completed when the two studies share their draws (same master seed,
+    spread and a common prefix of runs: the first min(n_a, n_b) runs); otherwise Welch's unpaired
+    interval. Each entry: the difference :class:`Interval`, the ratio of means, ``certain`` (interval
+    excludes 0).
+    """
+    n = min(a.runs, b.runs)
+    pa = Draws(a.draws.master_seed, a.draws.spread, a.draws.noise_seed[:n], a.draws.factors[:n], a.draws.phase[:n])
+    pb = Draws(b.draws.master_seed, b.draws.spread, b.draws.noise_seed[:n], b.draws.factors[:n], b.draws.phase[:n])
+    paired = pa.same_as(pb) and a.h == b.h and a.config_text == b.config_text
+    out: dict = {"paired": paired, "n": n if paired else None, "chat": {}, "rmse": {}, "objectives": {}}
+
+    def entry(x, y):
+        if paired:
+            iv = paired_ci(x[:n], y[:n])
+        else:
+            iv = welch_ci(x, y)
+        mx, my = np.nanmean(x), np.nanmean(y)
+        return {"diff": iv, "ratio": float(mx / my) if my else float("nan"), "certain": iv.excludes_zero}
+
+    for key in ("chat", "rmse"):
+        xa, xb = getattr(a, key), getattr(b, key)
+        for i, d in enumerate(DOFS):
+            out[key][d] = entry(xa[:, i], xb[:, i])
+    oa, ob = a.objectives(), b.objectives()
+    for j, name in enumerate(("f_chat", "f_rmse")):
+        out["objectives"][name] = entry(oa[:, j], ob[:, j])
+    out["failures"] = (wilson(int((~a.ok).sum()), a.runs), wilson(int((~b.ok).sum()), b.runs))
+    return out
+
+
+def _label(mc: MonteCarlo) -> str:
+    return f"{mc.controller} ({mc.gains_source})"
+
+
+def compare_markdown(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, name_b: str | None = None) -> str:
+    """The comparison of :func:`compare` as Markdown: "A - B" per DOF with its 95 % interval."""
+    c = compare(a, b)
+    A, B = name_a or _label(a), name_b or _label(b)
+    how = (f"paired over the {c['n']} shared draws (same master seed {a.draws.master_seed}): per draw the "
+           "difference, then its mean with a 95 % t-interval" if c["paired"] else
+           "UNPAIRED (the files do not share their draws): difference of means with Welch's 95 % interval")
+    fa, fb = c["failures"]
+    L = [f"# {A} - {B}", "", f"Difference {A} minus {B}, {how}. Negative = {A} lower. "
+         "'certain' = the interval excludes 0; ratio = mean A / mean B.", "",
+         f"Failures: {A} {int(round(fa.estimate * fa.n))}/{fa.n} [{fa.lo:.3g}, {fa.hi:.3g}]; "
+         f"{B} {int(round(fb.estimate * fb.n))}/{fb.n} [{fb.lo:.3g}, {fb.hi:.3g}] (95 % Wilson).", "",
+         "| DOF | CHAT A - B [95 % CI] | ratio | sign | RMSE A - B [95 % CI] | ratio | sign |",
+         "|---|---:|---:|---|---:|---:|---|"]
+
+    def sign(e):
+        if not e["certain"]:
+            return "not certain"
+        return "A lower" if e["diff"].hi < 0 else "A higher"
+
+    for i, d in enumerate(DOFS):
+        ec, er = c["chat"][d], c["rmse"][d]
+        L.append(f"| {_DOF_MD[i]} | {_ci(ec['diff'])} | {ec['ratio']:.3f} | {sign(ec)} "
+                 f"| {_ci(er['diff'])} | {er['ratio']:.3f} | {sign(er)} |")
+    L += [""]
+    for name, e in c["objectives"].items():
+        L.append(f"- {name} (SPEC 7): A - B = {_ci(e['diff'])}, ratio {e['ratio']:.3f}, {sign(e)}")
+    nc = sum(c["chat"][d]["certain"] and c["chat"][d]["diff"].hi < 0 for d in DOFS)
+    nr = sum(c["rmse"][d]["certain"] and c["rmse"][d]["diff"].lo > 0 for d in DOFS)
+    L += ["", f"CHAT: {A} certainly lower in {nc} of 6 DOF. RMSE: {A} certainly higher in {nr} of 6 DOF.", ""]
+    return "\n".join(L)
