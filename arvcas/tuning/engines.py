@@ -1,0 +1,202 @@
+"""Where a generation is evaluated: ``local`` (all cores of this machine) or ``dask`` (a cluster).
+
+Both call the same top-level function, :func:`evaluate_rows`, which runs
+:func:`arvcas.simulation.simulate_batch` once per draw on a block of gain sets and returns the
+per-DOF metrics with the build key of the compiled run it used. The ``dask`` engine splits the
+population into contiguous chunks, ``client.map`` s them to the workers and concatenates the results
+in order; every run is independent of the others in its batch, so the generation's numbers, and
+therefore the front, are the same bit for bit as with the ``local`` engine, provided the workers run
+the same compiled code. Each worker builds the run function or loads it from its compile cache by
+content hash (:mod:`arvcas.codegen`); the engine checks that every chunk reports the client's key
+and refuses to mix results from different compiled code.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Params
+from ..scenario import ScenarioConfig
+
+__all__ = ["EngineError", "EvalTask", "evaluate_rows", "run_key", "LocalEngine", "DaskEngine", "make_engine"]
+
+
+class EngineError(ValueError):
+    """One-line error about the evaluation engine (connection, mismatched compiled code)."""
+
+
+@dataclass(frozen=True)
+class EvalTask:
+    """What every candidate is evaluated on: controller, draws (seed, uncertainty, phase), scenario, params."""
+
+    controller: str
+    draws: tuple  # ((noise_seed, uncertainty (4,), phase (6,)), ...) resolved
+    cfg: ScenarioConfig
+    params: Params
+
+
+def run_key(controller: str, cfg: ScenarioConfig) -> str:
+    """Content hash of the compiled metrics-only run (built or loaded from the cache)."""
+    from .. import codegen
+    from ..simulation import run_function
+
+    m = codegen.artifact_of(run_function(controller, cfg, trace=False))
+    return "" if m is None else str(m["key"])
+
+
+def evaluate_rows(task: EvalTask, gains: np.ndarray, n_threads: int | None = None):
+    """Run every draw on the gain sets ``gains`` (n, n_gains) in one batched call per draw.
+
+    Returns ``(chat (K, n, 6), rmse (K, n, 6), ok (K, n), t_fail (K, n), key)``.
+    Top level (importable) so that Dask workers can run it.
+    """
+    from ..simulation import simulate_batch
+
+    outs = [simulate_batch(task.controller, gains, seed=seed, params=task.params, cfg=task.cfg,
+                           uncertainty=unc, phase=ph, n_threads=n_threads, return_status=True)
+            for seed, unc, ph in task.draws]
+    chat = np.stack([o[0] for o in outs])
+    rmse = np.stack([o[1] for o in outs])
+    ok = np.stack([o[2] for o in outs])
+    t_fail = np.stack([o[3] for o in outs])
+    return chat, rmse, ok, t_fail, run_key(task.controller, task.cfg)
+
+
+class LocalEngine:
+    """This machine: ``simulate_batch`` over ``threads`` cores (0 = all this process may use)."""
+
+    name = "local"
+
+    def __init__(self, threads: int = 0):
+        self.threads = threads or _cores()
+        self._key: dict = {}
+
+    def describe(self) -> str:
+        return f"local, {self.threads} thread(s)"
+
+    def prepare(self, task: EvalTask) -> str:
+        k = (task.controller, task.cfg.graph_key())
+        if k not in self._key:
+            self._key[k] = run_key(task.controller, task.cfg)
+        return self._key[k]
+
+    def evaluate(self, task: EvalTask, gains: np.ndarray):
+        chat, rmse, ok, t_fail, _ = evaluate_rows(task, gains, n_threads=self.threads)
+        return chat, rmse, ok, t_fail
+
+    def close(self) -> None:
+        pass
+
+
+def _cores() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover
+        return max(1, os.cpu_count() or 1)
+
+
+def _chunk(task: EvalTask, gains: np.ndarray, n_threads: int):
+    """Dask task: one contiguous block of the population."""
+    return evaluate_rows(task, gains, n_threads=n_threads)
+
+
+class DaskEngine:
+    """A Dask cluster: ``scheduler`` address, or a local cluster on 127.0.0.1 when None.
+
+    Connecting is bounded by ``timeout_s``; an unreachable scheduler is an :class:`EngineError`.
+    The population is split into one chunk per worker thread (at most one row per chunk).
+    """
+
+    name = "dask"
+
+    def __init__(self, scheduler: str | None = None, workers: int = 0, timeout_s: float = 10.0):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:
+            raise EngineError("engine dask: the 'distributed' package is not installed "
+                              "(pip install 'arvcas[dask]')") from None
+        self.scheduler = scheduler
+        self._cluster = None
+        self._keys: dict = {}
+        try:
+            if scheduler is None:
+                n = workers or _cores()
+                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                             host="127.0.0.1", dashboard_address=None,
+                                             silence_logs=logging.ERROR)
+                self.client = Client(self._cluster, timeout=f"{timeout_s}s", set_as_default=False)
+            else:
+                self.client = Client(scheduler, timeout=f"{timeout_s}s", set_as_default=False)
+        except (OSError, TimeoutError) as e:
+            self.close()
+            msg = " ".join(str(e).split()) or type(e).__name__
+            where = scheduler or "local cluster"
+            raise EngineError(f"engine dask: cannot connect to scheduler {where} within {timeout_s:g} s ({msg})") from None
+        if scheduler is not None:
+            try:
+                self.client.wait_for_workers(1, timeout=timeout_s)
+            except (OSError, TimeoutError):
+                self.close()
+                raise EngineError(f"engine dask: scheduler {scheduler} has no workers after {timeout_s:g} s") from None
+
+    def threads(self) -> list[int]:
+        """Threads per worker, in a stable order."""
+        info = self.client.nthreads()
+        return [info[w] for w in sorted(info)]
+
+    def describe(self) -> str:
+        th = self.threads()
+        where = self.scheduler or "local cluster on 127.0.0.1"
+        return f"dask ({where}), {len(th)} worker(s), {sum(th)} thread(s)"
+
+    def prepare(self, task: EvalTask) -> str:
+        k = (task.controller, task.cfg.graph_key())
+        if k not in self._keys:
+            self._keys[k] = run_key(task.controller, task.cfg)
+        return self._keys[k]
+
+    def evaluate(self, task: EvalTask, gains: np.ndarray):
+        key = self.prepare(task)
+        n = gains.shape[0]
+        n_chunks = max(1, min(n, sum(self.threads())))
+        blocks = [b for b in np.array_split(np.arange(n), n_chunks) if b.size]
+        futures = self.client.map(_chunk, [task] * len(blocks), [gains[b] for b in blocks], [1] * len(blocks),
+                                  pure=False)
+        parts = self.client.gather(futures)
+        for p in parts:
+            if p[4] != key:
+                raise EngineError(f"engine dask: a worker ran compiled code {p[4][:20] or '?'}, this process "
+                                  f"{key[:20]}: results would not be identical (different arvcas, CasADi or compiler)")
+        chat = np.concatenate([p[0] for p in parts], axis=1)
+        rmse = np.concatenate([p[1] for p in parts], axis=1)
+        ok = np.concatenate([p[2] for p in parts], axis=1)
+        t_fail = np.concatenate([p[3] for p in parts], axis=1)
+        return chat, rmse, ok, t_fail
+
+    def close(self) -> None:
+        c = getattr(self, "client", None)
+        if c is not None:
+            try:
+                c.close()
+            except Exception:  # noqa: BLE001 - best effort on shutdown
+                pass
+            self.client = None
+        if self._cluster is not None:
+            try:
+                self._cluster.close()
+            except Exception:  # noqa: BLE001
+                pass
+            self._cluster = None
+
+
+def make_engine(cfg) -> LocalEngine | DaskEngine:
+    """An engine from an :class:`arvcas.tuning.study.EngineConfig`."""
+    if cfg.name == "local":
+        return LocalEngine(cfg.threads)
+    if cfg.name == "dask":
+        return DaskEngine(cfg.scheduler, cfg.workers, cfg.timeout_s)
+    raise EngineError(f"engine: unknown '{cfg.name}' (allowed: local, dask)")

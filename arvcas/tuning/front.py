@@ -1,0 +1,323 @@
+"""Fronts as data: :class:`Front` (read from ``front.h5``), export, plot, knee point, replay.
+
+Front members are the feasible, non-dominated rows of the study's final (or latest) population,
+sorted by ``f_chat``; member ``i`` of every function here is row ``i`` of that order.
+
+Knee point: pymoo's :class:`~pymoo.mcdm.high_tradeoff.HighTradeoffPoints` (the members whose
+least trade-off to their neighbours is an upper-tail outlier) on the front normalised to [0, 1] per
+objective; when it finds several, the one with the smallest sum of normalised objectives; when it
+finds none (small or evenly curved fronts), pymoo's :class:`~pymoo.mcdm.pseudo_weights.PseudoWeights`
+with equal weights (0.5, 0.5).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..metrics import DOFS, table3
+from . import checkpoint as ck
+
+__all__ = ["Front", "read_front", "knee_index", "export_front", "plot_front", "plot_fronts", "member_gains",
+           "replay", "resolve_front_path"]
+
+
+def resolve_front_path(p: str | Path) -> Path:
+    """A ``front.h5`` path from a file or a study output directory (one controller)."""
+    p = Path(p)
+    if p.is_dir():
+        f = p / ck.FRONT_NAME
+        if f.exists():
+            return f
+        subs = sorted(q for q in p.glob(f"*/{ck.FRONT_NAME}"))
+        if subs:
+            raise ck.CheckpointError(f"{p}: holds several fronts ({', '.join(str(s.parent.name) for s in subs)}); "
+                                     f"give one of {', '.join(str(s) for s in subs)}")
+        raise ck.CheckpointError(f"{p}: no {ck.FRONT_NAME} in this directory")
+    return p
+
+
+@dataclass(frozen=True)
+class Front:
+    """A study's front and its provenance. Arrays over the f front members, sorted by f_chat.
+
+    ``F`` (f, 2) = (f_chat, f_rmse), SPEC 7 (paper's AGSTA = (1, 1)); ``gains`` (f, m) with
+    ``names``; ``index`` (f,) rows in the stored population; ``chat``/``rmse`` (K, f, 6) per draw
+    and DOF; ``table2_F`` (2,) Table 2 on the same draws (NaN if it diverged).
+    """
+
+    path: Path
+    controller: str
+    study_name: str
+    status: str
+    n_gen: int
+    n_eval: int
+    names: list
+    gains: np.ndarray
+    X: np.ndarray
+    F: np.ndarray
+    G: np.ndarray
+    index: np.ndarray
+    chat: np.ndarray
+    rmse: np.ndarray
+    population_F: np.ndarray
+    population_G: np.ndarray
+    table2: np.ndarray
+    table2_F: np.ndarray
+    table2_G: np.ndarray
+    reference_point: np.ndarray
+    history: dict
+    seed: int
+    draw_seeds: np.ndarray
+    draw_uncertainty: np.ndarray
+    draw_phase: np.ndarray
+    scenario_text: str
+    study_text: str
+    versions: dict
+
+    @property
+    def size(self) -> int:
+        return int(self.F.shape[0])
+
+    @property
+    def hv(self) -> float:
+        """Hypervolume of the front against the study's reference point."""
+        from .run import hypervolume
+
+        return hypervolume(self.F, self.G, self.reference_point)
+
+    def knee(self) -> int:
+        """Index (into the front) of the knee point; see the module docstring."""
+        return knee_index(self.F)
+
+    def plot(self, ax=None, **kw):
+        return plot_front(self, ax=ax, **kw)
+
+
+def read_front(path: str | Path) -> Front:
+    """Read ``front.h5`` (or a study directory holding one); one-line error if it is not one."""
+    path = resolve_front_path(path)
+    c = ck.read_checkpoint(path)
+    if c.X is None:
+        raise ck.CheckpointError(f"{path}: no generation finished yet (nothing on the front); "
+                                 f"resume the study to continue")
+    idx = c.front
+    nan2 = np.full(2, np.nan)
+    return Front(
+        path=path, controller=c.controller, study_name=c.study_name, status=c.status, n_gen=c.n_gen,
+        n_eval=c.n_eval, names=list(c.names), gains=c.gains[idx], X=c.X[idx], F=c.F[idx], G=c.G[idx], index=idx,
+        chat=c.chat[:, idx], rmse=c.rmse[:, idx], population_F=c.F, population_G=c.G, table2=c.table2,
+        table2_F=c.table2_F if c.table2_F is not None else nan2,
+        table2_G=c.table2_G if c.table2_G is not None else np.full(1, np.nan),
+        reference_point=c.reference_point, history=c.history, seed=c.seed, draw_seeds=c.draw_seeds,
+        draw_uncertainty=c.draw_uncertainty, draw_phase=c.draw_phase, scenario_text=c.scenario_text,
+        study_text=c.study_text, versions=c.versions,
+    )
+
+
+def knee_index(F: np.ndarray) -> int:
+    """Knee of a 2-objective front (rows sorted or not); see the module docstring."""
+    from pymoo.mcdm.high_tradeoff import HighTradeoffPoints
+    from pymoo.mcdm.pseudo_weights import PseudoWeights
+
+    F = np.asarray(F, dtype=float)
+    n = F.shape[0]
+    if n == 0:
+        raise ValueError("knee: the front is empty")
+    if n <= 2:
+        return 0 if n == 1 else int(np.argmin(_normalise(F).sum(axis=1)))
+    N = _normalise(F)
+    idx = None
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore")
+        try:
+            idx = HighTradeoffPoints().do(N)
+        except (ValueError, IndexError, ZeroDivisionError):
+            idx = None
+    if idx is not None and np.size(idx) > 0:
+        idx = np.atleast_1d(idx).astype(int)
+        return int(idx[np.argmin(N[idx].sum(axis=1))])
+    return int(PseudoWeights(np.array([0.5, 0.5])).do(N))
+
+
+def _normalise(F: np.ndarray) -> np.ndarray:
+    lo, hi = F.min(axis=0), F.max(axis=0)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    return (F - lo) / span
+
+
+# ---- export ---------------------------------------------------------------------------------------
+
+
+def _records(fr: Front) -> tuple[list[str], list[list]]:
+    knee = fr.knee() if fr.size else -1
+    head = ["member", "population_row", "f_chat", "f_rmse", "G", "knee"] + list(fr.names) \
+        + [f"chat.{d}" for d in DOFS] + [f"rmse.{d}" for d in DOFS]
+    chat, rmse = fr.chat.mean(axis=0), fr.rmse.mean(axis=0)  # over draws (one draw: that draw)
+    rows = []
+    for i in range(fr.size):
+        rows.append([i, int(fr.index[i]), float(fr.F[i, 0]), float(fr.F[i, 1]), float(fr.G[i, 0]), i == knee]
+                    + [float(x) for x in fr.gains[i]] + [float(x) for x in chat[i]] + [float(x) for x in rmse[i]])
+    return head, rows
+
+
+def export_front(path: str | Path, fmt: str) -> str:
+    """The front as CSV or JSON text (floats in shortest round-trip form: reading them back is exact).
+
+    CSV: one row per member: ``member, population_row, f_chat, f_rmse, G, knee``, the gains by name,
+    then per-DOF CHAT and RMSE (mean over the draws). JSON: the same members plus provenance (study,
+    seed, draws, reference point, hypervolume, Table 2's objectives, versions).
+    """
+    if fmt not in ("csv", "json"):
+        raise ValueError(f"--format: unknown '{fmt}' (allowed: csv, json)")
+    fr = read_front(path)
+    head, rows = _records(fr)
+    if fmt == "csv":
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(head)
+        for r in rows:
+            w.writerow([repr(x) if isinstance(x, float) else x for x in r])
+        return buf.getvalue()
+    members = []
+    for r in rows:
+        members.append({
+            "member": r[0], "population_row": r[1], "f_chat": r[2], "f_rmse": r[3], "G": r[4], "knee": r[5],
+            "gains": dict(zip(fr.names, r[6:6 + len(fr.names)])),
+            "chat": r[6 + len(fr.names):12 + len(fr.names)], "rmse": r[12 + len(fr.names):],
+        })
+    doc = {
+        "format": "arvcas.tuning.front.export", "format_version": 1, "controller": fr.controller,
+        "study": fr.study_name, "status": fr.status, "generations": fr.n_gen, "evaluations": fr.n_eval,
+        "seed": fr.seed, "objectives": ["f_chat", "f_rmse"],
+        "draws": [{"noise_seed": int(s), "uncertainty": u.tolist(), "phase_rad": p.tolist()}
+                  for s, u, p in zip(fr.draw_seeds, fr.draw_uncertainty, fr.draw_phase)],
+        "reference_point": fr.reference_point.tolist(), "hypervolume": fr.hv,
+        "table2": {"f_chat": _num(fr.table2_F[0]), "f_rmse": _num(fr.table2_F[1]), "G": _num(fr.table2_G[0]),
+                   "gains": dict(zip(fr.names, fr.table2.tolist()))},
+        "knee": fr.knee() if fr.size else None, "gain_names": fr.names, "dofs": list(DOFS), "members": members,
+        "versions": fr.versions,
+    }
+    return json.dumps(doc, indent=1) + "\n"
+
+
+def _num(x):
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+# ---- plot --------------------------------------------------------------------------------------------
+
+
+def _paper_points():
+    t = table3()
+    return (1.0, 1.0), (float(np.mean(t.chat_proposed / t.chat_agsta)), float(np.mean(t.rmse_proposed / t.rmse_agsta)))
+
+
+def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bool = True):
+    """Several fronts in one axes (f_chat vs f_rmse): fronts, Table 2 on the same draws, knees."""
+    if ax is None:  # a bare Figure: no pyplot state, no GUI backend (save with fig.savefig)
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(7.0, 5.2), layout="constrained")
+        ax = fig.add_subplot()
+    else:
+        fig = ax.figure
+    colors = ["tab:blue", "tab:orange", "tab:green", "tab:purple"]
+    for j, fr in enumerate(fronts):
+        col = colors[j % len(colors)]
+        lab = labels[j] if labels else fr.controller
+        if population:
+            feas = fr.population_G[:, 0] <= 0
+            P = fr.population_F[feas]
+            ax.scatter(P[:, 0], P[:, 1], s=8, color=col, alpha=0.25, linewidths=0)
+        if fr.size:
+            ax.plot(fr.F[:, 0], fr.F[:, 1], "-o", color=col, ms=3.5, lw=1.2,
+                    label=f"{lab}: front ({fr.size}), HV {fr.hv:.4g}")
+            k = fr.knee()
+            ax.plot(fr.F[k, 0], fr.F[k, 1], "D", color=col, ms=9, mec="k", mew=1.0,
+                    label=f"{lab}: knee ({fr.F[k, 0]:.3g}, {fr.F[k, 1]:.3g})")
+        if np.isfinite(fr.table2_F).all():
+            ax.plot(fr.table2_F[0], fr.table2_F[1], "*", color=col, ms=15, mec="k", mew=0.8,
+                    label=f"{lab}: Table 2 gains, same draw(s)")
+    if paper:
+        a, p = _paper_points()
+        ax.plot(*a, "s", mfc="none", mec="0.3", ms=8, label="paper Table 3 AGSTA (their simulator)")
+        ax.plot(*p, "^", mfc="none", mec="0.3", ms=8, label="paper Table 3 proposed (their simulator)")
+    ax.set_xlabel("f_chat: mean CHAT / paper's AGSTA CHAT")
+    ax.set_ylabel("f_rmse: mean RMSE / paper's AGSTA RMSE")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    return fig
+
+
+def plot_front(front: Front | str | Path, ax=None, **kw):
+    """One front: population (light), front, knee (diamond), Table 2 on the same draws (star)."""
+    fr = front if isinstance(front, Front) else read_front(front)
+    fig = plot_fronts([fr], ax=ax, **kw)
+    fig.axes[0].set_title(f"{fr.controller}: {fr.study_name}, {fr.n_gen} generations, {fr.n_eval} runs", fontsize=9)
+    return fig
+
+
+# ---- replay ------------------------------------------------------------------------------------------
+
+
+def _member(fr: Front, index: int) -> int:
+    if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+        raise ValueError(f"--index: expected an integer, got {index!r}")
+    if not -fr.size <= index < fr.size:
+        raise ValueError(f"--index {index}: {fr.path} has {fr.size} front member(s) (0..{fr.size - 1})")
+    return int(index) % fr.size
+
+
+def member_gains(path: str | Path, index: int):
+    """``(controller, gains, seed, scenario text)`` of front member ``index`` (sorted by f_chat).
+
+    Replaying these with :func:`arvcas.simulation.simulate` (the gains, the noise seed, the scenario
+    text, the packaged parameters) reproduces the member's stored per-DOF CHAT and RMSE, and so its
+    objectives, bit for bit. Only for single-draw studies that use the scenario's own uncertainty
+    factors and phases; otherwise use :func:`replay`.
+    """
+    fr = read_front(path)
+    i = _member(fr, index)
+    if fr.draw_seeds.size != 1:
+        raise ValueError(f"{fr.path}: the objectives average {fr.draw_seeds.size} draws; one simulate run cannot "
+                         f"reproduce them (use arvcas.tuning.front.replay)")
+    from ..scenario import loads_scenario
+
+    cfg = loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)")
+    if not (np.array_equal(fr.draw_uncertainty[0], cfg.uncertainty)
+            and np.array_equal(fr.draw_phase[0], np.array(cfg.disturbance_phase))):
+        raise ValueError(f"{fr.path}: the study's draw sets its own uncertainty factors or phases; a plain simulate "
+                         f"run cannot reproduce it (use arvcas.tuning.front.replay)")
+    return fr.controller, fr.gains[i].copy(), int(fr.draw_seeds[0]), fr.scenario_text
+
+
+def replay(path: str | Path, index: int, n_threads: int | None = None):
+    """Re-evaluate front member ``index`` on all the study's draws (same code path as the study).
+
+    Returns the :class:`~arvcas.tuning.problem.Evaluation` of that one member (F, G, per-DOF metrics).
+    """
+    from ..params import Params, load as load_params
+    from ..scenario import loads_scenario
+    from .engines import EvalTask, LocalEngine
+    from .run import evaluate_gains
+
+    fr = read_front(path)
+    i = _member(fr, index)
+    cfg = loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)")
+    p = load_params()
+    if not np.array_equal(p.vector(), ck.read_checkpoint(fr.path).params):
+        raise ValueError(f"{fr.path}: the study used other parameter values than the packaged file")
+    draws = tuple((int(s), u, ph) for s, u, ph in zip(fr.draw_seeds, fr.draw_uncertainty, fr.draw_phase))
+    task = EvalTask(controller=fr.controller, draws=draws, cfg=cfg, params=p)
+    assert isinstance(p, Params)
+    return evaluate_gains(LocalEngine(n_threads or 1), task, fr.gains[i][None, :])

@@ -1,0 +1,115 @@
+"""The tuning problem as a vectorised pymoo :class:`~pymoo.core.problem.Problem` (SPEC 7).
+
+Decision vector ``x`` (n_var,): ``log10`` of the controller's flat gain vector (Table 2 order,
+:func:`arvcas.gains.gain_names`), within the study's bounds. Each call evaluates the whole
+population in one batched call of the compiled run per draw (through an engine).
+
+Objectives ``F = (f_chat, f_rmse)``: :func:`arvcas.metrics.normalised_objectives` of each draw,
+averaged over the draws (one draw: exactly that function's value).
+
+One inequality constraint ``G <= 0`` (pymoo's convention):
+
+* ``G = 0`` when every draw ran the whole scenario;
+* ``G = 1 + max over draws of (t_end - t_fail) / t_end`` when a draw diverged (non-finite state,
+  the error bound of the scenario's ``[limits]`` exceeded): between 1 and 2, larger for an earlier
+  failure, so NSGA-II's constraint domination prefers candidates that survive longer;
+* ``G = 2`` when a run completed but returned non-finite metrics (not expected; never silent).
+
+An infeasible candidate's objectives are unknown. pymoo needs finite numbers, so it is given the
+placeholder :data:`INFEASIBLE_F` for both; it can never win, because NSGA-II ranks any feasible
+candidate above every infeasible one and infeasible ones among themselves by ``G``. The stored
+objectives (``Evaluation.F``, ``front.h5``) are NaN for them, never the placeholder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pymoo.core.problem import Problem
+
+from ..metrics import normalised_objectives
+
+__all__ = ["INFEASIBLE_F", "Evaluation", "GainProblem", "to_gains", "assemble"]
+
+INFEASIBLE_F = 1.0e6  # pymoo's F for infeasible candidates (never stored, never on a front)
+
+
+def to_gains(X) -> np.ndarray:
+    """log10 decision vectors (n, n_var) -> gains (n, n_var), ``10 ** X``."""
+    return np.power(10.0, np.asarray(X, dtype=float))
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One evaluated batch: per draw ``d`` and candidate ``i``.
+
+    ``chat``/``rmse``: (K, n, 6) per-DOF metrics (NaN where that draw diverged); ``ok``/``t_fail``:
+    (K, n); ``F``: (n, 2) objectives, NaN for infeasible candidates; ``G``: (n, 1).
+    """
+
+    chat: np.ndarray
+    rmse: np.ndarray
+    ok: np.ndarray
+    t_fail: np.ndarray
+    F: np.ndarray
+    G: np.ndarray
+
+    @property
+    def feasible(self) -> np.ndarray:
+        return self.G[:, 0] <= 0
+
+    @property
+    def F_pymoo(self) -> np.ndarray:
+        """F with the placeholder in infeasible rows (what NSGA-II sees)."""
+        return pymoo_F(self.F, self.G)
+
+
+def pymoo_F(F: np.ndarray, G: np.ndarray) -> np.ndarray:
+    out = np.array(F, dtype=float, copy=True)
+    out[G[:, 0] > 0] = INFEASIBLE_F
+    return out
+
+
+def assemble(chat, rmse, ok, t_fail, duration: float) -> Evaluation:
+    """Objectives and constraint from per-draw metrics (K, n, 6) and status (K, n)."""
+    chat, rmse = np.asarray(chat, dtype=float), np.asarray(rmse, dtype=float)
+    ok, t_fail = np.asarray(ok, dtype=bool), np.asarray(t_fail, dtype=float)
+    K, n = ok.shape
+    F = np.full((n, 2), np.nan)
+    G = np.zeros((n, 1))
+    for i in range(n):
+        if not ok[:, i].all():
+            left = [(duration - t_fail[d, i]) / duration for d in range(K) if not ok[d, i]]
+            left = [x if np.isfinite(x) else 1.0 for x in left]
+            G[i, 0] = 1.0 + min(1.0, max(0.0, max(left)))
+            continue
+        per_draw = [normalised_objectives(chat[d, i], rmse[d, i]) for d in range(K)]
+        f = per_draw[0] if K == 1 else tuple(float(np.mean([p[j] for p in per_draw])) for j in range(2))
+        if not all(np.isfinite(f)):
+            G[i, 0] = 2.0
+            continue
+        F[i] = f
+    return Evaluation(chat=chat, rmse=rmse, ok=ok, t_fail=t_fail, F=F, G=G)
+
+
+class GainProblem(Problem):
+    """``x = log10(gains)`` -> ``F = (f_chat, f_rmse)``, ``G`` (see the module docstring).
+
+    ``evaluate_gains(gains (n, n_var)) -> Evaluation`` does the work (an engine bound to the study's
+    controller, draws and scenario); the last :class:`Evaluation` is kept in ``last`` so the study
+    loop can store the per-DOF metrics with the population.
+    """
+
+    def __init__(self, names, log_lower, log_upper, evaluate_gains):
+        self.names = list(names)
+        self.evaluate_gains = evaluate_gains
+        self.last: Evaluation | None = None
+        super().__init__(n_var=len(self.names), n_obj=2, n_ieq_constr=1,
+                         xl=np.asarray(log_lower, dtype=float), xu=np.asarray(log_upper, dtype=float))
+
+    def _evaluate(self, X, out, *args, **kwargs):
+        ev = self.evaluate_gains(to_gains(X))
+        self.last = ev
+        out["F"] = ev.F_pymoo
+        out["G"] = ev.G

@@ -1,0 +1,129 @@
+"""Fronts as data: export round trip, plot, knee, exact replay of a member, comparison of two fronts."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+
+import numpy as np
+import pytest
+
+from arvcas import cli
+from arvcas.metrics import normalised_objectives
+from arvcas.simulation import simulate, simulate_batch
+from arvcas.tuning import compare_fronts, export_front, knee_index, member_gains, read_front, replay, run_study
+from arvcas.tuning import load_study
+
+from test_tuning_study import write_tiny
+
+
+@pytest.fixture(scope="module")
+def fronts(tmp_path_factory):
+    """Two small finished studies: agsta and proposed (population 8, 3 generations)."""
+    d = tmp_path_factory.mktemp("tuning_fronts")
+    out = {}
+    for c in ("agsta", "proposed"):
+        study = write_tiny(d / f"{c}.toml", controller=c)
+        run_study(load_study(study), d / c, say=lambda m: None)
+        out[c] = d / c / "front.h5"
+    return out
+
+
+def test_front_object(fronts):
+    fr = read_front(fronts["agsta"].parent)  # a directory works too
+    assert fr.controller == "agsta" and fr.size >= 1 and fr.gains.shape == (fr.size, 48)
+    assert np.all(np.diff(fr.F[:, 0]) > 0) and np.all(np.diff(fr.F[:, 1]) < 0)  # sorted, non-dominated
+    assert fr.hv > 0 and 0 <= fr.knee() < fr.size
+    np.testing.assert_array_equal(fr.F, fr.population_F[fr.index])
+
+
+def test_export_round_trip(fronts, tmp_path, capsys):
+    fr = read_front(fronts["proposed"])
+    text = export_front(fronts["proposed"], "csv")
+    rows = list(csv.DictReader(io.StringIO(text)))
+    assert len(rows) == fr.size
+    for i, r in enumerate(rows):
+        assert int(r["member"]) == i and int(r["population_row"]) == fr.index[i]
+        assert float(r["f_chat"]) == fr.F[i, 0] and float(r["f_rmse"]) == fr.F[i, 1]
+        np.testing.assert_array_equal([float(r[n]) for n in fr.names], fr.gains[i])
+    assert sum(r["knee"] == "True" for r in rows) == 1
+    doc = json.loads(export_front(fronts["proposed"], "json"))
+    assert doc["controller"] == "proposed" and doc["gain_names"] == fr.names and doc["seed"] == fr.seed
+    for i, m in enumerate(doc["members"]):
+        assert [m["f_chat"], m["f_rmse"]] == fr.F[i].tolist()
+        assert [m["gains"][n] for n in fr.names] == fr.gains[i].tolist()
+    assert doc["hypervolume"] == fr.hv and doc["draws"][0]["noise_seed"] == 0
+    # through the CLI, to a file and to stdout
+    out = tmp_path / "f.json"
+    assert cli.main(["front", "export", str(fronts["proposed"]), "--format", "json", "--out", str(out)]) == 0
+    assert json.loads(out.read_text()) == doc
+    capsys.readouterr()
+    assert cli.main(["front", "export", str(fronts["proposed"]), "--format", "csv"]) == 0
+    assert capsys.readouterr().out == text
+
+
+def test_plot(fronts, tmp_path, capsys):
+    png = tmp_path / "front.png"
+    assert cli.main(["front", "plot", str(fronts["agsta"]), "--out", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "knee: member" in capsys.readouterr().out
+    labels = [t.get_text() for t in read_front(fronts["agsta"]).plot().axes[0].get_legend().get_texts()]
+    assert any("Table 2" in t for t in labels) and any("knee" in t for t in labels)
+
+
+def test_knee_of_a_simple_front():
+    # two straight pieces meeting at (0.2, 0.2): HighTradeoffPoints finds the corner
+    a, b = np.linspace(0, 0.2, 11), np.linspace(0.2, 1, 11)[1:]
+    F = np.vstack([np.c_[a, 1 - 4 * a], np.c_[b, 0.2 - 0.25 * (b - 0.2)]])
+    assert knee_index(F) == 10
+    # too few points for an outlier: pseudo-weights (0.5, 0.5) on the normalised front
+    assert knee_index(np.array([[0.0, 1.0], [0.1, 0.3], [0.2, 0.2], [1.0, 0.0]])) == 2
+    assert knee_index(F[:1]) == 0
+
+
+@pytest.mark.parametrize("controller", ["agsta", "proposed"])
+def test_member_replays_exactly(fronts, controller):
+    """simulate (trace function) and simulate_batch (metrics-only function) reproduce the stored numbers."""
+    fr = read_front(fronts[controller])
+    i = fr.knee()
+    c, g, seed, cfg_text = member_gains(fronts[controller], i)
+    assert c == controller and seed == 0
+    r = simulate(c, g, seed=seed)
+    np.testing.assert_array_equal(r.chat, fr.chat[0, i])
+    np.testing.assert_array_equal(r.rmse, fr.rmse[0, i])
+    assert normalised_objectives(r.chat, r.rmse) == tuple(fr.F[i])
+    ch, rm = simulate_batch(c, g[None, :], seed=seed)
+    np.testing.assert_array_equal(ch[0], r.chat)
+    ev = replay(fronts[controller], i)
+    np.testing.assert_array_equal(ev.F[0], fr.F[i])
+
+
+def test_simulate_from_front_cli(fronts, capsys):
+    fr = read_front(fronts["agsta"])
+    rc = cli.main(["simulate", "--from-front", str(fronts["agsta"]), "--index", "0"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "agsta" in out
+    assert f"{fr.chat[0, 0, 0]:12.5g}" in out
+    rc = cli.main(["simulate", "--from-front", str(fronts["agsta"]), "--index", str(fr.size)])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"has {fr.size} front member(s)" in err
+
+
+def test_compare(fronts, tmp_path, capsys):
+    c = compare_fronts(fronts["agsta"], fronts["proposed"])
+    fa, fb = read_front(fronts["agsta"]), read_front(fronts["proposed"])
+    np.testing.assert_array_equal(c.reference_point, np.maximum(fa.reference_point, fb.reference_point))
+    assert c.hv == (fa.hv, fb.hv) and c.labels == ("agsta", "proposed")
+    assert 0 <= c.coverage[0] <= 1 and 0 <= c.coverage[1] <= 1
+    assert c.regions[0][0] == min(fa.F[0, 0], fb.F[0, 0])
+    # a front compared with itself: equal everywhere
+    same = compare_fronts(fa, fa, ref=[400.0, 5.0])
+    assert same.hv[0] == same.hv[1] and same.coverage == (1.0, 1.0)
+    assert {w for _, _, w in same.regions} == {"tie"}
+    png = tmp_path / "cmp.png"
+    rc = cli.main(["compare", str(fronts["agsta"].parent), str(fronts["proposed"].parent), "--plot", str(png)])
+    out = capsys.readouterr().out
+    assert rc == 0 and "hypervolume" in out and "where" in out and png.exists()
+    rc = cli.main(["compare", str(fronts["agsta"]), str(fronts["proposed"]), "--ref", "1,x"])
+    assert rc == 2 and "--ref" in capsys.readouterr().err
