@@ -1,8 +1,13 @@
-"""Command-line entries of :mod:`arvcas.beyond`: ``sweep`` and ``montecarlo`` (and, with the tuning
-package, ``front robust`` and ``compare`` on Monte Carlo files).
+"""Command-line entries of :mod:`arvcas.beyond`: ``sweep``, ``montecarlo``, ``front robust`` and
+``compare`` on Monte Carlo files.
 
-:func:`register` adds them to :data:`arvcas.cli.COMMANDS`; each ``_run_*`` parses nothing itself and
-calls a library function with typed arguments. Errors are ValueError/OSError (one line via arvcas.cli).
+:func:`register` adds ``sweep`` and ``montecarlo`` to :data:`arvcas.cli.COMMANDS` and extends the
+tuning package's commands, which must be registered first: ``front`` gains the action ``robust``
+(through argparse's public API: the ``front`` parser's sub-parsers action is captured while the
+tuning package builds it) and ``compare`` dispatches on the file type (two fronts: the tuning
+package's comparison; two Monte Carlo files: :func:`arvcas.beyond.montecarlo.compare_markdown`).
+No file of the tuning package is edited. Each ``_run_*`` calls a library function with typed
+arguments; errors are ValueError/OSError (one line via arvcas.cli).
 """
 
 from __future__ import annotations
@@ -48,6 +53,8 @@ def _add_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--controllers", type=_names, default=None, metavar="A,B,...",
                    help="default: proposed, traditional, implicit, agsta")
     p.add_argument("--seeds", type=_ints, default=[0], metavar="S1,S2|A..B", help="noise seeds (default 0)")
+    p.add_argument("--noise-scale", type=float, default=1.0, metavar="X",
+                   help="multiply the sensor noise by X (0: perfect measurements, the EKF unchanged; default 1)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
     p.add_argument("--params", type=Path, default=None, metavar="FILE", help="parameter file (default: packaged)")
 
@@ -60,7 +67,7 @@ def _run_sweep(a: argparse.Namespace) -> int:
 
     _io.prepare_dir(a.out, f"--out {a.out}")
     sw = run_sweep(a.h, a.controllers or CONTROLLERS, a.seeds, cfg=scenario.load_scenario(a.config),
-                   params=load(a.params), progress=_say)
+                   params=load(a.params), noise_scale=a.noise_scale, progress=_say)
     files = write_sweep_dir(sw, a.out)
     print(sweep_markdown(sw).split("\n## ", 1)[0])
     for p in files.values():
@@ -84,6 +91,9 @@ def _add_montecarlo(p: argparse.ArgumentParser) -> None:
     p.add_argument("--from-front", type=Path, default=None, metavar="FRONT",
                    help="use the gains of a tuning front member (with --index)")
     p.add_argument("--index", default=None, help="front member: an integer, or 'knee'")
+    p.add_argument("--draws-toml", action="store_true",
+                   help="print the --runs draws of --seed as [[evaluation.draws]] tables for a tuning study file "
+                        "(optimise the mean over K draws) and exit")
     p.add_argument("--check", type=Path, default=None, metavar="FILE.h5",
                    help="re-run a stored study from its file alone and compare bit for bit (no other option)")
 
@@ -104,6 +114,13 @@ def _run_montecarlo(a: argparse.Namespace) -> int:
             print(f"{a.check}: NOT reproduced: {', '.join(diff)} differ")
             return 1
         print(f"{a.check}: reproduced bit for bit ({old.runs} runs: draws, chat, rmse, ok, t_fail)")
+        return 0
+    if a.draws_toml:
+        from .montecarlo import draw, draws_toml
+
+        if a.runs is None:
+            raise ValueError("--draws-toml: give --runs K")
+        print(draws_toml(draw(a.runs, a.seed, a.spread)), end="")
         return 0
     if a.runs is None or a.out is None:
         raise ValueError("montecarlo: --runs N and --out FILE.h5 are required (or --check FILE.h5)")
@@ -133,6 +150,120 @@ def _run_montecarlo(a: argparse.Namespace) -> int:
     return 0
 
 
+# ---- front robust (an action added to the tuning package's ``front`` command) ----------------------
+
+
+class _CaptureSubparsers:
+    """A parser proxy that records the sub-parsers action another ``add_arguments`` creates, so that
+    one more action can be added to it through argparse's public API."""
+
+    def __init__(self, parser: argparse.ArgumentParser):
+        self._parser = parser
+        self.subparsers = None
+
+    def add_subparsers(self, *args, **kwargs):
+        self.subparsers = self._parser.add_subparsers(*args, **kwargs)
+        return self.subparsers
+
+    def __getattr__(self, name):
+        return getattr(self._parser, name)
+
+
+def _add_robust(sub) -> None:
+    r = sub.add_parser("robust", help="re-evaluate every front member under Monte Carlo; mark the robust "
+                                      "non-dominated ones (robust.h5, robust.md, robust.png)")
+    r.add_argument("file", type=Path, help="front.h5 (or a study output directory)")
+    r.add_argument("--runs", type=int, required=True, metavar="N", help="Monte Carlo draws per member")
+    r.add_argument("--seed", type=int, default=0, help="master seed of the draws (default 0)")
+    r.add_argument("--spread", type=float, default=0.3,
+                   help="half-width of the nominal-model factors' draw around 1 (default 0.3)")
+    r.add_argument("--out", type=Path, default=None, metavar="DIR", help="default: the front's directory")
+
+
+def _run_robust(a: argparse.Namespace) -> int:
+    from ..tuning.front import resolve_front_path
+    from . import _io
+    from .robust import robust_front, robust_markdown, write_robust_dir
+
+    out = a.out if a.out is not None else resolve_front_path(a.file).parent
+    _io.prepare_dir(out, f"--out {out}")
+    rf = robust_front(a.file, a.runs, a.seed, a.spread, progress=_say)
+    files = write_robust_dir(rf, out)
+    print(robust_markdown(rf))
+    for p in files.values():
+        print(f"wrote {p}")
+    return 0
+
+
+def _with_robust(front):
+    """The tuning package's ``front`` command with the ``robust`` action added."""
+    from ..cli import Command
+
+    def add(p: argparse.ArgumentParser) -> None:
+        cap = _CaptureSubparsers(p)
+        front.add_arguments(cap)
+        if cap.subparsers is None:
+            raise RuntimeError("arvcas.beyond: the 'front' command has no actions to extend")
+        _add_robust(cap.subparsers)
+
+    def run(a: argparse.Namespace) -> int:
+        return _run_robust(a) if a.action == "robust" else front.run(a)
+
+    return Command(front.help.replace("export (csv, json) or plot", "export (csv, json), plot or robust (Monte Carlo)"),
+                   add, run)
+
+
+# ---- compare on Monte Carlo files ------------------------------------------------------------------
+
+
+def _run_compare_mc(a: argparse.Namespace) -> int:
+    from . import _io
+    from .montecarlo import compare_markdown, is_montecarlo_file, plot_compare, read_montecarlo
+
+    for p in (a.a, a.b):
+        if not is_montecarlo_file(p):
+            raise ValueError(f"compare: {p} is not a Monte Carlo file; compare takes two fronts or two Monte "
+                             "Carlo files")
+    if getattr(a, "ref", None) is not None:
+        raise ValueError("--ref: only for fronts (Monte Carlo files are compared per DOF with intervals)")
+    report = getattr(a, "report", None)
+    for p in (report, a.plot):
+        if p is not None:
+            _io.target(p, f"{p}")
+    ma, mb = read_montecarlo(a.a), read_montecarlo(a.b)
+    text = compare_markdown(ma, mb)
+    print(text)
+    if report is not None:
+        print(f"wrote {_io.write_text(report, text)}")
+    if a.plot is not None:
+        fig = plot_compare(ma, mb)
+        print(f"wrote {_io.atomic_write(a.plot, lambda p: fig.savefig(p, format='png', dpi=130))}")
+    return 0
+
+
+def _with_montecarlo_compare(compare):
+    """The tuning package's ``compare`` command, dispatching to the paired Monte Carlo comparison when
+    given Monte Carlo files (``format = "arvcas-montecarlo"``) instead of fronts."""
+    from ..cli import Command
+
+    def add(p: argparse.ArgumentParser) -> None:
+        compare.add_arguments(p)
+        p.add_argument("--report", type=Path, default=None, metavar="FILE.md",
+                       help="Monte Carlo files: also write the comparison as Markdown")
+
+    def run(a: argparse.Namespace) -> int:
+        from .montecarlo import is_montecarlo_file
+
+        if is_montecarlo_file(a.a) or is_montecarlo_file(a.b):
+            return _run_compare_mc(a)
+        if a.report is not None:
+            raise ValueError("--report: only for Monte Carlo files")
+        return compare.run(a)
+
+    return Command(compare.help + "; or two Monte Carlo files: per-DOF differences with 95 percent intervals",
+                   add, run)
+
+
 def register(commands: dict) -> None:
     """Add this package's subcommands to the ``arvcas`` command registry (``arvcas.cli.COMMANDS``)."""
     from ..cli import Command
@@ -143,3 +274,8 @@ def register(commands: dict) -> None:
     commands["montecarlo"] = Command(
         "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance phases: CIs, failure rate",
         _add_montecarlo, _run_montecarlo)
+    # extend the tuning package's commands when it is registered (before this call in arvcas/cli.py)
+    if "front" in commands:
+        commands["front"] = _with_robust(commands["front"])
+    if "compare" in commands:
+        commands["compare"] = _with_montecarlo_compare(commands["compare"])

@@ -51,7 +51,7 @@ from .stats import Interval, mean_ci, paired_ci, welch_ci, wilson
 __all__ = [
     "Draws", "MonteCarlo", "draw", "run_montecarlo", "write_montecarlo", "read_montecarlo", "reproduce",
     "summary", "summary_markdown", "compare", "compare_markdown", "FORMAT", "FORMAT_VERSION", "DRAW_RULE",
-    "is_montecarlo_file",
+    "is_montecarlo_file", "plot_compare", "draws_toml",
 ]
 
 FORMAT = "arvcas-montecarlo"
@@ -105,6 +105,20 @@ def draw(runs: int, seed: int = 0, spread: float = 0.3) -> Draws:
         fac[i] = 1.0 + spread * rng.uniform(-1.0, 1.0, 4)
         ph[i] = rng.uniform(0.0, 2.0 * math.pi, 6)
     return Draws(seed, float(spread), ns, fac, ph)
+
+
+def draws_toml(d: Draws) -> str:
+    """The draws as ``[[evaluation.draws]]`` tables of a tuning study file (``arvcas.tuning.study``):
+    a study listing them optimises the mean of the objectives over these K draws instead of one.
+    Phases are written in degrees (the study's unit) with 17 significant digits."""
+    L = [f"# {d.runs} Monte Carlo draws: arvcas montecarlo --draws-toml --runs {d.runs} --seed {d.master_seed} "
+         f"--spread {d.spread:g}"]
+    for i in range(d.runs):
+        u = ", ".join(f"{x:.17g}" for x in d.factors[i])
+        ph = ", ".join(f"{math.degrees(x):.17g}" for x in d.phase[i])
+        L += ["[[evaluation.draws]]", f"noise_seed = {int(d.noise_seed[i])}", f"uncertainty = [{u}]",
+              f"phase_deg = [{ph}]"]
+    return "\n".join(L) + "\n"
 
 
 @dataclass
@@ -407,7 +421,63 @@ def compare_markdown(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, na
     L += [""]
     for name, e in c["objectives"].items():
         L.append(f"- {name} (SPEC 7): A - B = {_ci(e['diff'])}, ratio {e['ratio']:.3f}, {sign(e)}")
-    nc = sum(c["chat"][d]["certain"] and c["chat"][d]["diff"].hi < 0 for d in DOFS)
-    nr = sum(c["rmse"][d]["certain"] and c["rmse"][d]["diff"].lo > 0 for d in DOFS)
-    L += ["", f"CHAT: {A} certainly lower in {nc} of 6 DOF. RMSE: {A} certainly higher in {nr} of 6 DOF.", ""]
+    L.append("")
+    for key in ("chat", "rmse"):
+        lower = [_DOF_MD[i] for i, d in enumerate(DOFS) if c[key][d]["certain"] and c[key][d]["diff"].hi < 0]
+        higher = [_DOF_MD[i] for i, d in enumerate(DOFS) if c[key][d]["certain"] and c[key][d]["diff"].lo > 0]
+        unsure = [_DOF_MD[i] for i, d in enumerate(DOFS) if not c[key][d]["certain"]]
+        L.append(f"- {key.upper()}: {A} certainly lower in {len(lower)} of 6 DOF ({', '.join(lower) or '-'}), "
+                 f"certainly higher in {len(higher)} ({', '.join(higher) or '-'}), not certain in {len(unsure)} "
+                 f"({', '.join(unsure) or '-'}).")
+    L.append("")
     return "\n".join(L)
+
+
+def plot_compare(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, name_b: str | None = None,
+                 fig=None):
+    """Four panels: per-DOF distributions of CHAT and RMSE for A and B (box: quartiles, whiskers:
+    5-95 %; each DOF divided by the paper's AGSTA value so the DOF share an axis), and the
+    difference of means A - B relative to B's mean with its 95 % interval (paired when the draws
+    are shared)."""
+    from matplotlib.figure import Figure
+
+    A, B = name_a or _label(a), name_b or _label(b)
+    c = compare(a, b)
+    if fig is None:
+        fig = Figure(figsize=(12.0, 7.5), layout="constrained")
+    axs = fig.subplots(2, 2)
+    t3 = metrics.table3()
+    x = np.arange(6)
+    for col, (key, ref) in enumerate((("chat", t3.chat_agsta), ("rmse", t3.rmse_agsta))):
+        ax = axs[0, col]
+        for off, mc, color in ((-0.18, a, "tab:blue"), (0.18, b, "tab:red")):
+            data = [v[np.isfinite(v)] for v in (getattr(mc, key) / ref).T]
+            bp = ax.boxplot(data, positions=x + off, widths=0.3, whis=(5, 95), showfliers=False, patch_artist=True,
+                            medianprops={"color": "k"})
+            for box in bp["boxes"]:
+                box.set_facecolor(color)
+                box.set_alpha(0.55)
+        ax.plot([], [], "s", color="tab:blue", alpha=0.55, label=A)
+        ax.plot([], [], "s", color="tab:red", alpha=0.55, label=B)
+        ax.set_xticks(x, _DOF_MD)
+        ax.set_ylabel(f"{key.upper()} / paper's AGSTA {key.upper()} (per DOF)")
+        ax.set_title(f"{key.upper()} over the draws (box: quartiles, whiskers: 5-95 %)", fontsize=10)
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.legend(fontsize=8)
+        ax = axs[1, col]
+        d = [c[key][dd]["diff"] for dd in DOFS]
+        mb = np.array([np.nanmean(getattr(b, key)[:, i]) for i in range(6)])
+        est = np.array([iv.estimate for iv in d]) / mb * 100
+        lo = np.array([iv.lo for iv in d]) / mb * 100
+        hi = np.array([iv.hi for iv in d]) / mb * 100
+        colors = ["tab:green" if h < 0 else "tab:red" if l > 0 else "0.5" for l, h in zip(lo, hi)]
+        ax.bar(x, est, color=colors, alpha=0.7)
+        ax.errorbar(x, est, yerr=[est - lo, hi - est], fmt="none", ecolor="k", capsize=4)
+        ax.axhline(0, color="k", lw=0.8)
+        ax.set_xticks(x, _DOF_MD)
+        ax.set_ylabel(f"(mean A - mean B) / mean B, % of {key.upper()}")
+        how = "paired" if c["paired"] else "unpaired (Welch)"
+        ax.set_title(f"{key.upper()}: A - B with 95 % CI, {how}; green: A certainly lower", fontsize=10)
+        ax.grid(True, axis="y", alpha=0.3)
+    fig.suptitle(f"A = {A}  vs  B = {B}  ({a.runs} / {b.runs} draws)")
+    return fig

@@ -139,6 +139,8 @@ def run_sweep(hs: Sequence[float], controllers: Sequence[str] = CONTROLLERS, see
     seeds = tuple(int(s) for s in seeds)
     if not seeds or any(s < 0 for s in seeds):
         raise ValueError(f"--seeds: give non-negative integers, got {seeds}")
+    if not (isinstance(noise_scale, (int, float)) and math.isfinite(noise_scale) and noise_scale >= 0):
+        raise ValueError(f"--noise-scale: must be a finite number >= 0, got {noise_scale!r}")
     G = {c: np.asarray((gains or {}).get(c, gains_mod.default_gains(c)), dtype=float) for c in controllers}
     for c in controllers:  # RESO stability at every h before anything runs
         for cf in cfgs:

@@ -1,0 +1,327 @@
+"""Robust fronts: every member of a tuning front re-evaluated under Monte Carlo.
+
+A tuning study (``arvcas.tuning``) ranks candidates on one draw (or a few): one noise sequence,
+one set of nominal-model factors, one set of disturbance phases. :func:`robust_front` re-runs every
+front member, and the Table 2 gains for reference, on ``runs`` draws of :mod:`.montecarlo`
+(the same draws for every member: the comparison between members is paired) and reports per member
+
+- ``F_mean``: SPEC 7's objectives (f_chat, f_rmse) averaged over the draws that completed, with
+  their 95 % t-intervals; the failure count (diverged draws) with its Wilson interval;
+- ``robust_nd``: the member has no failed draw and no other such member is at least as good in both
+  mean objectives and better in one (non-dominated on the Monte Carlo means);
+- ``certainly_dominated``: some other member with no failed draw is better in both objectives with
+  95 % confidence (the paired t-interval of the per-draw difference lies below 0 for f_chat and for
+  f_rmse; no multiple-comparison correction).
+
+Members are read through :func:`arvcas.tuning.front.read_front` (front order: by one-draw f_chat).
+The study's own scenario (``Front.scenario_text``) is used; the parameters must be the packaged ones
+the study used (checked). File layout (``format = "arvcas-robust-front"``, ``format_version = 1``):
+datasets ``gains`` (f, m), ``F_front`` (f, 2, the study's objectives), ``F_mean`` (f, 2), ``F_lo``,
+``F_hi``, ``n_fail`` (f,), ``robust_nd``, ``certainly_dominated`` (f,), per-run ``chat``/``rmse``
+(f, runs, 6) and ``ok`` (f, runs), ``table2/...`` (the same for Table 2), the draws (``noise_seed``,
+``factors``, ``phase``); attributes ``front_path``, ``controller``, ``study_name``, ``knee``
+(the study's knee member), ``master_seed``, ``runs``, ``spread``, ``draw_rule``, ``config``,
+``params``, versions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from .. import gains as gains_mod, metrics, scenario
+from ..params import SCHEMA as PARAM_SCHEMA, load as load_params
+from ..simulation import simulate_many
+from . import _io
+from .montecarlo import CHUNK, DRAW_RULE, Draws, draw
+from .stats import mean_ci, paired_ci, wilson
+
+__all__ = ["RobustFront", "front_member", "robust_front", "write_robust", "read_robust", "robust_markdown",
+           "plot_robust", "write_robust_dir", "FORMAT", "FORMAT_VERSION"]
+
+FORMAT = "arvcas-robust-front"
+FORMAT_VERSION = 1
+
+
+def _front(path):
+    from ..tuning.front import read_front
+
+    return read_front(path)
+
+
+def front_member(path, index) -> tuple[str, np.ndarray, str, str]:
+    """``(controller, gains, scenario text, description)`` of front member ``index`` (an integer in
+    the front's order, or ``"knee"`` for the study's knee point)."""
+    fr = _front(path)
+    if isinstance(index, str) and index.strip().lower() == "knee":
+        i = fr.knee()
+        what = f"knee (member {i})"
+    else:
+        try:
+            i = int(index)
+        except (TypeError, ValueError):
+            raise ValueError(f"--index: expected an integer or 'knee', got {index!r}") from None
+        if not -fr.size <= i < fr.size:
+            raise ValueError(f"--index {i}: {fr.path} has {fr.size} front member(s) (0..{fr.size - 1})")
+        i %= fr.size
+        what = f"member {i}"
+    return fr.controller, fr.gains[i].copy(), fr.scenario_text, f"{fr.study_name} front {what}, {fr.path}"
+
+
+@dataclass
+class RobustFront:
+    """Monte Carlo re-evaluation of a front (module docstring). Arrays over the f members."""
+
+    front_path: str
+    controller: str
+    study_name: str
+    knee: int
+    draws: Draws
+    gains: np.ndarray  # (f, m)
+    F_front: np.ndarray  # (f, 2): the study's own objectives
+    chat: np.ndarray  # (f, runs, 6)
+    rmse: np.ndarray  # (f, runs, 6)
+    ok: np.ndarray  # (f, runs)
+    table2_gains: np.ndarray
+    table2_F_front: np.ndarray  # (2,)
+    table2_chat: np.ndarray  # (runs, 6)
+    table2_rmse: np.ndarray
+    table2_ok: np.ndarray
+    config_text: str
+    params_vector: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return int(self.gains.shape[0])
+
+    def per_run_objectives(self) -> np.ndarray:
+        """(f + 1, runs, 2): SPEC 7 objectives per member and draw (last row: Table 2); NaN if diverged."""
+        C = np.concatenate([self.chat, self.table2_chat[None]], axis=0)
+        R = np.concatenate([self.rmse, self.table2_rmse[None]], axis=0)
+        t3 = metrics.table3()
+        with np.errstate(invalid="ignore"):
+            return np.stack([np.mean(C / t3.chat_agsta, axis=2), np.mean(R / t3.rmse_agsta, axis=2)], axis=2)
+
+    def stats(self) -> dict[str, np.ndarray]:
+        """``F_mean``, ``F_lo``, ``F_hi`` (f + 1, 2), ``n_fail`` (f + 1,), ``robust_nd``,
+        ``certainly_dominated`` (f,): members first, Table 2 last (not part of the front)."""
+        O = self.per_run_objectives()
+        ok = np.concatenate([self.ok, self.table2_ok[None]], axis=0)
+        n = O.shape[0]
+        mean, lo, hi = (np.full((n, 2), np.nan) for _ in range(3))
+        for i in range(n):
+            for j in range(2):
+                iv = mean_ci(O[i, :, j])
+                mean[i, j], lo[i, j], hi[i, j] = iv.estimate, iv.lo, iv.hi
+        n_fail = (~ok).sum(axis=1)
+        f = self.size
+        sound = n_fail[:f] == 0
+        nd = np.zeros(f, dtype=bool)
+        for i in np.flatnonzero(sound):
+            others = [k for k in np.flatnonzero(sound) if k != i]
+            dom = [np.all(mean[k] <= mean[i]) and np.any(mean[k] < mean[i]) for k in others]
+            nd[i] = not any(dom)
+        cert = np.zeros(f, dtype=bool)
+        for i in range(f):
+            for k in np.flatnonzero(sound):
+                if k == i:
+                    continue
+                if all(paired_ci(O[k, :, j], O[i, :, j]).hi < 0 for j in range(2)):
+                    cert[i] = True
+                    break
+        return {"F_mean": mean, "F_lo": lo, "F_hi": hi, "n_fail": n_fail, "robust_nd": nd,
+                "certainly_dominated": cert}
+
+
+def robust_front(path, runs: int, seed: int = 0, spread: float = 0.3, n_threads: int | None = None,
+                 progress: Callable[[str], None] | None = None) -> RobustFront:
+    """Re-evaluate every member of the front in ``path`` (and Table 2) on ``runs`` Monte Carlo draws."""
+    fr = _front(path)
+    if fr.size == 0:
+        raise ValueError(f"{fr.path}: the front is empty")
+    d = draw(runs, seed, spread)
+    cfg = scenario.loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)") if fr.scenario_text \
+        else scenario.load_scenario()
+    params = load_params()
+    from ..tuning.checkpoint import read_checkpoint
+
+    if not np.array_equal(params.vector(), read_checkpoint(fr.path).params):
+        raise ValueError(f"{fr.path}: the study used other parameter values than the packaged file")
+    c = fr.controller
+    table2 = gains_mod.default_gains(c)
+    G = np.vstack([fr.gains, table2[None]])  # members, then Table 2
+    m = G.shape[0]
+    rows_g = np.repeat(G, d.runs, axis=0)
+    rows_s = np.tile(d.noise_seed, m)
+    rows_u = np.tile(d.factors, (m, 1))
+    rows_p = np.tile(d.phase, (m, 1))
+    n = rows_g.shape[0]
+    chat, rmse, ok = np.full((n, 6), np.nan), np.full((n, 6), np.nan), np.zeros(n, dtype=bool)
+    for a in range(0, n, CHUNK):
+        b = min(n, a + CHUNK)
+        if progress:
+            progress(f"{c}: {fr.size} members + Table 2 x {d.runs} draws: runs {a}..{b - 1} of {n}")
+        c_, r_, o_, _t = simulate_many(c, rows_g[a:b], rows_s[a:b], uncertainty=rows_u[a:b], phase=rows_p[a:b],
+                                       params=params, cfg=cfg, n_threads=n_threads)
+        chat[a:b], rmse[a:b], ok[a:b] = c_, r_, o_
+    chat, rmse, ok = chat.reshape(m, d.runs, 6), rmse.reshape(m, d.runs, 6), ok.reshape(m, d.runs)
+    return RobustFront(
+        front_path=str(fr.path), controller=c, study_name=fr.study_name, knee=fr.knee(), draws=d,
+        gains=fr.gains.copy(), F_front=fr.F.copy(), chat=chat[:-1], rmse=rmse[:-1], ok=ok[:-1],
+        table2_gains=table2, table2_F_front=np.asarray(fr.table2_F, float), table2_chat=chat[-1],
+        table2_rmse=rmse[-1], table2_ok=ok[-1], config_text=cfg.to_toml(), params_vector=params.vector(),
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# file
+
+
+_ARRAYS = ("gains", "F_front", "chat", "rmse", "ok")
+_T2 = ("table2_gains", "table2_F_front", "table2_chat", "table2_rmse", "table2_ok")
+
+
+def write_robust(rf: RobustFront, path) -> Path:
+    import h5py
+
+    path = _io.target(path, str(path))
+    st = rf.stats()
+
+    def fill(tmp: Path) -> None:
+        with h5py.File(tmp, "w") as f:
+            a = f.attrs
+            a["format"], a["format_version"] = FORMAT, FORMAT_VERSION
+            a["front_path"], a["controller"], a["study_name"] = rf.front_path, rf.controller, rf.study_name
+            a["knee"] = int(rf.knee)
+            a["master_seed"], a["runs"], a["spread"] = int(rf.draws.master_seed), int(rf.draws.runs), rf.draws.spread
+            a["draw_rule"] = DRAW_RULE
+            a["config"] = rf.config_text
+            a["params"] = np.asarray(rf.params_vector, float)
+            a["param_names"] = np.array(list(PARAM_SCHEMA), dtype=object)
+            a["gain_names"] = np.array(gains_mod.gain_names(rf.controller), dtype=object)
+            a["objectives"] = "f_chat, f_rmse (SPEC 7: per-DOF value / paper's AGSTA value, mean over 6 DOF)"
+            for k, v in _io.provenance().items():
+                a[k] = v
+            for k in _ARRAYS:
+                f.create_dataset(k, data=getattr(rf, k))
+            for k in _T2:
+                f.create_dataset(k.replace("table2_", "table2/"), data=getattr(rf, k))
+            f.create_dataset("noise_seed", data=rf.draws.noise_seed)
+            f.create_dataset("factors", data=rf.draws.factors)
+            f.create_dataset("phase", data=rf.draws.phase)
+            for k in ("F_mean", "F_lo", "F_hi", "n_fail"):  # members first, Table 2 as the last row
+                f.create_dataset(k, data=st[k]).attrs["rows"] = "front members in front order, then Table 2"
+            f.create_dataset("robust_nd", data=st["robust_nd"])
+            f.create_dataset("certainly_dominated", data=st["certainly_dominated"])
+
+    return _io.atomic_write(path, fill)
+
+
+def read_robust(path) -> RobustFront:
+    f = _io.open_h5(path, FORMAT, FORMAT_VERSION)
+    try:
+        a = f.attrs
+        d = Draws(int(a["master_seed"]), float(a["spread"]), np.array(f["noise_seed"][()], dtype=np.int64),
+                  np.array(f["factors"][()]), np.array(f["phase"][()]))
+        return RobustFront(
+            front_path=_io.str_attr(a["front_path"]), controller=_io.str_attr(a["controller"]),
+            study_name=_io.str_attr(a["study_name"]), knee=int(a["knee"]), draws=d,
+            **{k: np.array(f[k][()]) for k in _ARRAYS},
+            **{k: np.array(f[k.replace("table2_", "table2/")][()]) for k in _T2},
+            config_text=_io.str_attr(a["config"]), params_vector=np.array(a["params"]),
+        )
+    finally:
+        f.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# report
+
+
+def robust_markdown(rf: RobustFront) -> str:
+    st = rf.stats()
+    M, lo, hi, nf = st["F_mean"], st["F_lo"], st["F_hi"], st["n_fail"]
+    R = rf.draws.runs
+    f = rf.size
+
+    def ci(i, j):
+        return f"{M[i, j]:.4g} [{lo[i, j]:.4g}, {hi[i, j]:.4g}]" if np.isfinite(M[i, j]) else "n/a"
+
+    def fails(i):
+        w = wilson(int(nf[i]), R)
+        return f"{int(nf[i])}/{R} (≤ {w.hi:.2g})"
+
+    n_nd, n_cd = int(st["robust_nd"].sum()), int(st["certainly_dominated"].sum())
+    L = [f"# Robust front: {rf.controller}, study '{rf.study_name}'", "",
+         f"Front `{rf.front_path}`: {f} members, each re-run with the Table 2 gains for reference on the same "
+         f"{R} Monte Carlo draws (master seed {rf.draws.master_seed}; noise seed, nominal-model factors uniform "
+         f"in [{1 - rf.draws.spread:g}, {1 + rf.draws.spread:g}], disturbance phases uniform in [0, 2π)). "
+         "F front = the study's objectives (its own draw); MC mean = mean over the draws with 95 % t-interval; "
+         "failures with the 95 % Wilson upper bound.", "",
+         f"**{n_nd} of {f} members stay non-dominated** on the Monte Carlo means (robust ND, members without "
+         f"failed draws); {n_cd} are certainly dominated (another member is better in both objectives, paired "
+         "95 % intervals).", "",
+         "| member | F front (f_chat, f_rmse) | MC f_chat [95 % CI] | MC f_rmse [95 % CI] | failures | robust ND "
+         "| certainly dominated |", "|---:|---|---:|---:|---:|---|---|"]
+    for i in range(f):
+        tag = " (knee)" if i == rf.knee else ""
+        L.append(f"| {i}{tag} | {rf.F_front[i, 0]:.4g}, {rf.F_front[i, 1]:.4g} | {ci(i, 0)} | {ci(i, 1)} | {fails(i)} "
+                 f"| {'yes' if st['robust_nd'][i] else 'no'} | {'yes' if st['certainly_dominated'][i] else 'no'} |")
+    t = f
+    L.append(f"| Table 2 | {rf.table2_F_front[0]:.4g}, {rf.table2_F_front[1]:.4g} | {ci(t, 0)} | {ci(t, 1)} "
+             f"| {fails(t)} | (reference) | |")
+    k = rf.knee
+    L += ["", f"Knee (member {k}): one draw ({rf.F_front[k, 0]:.4g}, {rf.F_front[k, 1]:.4g}), Monte Carlo "
+          f"({M[k, 0]:.4g}, {M[k, 1]:.4g}); robust ND: {'yes' if st['robust_nd'][k] else 'no'}.", ""]
+    return "\n".join(L)
+
+
+def plot_robust(rf: RobustFront, fig: Figure | None = None) -> Figure:
+    """f_chat vs f_rmse: the study's one-draw front (hollow), each member's Monte Carlo mean with its
+    95 % intervals (filled; robust non-dominated members ringed), Table 2 (star), the knee (diamond)."""
+    st = rf.stats()
+    M, lo, hi = st["F_mean"], st["F_lo"], st["F_hi"]
+    if fig is None:
+        fig = Figure(figsize=(8.0, 6.0), layout="constrained")
+    ax = fig.add_subplot()
+    f = rf.size
+    ax.plot(rf.F_front[:, 0], rf.F_front[:, 1], "o", mfc="none", mec="0.5", ms=5, label="front, study's draw")
+    for i in range(f):
+        ax.plot([rf.F_front[i, 0], M[i, 0]], [rf.F_front[i, 1], M[i, 1]], color="0.8", lw=0.6, zorder=1)
+    ok = np.isfinite(M[:f, 0])
+    ax.errorbar(M[:f][ok, 0], M[:f][ok, 1], xerr=[M[:f][ok, 0] - lo[:f][ok, 0], hi[:f][ok, 0] - M[:f][ok, 0]],
+                yerr=[M[:f][ok, 1] - lo[:f][ok, 1], hi[:f][ok, 1] - M[:f][ok, 1]], fmt="o", color="tab:blue",
+                ms=4, lw=0.8, capsize=2, label=f"Monte Carlo mean, 95 % CI ({rf.draws.runs} draws)")
+    nd = st["robust_nd"]
+    ax.plot(M[:f][nd, 0], M[:f][nd, 1], "o", mfc="none", mec="tab:red", ms=10, mew=1.4,
+            label=f"robust non-dominated ({int(nd.sum())} of {f})")
+    bad = st["n_fail"][:f] > 0
+    if bad.any():
+        ax.plot(M[:f][bad, 0], M[:f][bad, 1], "x", color="tab:red", ms=9, mew=1.6,
+                label=f"failed draws ({int(bad.sum())} members)")
+    k = rf.knee
+    ax.plot(M[k, 0], M[k, 1], "D", color="tab:orange", mec="k", ms=9, label=f"knee (member {k}), Monte Carlo")
+    ax.plot(rf.F_front[k, 0], rf.F_front[k, 1], "D", mfc="none", mec="tab:orange", ms=9, label="knee, study's draw")
+    if np.isfinite(M[f]).all():
+        ax.plot(M[f, 0], M[f, 1], "*", color="k", ms=14, label="Table 2, Monte Carlo")
+    if np.isfinite(rf.table2_F_front).all():
+        ax.plot(*rf.table2_F_front, "*", mfc="none", mec="k", ms=14, label="Table 2, study's draw")
+    ax.set_xlabel("f_chat (mean CHAT / paper's AGSTA CHAT)")
+    ax.set_ylabel("f_rmse (mean RMSE / paper's AGSTA RMSE)")
+    ax.set_title(f"{rf.controller}, study '{rf.study_name}': front under Monte Carlo", fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    return fig
+
+
+def write_robust_dir(rf: RobustFront, out_dir) -> dict[str, Path]:
+    """``out_dir/robust.h5``, ``robust.md``, ``robust.png`` (atomic)."""
+    out = _io.prepare_dir(out_dir, f"--out {out_dir}")
+    files = {"h5": write_robust(rf, out / "robust.h5"), "md": _io.write_text(out / "robust.md", robust_markdown(rf))}
+    fig = plot_robust(rf)
+    files["png"] = _io.atomic_write(out / "robust.png", lambda p: fig.savefig(p, format="png", dpi=140))
+    return files
