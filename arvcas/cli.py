@@ -229,7 +229,8 @@ COMMANDS: dict[str, Command] = {
     "paper": Command("the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
                      _add_paper, _run_paper),
 }
-__import__("arvcas.beyond.cli", fromlist=["register"]).register(COMMANDS)  # sweep, montecarlo (arvcas/beyond)
+__import__("arvcas.tuning.cli", fromlist=["register"]).register(COMMANDS)  # tune, front, compare (arvcas/tuning)
+__import__("arvcas.beyond.cli", fromlist=["register"]).register(COMMANDS)  # after tuning: extends front, compare
 
 
 def _parser() -> argparse.ArgumentParser:
