@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import difflib
 import math
-import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any, Iterator, Mapping
 
 import numpy as np
+
+from . import tomlfile
 
 __all__ = ["Params", "ParamsError", "load", "view", "SCHEMA", "default_path"]
 
@@ -193,20 +194,7 @@ def load(path: str | Path | None = None) -> Params:
     """
     p = Path(path) if path is not None else default_path()
     where = str(p)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise ParamsError(f"{where}: file not found") from None
-    except OSError as e:
-        raise ParamsError(f"{where}: cannot read file ({e.strerror})") from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise ParamsError(f"{where}: not UTF-8 text (byte {e.start})") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ParamsError(f"{where}: malformed TOML: {e}") from None
+    doc = tomlfile.parse(tomlfile.read_text(p, ParamsError), where, ParamsError)
     flat: dict[str, Any] = {}
     _flatten(doc, "", flat, where)
     for name in flat:

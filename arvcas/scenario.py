@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import difflib
 import math
-import tomllib
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -18,6 +17,8 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
+
+from . import tomlfile
 
 __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
@@ -182,28 +183,12 @@ def _unit_factors(unit: str, n: int, where: str) -> np.ndarray:
 def load_scenario(path: str | Path | None = None) -> ScenarioConfig:
     """Load and validate the scenario file; one-line :class:`ScenarioError` naming file and key."""
     p = Path(path) if path is not None else default_scenario_path()
-    where = str(p)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise ScenarioError(f"{where}: file not found") from None
-    except IsADirectoryError:
-        raise ScenarioError(f"{where}: is a directory, expected a scenario TOML file") from None
-    except OSError as e:
-        raise ScenarioError(f"{where}: cannot read file ({e.strerror})") from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise ScenarioError(f"{where}: not UTF-8 text (byte {e.start})") from None
-    return loads_scenario(text, where)
+    return loads_scenario(tomlfile.read_text(p, ScenarioError), str(p))
 
 
 def loads_scenario(text: str, where: str = "<scenario text>") -> ScenarioConfig:
     """Validate scenario TOML text (e.g. stored in a result file); ``where`` names it in errors."""
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(f"{where}: malformed TOML: {e}") from None
+    doc = tomlfile.parse(text, where, ScenarioError)
     flat: dict[str, Any] = {}
     for sec, table in doc.items():
         if not isinstance(table, dict):
