@@ -218,6 +218,25 @@ def _run_paper(a: argparse.Namespace) -> int:
     return 0 if all(r.ok for r in out["results"].values()) else 1
 
 
+# ---- bench -------------------------------------------------------------------------------------
+
+
+def _add_bench(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="tiny repetition counts, no opt-level sweep (CI check)")
+    p.add_argument("--out", type=Path, default=Path("results"), metavar="DIR",
+                   help="where bench.json and bench.md go (default: results/)")
+    p.add_argument("--wait-load", type=float, default=None, metavar="L",
+                   help="first wait (up to 15 min) until the 1-min load average is at most L")
+
+
+def _run_bench(a: argparse.Namespace) -> int:
+    from .bench import run
+
+    run(a.out, quick=a.quick, wait_load=a.wait_load)
+    print(f"wrote {a.out / 'bench.json'} and {a.out / 'bench.md'}")
+    return 0
+
+
 COMMANDS: dict[str, Command] = {
     "export-c": Command("write the plant functions as a C library with Makefile, example and README",
                         _add_export_c, _run_export_c),
@@ -228,6 +247,8 @@ COMMANDS: dict[str, Command] = {
                         _add_simulate, _run_simulate),
     "paper": Command("the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
                      _add_paper, _run_paper),
+    "bench": Command("measure plant, closed-loop and compile speed; write bench.json and bench.md",
+                     _add_bench, _run_bench),
 }
 __import__("arvcas.tuning.cli", fromlist=["register"]).register(COMMANDS)  # tune, front, compare (arvcas/tuning)
 __import__("arvcas.beyond.cli", fromlist=["register"]).register(COMMANDS)  # after tuning: extends front, compare
