@@ -73,11 +73,11 @@ def test_plot(fronts, tmp_path, capsys):
 
 
 def test_knee_of_a_simple_front():
-    # two straight pieces meeting at (0.2, 0.2): HighTradeoffPoints finds the corner
+    # two straight pieces meeting at (0.2, 0.2), on the diagonal of the normalised front: the corner
     a, b = np.linspace(0, 0.2, 11), np.linspace(0.2, 1, 11)[1:]
     F = np.vstack([np.c_[a, 1 - 4 * a], np.c_[b, 0.2 - 0.25 * (b - 0.2)]])
     assert knee_index(F) == 10
-    # too few points for an outlier: pseudo-weights (0.5, 0.5) on the normalised front
+    # the member closest to equal pseudo-weights
     assert knee_index(np.array([[0.0, 1.0], [0.1, 0.3], [0.2, 0.2], [1.0, 0.0]])) == 2
     assert knee_index(F[:1]) == 0
 

@@ -88,6 +88,7 @@ def _add_front(p: argparse.ArgumentParser) -> None:
     pl = sub.add_parser("plot", help="plot the front, Table 2 on the same draws and the knee point (PNG)")
     pl.add_argument("file", type=Path, help="front.h5 (or a study output directory)")
     pl.add_argument("--out", type=Path, default=None, metavar="PNG", help="default: next to FILE, front.png")
+    pl.add_argument("--paper", action="store_true", help="also mark the paper's Table 3 points (their simulator)")
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -121,7 +122,7 @@ def _run_front(a: argparse.Namespace) -> int:
     parent = out.parent if str(out.parent) else Path(".")
     if not parent.is_dir():
         raise ValueError(f"--out {out}: directory {parent} does not exist")
-    fig = plot_front(fr)
+    fig = plot_front(fr, paper=a.paper)
     fig.savefig(out, dpi=150)
     k = fr.knee()
     print(f"{fr.controller}: {fr.size} on the front, HV {fr.hv:.6g}; knee: member {k} "
@@ -138,6 +139,7 @@ def _add_compare(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ref", default=None, metavar="F_CHAT,F_RMSE",
                    help="common reference point (default: componentwise max of the two studies' points)")
     p.add_argument("--plot", type=Path, default=None, metavar="PNG", help="both fronts in one figure")
+    p.add_argument("--paper", action="store_true", help="with --plot: also mark the paper's Table 3 points")
 
 
 def _run_compare(a: argparse.Namespace) -> int:
@@ -160,7 +162,7 @@ def _run_compare(a: argparse.Namespace) -> int:
     c = compare_fronts(fa, fb, ref)
     print(format_comparison(c))
     if a.plot is not None:
-        fig = plot_fronts([fa, fb], labels=list(c.labels))
+        fig = plot_fronts([fa, fb], labels=list(c.labels), paper=a.paper)
         fig.axes[0].set_title(f"{c.labels[0]} vs {c.labels[1]}: HV {c.hv[0]:.4g} vs {c.hv[1]:.4g} "
                               f"(ref {c.reference_point[0]:g}, {c.reference_point[1]:g})", fontsize=9)
         fig.savefig(a.plot, dpi=150)

@@ -164,9 +164,15 @@ class DaskEngine:
         n = gains.shape[0]
         n_chunks = max(1, min(n, sum(self.threads())))
         blocks = [b for b in np.array_split(np.arange(n), n_chunks) if b.size]
-        futures = self.client.map(_chunk, [task] * len(blocks), [gains[b] for b in blocks], [1] * len(blocks),
-                                  pure=False)
-        parts = self.client.gather(futures)
+        try:
+            futures = self.client.map(_chunk, [task] * len(blocks), [gains[b] for b in blocks],
+                                      [1] * len(blocks), pure=False)
+            parts = self.client.gather(futures)
+        except (ValueError, KeyboardInterrupt):
+            raise
+        except Exception as e:  # noqa: BLE001 - a lost worker or connection: one line, not a traceback
+            msg = " ".join(str(e).split())[:200] or "no message"
+            raise EngineError(f"engine dask: evaluating the generation failed ({type(e).__name__}: {msg})") from None
         for p in parts:
             if p[4] != key:
                 raise EngineError(f"engine dask: a worker ran compiled code {p[4][:20] or '?'}, this process "

@@ -3,11 +3,13 @@
 Front members are the feasible, non-dominated rows of the study's final (or latest) population,
 sorted by ``f_chat``; member ``i`` of every function here is row ``i`` of that order.
 
-Knee point: pymoo's :class:`~pymoo.mcdm.high_tradeoff.HighTradeoffPoints` (the members whose
-least trade-off to their neighbours is an upper-tail outlier) on the front normalised to [0, 1] per
-objective; when it finds several, the one with the smallest sum of normalised objectives; when it
-finds none (small or evenly curved fronts), pymoo's :class:`~pymoo.mcdm.pseudo_weights.PseudoWeights`
-with equal weights (0.5, 0.5).
+Knee point: pymoo's :class:`~pymoo.mcdm.pseudo_weights.PseudoWeights` with equal weights (0.5, 0.5):
+the member whose pseudo-weight vector ``w_i ~ (f_i,max - f_i) / (f_i,max - f_i,min)`` (normalised to
+sum 1) is closest to equal weights, i.e. the balanced compromise where both objectives are the same
+fraction of the way from their worst to their best value on the front. Always exactly one member,
+and insensitive to the scale of either objective. pymoo's ``HighTradeoffPoints`` was tried first and
+rejected: on these fronts (noisy at the scale of neighbouring members) its local trade-off ratios
+pick an end of the front (a nearly vertical step between two neighbours), not the bend.
 """
 
 from __future__ import annotations
@@ -15,7 +17,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -122,28 +123,18 @@ def read_front(path: str | Path) -> Front:
 
 
 def knee_index(F: np.ndarray) -> int:
-    """Knee of a 2-objective front (rows sorted or not); see the module docstring."""
-    from pymoo.mcdm.high_tradeoff import HighTradeoffPoints
+    """Knee of a 2-objective front: pymoo's PseudoWeights(0.5, 0.5); see the module docstring."""
     from pymoo.mcdm.pseudo_weights import PseudoWeights
 
     F = np.asarray(F, dtype=float)
     n = F.shape[0]
     if n == 0:
         raise ValueError("knee: the front is empty")
-    if n <= 2:
-        return 0 if n == 1 else int(np.argmin(_normalise(F).sum(axis=1)))
-    N = _normalise(F)
-    idx = None
-    with warnings.catch_warnings(), np.errstate(all="ignore"):
-        warnings.simplefilter("ignore")
-        try:
-            idx = HighTradeoffPoints().do(N)
-        except (ValueError, IndexError, ZeroDivisionError):
-            idx = None
-    if idx is not None and np.size(idx) > 0:
-        idx = np.atleast_1d(idx).astype(int)
-        return int(idx[np.argmin(N[idx].sum(axis=1))])
-    return int(PseudoWeights(np.array([0.5, 0.5])).do(N))
+    if n == 1:
+        return 0
+    if np.any(F.max(axis=0) == F.min(axis=0)):  # a degenerate front: pseudo-weights undefined
+        return int(np.argmin(_normalise(F).sum(axis=1)))
+    return int(PseudoWeights(np.array([0.5, 0.5])).do(F))
 
 
 def _normalise(F: np.ndarray) -> np.ndarray:
@@ -220,8 +211,12 @@ def _paper_points():
     return (1.0, 1.0), (float(np.mean(t.chat_proposed / t.chat_agsta)), float(np.mean(t.rmse_proposed / t.rmse_agsta)))
 
 
-def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bool = True):
-    """Several fronts in one axes (f_chat vs f_rmse): fronts, Table 2 on the same draws, knees."""
+def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bool = False):
+    """Several fronts in one axes (f_chat vs f_rmse): fronts, Table 2 on the same draws, knees.
+
+    ``population``: the feasible members of the last population, faint; ``paper``: the paper's
+    Table 3 points (AGSTA = (1, 1) by construction, and the proposed controller), from its simulator.
+    """
     if ax is None:  # a bare Figure: no pyplot state, no GUI backend (save with fig.savefig)
         from matplotlib.figure import Figure
 

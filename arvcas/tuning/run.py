@@ -44,7 +44,7 @@ from pymoo.operators.sampling.rnd import FloatRandomSampling
 
 from ..params import load as load_params
 from . import checkpoint as ck
-from .engines import EvalTask, make_engine
+from .engines import EngineError, EvalTask, make_engine
 from .problem import Evaluation, GainProblem, assemble, pymoo_F
 from .study import Study, StudyError
 
@@ -328,6 +328,8 @@ def run_study(study: Study, out: str | Path, *, controllers: tuple[str, ...] | N
                 if diff:
                     raise TuningError(f"--resume: {study.path} differs from the study in {path} in {', '.join(diff)} "
                                       f"(only [termination] and [engine] may change between sessions)")
+            elif resume:
+                say(f"{c}: no checkpoint at {path}: starting the study")
             plan.append((c, path, existing))
         if all(e is not None and e.status == "finished" and not _extends(study, e) for _, _, e in plan):
             for c, path, e in plan:
@@ -407,7 +409,17 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
     while True:
         t0 = time.time()
         off = alg.ask()
-        alg.evaluator.eval(problem, off)
+        try:
+            alg.evaluator.eval(problem, off)
+        except EngineError as e:
+            if not stop.requested:
+                raise
+            # Ctrl-C reached the workers too (same process group): this generation is lost, the last is kept
+            c.status, c.stop_reason = "interrupted", "interrupted"
+            ck.write_checkpoint(c, path)
+            say(f"{controller}: interrupted during generation {c.n_gen + 1} ({e}); checkpoint of generation "
+                f"{c.n_gen} kept in {path}; resume with: {resume_cmd}")
+            return _outcome(c, path, time.time() - t_session)
         _set_eval(off, problem.last)
         alg.tell(infills=off)
         n_gen, n_eval = int(alg.n_iter - 1), int(alg.evaluator.n_eval)
