@@ -126,6 +126,17 @@ def test_cli_compare_dispatches_on_file_type(front_file, tmp_path, capsys):
     assert "not a Monte Carlo file" in capsys.readouterr().err
 
 
+def test_compare_two_robust_fronts(robust, tmp_path, capsys):
+    a = write_robust_dir(robust, tmp_path / "a")["h5"]
+    b = write_robust_dir(robust, tmp_path / "b")["h5"]
+    capsys.readouterr()
+    assert main(["compare", str(a), str(b), "--report", str(tmp_path / "r.md"), "--plot", str(tmp_path / "r.png")]) == 0
+    text = (tmp_path / "r.md").read_text()
+    assert "on the same draws" in text and "Coverage: 100 %" in text  # a front covers itself
+    assert main(["compare", str(a), str(tmp_path / "r.md")]) == 2
+    assert "robust-front file" in capsys.readouterr().err
+
+
 def test_draws_toml_is_a_valid_study_draw_list(tmp_path, capsys):
     """--draws-toml K: a tuning study that lists these draws optimises the mean over K draws."""
     from arvcas.beyond.montecarlo import draw

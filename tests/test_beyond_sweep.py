@@ -67,6 +67,7 @@ def test_sweep_files(small_sweep, tmp_path):
         assert np.array_equal(f["gains/traditional"][()], gains.default_gains("traditional"))
     md = sweep_markdown(back)
     assert "| traditional | 0.2 | 1/1 |" in md
+    assert main(["sweep", "--check", str(files["h5"])]) == 0  # re-run from the file alone: bit for bit
 
 
 def test_sweep_cli_bad_input_one_line(tmp_path, capsys):

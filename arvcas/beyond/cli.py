@@ -47,9 +47,9 @@ def _say(msg: str) -> None:
 
 
 def _add_sweep(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--h", type=_floats, required=True, metavar="H1,H2,...",
+    p.add_argument("--h", type=_floats, default=None, metavar="H1,H2,...",
                    help="controller sampling periods in s (whole multiples of the plant step 0.01 s)")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="writes DIR/sweep.h5, sweep.md, sweep.png")
+    p.add_argument("--out", type=Path, default=None, metavar="DIR", help="writes DIR/sweep.h5, sweep.md, sweep.png")
     p.add_argument("--controllers", type=_names, default=None, metavar="A,B,...",
                    help="default: proposed, traditional, implicit, agsta")
     p.add_argument("--seeds", type=_ints, default=[0], metavar="S1,S2|A..B", help="noise seeds (default 0)")
@@ -57,14 +57,28 @@ def _add_sweep(p: argparse.ArgumentParser) -> None:
                    help="multiply the sensor noise by X (0: perfect measurements, the EKF unchanged; default 1)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
     p.add_argument("--params", type=Path, default=None, metavar="FILE", help="parameter file (default: packaged)")
+    p.add_argument("--check", type=Path, default=None, metavar="FILE.h5",
+                   help="re-run a stored sweep from its file alone and compare bit for bit (no other option)")
 
 
 def _run_sweep(a: argparse.Namespace) -> int:
     from .. import scenario
     from ..params import load
     from . import _io
-    from .sweep import CONTROLLERS, run_sweep, sweep_markdown, write_sweep_dir
+    from .sweep import CONTROLLERS, reproduce_sweep, run_sweep, sweep_markdown, write_sweep_dir
 
+    if a.check is not None:
+        if a.h is not None or a.out is not None:
+            raise ValueError("--check FILE re-runs the file's own configuration: give no --h or --out")
+        _say(f"re-running {a.check} ...")
+        _new, diff = reproduce_sweep(a.check)
+        if diff:
+            print(f"{a.check}: NOT reproduced: {', '.join(diff)} differ")
+            return 1
+        print(f"{a.check}: reproduced bit for bit (chat, rmse, ok, t_fail, zigzag measures, k1 series)")
+        return 0
+    if a.h is None or a.out is None:
+        raise ValueError("sweep: --h H1,H2,... and --out DIR are required (or --check FILE.h5)")
     _io.prepare_dir(a.out, f"--out {a.out}")
     sw = run_sweep(a.h, a.controllers or CONTROLLERS, a.seeds, cfg=scenario.load_scenario(a.config),
                    params=load(a.params), noise_scale=a.noise_scale, progress=_say)
@@ -126,13 +140,16 @@ def _run_montecarlo(a: argparse.Namespace) -> int:
         raise ValueError("montecarlo: --runs N and --out FILE.h5 are required (or --check FILE.h5)")
     out = _io.target(a.out, f"--out {a.out}")
     cfg = scenario.load_scenario(a.config)
-    controller, gains, source = a.controller, None, None
+    controller, gains, source, front_path = a.controller, None, None, None
     if a.from_front is not None:
         from .robust import front_member
 
         if a.index is None:
             raise ValueError("--from-front needs --index I (or --index knee)")
         controller_f, gains, cfg_text, source = front_member(a.from_front, a.index)
+        from ..tuning.front import resolve_front_path
+
+        front_path = str(resolve_front_path(a.from_front))
         if controller is not None and controller != controller_f:
             raise ValueError(f"--controller {controller} differs from the front's controller {controller_f}")
         controller = controller_f
@@ -142,6 +159,8 @@ def _run_montecarlo(a: argparse.Namespace) -> int:
         raise ValueError("--controller: required (proposed, agsta, traditional, implicit)")
     mc = run_montecarlo(controller, a.runs, a.seed, gains=gains, spread=a.spread, cfg=cfg, params=load(a.params),
                         gains_source=source, progress=_say)
+    if front_path is not None:
+        mc.meta["front_path"] = front_path
     write_montecarlo(mc, out)
     md = summary_markdown(mc)
     md_path = _io.write_text(out.with_suffix(".md"), md)
@@ -216,27 +235,35 @@ def _with_robust(front):
 # ---- compare on Monte Carlo files ------------------------------------------------------------------
 
 
-def _run_compare_mc(a: argparse.Namespace) -> int:
+def _run_compare_mc(a: argparse.Namespace, kind: str) -> int:
+    """``kind``: "montecarlo" (two Monte Carlo files) or "robust" (two robust.h5 of ``front robust``)."""
     from . import _io
-    from .montecarlo import compare_markdown, is_montecarlo_file, plot_compare, read_montecarlo
 
+    if kind == "montecarlo":
+        from .montecarlo import compare_markdown as markdown, is_montecarlo_file as is_kind, plot_compare as plot
+        from .montecarlo import read_montecarlo as read
+        what = "Monte Carlo file"
+    else:
+        from .robust import compare_robust_markdown as markdown, is_robust_file as is_kind
+        from .robust import plot_compare_robust as plot, read_robust as read
+        what = "robust-front file (front robust)"
     for p in (a.a, a.b):
-        if not is_montecarlo_file(p):
-            raise ValueError(f"compare: {p} is not a Monte Carlo file; compare takes two fronts or two Monte "
-                             "Carlo files")
+        if not is_kind(p):
+            raise ValueError(f"compare: {p} is not a {what} like the other; compare takes two fronts, two Monte "
+                             "Carlo files or two robust-front files")
     if getattr(a, "ref", None) is not None:
-        raise ValueError("--ref: only for fronts (Monte Carlo files are compared per DOF with intervals)")
+        raise ValueError("--ref: only for fronts")
     report = getattr(a, "report", None)
     for p in (report, a.plot):
         if p is not None:
             _io.target(p, f"{p}")
-    ma, mb = read_montecarlo(a.a), read_montecarlo(a.b)
-    text = compare_markdown(ma, mb)
+    ma, mb = read(a.a), read(a.b)
+    text = markdown(ma, mb)
     print(text)
     if report is not None:
         print(f"wrote {_io.write_text(report, text)}")
     if a.plot is not None:
-        fig = plot_compare(ma, mb)
+        fig = plot(ma, mb)
         print(f"wrote {_io.atomic_write(a.plot, lambda p: fig.savefig(p, format='png', dpi=130))}")
     return 0
 
@@ -249,19 +276,22 @@ def _with_montecarlo_compare(compare):
     def add(p: argparse.ArgumentParser) -> None:
         compare.add_arguments(p)
         p.add_argument("--report", type=Path, default=None, metavar="FILE.md",
-                       help="Monte Carlo files: also write the comparison as Markdown")
+                       help="Monte Carlo or robust-front files: also write the comparison as Markdown")
 
     def run(a: argparse.Namespace) -> int:
         from .montecarlo import is_montecarlo_file
+        from .robust import is_robust_file
 
         if is_montecarlo_file(a.a) or is_montecarlo_file(a.b):
-            return _run_compare_mc(a)
+            return _run_compare_mc(a, "montecarlo")
+        if is_robust_file(a.a) or is_robust_file(a.b):
+            return _run_compare_mc(a, "robust")
         if a.report is not None:
-            raise ValueError("--report: only for Monte Carlo files")
+            raise ValueError("--report: only for Monte Carlo or robust-front files")
         return compare.run(a)
 
-    return Command(compare.help + "; or two Monte Carlo files: per-DOF differences with 95 percent intervals",
-                   add, run)
+    return Command(compare.help + "; or two Monte Carlo files (per-DOF differences with 95 percent intervals); "
+                   "or two robust fronts (front robust)", add, run)
 
 
 def register(commands: dict) -> None:

@@ -211,6 +211,7 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
         "rmse_units": "m (x, y, z), rad (phi, theta, psi); eq. 43",
         "factors_columns": "C, D, g, arm (nominal-model factors of SPEC 4; used by agsta only)",
         "artifact_key": str(mc.meta.get("artifact_key", "")), "scenario_file": str(mc.meta.get("scenario_file", "")),
+        "front_path": str(mc.meta.get("front_path", "")),
         **_io.provenance(),
     }
 
@@ -263,7 +264,7 @@ def read_montecarlo(path) -> MonteCarlo:
             params_vector=np.array(a["params"], float), h=float(a["h"]), n_quad=int(a["n_quad"]),
             gains_source=_io.str_attr(a["gains_source"]),
             meta={k: _io.str_attr(a[k]) for k in ("arvcas_version", "casadi_version", "numpy_version", "created",
-                                                  "artifact_key", "scenario_file") if k in a},
+                                                  "artifact_key", "scenario_file", "front_path") if k in a},
         )
     except KeyError as e:
         raise ResultsError(f"{path}: damaged file: missing {e}") from None
@@ -335,6 +336,7 @@ def summary_markdown(mc: MonteCarlo, title: str | None = None) -> str:
          f"seed, nominal-model factors [C, D, g, arm] uniform in [{1 - mc.draws.spread:g}, {1 + mc.draws.spread:g}] "
          "and disturbance phases uniform in [0, 2π). Mean over the completed runs with its 95 % t-interval "
          "[lo, hi]; p5 / p50 / p95 = percentiles over the runs.", "",
+         *([f"Gains: {mc.gains_source} of `{mc.meta['front_path']}`.", ""] if mc.meta.get("front_path") else []),
          f"Failures (diverged runs): {s['n_fail']} of {mc.runs} = {fr.estimate:.3g}, "
          f"95 % Wilson interval [{fr.lo:.3g}, {fr.hi:.3g}].", "",
          "| DOF | CHAT mean [95 % CI] | CHAT p5 / p50 / p95 | RMSE mean [95 % CI] | RMSE p5 / p50 / p95 |",

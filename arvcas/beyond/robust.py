@@ -41,7 +41,8 @@ from .montecarlo import CHUNK, DRAW_RULE, Draws, draw
 from .stats import mean_ci, paired_ci, wilson
 
 __all__ = ["RobustFront", "front_member", "robust_front", "write_robust", "read_robust", "robust_markdown",
-           "plot_robust", "write_robust_dir", "FORMAT", "FORMAT_VERSION"]
+           "plot_robust", "write_robust_dir", "compare_robust", "compare_robust_markdown", "plot_compare_robust",
+           "is_robust_file", "FORMAT", "FORMAT_VERSION"]
 
 FORMAT = "arvcas-robust-front"
 FORMAT_VERSION = 1
@@ -55,7 +56,7 @@ def _front(path):
 
 def front_member(path, index) -> tuple[str, np.ndarray, str, str]:
     """``(controller, gains, scenario text, description)`` of front member ``index`` (an integer in
-    the front's order, or ``"knee"`` for the study's knee point)."""
+    the front's order, or ``"knee"`` for the study's knee point, :meth:`arvcas.tuning.front.Front.knee`)."""
     fr = _front(path)
     if isinstance(index, str) and index.strip().lower() == "knee":
         i = fr.knee()
@@ -69,7 +70,7 @@ def front_member(path, index) -> tuple[str, np.ndarray, str, str]:
             raise ValueError(f"--index {i}: {fr.path} has {fr.size} front member(s) (0..{fr.size - 1})")
         i %= fr.size
         what = f"member {i}"
-    return fr.controller, fr.gains[i].copy(), fr.scenario_text, f"{fr.study_name} front {what}, {fr.path}"
+    return fr.controller, fr.gains[i].copy(), fr.scenario_text, f"'{fr.study_name}' front {what}"
 
 
 @dataclass
@@ -325,3 +326,83 @@ def write_robust_dir(rf: RobustFront, out_dir) -> dict[str, Path]:
     fig = plot_robust(rf)
     files["png"] = _io.atomic_write(out / "robust.png", lambda p: fig.savefig(p, format="png", dpi=140))
     return files
+
+
+# ---------------------------------------------------------------------------------------------
+# two robust fronts (e.g. the proposed controller's and the AGSTA's)
+
+
+def is_robust_file(path) -> bool:
+    return _io.h5_format(path) == FORMAT
+
+
+def _weakly_dominated(p: np.ndarray, S: np.ndarray) -> bool:
+    return bool(len(S)) and bool(np.any(np.all(S <= p, axis=1)))
+
+
+def compare_robust(a: RobustFront, b: RobustFront) -> dict:
+    """Coverage of the two robust fronts (Monte Carlo means of the robust non-dominated members):
+    ``cov_ab`` = fraction of B's members weakly dominated by some member of A, and ``cov_ba``;
+    ``paired`` = both were evaluated on the same draws and scenario."""
+    sa, sb = a.stats(), b.stats()
+    A = sa["F_mean"][:a.size][sa["robust_nd"]]
+    B = sb["F_mean"][:b.size][sb["robust_nd"]]
+    cov_ab = float(np.mean([_weakly_dominated(p, A) for p in B])) if len(B) else float("nan")
+    cov_ba = float(np.mean([_weakly_dominated(p, B) for p in A])) if len(A) else float("nan")
+    paired = a.draws.same_as(b.draws) and a.config_text == b.config_text
+    return {"A": A[np.argsort(A[:, 0])], "B": B[np.argsort(B[:, 0])], "cov_ab": cov_ab, "cov_ba": cov_ba,
+            "paired": paired, "knee_a": sa["F_mean"][a.knee], "knee_b": sb["F_mean"][b.knee],
+            "table2_a": sa["F_mean"][a.size], "table2_b": sb["F_mean"][b.size]}
+
+
+def compare_robust_markdown(a: RobustFront, b: RobustFront) -> str:
+    c = compare_robust(a, b)
+    na, nb = f"{a.controller} ('{a.study_name}')", f"{b.controller} ('{b.study_name}')"
+    same = ("on the same draws" if c["paired"] else "on DIFFERENT draws or scenarios (not a paired comparison)")
+    L = [f"# Robust fronts: A = {na} vs B = {nb}", "",
+         f"Monte Carlo means ({a.draws.runs} and {b.draws.runs} draws, {same}) of the members that stay "
+         "non-dominated under Monte Carlo (robust ND, see robust.md of each).", "",
+         f"- Coverage: {c['cov_ab'] * 100:.0f} % of B's {len(c['B'])} robust members are weakly dominated by one "
+         f"of A's; {c['cov_ba'] * 100:.0f} % of A's {len(c['A'])} by one of B's.",
+         f"- Knees (the studies' own knee members), Monte Carlo mean (f_chat, f_rmse): A ({c['knee_a'][0]:.4g}, "
+         f"{c['knee_a'][1]:.4g}), B ({c['knee_b'][0]:.4g}, {c['knee_b'][1]:.4g}).",
+         f"- Table 2 gains, Monte Carlo mean: A ({c['table2_a'][0]:.4g}, {c['table2_a'][1]:.4g}), "
+         f"B ({c['table2_b'][0]:.4g}, {c['table2_b'][1]:.4g}).", "",
+         "Best Monte Carlo f_rmse each robust front attains at f_chat <= x:", "",
+         "| x | A | B |", "|---:|---:|---:|"]
+    xs = np.unique(np.concatenate([c["A"][:, 0], c["B"][:, 0]]))
+    grid = np.quantile(xs, np.linspace(0, 1, 9)) if xs.size else []
+
+    def best(S, x):
+        v = S[S[:, 0] <= x, 1]
+        return f"{v.min():.4g}" if v.size else "-"
+
+    for x in grid:
+        L.append(f"| {x:.4g} | {best(c['A'], x)} | {best(c['B'], x)} |")
+    L.append("")
+    return "\n".join(L)
+
+
+def plot_compare_robust(a: RobustFront, b: RobustFront, fig: Figure | None = None) -> Figure:
+    """Both robust fronts (Monte Carlo means, 95 % intervals), their knees and Table 2 points."""
+    if fig is None:
+        fig = Figure(figsize=(8.0, 6.0), layout="constrained")
+    ax = fig.add_subplot()
+    for rf, col in ((a, "tab:blue"), (b, "tab:red")):
+        st = rf.stats()
+        f = rf.size
+        nd = np.flatnonzero(st["robust_nd"])
+        nd = nd[np.argsort(st["F_mean"][nd, 0])]
+        M, lo, hi = st["F_mean"][nd], st["F_lo"][nd], st["F_hi"][nd]
+        ax.errorbar(M[:, 0], M[:, 1], xerr=[M[:, 0] - lo[:, 0], hi[:, 0] - M[:, 0]],
+                    yerr=[M[:, 1] - lo[:, 1], hi[:, 1] - M[:, 1]], fmt="-o", color=col, ms=4, lw=1.0, capsize=2,
+                    label=f"{rf.controller}: robust front ({len(nd)} of {f})")
+        k = rf.knee
+        ax.plot(*st["F_mean"][k], "D", color=col, mec="k", ms=9, label=f"{rf.controller}: knee (member {k})")
+        ax.plot(*st["F_mean"][f], "*", color=col, mec="k", ms=15, label=f"{rf.controller}: Table 2")
+    ax.set_xlabel("f_chat, Monte Carlo mean")
+    ax.set_ylabel("f_rmse, Monte Carlo mean")
+    ax.set_title(f"Robust fronts ({a.draws.runs} / {b.draws.runs} draws)", fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig

@@ -38,8 +38,8 @@ from ..scenario import ScenarioConfig
 from ..simulation import simulate
 from . import _io
 
-__all__ = ["Sweep", "zigzag", "run_sweep", "write_sweep", "read_sweep", "sweep_markdown", "plot_sweep",
-           "write_sweep_dir", "CONTROLLERS", "FORMAT", "FORMAT_VERSION"]
+__all__ = ["Sweep", "zigzag", "zigzag_time_fraction", "run_sweep", "reproduce_sweep", "write_sweep", "read_sweep",
+           "sweep_markdown", "plot_sweep", "write_sweep_dir", "CONTROLLERS", "FORMAT", "FORMAT_VERSION"]
 
 CONTROLLERS = ("proposed", "traditional", "implicit", "agsta")
 FORMAT = "arvcas-sweep"
@@ -210,7 +210,8 @@ def write_sweep(sw: Sweep, path) -> Path:
             f.create_dataset("chat_per_second", data=sw.chat / np.array(sw.hs)[None, :, None, None])
             for c, series in sw.k1_seed0.items():
                 for j, k1 in enumerate(series):
-                    f.create_dataset(f"k1/{c}/{j}", data=k1).attrs["h"] = sw.hs[j]
+                    ds = f.create_dataset(f"k1/{c}/{j}", data=k1, compression="gzip", shuffle=True)
+                    ds.attrs["h"] = sw.hs[j]
 
     return _io.atomic_write(path, fill)
 
@@ -232,6 +233,23 @@ def read_sweep(path) -> Sweep:
         )
     finally:
         f.close()
+
+
+def reproduce_sweep(path) -> tuple[Sweep, list[str]]:
+    """Re-run the sweep stored in ``path`` from its stored configuration (scenario, parameters, gains,
+    periods, seeds, noise scale); returns the new sweep and the fields that differ (empty: bit for bit)."""
+    old = read_sweep(path)
+    cfg = scenario.loads_scenario(old.config_text, f"{path} (stored scenario)")
+    names = list(PARAM_SCHEMA)
+    if old.params_vector.shape != (len(names),):
+        raise ValueError(f"{path}: stored params do not match this arvcas version's parameter schema")
+    params = load_params().replace(dict(zip(names, old.params_vector.tolist())))
+    new = run_sweep(old.hs, old.controllers, old.seeds, cfg=cfg, params=params, gains=old.gains,
+                    noise_scale=old.noise_scale)
+    diff = [k for k in _ARRAYS if not np.array_equal(getattr(new, k), getattr(old, k), equal_nan=k != "ok")]
+    diff += [f"k1/{c}" for c in old.controllers
+             if not all(np.array_equal(a, b) for a, b in zip(new.k1_seed0[c], old.k1_seed0[c]))]
+    return new, diff
 
 
 # ---------------------------------------------------------------------------------------------
