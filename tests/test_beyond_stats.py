@@ -51,3 +51,22 @@ def test_wilson_matches_scipy(k, n):
     assert iv.estimate == k / n
     assert iv.lo == pytest.approx(r.low, abs=1e-12) and iv.hi == pytest.approx(r.high, abs=1e-12)
     assert 0.0 <= iv.lo <= iv.estimate <= iv.hi <= 1.0
+
+
+@pytest.mark.parametrize("n", [5, 6, 9, 20, 57, 500])
+def test_median_ci_is_the_sign_test_interval(n):
+    from arvcas.beyond.stats import median_ci, paired_median_ci
+
+    x = np.random.default_rng(n).standard_cauchy(n)  # heavy tails: the case it is for
+    iv = median_ci(x)
+    v = np.sort(x)
+    # k = the number of order statistics cut from each end + 1, from SciPy's binomial CDF
+    k = max((j for j in range(n + 1) if sst.binom.cdf(j - 1, n, 0.5) <= 0.025), default=0)
+    assert iv.estimate == np.median(x)
+    if k == 0:
+        assert np.isnan(iv.lo) and np.isnan(iv.hi)
+    else:
+        assert (iv.lo, iv.hi) == (v[k - 1], v[n - k])
+        assert sst.binom.cdf(k - 1, n, 0.5) <= 0.025 < sst.binom.cdf(k, n, 0.5)
+    d = paired_median_ci(x, np.zeros(n))
+    assert (d.estimate, d.n) == (iv.estimate, n)

@@ -46,7 +46,7 @@ from ..scenario import ScenarioConfig
 from ..simulation import run_function, simulate_many
 from ..uvms import ModelOptions
 from . import _io
-from .stats import Interval, mean_ci, paired_ci, welch_ci, wilson
+from .stats import Interval, mean_ci, median_ci, paired_ci, paired_median_ci, welch_ci, wilson
 
 __all__ = [
     "Draws", "MonteCarlo", "draw", "run_montecarlo", "write_montecarlo", "read_montecarlo", "reproduce",
@@ -315,7 +315,8 @@ def summary(mc: MonteCarlo) -> dict:
             out[key][d] = {"mean": mean_ci(arr[:, i]), "pct": _percentiles(arr[:, i])}
     obj = mc.objectives()
     for j, name in enumerate(("f_chat", "f_rmse")):
-        out["objectives"][name] = {"mean": mean_ci(obj[:, j]), "pct": _percentiles(obj[:, j])}
+        out["objectives"][name] = {"mean": mean_ci(obj[:, j]), "median": median_ci(obj[:, j]),
+                                   "pct": _percentiles(obj[:, j])}
     n_fail = int((~mc.ok).sum())
     out["failures"] = wilson(n_fail, mc.runs)
     out["n_fail"] = n_fail
@@ -347,7 +348,8 @@ def summary_markdown(mc: MonteCarlo, title: str | None = None) -> str:
                  f"| {_ci(r['mean'])} | {' / '.join(f'{v:.4g}' for v in r['pct'])} |")
     L += ["", "SPEC 7 objectives (per-DOF value / paper's AGSTA value, averaged over the 6 DOF):", ""]
     for name, v in s["objectives"].items():
-        L.append(f"- {name}: {_ci(v['mean'])}; p5 / p50 / p95 {' / '.join(f'{x:.4g}' for x in v['pct'])}")
+        L.append(f"- {name}: mean {_ci(v['mean'])}; median {_ci(v['median'])} (sign-test 95 % interval); "
+                 f"p5 / p50 / p95 {' / '.join(f'{x:.4g}' for x in v['pct'])}")
     L.append("")
     return "\n".join(L)
 
@@ -364,8 +366,9 @@ def compare(a: MonteCarlo, b: MonteCarlo) -> dict:
 
     Paired over the runs both completed when the two studies share their draws (same master seed,
     spread and a common prefix of runs: the first min(n_a, n_b) runs); otherwise Welch's unpaired
-    interval. Each entry: the difference :class:`Interval`, the ratio of means, ``certain`` (interval
-    excludes 0).
+    interval. Each entry: ``diff``, the mean difference :class:`Interval` (t); ``median``, the median
+    of the paired differences with its sign-test interval (paired only), which a few extreme runs
+    cannot move; the ratio of means; ``certain``/``median_certain`` (the interval excludes 0).
     """
     n = min(a.runs, b.runs)
     pa = Draws(a.draws.master_seed, a.draws.spread, a.draws.noise_seed[:n], a.draws.factors[:n], a.draws.phase[:n])
@@ -376,10 +379,13 @@ def compare(a: MonteCarlo, b: MonteCarlo) -> dict:
     def entry(x, y):
         if paired:
             iv = paired_ci(x[:n], y[:n])
+            med = paired_median_ci(x[:n], y[:n])
         else:
             iv = welch_ci(x, y)
+            med = Interval(float(np.nanmedian(x) - np.nanmedian(y)), float("nan"), float("nan"), 0)
         mx, my = np.nanmean(x), np.nanmean(y)
-        return {"diff": iv, "ratio": float(mx / my) if my else float("nan"), "certain": iv.excludes_zero}
+        return {"diff": iv, "ratio": float(mx / my) if my else float("nan"), "certain": iv.excludes_zero,
+                "median": med, "median_certain": med.excludes_zero}
 
     for key in ("chat", "rmse"):
         xa, xb = getattr(a, key), getattr(b, key)
@@ -400,8 +406,9 @@ def compare_markdown(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, na
     """The comparison of :func:`compare` as Markdown: "A - B" per DOF with its 95 % interval."""
     c = compare(a, b)
     A, B = name_a or _label(a), name_b or _label(b)
-    how = (f"paired over the {c['n']} shared draws (same master seed {a.draws.master_seed}): per draw the "
-           "difference, then its mean with a 95 % t-interval" if c["paired"] else
+    n_both = c["chat"][DOFS[0]]["diff"].n
+    how = (f"paired over the {c['n']} shared draws (same master seed {a.draws.master_seed}; {n_both} completed in "
+           "both): per draw the difference, then its mean with a 95 % t-interval" if c["paired"] else
            "UNPAIRED (the files do not share their draws): difference of means with Welch's 95 % interval")
     fa, fb = c["failures"]
     L = [f"# {A} - {B}", "", f"Difference {A} minus {B}, {how}. Negative = {A} lower. "
@@ -423,14 +430,34 @@ def compare_markdown(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, na
     L += [""]
     for name, e in c["objectives"].items():
         L.append(f"- {name} (SPEC 7): A - B = {_ci(e['diff'])}, ratio {e['ratio']:.3f}, {sign(e)}")
-    L.append("")
-    for key in ("chat", "rmse"):
-        lower = [_DOF_MD[i] for i, d in enumerate(DOFS) if c[key][d]["certain"] and c[key][d]["diff"].hi < 0]
-        higher = [_DOF_MD[i] for i, d in enumerate(DOFS) if c[key][d]["certain"] and c[key][d]["diff"].lo > 0]
-        unsure = [_DOF_MD[i] for i, d in enumerate(DOFS) if not c[key][d]["certain"]]
-        L.append(f"- {key.upper()}: {A} certainly lower in {len(lower)} of 6 DOF ({', '.join(lower) or '-'}), "
-                 f"certainly higher in {len(higher)} ({', '.join(higher) or '-'}), not certain in {len(unsure)} "
-                 f"({', '.join(unsure) or '-'}).")
+    if c["paired"]:
+        def msign(e):
+            if not e["median_certain"]:
+                return "not certain"
+            return "A lower" if e["median"].hi < 0 else "A higher"
+
+        L += ["", "Medians of the paired differences, with the sign test's 95 % interval (not moved by a few "
+              "extreme runs; compare with the means above when they disagree):", "",
+              "| DOF | CHAT median A - B [95 % CI] | sign | RMSE median A - B [95 % CI] | sign |",
+              "|---|---:|---|---:|---|"]
+        for i, d in enumerate(DOFS):
+            ec, er = c["chat"][d], c["rmse"][d]
+            L.append(f"| {_DOF_MD[i]} | {_ci(ec['median'])} | {msign(ec)} | {_ci(er['median'])} | {msign(er)} |")
+        L.append("")
+        for name, e in c["objectives"].items():
+            L.append(f"- {name} (SPEC 7): median A - B = {_ci(e['median'])}, {msign(e)}")
+    L += ["", "Where the sign is certain (95 %):", ""]
+    for stat, iv_key, ok_key in (("means", "diff", "certain"), ("medians", "median", "median_certain")):
+        if stat == "medians" and not c["paired"]:
+            continue
+        for key in ("chat", "rmse"):
+            e = [c[key][d] for d in DOFS]
+            lower = [_DOF_MD[i] for i in range(6) if e[i][ok_key] and e[i][iv_key].hi < 0]
+            higher = [_DOF_MD[i] for i in range(6) if e[i][ok_key] and e[i][iv_key].lo > 0]
+            unsure = [_DOF_MD[i] for i in range(6) if not e[i][ok_key]]
+            L.append(f"- {key.upper()} ({stat}): A lower in {len(lower)} of 6 DOF ({', '.join(lower) or '-'}), "
+                     f"higher in {len(higher)} ({', '.join(higher) or '-'}), not certain in {len(unsure)} "
+                     f"({', '.join(unsure) or '-'}).")
     L.append("")
     return "\n".join(L)
 
