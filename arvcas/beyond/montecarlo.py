@@ -465,9 +465,9 @@ def compare_markdown(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, na
 def plot_compare(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, name_b: str | None = None,
                  fig=None):
     """Four panels: per-DOF distributions of CHAT and RMSE for A and B (box: quartiles, whiskers:
-    5-95 %; each DOF divided by the paper's AGSTA value so the DOF share an axis), and the
-    difference of means A - B relative to B's mean with its 95 % interval (paired when the draws
-    are shared)."""
+    5-95 %; each DOF divided by the paper's AGSTA value so the DOF share an axis), and A - B relative
+    to B: for shared draws the median of the paired differences with its sign-test 95 % interval,
+    otherwise the difference of means with Welch's interval."""
     from matplotlib.figure import Figure
 
     A, B = name_a or _label(a), name_b or _label(b)
@@ -494,8 +494,10 @@ def plot_compare(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, name_b
         ax.grid(True, axis="y", alpha=0.3)
         ax.legend(fontsize=8)
         ax = axs[1, col]
-        d = [c[key][dd]["diff"] for dd in DOFS]
-        mb = np.array([np.nanmean(getattr(b, key)[:, i]) for i in range(6)])
+        # paired: the median of the per-draw differences (sign-test interval), which a few extreme runs
+        # cannot move; unpaired: the difference of means (Welch)
+        d = [c[key][dd]["median" if c["paired"] else "diff"] for dd in DOFS]
+        mb = np.array([(np.nanmedian if c["paired"] else np.nanmean)(getattr(b, key)[:, i]) for i in range(6)])
         est = np.array([iv.estimate for iv in d]) / mb * 100
         lo = np.array([iv.lo for iv in d]) / mb * 100
         hi = np.array([iv.hi for iv in d]) / mb * 100
@@ -504,9 +506,13 @@ def plot_compare(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, name_b
         ax.errorbar(x, est, yerr=[est - lo, hi - est], fmt="none", ecolor="k", capsize=4)
         ax.axhline(0, color="k", lw=0.8)
         ax.set_xticks(x, _DOF_MD)
-        ax.set_ylabel(f"(mean A - mean B) / mean B, % of {key.upper()}")
-        how = "paired" if c["paired"] else "unpaired (Welch)"
-        ax.set_title(f"{key.upper()}: A - B with 95 % CI, {how}; green: A certainly lower", fontsize=10)
+        if c["paired"]:
+            ax.set_ylabel(f"median of (A - B) per draw / median B, % of {key.upper()}")
+            ax.set_title(f"{key.upper()}: paired A - B, median, sign-test 95 % CI; green: A certainly lower",
+                         fontsize=10)
+        else:
+            ax.set_ylabel(f"(mean A - mean B) / mean B, % of {key.upper()}")
+            ax.set_title(f"{key.upper()}: A - B, means, Welch 95 % CI; green: A certainly lower", fontsize=10)
         ax.grid(True, axis="y", alpha=0.3)
     fig.suptitle(f"A = {A}  vs  B = {B}  ({a.runs} / {b.runs} draws)")
     return fig

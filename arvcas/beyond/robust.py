@@ -311,9 +311,19 @@ def plot_robust(rf: RobustFront, fig: Figure | None = None) -> Figure:
         ax.plot(M[f, 0], M[f, 1], "*", color="k", ms=14, label="Table 2, Monte Carlo")
     if np.isfinite(rf.table2_F_front).all():
         ax.plot(*rf.table2_F_front, "*", mfc="none", mec="k", ms=14, label="Table 2, study's draw")
+    # axes from the front, the robust members, the knee and Table 2; members whose Monte Carlo mean lies
+    # far outside (means dominated by a few extreme runs) are counted in the title, not drawn to scale
+    key = np.vstack([rf.F_front, M[:f][nd], M[[k, f]], rf.table2_F_front[None]])
+    key = key[np.all(np.isfinite(key), axis=1)]
+    lo_k, hi_k = key.min(axis=0), key.max(axis=0)
+    pad = 0.08 * (hi_k - lo_k)
+    ax.set_xlim(lo_k[0] - pad[0], hi_k[0] + pad[0])
+    ax.set_ylim(lo_k[1] - pad[1], hi_k[1] + pad[1])
+    off = int(np.sum(np.isfinite(M[:f, 0]) & np.any((M[:f] < lo_k - pad) | (M[:f] > hi_k + pad), axis=1)))
     ax.set_xlabel("f_chat (mean CHAT / paper's AGSTA CHAT)")
     ax.set_ylabel("f_rmse (mean RMSE / paper's AGSTA RMSE)")
-    ax.set_title(f"{rf.controller}, study '{rf.study_name}': front under Monte Carlo", fontsize=10)
+    extra = f"; {off} member(s) off the axes (Monte Carlo mean far larger)" if off else ""
+    ax.set_title(f"{rf.controller}, study '{rf.study_name}': front under Monte Carlo{extra}", fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
     return fig
