@@ -871,7 +871,8 @@ def render_markdown(res: dict) -> str:
         f"- machine: {m['cpu_model']}, {m['cores']} cores ({m['cores_usable']} usable), {m['platform']}",
         f"- compiler: {m['compiler']}; generated code built with `{m['codegen_flags']}`; CasADi "
         f"{m['casadi_version']}, Python {m['python']}, NumPy {m['numpy_version']}",
-        f"- load average (1, 5, 15 min): {la0} before, {la1} after; CPU time used by other processes "
+        f"- load average (1, 5, 15 min): {la0} before, {la1} after (the benchmark itself keeps about one "
+        f"core busy); CPU time used by other processes "
         f"while measuring: {m['other_cpu_share']:.1%} of the machine; total {m['total_wall_s']:.0f} s",
         f"- every time is the median of n repetitions (n = {s['reps']} for fast, {s['reps_slow']} for slow "
         f"measurements); spread = (max - min) / median; ratios are against baselines of this same run",
