@@ -14,8 +14,6 @@ Every file is written atomically (temporary name in ``out_dir``, then ``os.repla
 from __future__ import annotations
 
 import datetime as _dt
-import os
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -145,24 +143,6 @@ def table3_markdown(runs: dict[str, Result], cfg: ScenarioConfig, seed: int) -> 
     return "\n".join(L)
 
 
-def _atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        write(tmp)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
-
-
 def _prepare_out_dir(out_dir) -> Path:
     out = Path(out_dir)
     if not out.exists():
@@ -247,7 +227,7 @@ def run_paper(out_dir, seed: int = 0, progress: Callable[[str], None] | None = p
         files[c] = results.write_result(r, out / f"{c}.h5")
         say(f"  {c}: {_status(r)} in {time.perf_counter() - t0:.1f} s -> {files[c]}")
     text = table3_markdown(runs, cfg, seed)
-    files["table3"] = _atomic_write(out / "table3.md", lambda p: p.write_text(text, encoding="utf-8"))
+    files["table3"] = results.atomic_write(out / "table3.md", lambda p: p.write_text(text, encoding="utf-8"))
     say(f"  table -> {files['table3']}")
     p, a, t = runs["proposed"], runs["agsta"], runs["traditional"]
     makers = {
@@ -261,12 +241,12 @@ def run_paper(out_dir, seed: int = 0, progress: Callable[[str], None] | None = p
     }
     for name in FIGURE_FILES:
         fig = makers[name]()
-        files[name] = _atomic_write(out / f"{name}.png", lambda path, f=fig: f.savefig(path, format="png", dpi=150))
+        files[name] = results.atomic_write(out / f"{name}.png", lambda path, f=fig: f.savefig(path, format="png", dpi=150))
         say(f"  figure -> {files[name]}")
     if ekf_study:
         say("EKF process-noise study (SPEC 4: its effect on CHAT and RMSE) ...")
         text = ekf_effect_markdown(cfg, seed)
-        files["ekf"] = _atomic_write(out / "ekf.md", lambda path: path.write_text(text, encoding="utf-8"))
+        files["ekf"] = results.atomic_write(out / "ekf.md", lambda path: path.write_text(text, encoding="utf-8"))
         say(f"  table -> {files['ekf']}")
     checks = compare(p, a)
     passed = all(c["chat_lower"] and c["rmse_ok"] for c in checks.values())

@@ -48,6 +48,7 @@ import math
 import os
 import stat
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import casadi as ca
@@ -233,14 +234,14 @@ def _fsync_path(path: Path, directory: bool = False) -> None:
         os.close(fd)
 
 
-def write_result(result: Result, path) -> Path:
-    """Write ``result`` to the HDF5 file ``path`` atomically; returns the path.
+def atomic_write(path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp)`` on a temporary file next to ``path``, fsync it, then ``os.replace``.
 
-    The directory must exist and be writable; an existing file is replaced only once the new one is
-    complete on disk. Raises :class:`ResultsError` (one line) before any work when it cannot.
+    An interrupted or failed write (a full disk) leaves any previous ``path`` untouched and no partial
+    file under its name; an OSError becomes a one-line :class:`ResultsError` naming ``path``. Every
+    arvcas output file (results, tables, figures, Monte Carlo files) is written through here.
     """
-    path = _check_target(Path(path))
-    data, attrs = _collect(result)
+    path = Path(path)
     try:
         fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     except OSError as e:
@@ -248,12 +249,7 @@ def write_result(result: Result, path) -> Path:
     os.close(fd)
     tmp = Path(tmp_name)
     try:
-        with h5py.File(tmp, "w") as f:
-            for k, v in attrs.items():
-                f.attrs[k] = v
-            for name, a in data.items():
-                _put(f, name, a)
-            f.flush()
+        write(tmp)
         _fsync_path(tmp)
         umask = os.umask(0)
         os.umask(umask)
@@ -269,6 +265,26 @@ def write_result(result: Result, path) -> Path:
     except OSError:  # pragma: no cover - some filesystems refuse fsync on directories
         pass
     return path
+
+
+def write_result(result: Result, path) -> Path:
+    """Write ``result`` to the HDF5 file ``path`` atomically; returns the path.
+
+    The directory must exist and be writable; an existing file is replaced only once the new one is
+    complete on disk. Raises :class:`ResultsError` (one line) before any work when it cannot.
+    """
+    path = _check_target(Path(path))
+    data, attrs = _collect(result)
+
+    def fill(tmp: Path) -> None:
+        with h5py.File(tmp, "w") as f:
+            for k, v in attrs.items():
+                f.attrs[k] = v
+            for name, a in data.items():
+                _put(f, name, a)
+            f.flush()
+
+    return atomic_write(path, fill)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -99,7 +99,7 @@ def D(P, nu):
     D(1,2) uses X'v|w| |w| (the print labels it X'v|v|); every delta_s term uses the constant stern angle.
     """
     h = lambda k: P["hydro." + k]  # noqa: E731
-    u, v, w = nu[0], nu[1], nu[2]
+    v, w = nu[1], nu[2]
     aw, av = ca.fabs(w), ca.fabs(v)
     dsv = delta_s_term(P)
     z = 0

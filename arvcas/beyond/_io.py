@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import datetime as _dt
-import os
-import tempfile
-from collections.abc import Callable
 from pathlib import Path
 
 import casadi as ca
@@ -13,37 +10,9 @@ import h5py
 import numpy as np
 
 from .. import __version__
-from ..results import ResultsError, check_dir
+from ..results import ResultsError, atomic_write, check_dir
 
 __all__ = ["atomic_write", "write_text", "provenance", "prepare_dir", "target", "str_attr", "check_format"]
-
-
-def atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
-    """Call ``write(tmp)`` on a temporary file next to ``path``, fsync it, then ``os.replace``.
-
-    An interrupted write leaves any previous ``path`` untouched and no partial file under its name.
-    """
-    path = Path(path)
-    try:
-        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    except OSError as e:
-        raise ResultsError(f"{path}: cannot create a file in {path.parent} ({e.strerror})") from None
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        write(tmp)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException as e:
-        tmp.unlink(missing_ok=True)
-        if isinstance(e, OSError):
-            raise ResultsError(f"{path}: write failed ({e.strerror or e})") from None
-        raise
-    return path
 
 
 def write_text(path: Path, text: str) -> Path:
