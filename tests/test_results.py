@@ -170,6 +170,22 @@ def test_interrupted_write_keeps_previous_file(tmp_path, monkeypatch):
     assert_same(synthetic(seed=1), read_result(p))
 
 
+def test_full_disk_is_one_line_and_keeps_previous_file(tmp_path, monkeypatch):
+    """ENOSPC midway: a one-line ResultsError naming the file, the previous result intact, no temp file."""
+    p = tmp_path / "run.h5"
+    write_result(synthetic(seed=1), p)
+    before = p.read_bytes()
+
+    def put(f, name, data):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(results, "_put", put)
+    with pytest.raises(ResultsError, match="No space left on device") as ei:
+        write_result(synthetic(seed=2), p)
+    assert str(p) in one_line(ei)
+    assert p.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["run.h5"]
+
+
 def test_missing_directory_refused_before_work(tmp_path):
     target = tmp_path / "nope" / "run.h5"
     # a non-Result would fail validation: the directory error must come first
