@@ -33,4 +33,4 @@ def parse(text: str, where: str, error: type[ValueError]) -> dict[str, Any]:
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise error(f"{where}: malformed TOML: {e}") from None
+        raise error(f"{where}: malformed TOML: {' '.join(str(e).split())}") from None

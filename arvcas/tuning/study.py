@@ -32,7 +32,6 @@ import dataclasses
 import difflib
 import json
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from .. import gains as gains_mod
+from .. import tomlfile
 from .. import scenario as scenario_mod
 
 __all__ = [
@@ -348,34 +348,15 @@ def _value(kind: str, v: Any, where: str) -> Any:
     raise AssertionError(kind)  # pragma: no cover
 
 
-def _read_text(path: Path) -> str:
-    where = str(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise StudyError(f"{where}: study file not found") from None
-    except IsADirectoryError:
-        raise StudyError(f"{where}: is a directory, expected a study TOML file") from None
-    except OSError as e:
-        raise StudyError(f"{where}: cannot read study file ({e.strerror})") from None
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise StudyError(f"{where}: not UTF-8 text (byte {e.start})") from None
-
-
 def load_study(path: str | Path) -> Study:
     """Read and validate a study file; :class:`StudyError` (one line, file and key) on any fault."""
     p = Path(path)
-    return loads_study(_read_text(p), str(p), base_dir=p.parent)
+    return loads_study(tomlfile.read_text(p, StudyError, "study file"), str(p), base_dir=p.parent)
 
 
 def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | None = None) -> Study:
     """Validate study TOML text; ``base_dir`` resolves a relative ``evaluation.scenario`` path."""
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise StudyError(f"{where}: malformed TOML: {' '.join(str(e).split())}") from None
+    doc = tomlfile.parse(text, where, StudyError)
     for sec, table in doc.items():
         if sec not in _SCHEMA:
             raise StudyError(f"{where}: unknown section '{sec}'{_closest(sec, _SCHEMA)} "
