@@ -18,3 +18,17 @@ def params():
 def plant():
     """The public plant functions (SX, evaluated in CasADi's VM) at the default n_quad = 5."""
     return _uvms.plant_functions(_uvms.ModelOptions(n_quad=5))
+
+
+@pytest.fixture(scope="session")
+def dry(params):
+    """The parameters with no fluid (env.rho = 0): the case Pinocchio can reproduce exactly."""
+    return params.replace({"env.rho": 0.0})
+
+
+@pytest.fixture(scope="session")
+def pin_models(dry):
+    """Pinocchio models of vehicle + arm built from the same data file, payload 0, 0.5 and 1."""
+    import pinocchio_model as pm
+
+    return {pl: pm.build(dry, payload=pl) for pl in (0.0, 0.5, 1.0)}

@@ -19,16 +19,6 @@ RTOL = 1e-9
 N_STATES = 50
 
 
-@pytest.fixture(scope="module")
-def dry(params):
-    return params.replace({"env.rho": 0.0})
-
-
-@pytest.fixture(scope="module")
-def pin_models(dry):
-    return {pl: pm.build(dry, payload=pl) for pl in (0.0, 0.5, 1.0)}
-
-
 def _joint_limits(params):
     qmin = np.array([params[f"arm.joint{i}.qmin"] for i in range(1, 7)])
     qmax = np.array([params[f"arm.joint{i}.qmax"] for i in range(1, 7)])

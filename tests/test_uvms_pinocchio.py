@@ -23,16 +23,6 @@ N_STATES = 30
 
 
 @pytest.fixture(scope="module")
-def dry(params):
-    return params.replace({"env.rho": 0.0})
-
-
-@pytest.fixture(scope="module")
-def pin_models(dry):
-    return {pl: pm.build(dry, payload=pl) for pl in (0.0, 0.5, 1.0)}
-
-
-@pytest.fixture(scope="module")
 def trim_static(dry, pin_models):
     """[F_z, M_x, M_y] of the arm's static wrench at q0, level, at rest, no payload (Pinocchio)."""
     q0 = np.array([dry[f"arm.stow.q{i}"] for i in range(1, 7)])
