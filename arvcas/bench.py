@@ -56,7 +56,7 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from . import __version__, closedloop, codegen, export, gains as gains_mod, scenario, simulation, uvms
+from . import __version__, calls, closedloop, codegen, export, gains as gains_mod, scenario, schedule, simulation, uvms
 from .params import load as load_params
 
 __all__ = ["BenchError", "Settings", "run", "write", "render_markdown", "REQUIRED_KEYS"]
@@ -77,6 +77,7 @@ REQUIRED_KEYS = (
     "plant.uvms_rhs.ratio_vm_over_compiled_map", "plant.uvms_rhs.ratio_vm_map_over_c",
     "closed_loop.run_metrics_s", "closed_loop.run_trace_s", "closed_loop.simulate_s", "closed_loop.vm_run_s",
     "closed_loop.rtf_metrics", "closed_loop.rtf_vm", "closed_loop.ratio_vm_over_compiled",
+    "closed_loop.run_cold_s", "closed_loop.table_s", "closed_loop.rtf_cold",
     "closed_loop.instructions_per_sample", "closed_loop.instr_per_s",
     "closed_loop.batch.runs_per_s_1", "closed_loop.batch.runs_per_s_2", "closed_loop.batch.ratio_2_over_1",
     "compile.uvms_rhs.cold_build_s", "compile.uvms_rhs.warm_build_s", "compile.run.cold_build_s",
@@ -520,10 +521,21 @@ def _run_args(fn: ca.Function, g, noise, cfg, p) -> list:
             "ekf": getattr(cfg, "ekf_vector", None), "p": p}
     args = []
     for name in fn.name_in():
+        if name == "sched":
+            args.append(schedule.table(cfg, p))
+            continue
         if vals.get(name) is None:
             raise BenchError(f"run function {fn.name()}: do not know what to pass as input {name!r}")
-        args.append(ca.DM(np.asarray(vals[name], dtype=float)))
+        args.append(np.asarray(vals[name], dtype=float))
     return args
+
+
+def _table_cold(cfg, p) -> float:
+    """Seconds to build the run's time table from scratch (compiled functions loaded, table not kept)."""
+    schedule.clear_cache()
+    t0 = time.perf_counter()
+    schedule.table(cfg, p)
+    return time.perf_counter() - t0
 
 
 def _step_instructions(spec: closedloop.RunSpec, trace: bool) -> dict:
@@ -551,16 +563,19 @@ def _bench_closed_loop(s: Settings, cfg, P, log) -> dict:
     f_m = simulation.run_function(CONTROLLER, cfg, trace=False)
     f_t = simulation.run_function(CONTROLLER, cfg, trace=True)
     a_m, a_t = _run_args(f_m, g, noise, cfg, p), _run_args(f_t, g, noise, cfg, p)
-    t_m = _time(lambda: f_m.call(a_m), s.reps)
-    t_t = _time(lambda: f_t.call(a_t), s.reps)
+    t_m = _time(lambda: calls.call(f_m, *a_m), s.reps)
+    t_t = _time(lambda: calls.call(f_t, *a_t), s.reps)
     t_sim = _time(lambda: simulation.simulate(CONTROLLER, seed=0, cfg=cfg, params=P), s.reps)
+    # a run that builds its time table first (the first run of a new scenario or parameter set)
+    t_table = _stat([_table_cold(cfg, p) for _ in range(s.reps)])
+    t_cold = _time(lambda: (schedule.clear_cache(), calls.call(f_m, *_run_args(f_m, g, noise, cfg, p))), s.reps)
 
     log("closed loop: the same run in CasADi's VM ...")
     f_vm = closedloop.build_run(spec, trace=False)
     a_vm = _run_args(f_vm, g, noise, cfg, p)
-    t_vm = _time(lambda: f_vm.call(a_vm), s.reps_slow, warmup=0)
-    vm_out = [np.array(o) for o in f_vm.call(a_vm)]
-    c_out = [np.array(o) for o in f_m.call(a_m)]
+    t_vm = _time(lambda: calls.call(f_vm, *a_vm), s.reps_slow, warmup=0)
+    vm_out = calls.call(f_vm, *a_vm)
+    c_out = calls.call(f_m, *a_m)
     if not all(np.allclose(a, b, rtol=1e-8, atol=1e-12) for a, b in zip(vm_out, c_out)):
         raise BenchError("the compiled run and the VM run disagree")
 
@@ -588,10 +603,13 @@ def _bench_closed_loop(s: Settings, cfg, P, log) -> dict:
         "n_samples": n_samples,
         "substeps": cfg.substeps,
         "run_metrics_s": t_m,
+        "run_cold_s": t_cold,
+        "table_s": t_table,
         "run_trace_s": t_t,
         "simulate_s": t_sim,
         "vm_run_s": t_vm,
         "rtf_metrics": duration / t_m["median"],
+        "rtf_cold": duration / t_cold["median"],
         "rtf_trace": duration / t_t["median"],
         "rtf_simulate": duration / t_sim["median"],
         "rtf_vm": duration / t_vm["median"],
@@ -707,7 +725,7 @@ def _bench_compile(s: Settings, cfg, P, driver: _Driver, work: Path, log) -> dic
 
         def time_run(f, rep):
             if rep == 0:
-                timings.append(_time(lambda: f.call(args), s.reps))
+                timings.append(_time(lambda: calls.call(f, *args), s.reps))
 
         b, c = _cold_builds(run_fn, lv, s.reps_slow, time_run)
         sweep_run.append({"opt_level": lv, "build_s": _stat(b), "cc_s": _stat(c), "run_s": timings[0],
@@ -916,16 +934,22 @@ def render_markdown(res: dict) -> str:
     ]
     vm = _m(cl["vm_run_s"])
     for label, key, rtf in (("compiled run, metrics only", "run_metrics_s", "rtf_metrics"),
+                            ("the same, building its time table first", "run_cold_s", "rtf_cold"),
                             ("compiled run, with trace", "run_trace_s", "rtf_trace"),
                             ("`simulate()` (trace + Result)", "simulate_s", "rtf_simulate"),
                             ("CasADi VM, metrics only (baseline)", "vm_run_s", "rtf_vm")):
         L.append(f"| {label} | {_g(_m(cl[key]))} ({_spread(cl[key])}) | {_g(cl[rtf])} | "
                  f"{vm / _m(cl[key]):.1f}x |")
-    calls = " + ".join(f"{c['calls']} x {k} {c['n_instructions']:,}" for k, c in cl["step_calls"].items())
+    call_list = " + ".join(f"{c['calls']} x {k} {c['n_instructions']:,}" for k, c in cl["step_calls"].items())
     b = cl["batch"]
     L += [
         "",
-        f"Instructions per controller sample: {calls} = **{cl['instructions_per_sample']:,}** "
+        f"The run's time table (`arvcas.schedule`: the arm's and the disturbance's time-only terms at every "
+        f"RK4 stage time) takes {_g(_m(cl['table_s']))} s ({_spread(cl['table_s'])}) to build. It depends only "
+        f"on the scenario and the parameters, so a batch builds it once and `simulate` keeps the last few; "
+        f"the metrics-only and trace rows reuse it, the second row builds it every time.",
+        "",
+        f"Instructions per controller sample: {call_list} = **{cl['instructions_per_sample']:,}** "
         f"(with trace: {cl['instructions_per_sample_trace']:,}). Reached: {_g(cl['instr_per_s'])} "
         f"instructions/s compiled (trace: {_g(cl['instr_per_s_trace'])}), {_g(cl['vm_instr_per_s'])} in the VM.",
         "",
@@ -971,7 +995,7 @@ def render_markdown(res: dict) -> str:
                  f"{r['cc_ratio_vs_base']:.2f}x |")
     L += [
         "",
-        f"The same for uvms_rhs (C driver):",
+        "The same for uvms_rhs (C driver):",
         "",
         f"| level | cc s (spread) | C ns/eval (spread) | speed vs {base} | compile time vs {base} |",
         "|---|--:|--:|--:|--:|",

@@ -15,6 +15,11 @@ One controller sample k (t_k = k h) of :func:`step`:
 The run is ``step.fold(N + 1)`` (metrics only: CHAT and RMSE accumulated in the state) or
 ``step.mapaccum(N + 1)`` (a trace of every sample). Gains, noise, nominal-model factors,
 disturbance phases and model parameters are inputs: a new gain set or seed never recompiles.
+
+What depends on time but not on the state (the arm's trajectory and the terms of its wrench that
+follow from it, the LU factors of ``M + M_arm``, the disturbance's ``sin``/``cos`` of time) comes in
+as the run's last input, the time table of :mod:`arvcas.schedule`, one column per sample with the
+records of its RK4 stage times: computed once per (scenario, p), shared by every run of a batch.
 """
 
 from __future__ import annotations
@@ -25,12 +30,12 @@ import casadi as ca
 import numpy as np
 
 from . import gains as gains_mod
-from . import manipulator, scenario, thrusters, vehicle
+from . import manipulator, scenario, schedule, thrusters, vehicle
 from .controllers import atd, gsta, reso
 from .params import SCHEMA, view
 from .scenario import ScenarioConfig
 from .spatial import J, J_dot, J_inv
-from .uvms import ModelOptions, coupled_terms
+from .uvms import ModelOptions, coupled_terms_scheduled
 
 __all__ = ["Layout", "build_step", "build_run", "TRACE_FIELDS", "derived_constants"]
 
@@ -74,7 +79,7 @@ def state_layout(n_gains: int) -> Layout:
         ("tau_prev", 6), ("u_hold", 6),  # previous command (CHAT) and held realised thrust
         ("chat_sum", 6), ("e2_sum", 6), ("ok", 1), ("t_fail", 1),
         # constants of the run carried through the loop
-        ("gains", n_gains), ("unc", 4), ("phase", 6), ("ekf", 5), ("p", NP), ("consts", 9),
+        ("gains", n_gains), ("unc", 4), ("phase_cs", 12), ("ekf", 5), ("p", NP), ("consts", 9),
     ])
 
 
@@ -113,11 +118,12 @@ def _nominal_force(P, unc, eta, nu, tau_m_plus_trim):
 
 
 def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout]:
-    """One controller sample: (S, t_k, noise_k) -> (S_next[, trace_k]).
+    """One controller sample: (S, t_k, noise_k, sched_k) -> (S_next[, trace_k]).
 
     An MX function calling three generated SX functions: the controller part, ``h / h_plant`` RK4
-    substeps of the plant, and the divergence check. Without ``trace`` the per-sample outputs that
-    only the trace needs (e.g. ``f_true``) are not computed.
+    substeps of the plant, and the divergence check. ``sched_k`` is column k of the run's time table
+    (:mod:`arvcas.schedule`): the records at the sample's RK4 stage times. Without ``trace`` the
+    per-sample outputs that only the trace needs (e.g. ``f_true``) are not computed.
     """
     controller, cfg, opts = spec.controller, spec.cfg, spec.opts
     gains_mod.check_controller(controller)
@@ -126,17 +132,18 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout]:
     S = ca.SX.sym("S", L.size)
     tk = ca.SX.sym("t_k")
     noise = ca.SX.sym("noise", 12)
+    rec0 = ca.SX.sym("rec0", schedule.RECORD_SIZE)  # the time table's record at t_k
+    R0 = schedule.unpack(rec0)
     g = L.get(S, "gains")
     G = {k: ca.vertcat(*v) for k, v in gains_mod.unpack(controller, g).items()}
     P = view(L.get(S, "p"))
     consts = L.get(S, "consts")
     Fz, Mx, My, Mhat = consts[0], consts[1], consts[2], consts[3:9]
-    unc, phase = L.get(S, "unc"), L.get(S, "phase")
+    unc, phase_cs = L.get(S, "unc"), L.get(S, "phase_cs")
     h, hp, n_sub = cfg.time_h, cfg.time_h_plant, cfg.substeps
     first = tk < 0.5 * h
     ok = L.get(S, "ok")
     eta_d = ca.DM(cfg.initial_eta_d)
-    q0 = manipulator.stow_pose(P)
 
     x = L.get(S, "x")
     # 1. sensors
@@ -170,14 +177,13 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout]:
         v, w_next = gsta.gsta_explicit(s, w, k1, k2, G["mu1"], G["mu2"], h)  # eq. 21
 
     # the true state's coupled terms at t_k with the held thrust: f_true (eq. 6) and the AGSTA's tau_m
-    q, qd, qdd = scenario.joint_trajectory(cfg, q0, tk)
-    pl = scenario.payload_profile(cfg, tk)
+    q, pl = R0["q"], R0["payload"]
     eta, nu = x[0:6], x[6:12]
     u_hold = L.get(S, "u_hold")
     tau_real_held = ca.mtimes(thrusters.B_T(P), u_hold)
     trim = manipulator.trim_from_static(Fz, Mx, My, eta)
-    tau_dist = scenario.disturbance(cfg, tk, phase)
-    nud_true, tau_m_true = coupled_terms(P, eta, nu, tau_real_held + tau_dist, q, qd, qdd, pl, trim, opts)
+    tau_dist = scenario.disturbance_tabulated(cfg, R0["dist_sin"], R0["dist_cos"], phase_cs)
+    nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist, R0, trim, opts)
 
     if controller == "agsta":
         # SPEC 5: tau_eta = Mhat (eta_ddot_d - c e_dot + v) + f_n, nominal model in place of the RESO
@@ -230,33 +236,34 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout]:
         "y1": y1n, "y2": y2n, "r0": r0, "z1": z1, "z2": z2, "tau_eta_prev": tau_eta,
         "w": w_next, "k1": k1_next, "tau_prev": tau_v, "u_hold": u_sat,
         "chat_sum": chat_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
-        "gains": g, "unc": unc, "phase": phase, "ekf": ekf, "p": L.get(S, "p"), "consts": consts,
+        "gains": g, "unc": unc, "phase_cs": phase_cs, "ekf": ekf, "p": L.get(S, "p"), "consts": consts,
     })
     tr_vec = ca.vertcat(tk, eta, nu, eta_hat, y1, tau_v, u_sat, s, k1, k2, f_hat, f_true, q, pl, ok)
     outs = [C, tau_real] + ([tr_vec] if trace else [])
-    ctrl = ca.Function(f"cl_ctrl_{controller}" + ("_tr" if trace else ""), [S, tk, noise], ca.cse(outs))
+    ctrl = ca.Function(f"cl_ctrl_{controller}" + ("_tr" if trace else ""), [S, tk, noise, rec0], ca.cse(outs))
 
-    # 6. plant: one RK4 substep as its own Function, called h / h_plant times by the MX step
-    xs, ts, tr_s = ca.SX.sym("x", 12), ca.SX.sym("t"), ca.SX.sym("tau", 6)
-    p_s, c_s, ph_s = ca.SX.sym("p", NP), ca.SX.sym("consts", 9), ca.SX.sym("phase", 6)
+    # 6. plant: one RK4 substep as its own Function, called h / h_plant times by the MX step; its
+    # stage times t, t + hp/2, t + hp are records 2i, 2i+1, 2i+2 of the sample's time table column
+    xs, tr_s = ca.SX.sym("x", 12), ca.SX.sym("tau", 6)
+    p_s, c_s, ph_s = ca.SX.sym("p", NP), ca.SX.sym("consts", 9), ca.SX.sym("phase_cs", 12)
+    recs = ca.SX.sym("recs", 3 * schedule.RECORD_SIZE)
     Ps = view(p_s)
-    q0s = manipulator.stow_pose(Ps)
 
-    def f_plant(xx, t):
-        qq, qqd, qqdd = scenario.joint_trajectory(cfg, q0s, t)
-        pp = scenario.payload_profile(cfg, t)
+    def f_plant(xx, j):
+        rec = schedule.unpack(recs[j * schedule.RECORD_SIZE:(j + 1) * schedule.RECORD_SIZE])
         ee, nn = xx[0:6], xx[6:12]
         tr = manipulator.trim_from_static(c_s[0], c_s[1], c_s[2], ee)
-        nud, _ = coupled_terms(Ps, ee, nn, tr_s + scenario.disturbance(cfg, t, ph_s), qq, qqd, qqdd, pp, tr, opts)
+        dist = scenario.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
+        nud, _ = coupled_terms_scheduled(Ps, ee, nn, tr_s + dist, rec, tr, opts)
         return ca.vertcat(ca.mtimes(J(ee), nn), nud)
 
-    k_1 = f_plant(xs, ts)
-    k_2 = f_plant(xs + 0.5 * hp * k_1, ts + 0.5 * hp)
-    k_3 = f_plant(xs + 0.5 * hp * k_2, ts + 0.5 * hp)
-    k_4 = f_plant(xs + hp * k_3, ts + hp)
+    k_1 = f_plant(xs, 0)
+    k_2 = f_plant(xs + 0.5 * hp * k_1, 1)
+    k_3 = f_plant(xs + 0.5 * hp * k_2, 1)
+    k_4 = f_plant(xs + hp * k_3, 2)
     rk4 = ca.Function(
-        "cl_rk4", [xs, ts, tr_s, p_s, c_s, ph_s], [ca.cse(xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4))],
-        ["x", "t", "tau", "p", "consts", "phase"], ["x_next"],
+        "cl_rk4", [xs, recs, tr_s, p_s, c_s, ph_s], [ca.cse(xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4))],
+        ["x", "recs", "tau", "p", "consts", "phase_cs"], ["x_next"],
     )
 
     # finalize: a run that diverges (non-finite state, error bound) is frozen with ok = 0, t_fail set
@@ -269,16 +276,18 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout]:
     S_fin = ca.vertcat(ca.if_else(ok_n, Cn, Sfail), Ss[i_const:])
     fin = ca.Function("cl_finalize", [Cs, Ss, xn, tks], [S_fin])
 
+    K = schedule.RECORD_SIZE
     Sm, tkm, nm = ca.MX.sym("S", L.size), ca.MX.sym("t"), ca.MX.sym("noise", 12)
-    res = ctrl(Sm, tkm, nm)
+    schm = ca.MX.sym("sched", schedule.n_stages(cfg) * K)
+    res = ctrl(Sm, tkm, nm, schm[0:K])
     Cm, tau_m_real = res[0], res[1]
     xm = Sm[L.slices["x"]]
-    pm, cm, phm = Sm[L.slices["p"]], Sm[L.slices["consts"]], Sm[L.slices["phase"]]
+    pm, cm, phm = Sm[L.slices["p"]], Sm[L.slices["consts"]], Sm[L.slices["phase_cs"]]
     for i in range(n_sub):
-        xm = rk4(xm, tkm + i * hp, tau_m_real, pm, cm, phm)
+        xm = rk4(xm, schm[2 * i * K:(2 * i + 3) * K], tau_m_real, pm, cm, phm)
     Snext = fin(Cm, Sm, xm, tkm)
-    fn = ca.Function(f"cl_step_{controller}", [Sm, tkm, nm], [Snext] + list(res[2:]), ["S", "t", "noise"],
-                     ["S_next"] + (["trace"] if trace else []))
+    fn = ca.Function(f"cl_step_{controller}", [Sm, tkm, nm, schm], [Snext] + list(res[2:]),
+                     ["S", "t", "noise", "sched"], ["S_next"] + (["trace"] if trace else []))
     return fn, L
 
 
@@ -312,10 +321,12 @@ def _ekf_cov(xh, Pc, h, q_eta, q_nu):
 
 
 def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
-    """The whole run as one MX Function of (gains, noise 12x(N+1), unc[4], phase[6], ekf[5], p).
+    """The whole run as one MX Function of (gains, noise 12x(N+1), unc[4], phase[6], ekf[5], p, sched).
 
     ``ekf = [q_eta, q_nu, var_position, var_attitude, var_velocity]``: EKF process noise per step and
-    the sensor variances its R assumes (the noise input itself is drawn outside).
+    the sensor variances its R assumes (the noise input itself is drawn outside). ``sched`` is the
+    time table of (scenario, p) from :func:`arvcas.schedule.table` (the same for every gain set, seed
+    and controller, so a batch computes it once).
 
     ``trace=False``: outputs (chat[6], rmse[6], ok, t_fail); ``trace=True``: also the per-sample trace.
     """
@@ -329,21 +340,22 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     phase = ca.MX.sym("phase", 6)
     ekf = ca.MX.sym("ekf", 5)
     p = ca.MX.sym("p", NP)
+    sched = ca.MX.sym("sched", schedule.n_stages(cfg) * schedule.RECORD_SIZE, n)
     consts = _consts_fn(spec.opts)(p)
     x0 = ca.DM(list(cfg.initial_eta0) + list(cfg.initial_nu0))
     z = lambda k: ca.MX.zeros(k)  # noqa: E731
     S0 = ca.vertcat(
         x0, z(12), z(144), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6),
-        ca.MX(1), ca.MX(-1), G, unc, phase, ekf, p, consts,
+        ca.MX(1), ca.MX(-1), G, unc, ca.vertcat(ca.cos(phase), ca.sin(phase)), ekf, p, consts,
     )
     assert S0.shape[0] == L.size
     tgrid = ca.DM(np.arange(n) * cfg.time_h).T
     N = n - 1
     if trace:
-        S_all, tr = step.mapaccum(n)(S0, tgrid, noise)
+        S_all, tr = step.mapaccum(n)(S0, tgrid, noise, sched)
         Sf = S_all[:, -1]
     else:
-        Sf = step.fold(n)(S0, tgrid, noise)
+        Sf = step.fold(n)(S0, tgrid, noise, sched)
     chat = Sf[L.slices["chat_sum"]] / N
     rmse = ca.sqrt(Sf[L.slices["e2_sum"]] / N)
     ok = Sf[L.slices["ok"]]
@@ -351,7 +363,8 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     outs = [chat, rmse, ok, t_fail] + ([tr] if trace else [])
     names = ["chat", "rmse", "ok", "t_fail"] + (["trace"] if trace else [])
     name = f"run_{spec.controller}" + ("_trace" if trace else "")
-    return ca.Function(name, [G, noise, unc, phase, ekf, p], outs, ["gains", "noise", "unc", "phase", "ekf", "p"], names)
+    return ca.Function(name, [G, noise, unc, phase, ekf, p, sched], outs,
+                       ["gains", "noise", "unc", "phase", "ekf", "p", "sched"], names)
 
 
 def _consts_fn(opts: ModelOptions) -> ca.Function:

@@ -14,11 +14,12 @@ from __future__ import annotations
 import casadi as ca
 
 from . import hydro
-from .spatial import Rx, Rz, Rzyx, skew
+from .spatial import Rx, Rzyx, skew
 
 __all__ = [
     "N_JOINTS", "dh", "link_vectors", "link_inertia", "forward_kinematics", "rnea", "arm_wrench",
     "tool_position", "stow_pose", "trim_wrench", "trim_static", "trim_from_static", "base_inertia",
+    "SCHEDULE_FIELDS", "arm_schedule", "drag_wrench", "arm_wrench_scheduled",
 ]
 
 N_JOINTS = 6
@@ -30,8 +31,14 @@ def dh(P, i: int, q_i):
 
     Returns (R^{i-1}_i, p^{i-1}_i).
     """
+    return dh_cs(P, i, ca.cos(q_i), ca.sin(q_i))
+
+
+def dh_cs(P, i: int, c, s):
+    """:func:`dh` from ``c = cos(q_i)``, ``s = sin(q_i)`` (the closed loop tabulates them per time)."""
     a, d, al = P[f"arm.joint{i}.a"], P[f"arm.joint{i}.d"], P[f"arm.joint{i}.alpha"]
-    R = ca.mtimes(Rx(al), Rz(q_i))
+    Rz_q = ca.vertcat(ca.horzcat(c, -s, 0), ca.horzcat(s, c, 0), ca.horzcat(0, 0, 1))
+    R = ca.mtimes(Rx(al), Rz_q)
     p = ca.vertcat(a, -ca.sin(al) * d, ca.cos(al) * d)
     return R, p
 
@@ -75,11 +82,11 @@ def tool_position(P, q):
     return mount + p6 + ca.mtimes(R6, ca.vertcat(0, 0, P["arm.tool.length"]))
 
 
-def rnea(P, q, qd, qdd, w0, wd0, v0, a0, g0, payload, n_quad: int = 5):
+def rnea(P, q, qd, qdd, w0, wd0, v0, a0, g0, payload, n_quad: int = 5, drag: bool = True):
     """Recursive Newton-Euler (paper eq. 7, 8, 10) on a base frame {0} moving with (w0, wd0, v0, a0).
 
     All base quantities are in {0}: angular velocity/acceleration, velocity and absolute acceleration of
-    the origin, gravity vector ``g0`` (m/s^2). Returns (f_1, n_1, R^0_1, p^0_1): the force and moment the
+    the origin, gravity vector ``g0`` (m/s^2); ``drag=False`` leaves the fluid drag out. Returns (f_1, n_1, R^0_1, p^0_1): the force and moment the
     base exerts on link 1 at origin {1}, in frame {1}.
     """
     rho, Cd = P["env.rho"], P["env.Cd"]
@@ -113,7 +120,7 @@ def rnea(P, q, qd, qdd, w0, wd0, v0, a0, g0, payload, n_quad: int = 5):
         Ic = link_inertia(m_i, D_i, s)
         N = ca.mtimes(Ic, wd) + ca.cross(w, ca.mtimes(Ic, w))
         ext_c = m_i * g + hydro.buoyancy_force(rho, V_i, g)  # weight + buoyancy, both at c
-        f_d, n_d = hydro.link_drag(rho, Cd, D_i, s, v, w, n_quad)
+        f_d, n_d = hydro.link_drag(rho, Cd, D_i, s, v, w, n_quad) if drag else (0, 0)
         if i < N_JOINTS:
             R_next, p_next = frames[i]
             f_child = ca.mtimes(R_next, f_next)
@@ -147,11 +154,44 @@ def arm_wrench(P, eta, nu, nud, q, qd, qdd, payload, n_quad: int = 5):
     R = Rzyx(eta[3], eta[4], eta[5])
     g0 = ca.mtimes(R.T, ca.vertcat(0, 0, P["env.g"]))
     f1, n1, R1, p1 = rnea(P, q, qd, qdd, w0, wd0, v0, a0, g0, payload, n_quad)
-    f0 = ca.mtimes(R1, f1)
-    n0 = ca.mtimes(R1, n1) + ca.cross(p1, f0)
-    f_b = f0
-    n_b = n0 + ca.cross(pb0, f0)
-    return -ca.vertcat(f_b, n_b)
+    return -_to_cob(P, f1, n1, R1, p1)
+
+
+def _bodies(P, q, payload):
+    """The arm's bodies in {b}: links 1..6 and the payload point mass at the tool point.
+
+    Each entry: ``m`` (mass), ``m_wet`` (mass minus displaced water), ``c`` (centre in {b}), ``r``
+    (centre from the origin of its link's frame, in {b}), the cylinder inertia about ``c`` as ``I_tr I + k_ax Rs Rs'`` (``Rs``: the link vector in {b}; ``None``
+    and zeros for the payload), and ``link`` (the link the body rides on).
+    """
+    pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
+    rho = P["env.rho"]
+    s_list = link_vectors(P)
+    out = []
+    for i, (R, p) in enumerate(forward_kinematics(P, q), start=1):
+        s = s_list[i - 1]
+        m_i = P[f"arm.link{i}.mass"]
+        L2 = ca.dot(s, s)
+        r2 = (0.5 * P[f"arm.link{i}.diameter"]) ** 2
+        I_ax = 0.5 * m_i * r2
+        I_tr = m_i * (3 * r2 + L2) / 12.0
+        Rs = ca.mtimes(R, s)
+        out.append(dict(m=m_i, m_wet=m_i - rho * P[f"arm.link{i}.volume"], c=pb0 + p + 0.5 * Rs, r=0.5 * Rs,
+                        I_tr=I_tr, k_ax=(I_ax - I_tr) / L2, Rs=Rs, link=i))
+        if i == N_JOINTS:
+            mp = P["payload.mass"]
+            out.append(dict(m=payload * mp, m_wet=payload * (mp - rho * P["payload.volume"]), c=pb0 + p + Rs, r=Rs,
+                            I_tr=0, k_ax=0, Rs=None, link=i))
+    return out
+
+
+def _spatial_inertia(mass, first, J):
+    """[[m I, -S(sum m c)], [S(sum m c), J]] about the COB from the mass, first moment and rotational inertia."""
+    S1 = skew(first)
+    return ca.vertcat(
+        ca.horzcat(mass * ca.DM.eye(3), -S1),
+        ca.horzcat(S1, J),
+    )
 
 
 def base_inertia(P, q, payload):
@@ -164,35 +204,145 @@ def base_inertia(P, q, payload):
     moment ``sum m c`` and ``-sum m S(c)^2 = sum m (|c|^2 I - c c')``. A link's cylinder inertia is
     ``I_c = I_tr I + (I_ax - I_tr) w w'`` with ``w`` its unit axis in {b}.
     """
-    pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
-    s_list = link_vectors(P)
     mass = 0
     first = 0  # sum m c
     J = 0  # sum of rotational inertia about the COB (3x3 symmetric)
+    for b in _bodies(P, q, payload):
+        m, c = b["m"], b["c"]
+        mass = mass + m
+        mc = m * c
+        first = first + mc
+        J = J + (ca.dot(mc, c) + b["I_tr"]) * ca.DM.eye(3) - ca.mtimes(mc, c.T)
+        if b["Rs"] is not None:
+            J = J + b["k_ax"] * ca.mtimes(b["Rs"], b["Rs"].T)
+    return _spatial_inertia(mass, first, J)
+
+
+# The time-only part of the arm's wrench: everything that depends on (q, qd, qdd, payload) and p but
+# not on the vehicle state. (name, size); matrices are 6x6 symmetric, stored as their upper triangle.
+SCHEDULE_FIELDS: tuple[tuple[str, int], ...] = (
+    ("M_arm", 21), ("M_arm_dot", 21), ("h_q", 6), ("b_q", 6), ("W", 1), ("S", 3),
+)
+
+
+def arm_schedule(P, q, qd, qdd, payload) -> dict:
+    """The vehicle-state-independent terms of the arm's wrench on the vehicle (SPEC 3, exact).
+
+    With the arm's spatial momentum about the COB in {b}, ``h = M_arm(q) nu + h_q(q, qd)``, Newton-Euler
+    for the arm in the moving body frame gives, at ``nu_dot = 0``,
+
+        tau_m0 = [W g_b; S x g_b] + drag - (M_arm_dot nu + b_q + nu x* h)
+
+    (``nu x* h = [w x h_lin; w x h_ang + v x h_lin]``, ``g_b = R(eta)' [0, 0, g]``). Returned here:
+
+    - ``M_arm`` (:func:`base_inertia`) and ``M_arm_dot = dM_arm/dq qd``,
+    - ``h_q``: the momentum of the joint motion alone (vehicle at rest),
+    - ``b_q = d h_q / dt``: the fixed-base reaction, i.e. the recursive Newton-Euler of eq. 7-10 with the
+      base at rest, no gravity and no drag,
+    - ``W`` (kg): mass minus displaced water of the arm + payload, ``S`` (kg m): its first moment in {b}.
+
+    The payload fraction enters as a mass, not differentiated in time, like :func:`rnea`'s point mass.
+    :func:`arm_wrench_scheduled` completes the wrench with the drag; together they equal
+    :func:`arm_wrench` (tested to round-off). The closed loop tabulates these per time.
+    """
+    bodies = _bodies(P, q, payload)
+    # velocities of the joint motion alone, in {b}: origin velocities and angular velocities
+    w = ca.DM.zeros(3)
+    v_o = ca.DM.zeros(3)
+    p_prev = ca.DM.zeros(3)
+    link_w, link_vo = {}, {}
     for i, (R, p) in enumerate(forward_kinematics(P, q), start=1):
-        s = s_list[i - 1]
-        m_i = P[f"arm.link{i}.mass"]
-        L2 = ca.dot(s, s)
-        r2 = (0.5 * P[f"arm.link{i}.diameter"]) ** 2
-        I_ax = 0.5 * m_i * r2
-        I_tr = m_i * (3 * r2 + L2) / 12.0
-        Rs = ca.mtimes(R, s)
-        c = pb0 + p + 0.5 * Rs
-        bodies = [(m_i, c, I_tr, (I_ax - I_tr) / L2, Rs)]
-        if i == N_JOINTS:
-            bodies.append((payload * P["payload.mass"], pb0 + p + Rs, 0, 0, None))
-        for m, c, i_tr, k_ax, Rs_ in bodies:
-            mass = mass + m
-            mc = m * c
-            first = first + mc
-            J = J + (ca.dot(mc, c) + i_tr) * ca.DM.eye(3) - ca.mtimes(mc, c.T)
-            if Rs_ is not None:
-                J = J + k_ax * ca.mtimes(Rs_, Rs_.T)
-    S1 = skew(first)
-    return ca.vertcat(
-        ca.horzcat(mass * ca.DM.eye(3), -S1),
-        ca.horzcat(S1, J),
-    )
+        v_o = v_o + ca.cross(w, p - p_prev)  # origin i is fixed in link i-1
+        w = w + qd[i - 1] * ca.mtimes(R, _Z)
+        link_w[i], link_vo[i] = w, v_o
+        p_prev = p
+    h_lin, h_ang = 0, 0
+    first_dot, J_dot = 0, 0
+    W, S = 0, 0
+    for b in bodies:
+        m, c, w = b["m"], b["c"], link_w[b["link"]]
+        c_dot = link_vo[b["link"]] + ca.cross(w, b["r"])
+        mcd = m * c_dot
+        h_lin = h_lin + mcd
+        Iw = b["I_tr"] * w
+        if b["Rs"] is not None:
+            Iw = Iw + (b["k_ax"] * ca.dot(b["Rs"], w)) * b["Rs"]
+        h_ang = h_ang + Iw + ca.cross(c, mcd)
+        # d/dt of m (|c|^2 I - c c') + k_ax Rs Rs', with d(Rs)/dt = w x Rs
+        first_dot = first_dot + mcd
+        mc = m * c
+        J_dot = J_dot + (2 * ca.dot(mc, c_dot)) * ca.DM.eye(3) - ca.mtimes(mcd, c.T) - ca.mtimes(mc, c_dot.T)
+        if b["Rs"] is not None:
+            d = ca.cross(w, b["Rs"])
+            J_dot = J_dot + b["k_ax"] * (ca.mtimes(d, b["Rs"].T) + ca.mtimes(b["Rs"], d.T))
+        W = W + b["m_wet"]
+        S = S + b["m_wet"] * c
+    z3 = ca.DM.zeros(3)
+    f1, n1, R1, p1 = rnea(P, q, qd, qdd, z3, z3, z3, z3, z3, payload, drag=False)
+    return {
+        "M_arm": base_inertia(P, q, payload),
+        "M_arm_dot": _spatial_inertia(0, first_dot, J_dot),
+        "h_q": ca.vertcat(h_lin, h_ang),
+        "b_q": _to_cob(P, f1, n1, R1, p1),
+        "W": W,
+        "S": S,
+    }
+
+
+def _to_cob(P, f1, n1, R1, p1):
+    """A wrench at origin {1} in frame {1} moved to the COB in {b} (R^b_0 = I, SPEC 3)."""
+    pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
+    f0 = ca.mtimes(R1, f1)
+    n0 = ca.mtimes(R1, n1) + ca.cross(p1, f0)
+    return ca.vertcat(f0, n0 + ca.cross(pb0, f0))
+
+
+def drag_wrench(P, nu, cq, sq, qd, n_quad: int = 5):
+    """The water's drag on the whole arm as a wrench at the COB in {b} (eq. 9 by quadrature, SPEC 3).
+
+    The velocity pass of eq. 7 from the vehicle's ``nu`` and the joint rates, then the links' drag
+    forces and moments carried back to the base. ``cq``, ``sq``: cos and sin of the joint angles.
+    """
+    rho, Cd = P["env.rho"], P["env.Cd"]
+    pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
+    w = nu[3:6]
+    v = nu[0:3] + ca.cross(w, pb0)
+    s_list = link_vectors(P)
+    frames, loads = [], []
+    for i in range(1, N_JOINTS + 1):
+        Ri, pi = dh_cs(P, i, cq[i - 1], sq[i - 1])
+        RiT = Ri.T
+        v = ca.mtimes(RiT, v + ca.cross(w, pi))
+        w = ca.mtimes(RiT, w) + qd[i - 1] * _Z
+        frames.append((Ri, pi))
+        loads.append(hydro.link_drag(rho, Cd, P[f"arm.link{i}.diameter"], s_list[i - 1], v, w, n_quad))
+    f, n = ca.DM.zeros(3), ca.DM.zeros(3)
+    for i in range(N_JOINTS, 0, -1):
+        if i < N_JOINTS:
+            R_next, p_next = frames[i]
+            f = ca.mtimes(R_next, f)
+            n = ca.mtimes(R_next, n) + ca.cross(p_next, f)
+        f = f + loads[i - 1][0]
+        n = n + loads[i - 1][1]
+    R1, p1 = frames[0]
+    return _to_cob(P, f, n, R1, p1)
+
+
+def arm_wrench_scheduled(P, sched: dict, eta, nu, cq, sq, qd, n_quad: int = 5):
+    """tau_m at ``nu_dot = 0`` from the time-only terms of :func:`arm_schedule` and the vehicle state.
+
+    Equal to ``arm_wrench(P, eta, nu, 0, q, qd, qdd, payload)`` up to round-off, at a fraction of its
+    cost once the schedule is tabulated. ``sched`` holds the fields of :data:`SCHEDULE_FIELDS` as
+    matrices (``M_arm``, ``M_arm_dot`` 6x6) and vectors.
+    """
+    R = Rzyx(eta[3], eta[4], eta[5])
+    g_b = ca.mtimes(R.T, ca.vertcat(0, 0, P["env.g"]))
+    h = ca.mtimes(sched["M_arm"], nu) + sched["h_q"]
+    v, w = nu[0:3], nu[3:6]
+    nu_x_h = ca.vertcat(ca.cross(w, h[0:3]), ca.cross(w, h[3:6]) + ca.cross(v, h[0:3]))
+    inertial = ca.mtimes(sched["M_arm_dot"], nu) + sched["b_q"] + nu_x_h
+    weight = ca.vertcat(sched["W"] * g_b, ca.cross(sched["S"], g_b))
+    return weight + drag_wrench(P, nu, cq, sq, qd, n_quad) - inertial
 
 
 def stow_pose(P):

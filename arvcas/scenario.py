@@ -22,7 +22,7 @@ from . import tomlfile
 
 __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
-    "quintic", "joint_trajectory", "payload_profile", "disturbance", "noise_sequence",
+    "quintic", "joint_trajectory", "payload_profile", "disturbance", "disturbance_tabulated", "noise_sequence",
     "check_joint_limits", "n_samples",
 ]
 
@@ -286,6 +286,16 @@ def disturbance(cfg: ScenarioConfig, t, phase):
     """tau_u(t) of eq. 41 in {b}: offset + amplitude sin(freq t + phase); ``phase`` is a 6-vector input."""
     off, amp, w = ca.DM(cfg.disturbance_offset), ca.DM(cfg.disturbance_amplitude), ca.DM(cfg.disturbance_freq)
     return off + amp * ca.sin(w * t + phase)
+
+
+def disturbance_tabulated(cfg: ScenarioConfig, dist_sin, dist_cos, phase_cs):
+    """eq. 41 from tabulated ``sin(freq t)``, ``cos(freq t)`` and ``phase_cs = [cos(phase); sin(phase)]``.
+
+    ``sin(w t + phase) = sin(w t) cos(phase) + cos(w t) sin(phase)``: the run tabulates the time part
+    once (:mod:`arvcas.schedule`) and the phase part once per run.
+    """
+    off, amp = ca.DM(cfg.disturbance_offset), ca.DM(cfg.disturbance_amplitude)
+    return off + amp * (dist_sin * phase_cs[0:6] + dist_cos * phase_cs[6:12])
 
 
 def noise_sequence(cfg: ScenarioConfig, seed: int, n: int | None = None) -> np.ndarray:

@@ -1,7 +1,9 @@
 """Python API of the closed-loop experiment: :func:`simulate`, :func:`simulate_batch`, :class:`Result`.
 
 Both call compiled C (the whole run is one CasADi function, built once and cached by content hash):
-a new gain set, seed or parameter value never recompiles.
+a new gain set, seed or parameter value never recompiles. The run's time table (:mod:`arvcas.schedule`:
+the arm's and the disturbance's time-only terms) is computed once per (scenario, p) and shared by
+every run of a batch.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from . import __version__, closedloop, codegen, gains as gains_mod, scenario
+from . import __version__, calls, closedloop, codegen, gains as gains_mod, scenario, schedule
 from .params import Params, load as load_params
 from .scenario import ScenarioConfig
 from .uvms import ModelOptions
@@ -126,7 +128,8 @@ def simulate(controller: str, gains=None, seed: int = 0, params: Params | None =
         raise SimulationError(f"noise_scale: must be a finite number >= 0, got {noise_scale!r}")
     noise = noise * float(noise_scale)
     fn = run_function(controller, cfg, trace=True, opts=opts)
-    chat, rmse, ok, t_fail, tr = (np.array(o) for o in fn(g, noise, unc, ph, cfg.ekf_vector, params.vector()))
+    pv = params.vector()
+    chat, rmse, ok, t_fail, tr = calls.call(fn, g, noise, unc, ph, cfg.ekf_vector, pv, schedule.table(cfg, pv, opts))
     cols = {}
     i = 0
     for name, n in closedloop.TRACE_FIELDS:
@@ -177,8 +180,9 @@ def simulate_batch(controller: str, gains, seed: int = 0, params: Params | None 
     n = g.shape[0]
     fn = run_function(controller, cfg, trace=False, opts=opts)
     nt = min(_n_threads(n_threads), n)
-    mapped = _mapped(fn, n, nt)
-    chat, rmse, ok, t_fail = (np.array(o) for o in mapped(g.T, noise, unc, ph, cfg.ekf_vector, params.vector()))
+    mapped = _mapped(fn, n, nt, shared=(1, 2, 3, 4, 5, 6))
+    pv = params.vector()
+    chat, rmse, ok, t_fail = calls.call(mapped, g.T, noise, unc, ph, cfg.ekf_vector, pv, schedule.table(cfg, pv, opts))
     ok = ok.ravel() > 0.5
     chat, rmse = chat.T.copy(), rmse.T.copy()
     chat[~ok] = np.nan
@@ -219,8 +223,9 @@ def simulate_many(controller: str, gains, seeds, uncertainty=None, phase=None, p
     PH = rows(phase, ph0, 6, "phase")
     noise = np.hstack([scenario.noise_sequence(cfg, int(sd)) for sd in seeds])
     fn = run_function(controller, cfg, trace=False, opts=opts)
-    mapped = _mapped(fn, n, min(_n_threads(n_threads), n))
-    chat, rmse, ok, t_fail = (np.array(o) for o in mapped(G.T, noise, U.T, PH.T, cfg.ekf_vector, params.vector()))
+    mapped = _mapped(fn, n, min(_n_threads(n_threads), n), shared=(4, 5, 6))
+    pv = params.vector()
+    chat, rmse, ok, t_fail = calls.call(mapped, G.T, noise, U.T, PH.T, cfg.ekf_vector, pv, schedule.table(cfg, pv, opts))
     ok = ok.ravel() > 0.5
     chat, rmse = chat.T.copy(), rmse.T.copy()
     chat[~ok] = np.nan
@@ -231,10 +236,13 @@ def simulate_many(controller: str, gains, seeds, uncertainty=None, phase=None, p
 _MAP_CACHE: dict = {}
 
 
-def _mapped(fn: ca.Function, n: int, n_threads: int) -> ca.Function:
-    key = (id(fn), n, n_threads)
+def _mapped(fn: ca.Function, n: int, n_threads: int, shared: tuple[int, ...] = ()) -> ca.Function:
+    """``fn`` over n columns on ``n_threads`` threads; inputs listed in ``shared`` are passed once, not repeated."""
+    key = (id(fn), n, n_threads, shared)
     m = _MAP_CACHE.get(key)
     if m is None:
-        m = fn.map(n, "thread", n_threads) if n_threads > 1 else fn.map(n, "serial")
+        par = "thread" if n_threads > 1 else "serial"
+        opts = {"max_num_threads": n_threads} if n_threads > 1 else {}
+        m = fn.map(f"{fn.name()}_map{n}", par, n, list(shared), [], opts)
         _MAP_CACHE[key] = m
     return m

@@ -13,11 +13,11 @@ from dataclasses import dataclass
 import casadi as ca
 
 from . import manipulator, thrusters, vehicle
-from .linalg import solve_nopivot
+from .linalg import lu_solve, solve_nopivot
 from .params import SCHEMA
 from .spatial import J
 
-__all__ = ["ModelOptions", "coupled_terms", "coupled_accel", "uvms_xdot", "plant_functions", "PUBLIC_FUNCTIONS"]
+__all__ = ["ModelOptions", "coupled_terms", "coupled_terms_scheduled", "coupled_accel", "uvms_xdot", "plant_functions", "PUBLIC_FUNCTIONS"]
 
 NP = len(SCHEMA)
 
@@ -49,6 +49,19 @@ def coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOp
     b = tau + tm0 + tau_extra - vehicle.forces(P, eta, nu)
     nud = solve_nopivot(vehicle.M(P) + Mb, b)  # M + M_arm is diagonally dominant
     return nud, tm0 - ca.mtimes(Mb, nud)
+
+
+def coupled_terms_scheduled(P, eta, nu, tau, rec: dict, tau_extra, opts: ModelOptions):
+    """:func:`coupled_terms` from a record of the run's time table (:func:`arvcas.schedule.unpack`).
+
+    The same equations: the arm's wrench from its time-only terms and the vehicle state
+    (:func:`arvcas.manipulator.arm_wrench_scheduled`), and ``(M + M_arm) nu_dot = b`` by the tabulated
+    LU factors. Equal to :func:`coupled_terms` to round-off.
+    """
+    tm0 = manipulator.arm_wrench_scheduled(P, rec, eta, nu, rec["cq"], rec["sq"], rec["qd"], opts.n_quad)
+    b = tau + tm0 + tau_extra - vehicle.forces(P, eta, nu)
+    nud = lu_solve(*rec["lu"], b)
+    return nud, tm0 - ca.mtimes(rec["M_arm"], nud)
 
 
 def coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions):

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from arvcas import closedloop, codegen, gains, metrics, scenario
+from arvcas import calls, closedloop, codegen, gains, metrics, scenario, schedule
 from arvcas.params import load as load_params
 from arvcas.simulation import SimulationError, simulate, simulate_batch
 
@@ -27,9 +27,9 @@ def test_compiled_run_equals_vm(cfg):
     P = load_params()
     F = closedloop.build_run(closedloop.RunSpec("proposed", cfg), trace=False)
     args = (gains.default_gains("proposed"), scenario.noise_sequence(cfg, 1), cfg.uncertainty,
-            np.array(cfg.disturbance_phase), cfg.ekf_vector, P.vector())
-    vm = [np.array(o) for o in F(*args)]
-    cc = [np.array(o) for o in codegen.build(F)(*args)]
+            np.array(cfg.disturbance_phase), cfg.ekf_vector, P.vector(), schedule.table(cfg, P.vector()))
+    vm = calls.call(F, *args)
+    cc = calls.call(codegen.build(F), *args)
     for a, b in zip(vm, cc):
         np.testing.assert_allclose(b, a, rtol=1e-10, atol=1e-14)
 

@@ -1,0 +1,213 @@
+"""The run's time table: every plant quantity that depends on time (and p) but not on the state.
+
+The arm follows a prescribed trajectory and the disturbance is a prescribed function of time, so a
+large share of the plant's right-hand side is the same for every gain set, seed and controller: the
+joint angles and rates, the arm's composite inertia and its rate, the momentum and rate of the joint
+motion, the arm's weight in water and its first moment, the LU factors of the coupled inertia
+``M + M_arm`` and ``sin``/``cos`` of the disturbance's ``freq t`` (eq. 41). One *record*
+(:data:`RECORD_FIELDS`) holds them at one time.
+
+The closed loop needs them at the RK4 stage times of every controller sample k,
+``t_k + j h_plant / 2`` for ``j = 0 .. 2 h / h_plant`` (:func:`stage_times`), so the run takes the
+table ``(n_stage * RECORD_SIZE) x (N + 1)`` as an input (a column per sample). :func:`table` builds
+it with two compiled functions: the cheap time part at every stage time, and the arm part only where
+the arm state ``(q, payload, qd, qdd)`` differs from the stage time before: the arm holds still most
+of the run, so most stage times repeat the one before (equal inputs, bitwise equal records). A table is a pure function of (scenario, p, model options) and is computed once per
+batch of runs, or once per process for repeated single runs (:func:`table` keeps the last few).
+It is the same for every controller, gain set and seed.
+
+Exactness: :func:`arvcas.manipulator.arm_wrench_scheduled` with these terms equals the recursive
+Newton-Euler :func:`arvcas.manipulator.arm_wrench` to round-off (tests/test_schedule.py).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+from collections import OrderedDict
+
+import casadi as ca
+import numpy as np
+
+from . import calls, codegen, manipulator, scenario, vehicle
+from .linalg import lu_nopivot, lu_pack, lu_unpack
+from .params import SCHEMA, view
+from .scenario import ScenarioConfig
+from .uvms import ModelOptions
+
+__all__ = [
+    "RECORD_FIELDS", "RECORD_SIZE", "ARM_FIELDS", "TIME_FIELDS", "record_slices", "unpack", "stage_times",
+    "n_stages", "record_expr", "table", "clear_cache",
+]
+
+NP = len(SCHEMA)
+
+# per time: what depends on t directly (trajectory, disturbance) ...
+TIME_FIELDS: tuple[tuple[str, int], ...] = (
+    ("q", 6), ("payload", 1), ("qd", 6), ("qdd", 6), ("dist_sin", 6), ("dist_cos", 6),
+)
+# ... and what depends on t only through the arm state (q, qd, qdd, payload)
+ARM_FIELDS: tuple[tuple[str, int], ...] = (
+    ("cq", 6), ("sq", 6), *manipulator.SCHEDULE_FIELDS, ("lu", 36),
+)
+RECORD_FIELDS = TIME_FIELDS + ARM_FIELDS
+RECORD_SIZE = sum(n for _, n in RECORD_FIELDS)
+_SYM6 = [(i, j) for i in range(6) for j in range(i, 6)]  # upper triangle, row by row
+
+
+def record_slices() -> dict[str, slice]:
+    out, i = {}, 0
+    for name, n in RECORD_FIELDS:
+        out[name] = slice(i, i + n)
+        i += n
+    return out
+
+
+_SLICES = record_slices()
+
+
+def _sym_pack(A):
+    return ca.vertcat(*[A[i, j] for i, j in _SYM6])
+
+
+def _sym_unpack(v):
+    rows = [[None] * 6 for _ in range(6)]
+    for k, (i, j) in enumerate(_SYM6):
+        rows[i][j] = rows[j][i] = v[k]
+    return ca.vertcat(*[ca.horzcat(*r) for r in rows])
+
+
+def unpack(rec) -> dict:
+    """A record column (SX/MX) as named terms: 6x6 matrices for ``M_arm``/``M_arm_dot``, (F, U) for ``lu``."""
+    d = {name: rec[s] for name, s in _SLICES.items()}
+    d["M_arm"] = _sym_unpack(d["M_arm"])
+    d["M_arm_dot"] = _sym_unpack(d["M_arm_dot"])
+    d["lu"] = lu_unpack(d["lu"], 6)
+    return d
+
+
+def n_stages(cfg: ScenarioConfig) -> int:
+    """Distinct RK4 stage times per controller sample: 2 h / h_plant + 1."""
+    return 2 * cfg.substeps + 1
+
+
+def stage_times(cfg: ScenarioConfig) -> np.ndarray:
+    """(N + 1, n_stages) stage times ``t_k + j h_plant / 2``; column 0 is the sample time t_k = k h."""
+    n = scenario.n_samples(cfg)
+    tk = np.arange(n) * cfg.time_h
+    return tk[:, None] + np.arange(n_stages(cfg))[None, :] * (0.5 * cfg.time_h_plant)
+
+
+def _time_expr(cfg: ScenarioConfig, t, P):
+    q, qd, qdd = scenario.joint_trajectory(cfg, manipulator.stow_pose(P), t)
+    w = ca.DM(cfg.disturbance_freq)
+    return ca.densify(ca.vertcat(q, scenario.payload_profile(cfg, t), qd, qdd, ca.sin(w * t), ca.cos(w * t)))
+
+
+def _arm_expr(P, q, qd, qdd, payload):
+    sc = manipulator.arm_schedule(P, q, qd, qdd, payload)
+    lu = lu_pack(*lu_nopivot(vehicle.M(P) + sc["M_arm"]))  # coupled inertia, SPEC 3
+    parts = {"cq": ca.cos(q), "sq": ca.sin(q), "lu": lu, "M_arm": _sym_pack(sc["M_arm"]),
+             "M_arm_dot": _sym_pack(sc["M_arm_dot"]), "h_q": sc["h_q"], "b_q": sc["b_q"], "W": sc["W"], "S": sc["S"]}
+    return ca.densify(ca.vertcat(*[parts[name] for name, _ in ARM_FIELDS]))
+
+
+def record_expr(cfg: ScenarioConfig, t, P):
+    """One record at time ``t`` as an expression (the reference the compiled table is tested against)."""
+    te = _time_expr(cfg, t, P)
+    s = {name: te[_SLICES[name]] for name, _ in TIME_FIELDS}
+    return ca.vertcat(te, _arm_expr(P, s["q"], s["qd"], s["qdd"], s["payload"]))
+
+
+def _time_function(cfg: ScenarioConfig) -> ca.Function:
+    t, p = ca.SX.sym("t"), ca.SX.sym("p", NP)
+    f = ca.Function("sched_time", [t, p], [_time_expr(cfg, t, view(p))], ["t", "p"], ["rec_time"])
+    n = scenario.n_samples(cfg) * n_stages(cfg)
+    return f.map("sched_time_map", "serial", n, [1], [])
+
+
+ARM_CHUNK = 512  # arm states per call of the compiled arm part
+
+
+def _arm_function(opts: ModelOptions) -> ca.Function:
+    """The arm part on ARM_CHUNK arm states (columns) at once: one compiled loop."""
+    q, qd, qdd, pl, p = ca.SX.sym("q", 6), ca.SX.sym("qd", 6), ca.SX.sym("qdd", 6), ca.SX.sym("payload"), ca.SX.sym("p", NP)
+    f = ca.Function("sched_arm", [ca.vertcat(q, pl, qd, qdd), p], [_arm_expr(view(p), q, qd, qdd, pl)],
+                    ["arm_state", "p"], ["rec_arm"])
+    return f.map("sched_arm_map", "serial", ARM_CHUNK, [1], [])
+
+
+# (kind, key) -> compiled function; a process builds each once (the disk cache makes it a load)
+_FUNCS: dict = {}
+_FUNCS_LOCK = threading.Lock()
+_TABLES: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
+_TABLES_KEEP = 4  # a table is ~20 MB at the paper's sampling
+
+
+def _compiled(kind: str, key, make) -> ca.Function:
+    with _FUNCS_LOCK:
+        f = _FUNCS.get((kind, key))
+        if f is None:
+            f = codegen.build(make())
+            _FUNCS[(kind, key)] = f
+        return f
+
+
+def _changes(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(indices of the rows that differ from the row before, the index of each row's representative)."""
+    new = np.ones(rows.shape[0], dtype=bool)
+    new[1:] = np.any(rows[1:] != rows[:-1], axis=1)
+    first = np.flatnonzero(new)
+    return first, np.cumsum(new) - 1
+
+
+def _arm_batch(f_arm: ca.Function, states: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The compiled arm part on the columns of ``states`` (19 x n), ARM_CHUNK at a time (the last padded)."""
+    n = states.shape[1]
+    n_pad = -(-n // ARM_CHUNK) * ARM_CHUNK
+    padded = np.empty((states.shape[0], n_pad), order="F")
+    padded[:, :n] = states
+    padded[:, n:] = states[:, -1:]
+    out = np.empty((f_arm.size1_out(0), n_pad), order="F")
+    for a in range(0, n_pad, ARM_CHUNK):
+        out[:, a:a + ARM_CHUNK] = calls.call(f_arm, padded[:, a:a + ARM_CHUNK], p)[0]
+    return out[:, :n]
+
+
+def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions()) -> np.ndarray:
+    """The run's time table for (scenario, parameter vector ``p``): ``(n_stages * RECORD_SIZE, N + 1)``.
+
+    Column k holds the records of sample k's stage times one after the other. A read-only
+    Fortran-ordered array, so the run reads it in place (:func:`arvcas.calls.call`); kept for the
+    last few (scenario, p, options) in this process.
+    """
+    p = np.ascontiguousarray(p, dtype=float).ravel()
+    key = (cfg.graph_key(), hashlib.sha256(p.tobytes()).hexdigest(), opts)
+    with _FUNCS_LOCK:
+        tab = _TABLES.get(key)
+        if tab is not None:
+            _TABLES.move_to_end(key)
+            return tab
+    f_time = _compiled("time", cfg.graph_key(), lambda: _time_function(cfg))
+    f_arm = _compiled("arm", opts, lambda: _arm_function(opts))
+    times = stage_times(cfg)
+    n, ns = times.shape
+    rec = np.empty((RECORD_SIZE, n * ns), order="F")
+    n_time = sum(k for _, k in TIME_FIELDS)
+    rec[:n_time] = calls.call(f_time, times.reshape(1, -1), p)[0]
+    # the arm part only where the arm state (q, payload, qd, qdd) changes: it holds still most of the run
+    first, rep = _changes(rec[:19].T)
+    rec[n_time:] = _arm_batch(f_arm, np.asfortranarray(rec[:19, first]), p)[:, rep]
+    tab = rec.reshape(ns * RECORD_SIZE, n, order="F")
+    tab.setflags(write=False)
+    with _FUNCS_LOCK:
+        _TABLES[key] = tab
+        while len(_TABLES) > _TABLES_KEEP:
+            _TABLES.popitem(last=False)
+    return tab
+
+
+def clear_cache() -> None:
+    """Forget the tables kept in this process (the compiled functions stay)."""
+    with _FUNCS_LOCK:
+        _TABLES.clear()
