@@ -13,7 +13,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-__all__ = ["gauss_legendre", "link_drag", "buoyancy_force"]
+__all__ = ["gauss_legendre", "link_drag", "normal_basis", "planar_drag", "buoyancy_force"]
 
 
 @lru_cache(maxsize=None)
@@ -47,6 +47,42 @@ def link_drag(rho, Cd, diameter, s, v, w, n_quad: int):
         m = m + x * q
     k = -0.5 * rho * Cd * diameter
     return k * f, k * ca.cross(u, m)
+
+
+def normal_basis(u):
+    """Unit vectors (e1, e2) with (u, e1, e2) right-handed and orthonormal, for a unit vector ``u``.
+
+    ``e1`` is u x (the coordinate axis least aligned with u), normalised; ``e2 = u x e1``. Works on
+    symbolic ``u`` (the choice is an ``if_else``).
+    """
+    ax, ay, az = ca.fabs(u[0]), ca.fabs(u[1]), ca.fabs(u[2])
+    use_x = ca.logic_and(ax <= ay, ax <= az)
+    use_y = ca.logic_and(ca.logic_not(use_x), ay <= az)
+    c = ca.vertcat(ca.if_else(use_x, 1, 0), ca.if_else(use_y, 1, 0),
+                   ca.if_else(ca.logic_or(use_x, use_y), 0, 1))
+    e1 = ca.cross(u, c)
+    e1 = e1 / ca.norm_2(e1)
+    return e1, ca.cross(u, e1)
+
+
+def planar_drag(k, L, a, b, n_quad: int):
+    """The drag integrals of :func:`link_drag` in a basis (e1, e2) of the plane normal to the link.
+
+    ``a``, ``b``: the 2 components of ``v_n(x) = a + x b`` in that basis; ``k = -1/2 rho C_d D``.
+    Returns the force's components ``k int |v_n| v_n dx`` and the components ``k int x |v_n| v_n dx``
+    whose cross product with ``u`` is the moment about the link origin:
+    ``f = f1 e1 + f2 e2``, ``n = m1 e2 - m2 e1``.
+    """
+    nodes, weights = gauss_legendre(n_quad)
+    f = 0
+    m = 0
+    for xi, wi in zip(nodes, weights):
+        x = L * xi
+        vn = a + x * b
+        q = (wi * L) * ca.norm_2(vn) * vn
+        f = f + q
+        m = m + x * q
+    return k * f, k * m
 
 
 def buoyancy_force(rho, volume, g_i):

@@ -14,7 +14,7 @@ from __future__ import annotations
 import casadi as ca
 
 from . import hydro
-from .spatial import Rx, Rzyx, skew
+from .spatial import Rx, Rz, Rzyx, skew
 
 __all__ = [
     "N_JOINTS", "dh", "link_vectors", "link_inertia", "forward_kinematics", "rnea", "arm_wrench",
@@ -31,14 +31,8 @@ def dh(P, i: int, q_i):
 
     Returns (R^{i-1}_i, p^{i-1}_i).
     """
-    return dh_cs(P, i, ca.cos(q_i), ca.sin(q_i))
-
-
-def dh_cs(P, i: int, c, s):
-    """:func:`dh` from ``c = cos(q_i)``, ``s = sin(q_i)`` (the closed loop tabulates them per time)."""
     a, d, al = P[f"arm.joint{i}.a"], P[f"arm.joint{i}.d"], P[f"arm.joint{i}.alpha"]
-    Rz_q = ca.vertcat(ca.horzcat(c, -s, 0), ca.horzcat(s, c, 0), ca.horzcat(0, 0, 1))
-    R = ca.mtimes(Rx(al), Rz_q)
+    R = ca.mtimes(Rx(al), Rz(q_i))
     p = ca.vertcat(a, -ca.sin(al) * d, ca.cos(al) * d)
     return R, p
 
@@ -221,8 +215,10 @@ def base_inertia(P, q, payload):
 # The time-only part of the arm's wrench: everything that depends on (q, qd, qdd, payload) and p but
 # not on the vehicle state. (name, size); matrices are 6x6 symmetric, stored as their upper triangle.
 SCHEDULE_FIELDS: tuple[tuple[str, int], ...] = (
-    ("M_arm", 21), ("M_arm_dot", 21), ("h_q", 6), ("b_q", 6), ("W", 1), ("S", 3),
+    ("M_arm", 21), ("M_arm_dot", 21), ("h_q", 6), ("b_q", 6), ("W", 1), ("S", 3), ("drag_frames", 15 * N_JOINTS),
 )
+# per link in drag_frames: Omega (3), r (3), V (3), e1 (3), e2 (3); see arm_schedule
+_DRAG_FRAME = 15
 
 
 def arm_schedule(P, q, qd, qdd, payload) -> dict:
@@ -239,7 +235,11 @@ def arm_schedule(P, q, qd, qdd, payload) -> dict:
     - ``h_q``: the momentum of the joint motion alone (vehicle at rest),
     - ``b_q = d h_q / dt``: the fixed-base reaction, i.e. the recursive Newton-Euler of eq. 7-10 with the
       base at rest, no gravity and no drag,
-    - ``W`` (kg): mass minus displaced water of the arm + payload, ``S`` (kg m): its first moment in {b}.
+    - ``W`` (kg): mass minus displaced water of the arm + payload, ``S`` (kg m): its first moment in {b},
+    - ``drag_frames``: per link, in {b}, the angular velocity ``Omega`` of the joint motion, the origin
+      ``r`` (from the COB) and its velocity ``V`` from the joint motion, and a basis ``e1, e2`` of the
+      plane normal to the link (:func:`arvcas.hydro.normal_basis`): the drag's geometry
+      (:func:`drag_wrench`).
 
     The payload fraction enters as a mass, not differentiated in time, like :func:`rnea`'s point mass.
     :func:`arm_wrench_scheduled` completes the wrench with the drag; together they equal
@@ -247,15 +247,21 @@ def arm_schedule(P, q, qd, qdd, payload) -> dict:
     """
     bodies = _bodies(P, q, payload)
     # velocities of the joint motion alone, in {b}: origin velocities and angular velocities
+    pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
+    s_list = link_vectors(P)
     w = ca.DM.zeros(3)
     v_o = ca.DM.zeros(3)
     p_prev = ca.DM.zeros(3)
     link_w, link_vo = {}, {}
+    frames = []
     for i, (R, p) in enumerate(forward_kinematics(P, q), start=1):
         v_o = v_o + ca.cross(w, p - p_prev)  # origin i is fixed in link i-1
         w = w + qd[i - 1] * ca.mtimes(R, _Z)
         link_w[i], link_vo[i] = w, v_o
         p_prev = p
+        s = s_list[i - 1]
+        e1, e2 = hydro.normal_basis(s / ca.norm_2(s))
+        frames += [w, pb0 + p, v_o, ca.mtimes(R, e1), ca.mtimes(R, e2)]
     h_lin, h_ang = 0, 0
     first_dot, J_dot = 0, 0
     W, S = 0, 0
@@ -286,6 +292,7 @@ def arm_schedule(P, q, qd, qdd, payload) -> dict:
         "b_q": _to_cob(P, f1, n1, R1, p1),
         "W": W,
         "S": S,
+        "drag_frames": ca.vertcat(*frames),
     }
 
 
@@ -297,38 +304,35 @@ def _to_cob(P, f1, n1, R1, p1):
     return ca.vertcat(f0, n0 + ca.cross(pb0, f0))
 
 
-def drag_wrench(P, nu, cq, sq, qd, n_quad: int = 5):
+def drag_wrench(P, nu, frames, n_quad: int = 5):
     """The water's drag on the whole arm as a wrench at the COB in {b} (eq. 9 by quadrature, SPEC 3).
 
-    The velocity pass of eq. 7 from the vehicle's ``nu`` and the joint rates, then the links' drag
-    forces and moments carried back to the base. ``cq``, ``sq``: cos and sin of the joint angles.
+    Everything in {b}: link i turns at ``w_i = w + Omega_i`` and its origin moves at
+    ``v + w x r_i + V_i`` (the vehicle's ``nu = [v; w]`` plus the joint motion); the normal velocity
+    along the link, in the basis ``e1, e2``, is affine in x and integrated by
+    :func:`arvcas.hydro.planar_drag`. ``frames``: the ``drag_frames`` of :func:`arm_schedule`.
+    Equals the drag in :func:`rnea` (test_schedule.py).
     """
     rho, Cd = P["env.rho"], P["env.Cd"]
-    pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
-    w = nu[3:6]
-    v = nu[0:3] + ca.cross(w, pb0)
+    v_b, w_b = nu[0:3], nu[3:6]
     s_list = link_vectors(P)
-    frames, loads = [], []
+    F, N = 0, 0
     for i in range(1, N_JOINTS + 1):
-        Ri, pi = dh_cs(P, i, cq[i - 1], sq[i - 1])
-        RiT = Ri.T
-        v = ca.mtimes(RiT, v + ca.cross(w, pi))
-        w = ca.mtimes(RiT, w) + qd[i - 1] * _Z
-        frames.append((Ri, pi))
-        loads.append(hydro.link_drag(rho, Cd, P[f"arm.link{i}.diameter"], s_list[i - 1], v, w, n_quad))
-    f, n = ca.DM.zeros(3), ca.DM.zeros(3)
-    for i in range(N_JOINTS, 0, -1):
-        if i < N_JOINTS:
-            R_next, p_next = frames[i]
-            f = ca.mtimes(R_next, f)
-            n = ca.mtimes(R_next, n) + ca.cross(p_next, f)
-        f = f + loads[i - 1][0]
-        n = n + loads[i - 1][1]
-    R1, p1 = frames[0]
-    return _to_cob(P, f, n, R1, p1)
+        fr = frames[(i - 1) * _DRAG_FRAME:i * _DRAG_FRAME]
+        Om, r, V, e1, e2 = fr[0:3], fr[3:6], fr[6:9], fr[9:12], fr[12:15]
+        w = w_b + Om
+        v = v_b + ca.cross(w_b, r) + V
+        a = ca.vertcat(ca.dot(e1, v), ca.dot(e2, v))
+        b = ca.vertcat(ca.dot(e2, w), -ca.dot(e1, w))  # components of w x u (u x e1 = e2, u x e2 = -e1)
+        k = -0.5 * rho * Cd * P[f"arm.link{i}.diameter"]
+        f2, m2 = hydro.planar_drag(k, ca.norm_2(s_list[i - 1]), a, b, n_quad)
+        f = f2[0] * e1 + f2[1] * e2
+        F = F + f
+        N = N + (m2[0] * e2 - m2[1] * e1) + ca.cross(r, f)
+    return ca.vertcat(F, N)
 
 
-def arm_wrench_scheduled(P, sched: dict, eta, nu, cq, sq, qd, n_quad: int = 5):
+def arm_wrench_scheduled(P, sched: dict, eta, nu, n_quad: int = 5):
     """tau_m at ``nu_dot = 0`` from the time-only terms of :func:`arm_schedule` and the vehicle state.
 
     Equal to ``arm_wrench(P, eta, nu, 0, q, qd, qdd, payload)`` up to round-off, at a fraction of its
@@ -342,7 +346,7 @@ def arm_wrench_scheduled(P, sched: dict, eta, nu, cq, sq, qd, n_quad: int = 5):
     nu_x_h = ca.vertcat(ca.cross(w, h[0:3]), ca.cross(w, h[3:6]) + ca.cross(v, h[0:3]))
     inertial = ca.mtimes(sched["M_arm_dot"], nu) + sched["b_q"] + nu_x_h
     weight = ca.vertcat(sched["W"] * g_b, ca.cross(sched["S"], g_b))
-    return weight + drag_wrench(P, nu, cq, sq, qd, n_quad) - inertial
+    return weight + drag_wrench(P, nu, sched["drag_frames"], n_quad) - inertial
 
 
 def stow_pose(P):

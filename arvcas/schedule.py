@@ -47,9 +47,7 @@ TIME_FIELDS: tuple[tuple[str, int], ...] = (
     ("q", 6), ("payload", 1), ("qd", 6), ("qdd", 6), ("dist_sin", 6), ("dist_cos", 6),
 )
 # ... and what depends on t only through the arm state (q, qd, qdd, payload)
-ARM_FIELDS: tuple[tuple[str, int], ...] = (
-    ("cq", 6), ("sq", 6), *manipulator.SCHEDULE_FIELDS, ("lu", 36),
-)
+ARM_FIELDS: tuple[tuple[str, int], ...] = (*manipulator.SCHEDULE_FIELDS, ("lu", 36))
 RECORD_FIELDS = TIME_FIELDS + ARM_FIELDS
 RECORD_SIZE = sum(n for _, n in RECORD_FIELDS)
 _SYM6 = [(i, j) for i in range(6) for j in range(i, 6)]  # upper triangle, row by row
@@ -107,8 +105,7 @@ def _time_expr(cfg: ScenarioConfig, t, P):
 def _arm_expr(P, q, qd, qdd, payload):
     sc = manipulator.arm_schedule(P, q, qd, qdd, payload)
     lu = lu_pack(*lu_nopivot(vehicle.M(P) + sc["M_arm"]))  # coupled inertia, SPEC 3
-    parts = {"cq": ca.cos(q), "sq": ca.sin(q), "lu": lu, "M_arm": _sym_pack(sc["M_arm"]),
-             "M_arm_dot": _sym_pack(sc["M_arm_dot"]), "h_q": sc["h_q"], "b_q": sc["b_q"], "W": sc["W"], "S": sc["S"]}
+    parts = dict(sc, lu=lu, M_arm=_sym_pack(sc["M_arm"]), M_arm_dot=_sym_pack(sc["M_arm_dot"]))
     return ca.densify(ca.vertcat(*[parts[name] for name, _ in ARM_FIELDS]))
 
 

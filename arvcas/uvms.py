@@ -58,7 +58,7 @@ def coupled_terms_scheduled(P, eta, nu, tau, rec: dict, tau_extra, opts: ModelOp
     (:func:`arvcas.manipulator.arm_wrench_scheduled`), and ``(M + M_arm) nu_dot = b`` by the tabulated
     LU factors. Equal to :func:`coupled_terms` to round-off.
     """
-    tm0 = manipulator.arm_wrench_scheduled(P, rec, eta, nu, rec["cq"], rec["sq"], rec["qd"], opts.n_quad)
+    tm0 = manipulator.arm_wrench_scheduled(P, rec, eta, nu, opts.n_quad)
     b = tau + tm0 + tau_extra - vehicle.forces(P, eta, nu)
     nud = lu_solve(*rec["lu"], b)
     return nud, tm0 - ca.mtimes(rec["M_arm"], nud)

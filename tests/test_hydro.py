@@ -181,3 +181,31 @@ def test_drag_opposes_vehicle_motion(params, arm_wrench_n, rotation):
     d1 = np.array(f(eta, nu, z, q, z, z, 0, p)).ravel() - np.array(f(eta, nu, z, q, z, z, 0, p_nodrag)).ravel()
     d2 = np.array(f(eta, 2 * nu, z, q, z, z, 0, p)).ravel() - np.array(f(eta, 2 * nu, z, q, z, z, 0, p_nodrag)).ravel()
     np.testing.assert_allclose(d2, 4 * d1, rtol=1e-9, atol=1e-9 * np.abs(d1).max())
+
+
+def test_normal_basis_is_right_handed_and_orthonormal():
+    rng = np.random.default_rng(11)
+    us = [np.eye(3)[i] for i in range(3)] + [-np.eye(3)[i] for i in range(3)] + list(rng.normal(size=(20, 3)))
+    for u in us:
+        u = u / np.linalg.norm(u)
+        e1, e2 = (np.array(e).ravel() for e in hydro.normal_basis(ca.DM(u)))
+        B = np.column_stack([u, e1, e2])
+        np.testing.assert_allclose(B.T @ B, np.eye(3), atol=1e-15)
+        assert np.linalg.det(B) == pytest.approx(1.0, abs=1e-14)
+
+
+def test_planar_drag_equals_link_drag():
+    """The 2-D form of the integrals gives link_drag's force and moment (independent 3-D code)."""
+    rng = np.random.default_rng(12)
+    rho, Cd, D = 1027.77, 1.1, 0.09
+    for _ in range(20):
+        s, v, w = rng.normal(size=3) * 0.4, rng.normal(size=3), rng.normal(size=3)
+        f_ref, n_ref = (np.array(o).ravel() for o in hydro.link_drag(rho, Cd, D, ca.DM(s), ca.DM(v), ca.DM(w), 5))
+        L = np.linalg.norm(s)
+        u = s / L
+        e1, e2 = (np.array(e).ravel() for e in hydro.normal_basis(ca.DM(u)))
+        a = ca.DM([e1 @ v, e2 @ v])
+        b = ca.DM([e2 @ w, -(e1 @ w)])
+        f2, m2 = (np.array(o).ravel() for o in hydro.planar_drag(-0.5 * rho * Cd * D, L, a, b, 5))
+        np.testing.assert_allclose(f2[0] * e1 + f2[1] * e2, f_ref, rtol=0, atol=1e-13 * np.abs(f_ref).max())
+        np.testing.assert_allclose(m2[0] * e2 - m2[1] * e1, n_ref, rtol=0, atol=1e-13 * np.abs(n_ref).max())
