@@ -521,8 +521,8 @@ def _run_args(fn: ca.Function, g, noise, cfg, p) -> list:
             "ekf": getattr(cfg, "ekf_vector", None), "p": p}
     args = []
     for name in fn.name_in():
-        if name == "sched":
-            args.append(schedule.table(cfg, p))
+        if name in ("sched_time", "sched_arm"):
+            args.append(getattr(schedule.table(cfg, p), name.split("_")[1]))
             continue
         if vals.get(name) is None:
             raise BenchError(f"run function {fn.name()}: do not know what to pass as input {name!r}")
@@ -540,7 +540,7 @@ def _table_cold(cfg, p) -> float:
 
 def _step_instructions(spec: closedloop.RunSpec, trace: bool) -> dict:
     """Instructions per controller sample: the sum over the sub-functions one step calls."""
-    step, _ = closedloop.build_step(spec, trace=trace)
+    step, _, _ = closedloop.build_step(spec, trace=trace)
     calls: dict[str, dict] = {}
     for i in range(step.n_instructions()):
         if step.instruction_id(i) == ca.OP_CALL:

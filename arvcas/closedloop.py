@@ -69,7 +69,7 @@ class Layout:
         return {k: np.take(arr, range(s.start, s.stop), axis=axis) for k, s in self.slices.items()}
 
 
-def state_layout(n_gains: int) -> Layout:
+def state_layout(n_gains: int, n_pc: int) -> Layout:
     return Layout([
         ("x", 12),  # true plant state [eta; nu]
         ("xh", 12), ("Pc", 144),  # EKF prior for this sample
@@ -79,7 +79,7 @@ def state_layout(n_gains: int) -> Layout:
         ("tau_prev", 6), ("u_hold", 6),  # previous command (CHAT) and held realised thrust
         ("chat_sum", 6), ("e2_sum", 6), ("ok", 1), ("t_fail", 1),
         # constants of the run carried through the loop
-        ("gains", n_gains), ("unc", 4), ("phase_cs", 12), ("ekf", 5), ("p", NP), ("consts", 9),
+        ("gains", n_gains), ("unc", 4), ("phase_cs", 12), ("ekf", 5), ("p", NP), ("consts", 9), ("pc", n_pc),
     ])
 
 
@@ -117,30 +117,72 @@ def _nominal_force(P, unc, eta, nu, tau_m_plus_trim):
     return ca.mtimes(Ji.T, body)
 
 
-def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout]:
-    """One controller sample: (S, t_k, noise_k, sched_k) -> (S_next[, trace_k]).
+def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
+    """One RK4 substep of the plant, and the function of its per-run constants.
+
+    ``cl_rk4(x, recs_time, recs_arm, tau, p, consts, phase_cs, pc) -> x_next``: the time table's
+    records (time parts, arm parts) at the stage times t, t + hp/2, t + hp. Subexpressions of p (and the run constants) alone, such as
+    the links' lengths or sin/cos of the DH twists, are taken out by ``casadi.extract_parametric``
+    and computed once per run by ``cl_rk4_consts(p, consts, phase_cs) -> pc``.
+    """
+    cfg, opts = spec.cfg, spec.opts
+    hp = cfg.time_h_plant
+    xs, tr_s = ca.SX.sym("x", 12), ca.SX.sym("tau", 6)
+    p_s, c_s, ph_s = ca.SX.sym("p", NP), ca.SX.sym("consts", 9), ca.SX.sym("phase_cs", 12)
+    TS, AS = schedule.TIME_SIZE, schedule.ARM_SIZE
+    recs_t, recs_a = ca.SX.sym("recs_time", 3 * TS), ca.SX.sym("recs_arm", 3 * AS)
+    Ps = view(p_s)
+
+    def f_plant(xx, j):
+        rec = schedule.unpack(ca.vertcat(recs_t[j * TS:(j + 1) * TS], recs_a[j * AS:(j + 1) * AS]))
+        ee, nn = xx[0:6], xx[6:12]
+        tr = manipulator.trim_from_static(c_s[0], c_s[1], c_s[2], ee)
+        dist = scenario.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
+        nud, _ = coupled_terms_scheduled(Ps, ee, nn, tr_s + dist, rec, tr, opts)
+        return ca.vertcat(ca.mtimes(J(ee), nn), nud)
+
+    k_1 = f_plant(xs, 0)
+    k_2 = f_plant(xs + 0.5 * hp * k_1, 1)
+    k_3 = f_plant(xs + 0.5 * hp * k_2, 1)
+    k_4 = f_plant(xs + hp * k_3, 2)
+    x_next = ca.cse(xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4))
+    x_next, pc_syms, pc_vals = ca.extract_parametric(x_next, ca.vertcat(p_s, c_s, ph_s), {"prefix": "pc_"})
+    pc_s = ca.vertcat(*pc_syms) if pc_syms else ca.SX(0, 1)
+    rk4 = ca.Function("cl_rk4", [xs, recs_t, recs_a, tr_s, p_s, c_s, ph_s, pc_s], [x_next],
+                      ["x", "recs_time", "recs_arm", "tau", "p", "consts", "phase_cs", "pc"], ["x_next"])
+    pc_fn = ca.Function("cl_rk4_consts", [p_s, c_s, ph_s], [ca.vertcat(*pc_vals) if pc_vals else ca.SX(0, 1)],
+                        ["p", "consts", "phase_cs"], ["pc"])
+    return rk4, pc_fn
+
+
+def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, ca.Function]:
+    """One controller sample: (S, t_k, noise_k, sched_time_k, sched_arm_k) -> (S_next[, trace_k]).
+
+    Returns (the step, the state's layout, the function of the RK4 substep's per-run constants that
+    fills the state's ``pc``; see :func:`_plant_substep`).
 
     An MX function calling three generated SX functions: the controller part, ``h / h_plant`` RK4
-    substeps of the plant, and the divergence check. ``sched_k`` is column k of the run's time table
-    (:mod:`arvcas.schedule`): the records at the sample's RK4 stage times. Without ``trace`` the
+    substeps of the plant, and the divergence check. ``sched_*_k`` are column k of the run's time
+    table (:class:`arvcas.schedule.Table`): the records at the sample's RK4 stage times. Without ``trace`` the
     per-sample outputs that only the trace needs (e.g. ``f_true``) are not computed.
     """
     controller, cfg, opts = spec.controller, spec.cfg, spec.opts
     gains_mod.check_controller(controller)
     ng = gains_mod.n_gains(controller)
-    L = state_layout(ng)
+    rk4, pc_fn = _plant_substep(spec)
+    L = state_layout(ng, pc_fn.size1_out(0))
     S = ca.SX.sym("S", L.size)
     tk = ca.SX.sym("t_k")
     noise = ca.SX.sym("noise", 12)
-    rec0 = ca.SX.sym("rec0", schedule.RECORD_SIZE)  # the time table's record at t_k
-    R0 = schedule.unpack(rec0)
+    rec0_t, rec0_a = ca.SX.sym("rec0_time", schedule.TIME_SIZE), ca.SX.sym("rec0_arm", schedule.ARM_SIZE)
+    R0 = schedule.unpack(ca.vertcat(rec0_t, rec0_a))  # the time table's record at t_k
     g = L.get(S, "gains")
     G = {k: ca.vertcat(*v) for k, v in gains_mod.unpack(controller, g).items()}
     P = view(L.get(S, "p"))
     consts = L.get(S, "consts")
     Fz, Mx, My, Mhat = consts[0], consts[1], consts[2], consts[3:9]
     unc, phase_cs = L.get(S, "unc"), L.get(S, "phase_cs")
-    h, hp, n_sub = cfg.time_h, cfg.time_h_plant, cfg.substeps
+    h, n_sub = cfg.time_h, cfg.substeps
     first = tk < 0.5 * h
     ok = L.get(S, "ok")
     eta_d = ca.DM(cfg.initial_eta_d)
@@ -237,34 +279,11 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout]:
         "w": w_next, "k1": k1_next, "tau_prev": tau_v, "u_hold": u_sat,
         "chat_sum": chat_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
         "gains": g, "unc": unc, "phase_cs": phase_cs, "ekf": ekf, "p": L.get(S, "p"), "consts": consts,
+        "pc": L.get(S, "pc"),
     })
     tr_vec = ca.vertcat(tk, eta, nu, eta_hat, y1, tau_v, u_sat, s, k1, k2, f_hat, f_true, q, pl, ok)
     outs = [C, tau_real] + ([tr_vec] if trace else [])
-    ctrl = ca.Function(f"cl_ctrl_{controller}" + ("_tr" if trace else ""), [S, tk, noise, rec0], ca.cse(outs))
-
-    # 6. plant: one RK4 substep as its own Function, called h / h_plant times by the MX step; its
-    # stage times t, t + hp/2, t + hp are records 2i, 2i+1, 2i+2 of the sample's time table column
-    xs, tr_s = ca.SX.sym("x", 12), ca.SX.sym("tau", 6)
-    p_s, c_s, ph_s = ca.SX.sym("p", NP), ca.SX.sym("consts", 9), ca.SX.sym("phase_cs", 12)
-    recs = ca.SX.sym("recs", 3 * schedule.RECORD_SIZE)
-    Ps = view(p_s)
-
-    def f_plant(xx, j):
-        rec = schedule.unpack(recs[j * schedule.RECORD_SIZE:(j + 1) * schedule.RECORD_SIZE])
-        ee, nn = xx[0:6], xx[6:12]
-        tr = manipulator.trim_from_static(c_s[0], c_s[1], c_s[2], ee)
-        dist = scenario.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
-        nud, _ = coupled_terms_scheduled(Ps, ee, nn, tr_s + dist, rec, tr, opts)
-        return ca.vertcat(ca.mtimes(J(ee), nn), nud)
-
-    k_1 = f_plant(xs, 0)
-    k_2 = f_plant(xs + 0.5 * hp * k_1, 1)
-    k_3 = f_plant(xs + 0.5 * hp * k_2, 1)
-    k_4 = f_plant(xs + hp * k_3, 2)
-    rk4 = ca.Function(
-        "cl_rk4", [xs, recs, tr_s, p_s, c_s, ph_s], [ca.cse(xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4))],
-        ["x", "recs", "tau", "p", "consts", "phase_cs"], ["x_next"],
-    )
+    ctrl = ca.Function(f"cl_ctrl_{controller}" + ("_tr" if trace else ""), [S, tk, noise, rec0_t, rec0_a], ca.cse(outs))
 
     # finalize: a run that diverges (non-finite state, error bound) is frozen with ok = 0, t_fail set
     Cs, Ss, xn, tks = ca.SX.sym("C", L.size), ca.SX.sym("S", L.size), ca.SX.sym("xn", 12), ca.SX.sym("t")
@@ -276,19 +295,19 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout]:
     S_fin = ca.vertcat(ca.if_else(ok_n, Cn, Sfail), Ss[i_const:])
     fin = ca.Function("cl_finalize", [Cs, Ss, xn, tks], [S_fin])
 
-    K = schedule.RECORD_SIZE
+    TS, AS, ns = schedule.TIME_SIZE, schedule.ARM_SIZE, schedule.n_stages(cfg)
     Sm, tkm, nm = ca.MX.sym("S", L.size), ca.MX.sym("t"), ca.MX.sym("noise", 12)
-    schm = ca.MX.sym("sched", schedule.n_stages(cfg) * K)
-    res = ctrl(Sm, tkm, nm, schm[0:K])
+    sch_t, sch_a = ca.MX.sym("sched_time", ns * TS), ca.MX.sym("sched_arm", ns * AS)
+    res = ctrl(Sm, tkm, nm, sch_t[0:TS], sch_a[0:AS])
     Cm, tau_m_real = res[0], res[1]
     xm = Sm[L.slices["x"]]
-    pm, cm, phm = Sm[L.slices["p"]], Sm[L.slices["consts"]], Sm[L.slices["phase_cs"]]
+    pm, cm, phm, pcm = Sm[L.slices["p"]], Sm[L.slices["consts"]], Sm[L.slices["phase_cs"]], Sm[L.slices["pc"]]
     for i in range(n_sub):
-        xm = rk4(xm, schm[2 * i * K:(2 * i + 3) * K], tau_m_real, pm, cm, phm)
+        xm = rk4(xm, sch_t[2 * i * TS:(2 * i + 3) * TS], sch_a[2 * i * AS:(2 * i + 3) * AS], tau_m_real, pm, cm, phm, pcm)
     Snext = fin(Cm, Sm, xm, tkm)
-    fn = ca.Function(f"cl_step_{controller}", [Sm, tkm, nm, schm], [Snext] + list(res[2:]),
-                     ["S", "t", "noise", "sched"], ["S_next"] + (["trace"] if trace else []))
-    return fn, L
+    fn = ca.Function(f"cl_step_{controller}", [Sm, tkm, nm, sch_t, sch_a], [Snext] + list(res[2:]),
+                     ["S", "t", "noise", "sched_time", "sched_arm"], ["S_next"] + (["trace"] if trace else []))
+    return fn, L, pc_fn
 
 
 def _ekf_update(xh, Pc, y, r):
@@ -321,16 +340,16 @@ def _ekf_cov(xh, Pc, h, q_eta, q_nu):
 
 
 def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
-    """The whole run as one MX Function of (gains, noise 12x(N+1), unc[4], phase[6], ekf[5], p, sched).
+    """The whole run as one MX Function of (gains, noise 12x(N+1), unc[4], phase[6], ekf[5], p, sched_time, sched_arm).
 
     ``ekf = [q_eta, q_nu, var_position, var_attitude, var_velocity]``: EKF process noise per step and
-    the sensor variances its R assumes (the noise input itself is drawn outside). ``sched`` is the
-    time table of (scenario, p) from :func:`arvcas.schedule.table` (the same for every gain set, seed
-    and controller, so a batch computes it once).
+    the sensor variances its R assumes (the noise input itself is drawn outside). ``sched_time`` and
+    ``sched_arm`` are the time table of (scenario, p) from :func:`arvcas.schedule.table` (the same for
+    every gain set, seed and controller, so a batch computes it once).
 
     ``trace=False``: outputs (chat[6], rmse[6], ok, t_fail); ``trace=True``: also the per-sample trace.
     """
-    step, L = build_step(spec, trace=trace)
+    step, L, pc_fn = build_step(spec, trace=trace)
     cfg = spec.cfg
     n = scenario.n_samples(cfg)
     ng = gains_mod.n_gains(spec.controller)
@@ -340,22 +359,24 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     phase = ca.MX.sym("phase", 6)
     ekf = ca.MX.sym("ekf", 5)
     p = ca.MX.sym("p", NP)
-    sched = ca.MX.sym("sched", schedule.n_stages(cfg) * schedule.RECORD_SIZE, n)
+    sched_t = ca.MX.sym("sched_time", schedule.n_stages(cfg) * schedule.TIME_SIZE, n)
+    sched_a = ca.MX.sym("sched_arm", schedule.n_stages(cfg) * schedule.ARM_SIZE, n)
     consts = _consts_fn(spec.opts)(p)
     x0 = ca.DM(list(cfg.initial_eta0) + list(cfg.initial_nu0))
     z = lambda k: ca.MX.zeros(k)  # noqa: E731
+    phase_cs = ca.vertcat(ca.cos(phase), ca.sin(phase))
     S0 = ca.vertcat(
         x0, z(12), z(144), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6),
-        ca.MX(1), ca.MX(-1), G, unc, ca.vertcat(ca.cos(phase), ca.sin(phase)), ekf, p, consts,
+        ca.MX(1), ca.MX(-1), G, unc, phase_cs, ekf, p, consts, pc_fn(p, consts, phase_cs),
     )
     assert S0.shape[0] == L.size
     tgrid = ca.DM(np.arange(n) * cfg.time_h).T
     N = n - 1
     if trace:
-        S_all, tr = step.mapaccum(n)(S0, tgrid, noise, sched)
+        S_all, tr = step.mapaccum(n)(S0, tgrid, noise, sched_t, sched_a)
         Sf = S_all[:, -1]
     else:
-        Sf = step.fold(n)(S0, tgrid, noise, sched)
+        Sf = step.fold(n)(S0, tgrid, noise, sched_t, sched_a)
     chat = Sf[L.slices["chat_sum"]] / N
     rmse = ca.sqrt(Sf[L.slices["e2_sum"]] / N)
     ok = Sf[L.slices["ok"]]
@@ -363,8 +384,8 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     outs = [chat, rmse, ok, t_fail] + ([tr] if trace else [])
     names = ["chat", "rmse", "ok", "t_fail"] + (["trace"] if trace else [])
     name = f"run_{spec.controller}" + ("_trace" if trace else "")
-    return ca.Function(name, [G, noise, unc, phase, ekf, p, sched], outs,
-                       ["gains", "noise", "unc", "phase", "ekf", "p", "sched"], names)
+    return ca.Function(name, [G, noise, unc, phase, ekf, p, sched_t, sched_a], outs,
+                       ["gains", "noise", "unc", "phase", "ekf", "p", "sched_time", "sched_arm"], names)
 
 
 def _consts_fn(opts: ModelOptions) -> ca.Function:

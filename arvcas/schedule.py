@@ -9,7 +9,7 @@ motion, the arm's weight in water and its first moment, the LU factors of the co
 
 The closed loop needs them at the RK4 stage times of every controller sample k,
 ``t_k + j h_plant / 2`` for ``j = 0 .. 2 h / h_plant`` (:func:`stage_times`), so the run takes the
-table ``(n_stage * RECORD_SIZE) x (N + 1)`` as an input (a column per sample). :func:`table` builds
+table as two inputs (:class:`Table`: the records' time parts and arm parts, a column per sample). :func:`table` builds
 it with two compiled functions: the cheap time part at every stage time, and the arm part only where
 the arm state ``(q, payload, qd, qdd)`` differs from the stage time before: the arm holds still most
 of the run, so most stage times repeat the one before (equal inputs, bitwise equal records). A table is a pure function of (scenario, p, model options) and is computed once per
@@ -25,6 +25,7 @@ from __future__ import annotations
 import hashlib
 import threading
 from collections import OrderedDict
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -36,8 +37,8 @@ from .scenario import ScenarioConfig
 from .uvms import ModelOptions
 
 __all__ = [
-    "RECORD_FIELDS", "RECORD_SIZE", "ARM_FIELDS", "TIME_FIELDS", "record_slices", "unpack", "stage_times",
-    "n_stages", "record_expr", "table", "clear_cache",
+    "RECORD_FIELDS", "RECORD_SIZE", "ARM_FIELDS", "ARM_SIZE", "TIME_FIELDS", "TIME_SIZE", "Table",
+    "record_slices", "unpack", "stage_times", "n_stages", "record_expr", "table", "clear_cache",
 ]
 
 NP = len(SCHEMA)
@@ -48,8 +49,10 @@ TIME_FIELDS: tuple[tuple[str, int], ...] = (
 )
 # ... and what depends on t only through the arm state (q, qd, qdd, payload)
 ARM_FIELDS: tuple[tuple[str, int], ...] = (*manipulator.SCHEDULE_FIELDS, ("lu", 36))
-RECORD_FIELDS = TIME_FIELDS + ARM_FIELDS
-RECORD_SIZE = sum(n for _, n in RECORD_FIELDS)
+RECORD_FIELDS = TIME_FIELDS + ARM_FIELDS  # one record = its time part, then its arm part
+TIME_SIZE = sum(n for _, n in TIME_FIELDS)
+ARM_SIZE = sum(n for _, n in ARM_FIELDS)
+RECORD_SIZE = TIME_SIZE + ARM_SIZE
 _SYM6 = [(i, j) for i in range(6) for j in range(i, 6)]  # upper triangle, row by row
 
 
@@ -137,7 +140,7 @@ def _arm_function(opts: ModelOptions) -> ca.Function:
 # (kind, key) -> compiled function; a process builds each once (the disk cache makes it a load)
 _FUNCS: dict = {}
 _FUNCS_LOCK = threading.Lock()
-_TABLES: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
+_TABLES: "OrderedDict[tuple, Table]" = OrderedDict()
 _TABLES_KEEP = 4  # a table is ~20 MB at the paper's sampling
 
 
@@ -171,12 +174,21 @@ def _arm_batch(f_arm: ca.Function, states: np.ndarray, p: np.ndarray) -> np.ndar
     return out[:, :n]
 
 
-def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions()) -> np.ndarray:
-    """The run's time table for (scenario, parameter vector ``p``): ``(n_stages * RECORD_SIZE, N + 1)``.
+class Table(NamedTuple):
+    """The run's time table as its two inputs: column k holds sample k's stage-time records.
 
-    Column k holds the records of sample k's stage times one after the other. A read-only
-    Fortran-ordered array, so the run reads it in place (:func:`arvcas.calls.call`); kept for the
-    last few (scenario, p, options) in this process.
+    ``time``: ``(n_stages * TIME_SIZE, N + 1)``, the time parts one after the other;
+    ``arm``: ``(n_stages * ARM_SIZE, N + 1)``, the arm parts. Read-only, Fortran-ordered.
+    """
+
+    time: np.ndarray
+    arm: np.ndarray
+
+
+def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions()) -> Table:
+    """The run's time table for (scenario, parameter vector ``p``), kept for the last few in this process.
+
+    Fortran-ordered arrays, so the run reads them in place (:func:`arvcas.calls.call`).
     """
     p = np.ascontiguousarray(p, dtype=float).ravel()
     key = (cfg.graph_key(), hashlib.sha256(p.tobytes()).hexdigest(), opts)
@@ -189,14 +201,14 @@ def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions(
     f_arm = _compiled("arm", opts, lambda: _arm_function(opts))
     times = stage_times(cfg)
     n, ns = times.shape
-    rec = np.empty((RECORD_SIZE, n * ns), order="F")
-    n_time = sum(k for _, k in TIME_FIELDS)
-    rec[:n_time] = calls.call(f_time, times.reshape(1, -1), p)[0]
+    rec_t = calls.call(f_time, times.reshape(1, -1), p)[0]  # (TIME_SIZE, n * ns), F-ordered
     # the arm part only where the arm state (q, payload, qd, qdd) changes: it holds still most of the run
-    first, rep = _changes(rec[:19].T)
-    rec[n_time:] = _arm_batch(f_arm, np.asfortranarray(rec[:19, first]), p)[:, rep]
-    tab = rec.reshape(ns * RECORD_SIZE, n, order="F")
-    tab.setflags(write=False)
+    first, rep = _changes(rec_t[:19].T)
+    arm_first = _arm_batch(f_arm, np.asfortranarray(rec_t[:19, first]), p)
+    rec_a = arm_first.T[rep].T  # a row gather of the transpose: contiguous copies, Fortran-ordered result
+    tab = Table(rec_t.reshape(ns * TIME_SIZE, n, order="F"), rec_a.reshape(ns * ARM_SIZE, n, order="F"))
+    for a in tab:
+        a.setflags(write=False)
     with _FUNCS_LOCK:
         _TABLES[key] = tab
         while len(_TABLES) > _TABLES_KEEP:

@@ -129,7 +129,7 @@ def simulate(controller: str, gains=None, seed: int = 0, params: Params | None =
     noise = noise * float(noise_scale)
     fn = run_function(controller, cfg, trace=True, opts=opts)
     pv = params.vector()
-    chat, rmse, ok, t_fail, tr = calls.call(fn, g, noise, unc, ph, cfg.ekf_vector, pv, schedule.table(cfg, pv, opts))
+    chat, rmse, ok, t_fail, tr = calls.call(fn, g, noise, unc, ph, cfg.ekf_vector, pv, *schedule.table(cfg, pv, opts))
     cols = {}
     i = 0
     for name, n in closedloop.TRACE_FIELDS:
@@ -180,9 +180,9 @@ def simulate_batch(controller: str, gains, seed: int = 0, params: Params | None 
     n = g.shape[0]
     fn = run_function(controller, cfg, trace=False, opts=opts)
     nt = min(_n_threads(n_threads), n)
-    mapped = _mapped(fn, n, nt, shared=(1, 2, 3, 4, 5, 6))
+    mapped = _mapped(fn, n, nt, shared=(1, 2, 3, 4, 5, 6, 7))
     pv = params.vector()
-    chat, rmse, ok, t_fail = calls.call(mapped, g.T, noise, unc, ph, cfg.ekf_vector, pv, schedule.table(cfg, pv, opts))
+    chat, rmse, ok, t_fail = calls.call(mapped, g.T, noise, unc, ph, cfg.ekf_vector, pv, *schedule.table(cfg, pv, opts))
     ok = ok.ravel() > 0.5
     chat, rmse = chat.T.copy(), rmse.T.copy()
     chat[~ok] = np.nan
@@ -223,9 +223,9 @@ def simulate_many(controller: str, gains, seeds, uncertainty=None, phase=None, p
     PH = rows(phase, ph0, 6, "phase")
     noise = np.hstack([scenario.noise_sequence(cfg, int(sd)) for sd in seeds])
     fn = run_function(controller, cfg, trace=False, opts=opts)
-    mapped = _mapped(fn, n, min(_n_threads(n_threads), n), shared=(4, 5, 6))
+    mapped = _mapped(fn, n, min(_n_threads(n_threads), n), shared=(4, 5, 6, 7))
     pv = params.vector()
-    chat, rmse, ok, t_fail = calls.call(mapped, G.T, noise, U.T, PH.T, cfg.ekf_vector, pv, schedule.table(cfg, pv, opts))
+    chat, rmse, ok, t_fail = calls.call(mapped, G.T, noise, U.T, PH.T, cfg.ekf_vector, pv, *schedule.table(cfg, pv, opts))
     ok = ok.ravel() > 0.5
     chat, rmse = chat.T.copy(), rmse.T.copy()
     chat[~ok] = np.nan

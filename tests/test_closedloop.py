@@ -27,7 +27,7 @@ def test_compiled_run_equals_vm(cfg):
     P = load_params()
     F = closedloop.build_run(closedloop.RunSpec("proposed", cfg), trace=False)
     args = (gains.default_gains("proposed"), scenario.noise_sequence(cfg, 1), cfg.uncertainty,
-            np.array(cfg.disturbance_phase), cfg.ekf_vector, P.vector(), schedule.table(cfg, P.vector()))
+            np.array(cfg.disturbance_phase), cfg.ekf_vector, P.vector(), *schedule.table(cfg, P.vector()))
     vm = calls.call(F, *args)
     cc = calls.call(codegen.build(F), *args)
     for a, b in zip(vm, cc):

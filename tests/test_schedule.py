@@ -113,6 +113,12 @@ def test_tabulated_disturbance_equals_eq41():
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-13 * max(1.0, np.abs(a).max()))
 
 
+def _records(tab, n, ns):
+    """The table's records, (RECORD_SIZE, n * ns) stage time by stage time."""
+    return np.vstack([tab.time.reshape(schedule.TIME_SIZE, n * ns, order="F"),
+                      tab.arm.reshape(schedule.ARM_SIZE, n * ns, order="F")])
+
+
 def test_compiled_table_equals_record_expression_everywhere(params):
     """Every record of the compiled, de-duplicated table equals the expression in the VM at its time."""
     cfg = scenario.load_scenario()
@@ -120,12 +126,12 @@ def test_compiled_table_equals_record_expression_everywhere(params):
     tab = schedule.table(cfg, pv)
     times = schedule.stage_times(cfg)
     n, ns = times.shape
-    K = schedule.RECORD_SIZE
-    assert tab.shape == (ns * K, n) and not tab.flags.writeable
+    assert tab.time.shape == (ns * schedule.TIME_SIZE, n) and tab.arm.shape == (ns * schedule.ARM_SIZE, n)
+    assert not tab.time.flags.writeable and not tab.arm.flags.writeable
     t, p = ca.SX.sym("t"), ca.SX.sym("p", NP)
     f = ca.Function("rec", [t, p], [ca.densify(schedule.record_expr(cfg, t, view(p)))]).map("recs", "serial", n * ns, [1], [])
     ref = np.array(f(times.reshape(1, -1), pv))  # (K, n * ns), stage times sample by sample
-    got = tab.reshape(K, n * ns, order="F")
+    got = _records(tab, n, ns)
     scale = np.maximum(np.abs(ref).max(axis=1, keepdims=True), 1e-300)
     assert np.all(np.abs(got - ref) <= 1e-13 * scale)
     assert schedule.table(cfg, pv) is tab  # kept for repeated runs
@@ -135,11 +141,12 @@ def test_compiled_table_equals_record_expression_everywhere(params):
 def test_table_follows_the_parameters(params):
     """The table is a function of p: a heavier payload changes the records after the pick-up only."""
     cfg = scenario.load_scenario()
-    a = schedule.table(cfg, params.vector())
-    b = schedule.table(cfg, params.replace({"payload.mass": params["payload.mass"] * 2}).vector())
+    n, ns = schedule.stage_times(cfg).shape
+    a = _records(schedule.table(cfg, params.vector()), n, ns)
+    b = _records(schedule.table(cfg, params.replace({"payload.mass": params["payload.mass"] * 2}).vector()), n, ns)
     sl = schedule.record_slices()["M_arm"]
-    k_before = int(20.0 / cfg.time_h)
-    k_after = int(30.0 / cfg.time_h)
+    k_before = int(20.0 / cfg.time_h) * ns
+    k_after = int(30.0 / cfg.time_h) * ns
     assert np.array_equal(a[sl, k_before], b[sl, k_before])
     assert not np.allclose(a[sl, k_after], b[sl, k_after])
 
@@ -163,8 +170,8 @@ def test_vehicle_mass_matrix_is_what_the_table_factors(params):
     """The LU in the table factors M + M_arm (SPEC 3), not M alone: solve against numpy at one time."""
     cfg = scenario.load_scenario()
     pv = params.vector()
-    tab = schedule.table(cfg, pv)
-    rec = tab[:schedule.RECORD_SIZE, 150]  # t = 15 s, arm moving
+    n, ns = schedule.stage_times(cfg).shape
+    rec = _records(schedule.table(cfg, pv), n, ns)[:, 150 * ns]  # t = 15 s, arm moving
     d = {k: rec[s] for k, s in schedule.record_slices().items()}
     F, U = lu_unpack(ca.DM(d["lu"]), 6)
     M_arm = np.array(schedule.unpack(ca.DM(rec))["M_arm"])
