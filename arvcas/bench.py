@@ -588,7 +588,7 @@ def _bench_closed_loop(s: Settings, cfg, P, log) -> dict:
     G[0] = g
     batch = {}
     for nt in (1, 2):
-        simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, params=P, n_threads=nt)  # warm-up (map built)
+        simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, params=P, n_threads=nt)  # warm-up (thread buffers allocated)
         st = _time(lambda: simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, params=P, n_threads=nt),
                    s.reps_slow, warmup=0)
         batch[f"wall_s_{nt}"] = st

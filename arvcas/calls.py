@@ -6,17 +6,26 @@ the run itself. :func:`call` binds the arrays' memory directly (``Function.buffe
 in place when they are Fortran-ordered float64 (others are copied once by NumPy), outputs are
 written into fresh Fortran-ordered arrays. Each thread keeps the buffers of the functions it called
 last (creating one allocates the function's work memory).
+
+:func:`call_many` evaluates a one-run function n times on a pool of threads: the buffer's evaluation
+releases the GIL, each thread has its own buffer (its own work memory), inputs shared by all runs are
+bound once and never copied, and each thread takes the next run when it finishes one, so a thread
+slowed by another job on its core does not hold the others up. (CasADi's ``Function.map`` with
+shared inputs repeats them n times in its work memory: the run's 36 MB time table times the
+population.)
 """
 
 from __future__ import annotations
 
+import itertools
 import threading
 from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 
 import casadi as ca
 import numpy as np
 
-__all__ = ["call", "fortran"]
+__all__ = ["call", "call_many", "fortran"]
 
 
 def fortran(a, shape: tuple[int, int]) -> np.ndarray:
@@ -77,4 +86,92 @@ def call(f: ca.Function, *args) -> list[np.ndarray]:
     if buf.ret() != 0:
         raise RuntimeError(f"{f.name()}: evaluation failed (return code {buf.ret()})")
     del keep
+    return outs
+
+
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+_POOLS_LOCK = threading.Lock()
+
+
+def _pool(n_threads: int) -> ThreadPoolExecutor:
+    """A pool of ``n_threads`` threads kept for the process: its threads keep their buffers between calls."""
+    with _POOLS_LOCK:
+        pool = _POOLS.get(n_threads)
+        if pool is None:
+            pool = _POOLS[n_threads] = ThreadPoolExecutor(n_threads, thread_name_prefix=f"arvcas-call{n_threads}")
+        return pool
+
+
+def _block_views(a: np.ndarray, n: int) -> list[memoryview]:
+    """The n consecutive column blocks of a Fortran-ordered array, each as a flat memoryview (no copy)."""
+    w = a.shape[1] // n
+    return [memoryview(a[:, j * w:(j + 1) * w].reshape(-1, order="F")) for j in range(n)]
+
+
+def call_many(f: ca.Function, n: int, args, per_run, n_threads: int = 1) -> list[np.ndarray]:
+    """Evaluate ``f`` n times: run j reads column block j of the inputs listed in ``per_run``.
+
+    An input i in ``per_run`` is an array of shape ``(size1_in(i), n * size2_in(i))``; any other input
+    is passed as ``call`` takes it and shared by all runs. Output i is returned as
+    ``(size1_out(i), n * size2_out(i))``, run j in column block j. ``n_threads`` threads (at most n)
+    take the runs one at a time; results do not depend on it.
+    """
+    if len(args) != f.n_in():
+        raise ValueError(f"{f.name()}: expected {f.n_in()} inputs, got {len(args)}")
+    if n < 1:
+        raise ValueError(f"{f.name()}: n must be a positive integer, got {n!r}")
+    per_run = frozenset(per_run)
+    bound, blocks = [], {}
+    for i, a in enumerate(args):
+        sp = f.sparsity_in(i)
+        if not sp.is_dense():
+            raise ValueError(f"{f.name()}: input {f.name_in(i)} is sparse; call_many() takes dense inputs only")
+        if i in per_run:
+            arr = fortran(a, (sp.size1(), n * sp.size2()))
+            blocks[i] = _block_views(arr, n)
+        else:
+            arr = fortran(a, (sp.size1(), sp.size2()))
+        bound.append(arr)
+    outs, out_blocks = [], []
+    for i in range(f.n_out()):
+        sp = f.sparsity_out(i)
+        if not sp.is_dense():
+            raise ValueError(f"{f.name()}: output {f.name_out(i)} is sparse; call_many() returns dense outputs only")
+        r = np.empty((sp.size1(), n * sp.size2()), order="F")
+        outs.append(r)
+        out_blocks.append(_block_views(r, n))
+    shared = [(i, memoryview(a.reshape(-1, order="F"))) for i, a in enumerate(bound) if i not in per_run]
+    todo = itertools.count()  # next() on a count is atomic under the GIL
+    stop = threading.Event()
+    errors: list[str] = []
+
+    def work():
+        buf, evaluate = _buffer(f)
+        for i, m in shared:
+            buf.set_arg(i, m)
+        while not stop.is_set():
+            j = next(todo)
+            if j >= n:
+                return
+            for i, b in blocks.items():
+                buf.set_arg(i, b[j])
+            for i, b in enumerate(out_blocks):
+                buf.set_res(i, b[j])
+            evaluate()
+            if buf.ret() != 0:
+                errors.append(f"{f.name()}: evaluation {j} failed (return code {buf.ret()})")
+                stop.set()
+
+    nt = max(1, min(int(n_threads), n))
+    if nt == 1:
+        work()
+    else:
+        pool = _pool(int(n_threads))  # one pool per thread count, so its threads' buffers stay warm
+        try:
+            for fut in [pool.submit(work) for _ in range(nt)]:
+                fut.result()
+        finally:  # an interrupt: the threads stop after the run they are in
+            stop.set()
+    if errors:
+        raise RuntimeError(errors[0])
     return outs

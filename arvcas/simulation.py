@@ -179,10 +179,9 @@ def simulate_batch(controller: str, gains, seed: int = 0, params: Params | None 
     cfg, params, g, noise, unc, ph = _prepare(controller, gains, seed, params, cfg, uncertainty, phase, batch=True)
     n = g.shape[0]
     fn = run_function(controller, cfg, trace=False, opts=opts)
-    nt = min(_n_threads(n_threads), n)
-    mapped = _mapped(fn, n, nt, shared=(1, 2, 3, 4, 5, 6, 7))
     pv = params.vector()
-    chat, rmse, ok, t_fail = calls.call(mapped, g.T, noise, unc, ph, cfg.ekf_vector, pv, *schedule.table(cfg, pv, opts))
+    chat, rmse, ok, t_fail = calls.call_many(fn, n, (g.T, noise, unc, ph, cfg.ekf_vector, pv, *schedule.table(cfg, pv, opts)),
+                                             per_run=(0,), n_threads=_n_threads(n_threads))
     ok = ok.ravel() > 0.5
     chat, rmse = chat.T.copy(), rmse.T.copy()
     chat[~ok] = np.nan
@@ -223,26 +222,11 @@ def simulate_many(controller: str, gains, seeds, uncertainty=None, phase=None, p
     PH = rows(phase, ph0, 6, "phase")
     noise = np.hstack([scenario.noise_sequence(cfg, int(sd)) for sd in seeds])
     fn = run_function(controller, cfg, trace=False, opts=opts)
-    mapped = _mapped(fn, n, min(_n_threads(n_threads), n), shared=(4, 5, 6, 7))
     pv = params.vector()
-    chat, rmse, ok, t_fail = calls.call(mapped, G.T, noise, U.T, PH.T, cfg.ekf_vector, pv, *schedule.table(cfg, pv, opts))
+    chat, rmse, ok, t_fail = calls.call_many(fn, n, (G.T, noise, U.T, PH.T, cfg.ekf_vector, pv, *schedule.table(cfg, pv, opts)),
+                                             per_run=(0, 1, 2, 3), n_threads=_n_threads(n_threads))
     ok = ok.ravel() > 0.5
     chat, rmse = chat.T.copy(), rmse.T.copy()
     chat[~ok] = np.nan
     rmse[~ok] = np.nan
     return chat, rmse, ok, np.where(ok, np.nan, t_fail.ravel())
-
-
-_MAP_CACHE: dict = {}
-
-
-def _mapped(fn: ca.Function, n: int, n_threads: int, shared: tuple[int, ...] = ()) -> ca.Function:
-    """``fn`` over n columns on ``n_threads`` threads; inputs listed in ``shared`` are passed once, not repeated."""
-    key = (id(fn), n, n_threads, shared)
-    m = _MAP_CACHE.get(key)
-    if m is None:
-        par = "thread" if n_threads > 1 else "serial"
-        opts = {"max_num_threads": n_threads} if n_threads > 1 else {}
-        m = fn.map(f"{fn.name()}_map{n}", par, n, list(shared), [], opts)
-        _MAP_CACHE[key] = m
-    return m
