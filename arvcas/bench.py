@@ -64,8 +64,11 @@ __all__ = ["BenchError", "Settings", "run", "write", "render_markdown", "REQUIRE
 CONTROLLER = "proposed"
 N_INPUT_SETS = 256  # varying inputs of the C driver (a power of two: the driver masks the index)
 OPT_LEVELS = ("-O0", "-O1", "-O2", "-O3")
-# the recommended level is the fastest-compiling among those whose run time is within this of the best
-RUN_TIME_TOLERANCE = 0.03
+# the recommended level is the fastest-compiling among those whose run time (least disturbed of the
+# repetitions) is within this of the best. Two full benchmarks of the same code on this shared 2-core
+# machine, 2026-12-01, gave -O1/-O2/-O3 runs of 20.0/19.1/19.5 ms, then 19.5/18.8/18.2 ms (minima): a
+# 3 % band made the choice flip between -O1, -O2 and -O3 from one benchmark to the next.
+RUN_TIME_TOLERANCE = 0.08
 
 # key paths bench.json always has (tests/test_bench.py checks them, and that every number is finite)
 REQUIRED_KEYS = (
@@ -759,15 +762,16 @@ def _timed_graph(make: Callable[[], object]) -> float:
 
 
 def _recommend(comp: dict) -> dict:
-    """The opt level to default to: among levels whose run time is within RUN_TIME_TOLERANCE of the
-    fastest, the one that compiles fastest; with the break-even number of runs against the others."""
+    """The opt level to default to: among levels whose run time (the least disturbed repetition) is
+    within RUN_TIME_TOLERANCE of the fastest, the one that compiles fastest; with the break-even number
+    of runs against the others (medians)."""
     sw = comp["opt_sweep"]["run"]
     default = comp["default_opt_level"]
     if len(sw) < 2:
         return {"opt_level": default, "rule": "no sweep (quick mode): keep the current default",
                 "text": f"quick mode measures only {sw[0]['opt_level']}: no recommendation; the default stays {default}."}
-    best_run = min(r["run_s"]["median"] for r in sw)
-    ok = [r for r in sw if r["run_s"]["median"] <= (1 + RUN_TIME_TOLERANCE) * best_run]
+    best_run = min(r["run_s"]["min"] for r in sw)
+    ok = [r for r in sw if r["run_s"]["min"] <= (1 + RUN_TIME_TOLERANCE) * best_run]
     rec = min(ok, key=lambda r: r["cc_s"]["median"])
     lines = []
     for r in sw:
@@ -785,7 +789,8 @@ def _recommend(comp: dict) -> dict:
             lines.append(f"{rec['opt_level']} vs {r['opt_level']}: runs {-d_run / r['run_s']['median']:.1%} "
                          f"slower (within {RUN_TIME_TOLERANCE:.0%}), compiles {-d_cc:.1f} s faster")
     text = (f"default opt level: {rec['opt_level']} (current: {default}). Rule: among the levels whose run "
-            f"time is within {RUN_TIME_TOLERANCE:.0%} of the fastest, the one that compiles fastest "
+            f"time (least disturbed repetition) is within {RUN_TIME_TOLERANCE:.0%} of the fastest, the one that "
+            f"compiles fastest "
             f"(a build is cached, so run speed counts first; compile time is paid after every change of the "
             f"graph). " + "; ".join(lines) + ".")
     return {"opt_level": rec["opt_level"], "rule": f"fastest compile among run times within "
