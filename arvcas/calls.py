@@ -63,30 +63,7 @@ def _buffer(f: ca.Function):
 
 def call(f: ca.Function, *args) -> list[np.ndarray]:
     """Evaluate ``f`` on dense inputs; returns its dense outputs as 2-D Fortran-ordered arrays."""
-    if len(args) != f.n_in():
-        raise ValueError(f"{f.name()}: expected {f.n_in()} inputs, got {len(args)}")
-    buf, evaluate = _buffer(f)
-    keep = []
-    for i, a in enumerate(args):
-        sp = f.sparsity_in(i)
-        if not sp.is_dense():
-            raise ValueError(f"{f.name()}: input {f.name_in(i)} is sparse; call() takes dense inputs only")
-        arr = fortran(a, (sp.size1(), sp.size2()))
-        keep.append(arr)
-        buf.set_arg(i, memoryview(arr.reshape(-1, order="F")))
-    outs = []
-    for i in range(f.n_out()):
-        sp = f.sparsity_out(i)
-        if not sp.is_dense():
-            raise ValueError(f"{f.name()}: output {f.name_out(i)} is sparse; call() returns dense outputs only")
-        r = np.empty((sp.size1(), sp.size2()), order="F")
-        buf.set_res(i, memoryview(r.reshape(-1, order="F")))
-        outs.append(r)
-    evaluate()
-    if buf.ret() != 0:
-        raise RuntimeError(f"{f.name()}: evaluation failed (return code {buf.ret()})")
-    del keep
-    return outs
+    return call_many(f, 1, args, per_run=())
 
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
@@ -125,7 +102,7 @@ def call_many(f: ca.Function, n: int, args, per_run, n_threads: int = 1) -> list
     for i, a in enumerate(args):
         sp = f.sparsity_in(i)
         if not sp.is_dense():
-            raise ValueError(f"{f.name()}: input {f.name_in(i)} is sparse; call_many() takes dense inputs only")
+            raise ValueError(f"{f.name()}: input {f.name_in(i)} is sparse; takes dense inputs only")
         if i in per_run:
             arr = fortran(a, (sp.size1(), n * sp.size2()))
             blocks[i] = _block_views(arr, n)
@@ -136,7 +113,7 @@ def call_many(f: ca.Function, n: int, args, per_run, n_threads: int = 1) -> list
     for i in range(f.n_out()):
         sp = f.sparsity_out(i)
         if not sp.is_dense():
-            raise ValueError(f"{f.name()}: output {f.name_out(i)} is sparse; call_many() returns dense outputs only")
+            raise ValueError(f"{f.name()}: output {f.name_out(i)} is sparse; gives dense outputs only")
         r = np.empty((sp.size1(), n * sp.size2()), order="F")
         outs.append(r)
         out_blocks.append(_block_views(r, n))
@@ -159,7 +136,7 @@ def call_many(f: ca.Function, n: int, args, per_run, n_threads: int = 1) -> list
                 buf.set_res(i, b[j])
             evaluate()
             if buf.ret() != 0:
-                errors.append(f"{f.name()}: evaluation {j} failed (return code {buf.ret()})")
+                errors.append(f"{f.name()}: evaluation {j} of {n} failed (return code {buf.ret()})")
                 stop.set()
 
     nt = max(1, min(int(n_threads), n))

@@ -178,16 +178,9 @@ def simulate_batch(controller: str, gains, seed: int = 0, params: Params | None 
     """
     cfg, params, g, noise, unc, ph = _prepare(controller, gains, seed, params, cfg, uncertainty, phase, batch=True)
     n = g.shape[0]
-    fn = run_function(controller, cfg, trace=False, opts=opts)
-    pv = params.vector()
-    chat, rmse, ok, t_fail = calls.call_many(fn, n, (g.T, noise, unc, ph, cfg.ekf_vector, pv, *schedule.table(cfg, pv, opts)),
-                                             per_run=(0,), n_threads=_n_threads(n_threads))
-    ok = ok.ravel() > 0.5
-    chat, rmse = chat.T.copy(), rmse.T.copy()
-    chat[~ok] = np.nan
-    rmse[~ok] = np.nan
+    chat, rmse, ok, t_fail = _evaluate(controller, cfg, params, opts, n, (g.T, noise, unc, ph), (0,), n_threads)
     if return_status:
-        return chat, rmse, ok, np.where(ok, np.nan, t_fail.ravel())
+        return chat, rmse, ok, t_fail
     return chat, rmse
 
 
@@ -221,10 +214,17 @@ def simulate_many(controller: str, gains, seeds, uncertainty=None, phase=None, p
     U = rows(uncertainty, unc0, 4, "uncertainty")
     PH = rows(phase, ph0, 6, "phase")
     noise = np.hstack([scenario.noise_sequence(cfg, int(sd)) for sd in seeds])
+    return _evaluate(controller, cfg, params, opts, n, (G.T, noise, U.T, PH.T), (0, 1, 2, 3), n_threads)
+
+
+def _evaluate(controller, cfg, params, opts, n, varying, per_run, n_threads):
+    """n metrics-only runs on the thread pool; ``varying`` = (gains, noise, unc, phase), those in
+    ``per_run`` with a column block per run, the rest and the time table shared.
+    Returns (chat (n x 6), rmse (n x 6), ok (n,), t_fail (n,)), NaN metrics for a diverged run."""
     fn = run_function(controller, cfg, trace=False, opts=opts)
     pv = params.vector()
-    chat, rmse, ok, t_fail = calls.call_many(fn, n, (G.T, noise, U.T, PH.T, cfg.ekf_vector, pv, *schedule.table(cfg, pv, opts)),
-                                             per_run=(0, 1, 2, 3), n_threads=_n_threads(n_threads))
+    chat, rmse, ok, t_fail = calls.call_many(fn, n, (*varying, cfg.ekf_vector, pv, *schedule.table(cfg, pv, opts)),
+                                             per_run=per_run, n_threads=_n_threads(n_threads))
     ok = ok.ravel() > 0.5
     chat, rmse = chat.T.copy(), rmse.T.copy()
     chat[~ok] = np.nan
