@@ -26,7 +26,7 @@ class Command:
 
 
 def _model_options(n_quad: int):
-    from .uvms import ModelOptions
+    from arvcas.model.uvms import ModelOptions
 
     return ModelOptions(n_quad=n_quad)
 
@@ -47,8 +47,8 @@ def _add_export_c(p: argparse.ArgumentParser) -> None:
 
 
 def _run_export_c(a: argparse.Namespace) -> int:
-    from .export import export_c
-    from .params import load
+    from arvcas.build.export import export_c
+    from arvcas.params import load
 
     paths = export_c(a.dir, opts=_model_options(a.n_quad), params=load(a.params))
     for path in paths:
@@ -65,7 +65,7 @@ def _add_cache(p: argparse.ArgumentParser) -> None:
 
 
 def _run_cache(a: argparse.Namespace) -> int:
-    from .codegen import cache_info
+    from arvcas.build.codegen import cache_info
 
     d, arts = cache_info()
     print(f"cache: {d}")
@@ -109,8 +109,8 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
     """
     import numpy as np
 
-    from .codegen import compiled
-    from .params import load
+    from arvcas.build.codegen import compiled
+    from arvcas.params import load
 
     p = load(params_path).vector()
     f = compiled("arm_wrench", _model_options(n_quad))
@@ -158,7 +158,7 @@ def _add_simulate(p: argparse.ArgumentParser) -> None:
 
 
 def _metrics_table(chat, rmse) -> str:
-    from .gains import DOFS
+    from arvcas.controllers.gains import DOFS
 
     lines = [f"{'DOF':>6} {'CHAT':>12} {'RMSE':>12}"]
     for d, c, r in zip(DOFS, chat, rmse):
@@ -167,9 +167,10 @@ def _metrics_table(chat, rmse) -> str:
 
 
 def _run_simulate(a: argparse.Namespace) -> int:
-    from . import results, scenario
-    from .params import load
-    from .simulation import simulate
+    from arvcas.io import results
+    from arvcas.sim import scenario
+    from arvcas.params import load
+    from arvcas.sim.simulation import simulate
 
     if a.out is not None:
         results.check_dir(a.out.parent if str(a.out.parent) else Path("."), f"--out {a.out}")
@@ -177,7 +178,7 @@ def _run_simulate(a: argparse.Namespace) -> int:
     gains = None
     controller, seed = a.controller, a.seed
     if a.from_front is not None:
-        from .tuning.front import member_gains
+        from arvcas.tuning.front import member_gains
 
         if a.index is None:
             raise ValueError("--from-front needs --index I")
@@ -209,7 +210,7 @@ def _add_paper(p: argparse.ArgumentParser) -> None:
 
 
 def _run_paper(a: argparse.Namespace) -> int:
-    from .paper import run_paper
+    from arvcas.experiments.paper import run_paper
 
     out = run_paper(a.out, seed=a.seed)
     print((a.out / "table3.md").read_text())
@@ -229,9 +230,20 @@ def _add_bench(p: argparse.ArgumentParser) -> None:
                    help="first wait (up to 15 min) until the 1-min load average is at most L")
 
 
-def _run_bench(a: argparse.Namespace) -> int:
-    from .bench import run
+def bench_module():
+    """``benchmarks/bench.py`` of the source checkout this package runs from (not part of the package)."""
+    import importlib
 
+    root = Path(__file__).resolve().parents[1]
+    if not (root / "benchmarks" / "bench.py").is_file():
+        raise ValueError(f"bench: needs a source checkout of arvcas ({root / 'benchmarks' / 'bench.py'} not found)")
+    if str(root) not in sys.path:
+        sys.path.insert(0, str(root))
+    return importlib.import_module("benchmarks.bench")
+
+
+def _run_bench(a: argparse.Namespace) -> int:
+    run = bench_module().run
     run(a.out, quick=a.quick, wait_load=a.wait_load)
     print(f"wrote {a.out / 'bench.json'} and {a.out / 'bench.md'}")
     return 0
@@ -251,11 +263,11 @@ COMMANDS: dict[str, Command] = {
                      _add_bench, _run_bench),
 }
 __import__("arvcas.tuning.cli", fromlist=["register"]).register(COMMANDS)  # tune, front, compare (arvcas/tuning)
-__import__("arvcas.beyond.cli", fromlist=["register"]).register(COMMANDS)  # after tuning: extends front, compare
+__import__("arvcas.experiments.cli", fromlist=["register"]).register(COMMANDS)  # after tuning: extends front, compare
 
 
 def _parser() -> argparse.ArgumentParser:
-    from . import __version__
+    from arvcas import __version__
 
     ap = argparse.ArgumentParser(prog="arvcas", description="Haidou-1 ARV + manipulator: CasADi models compiled to C")
     ap.add_argument("--version", action="version", version=f"arvcas {__version__}")

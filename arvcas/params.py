@@ -17,7 +17,7 @@ from typing import Any, Iterator, Mapping
 
 import numpy as np
 
-from . import tomlfile
+from arvcas import tomlfile
 
 __all__ = ["Params", "ParamsError", "load", "view", "SCHEMA", "default_path"]
 

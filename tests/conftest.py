@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from arvcas import params as _params
-from arvcas import uvms as _uvms
+from arvcas.model import uvms as _uvms
 
 
 @pytest.fixture(scope="session")

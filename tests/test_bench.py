@@ -11,7 +11,9 @@ import math
 
 import pytest
 
-from arvcas import bench
+from arvcas.cli import bench_module
+
+bench = bench_module()
 from arvcas.cli import main
 
 

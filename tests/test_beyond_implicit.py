@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from arvcas import gains, scenario
-from arvcas.simulation import simulate
+from arvcas.controllers import gains
+from arvcas.sim import scenario
+from arvcas.sim.simulation import simulate
 
 
 @pytest.fixture(scope="module")

@@ -10,13 +10,13 @@ import h5py
 import numpy as np
 import pytest
 
-from arvcas import gains, scenario
-from arvcas.beyond import montecarlo as mc_mod
-from arvcas.beyond.montecarlo import (compare, compare_markdown, draw, read_montecarlo, reproduce, run_montecarlo,
-                                      summary, summary_markdown, write_montecarlo)
+from arvcas.controllers import gains
+from arvcas.sim import scenario
+from arvcas.experiments import montecarlo as mc_mod
+from arvcas.experiments.montecarlo import compare, compare_markdown, draw, read_montecarlo, reproduce, run_montecarlo, summary, summary_markdown, write_montecarlo
 from arvcas.cli import main
-from arvcas.results import ResultsError
-from arvcas.simulation import simulate
+from arvcas.io.results import ResultsError
+from arvcas.sim.simulation import simulate
 
 RUNS = 6
 

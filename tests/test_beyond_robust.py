@@ -7,9 +7,9 @@ import h5py
 import numpy as np
 import pytest
 
-from arvcas import gains
-from arvcas.beyond.montecarlo import run_montecarlo, write_montecarlo
-from arvcas.beyond.robust import front_member, read_robust, robust_front, robust_markdown, write_robust_dir
+from arvcas.controllers import gains
+from arvcas.experiments.montecarlo import run_montecarlo, write_montecarlo
+from arvcas.experiments.robust import front_member, read_robust, robust_front, robust_markdown, write_robust_dir
 from arvcas.cli import main
 
 STUDY = """
@@ -139,7 +139,7 @@ def test_compare_two_robust_fronts(robust, tmp_path, capsys):
 
 def test_draws_toml_is_a_valid_study_draw_list(tmp_path, capsys):
     """--draws-toml K: a tuning study that lists these draws optimises the mean over K draws."""
-    from arvcas.beyond.montecarlo import draw
+    from arvcas.experiments.montecarlo import draw
     from arvcas.tuning.study import load_study
 
     assert main(["montecarlo", "--draws-toml", "--runs", "3", "--seed", "9"]) == 0

@@ -1,4 +1,4 @@
-"""Interval estimates of arvcas.beyond.stats against SciPy (an independent implementation)."""
+"""Interval estimates of arvcas.experiments.stats against SciPy (an independent implementation)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats as sst
 
-from arvcas.beyond.stats import mean_ci, paired_ci, t_cdf, t_quantile, welch_ci, wilson
+from arvcas.experiments.stats import mean_ci, paired_ci, t_cdf, t_quantile, welch_ci, wilson
 
 
 @pytest.mark.parametrize("df", [1, 2, 3.5, 9, 29, 199, 999, 1e5])
@@ -55,7 +55,7 @@ def test_wilson_matches_scipy(k, n):
 
 @pytest.mark.parametrize("n", [5, 6, 9, 20, 57, 500])
 def test_median_ci_is_the_sign_test_interval(n):
-    from arvcas.beyond.stats import median_ci, paired_median_ci
+    from arvcas.experiments.stats import median_ci, paired_median_ci
 
     x = np.random.default_rng(n).standard_cauchy(n)  # heavy tails: the case it is for
     iv = median_ci(x)

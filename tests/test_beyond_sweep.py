@@ -7,8 +7,8 @@ import h5py
 import numpy as np
 import pytest
 
-from arvcas import gains
-from arvcas.beyond.sweep import read_sweep, run_sweep, sweep_markdown, write_sweep_dir, zigzag, zigzag_time_fraction
+from arvcas.controllers import gains
+from arvcas.experiments.sweep import read_sweep, run_sweep, sweep_markdown, write_sweep_dir, zigzag, zigzag_time_fraction
 from arvcas.cli import main
 
 G = gains.default_gains("proposed")

@@ -1,10 +1,10 @@
-"""arvcas.calls: zero-copy calls and the thread-pool batch against plain CasADi evaluation."""
+"""arvcas.build.calls: zero-copy calls and the thread-pool batch against plain CasADi evaluation."""
 
 import casadi as ca
 import numpy as np
 import pytest
 
-from arvcas import calls
+from arvcas.build import calls
 
 
 @pytest.fixture(scope="module")

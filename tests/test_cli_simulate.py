@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from arvcas import cli, results
-from arvcas.simulation import simulate
+from arvcas import cli
+from arvcas.io import results
+from arvcas.sim.simulation import simulate
 
 
 def test_simulate_writes_result_and_prints_table(tmp_path, capsys):
@@ -37,7 +38,7 @@ def test_simulate_bad_inputs_one_line(tmp_path, capsys):
 
 
 def test_simulate_config_file_errors_name_the_key(tmp_path, capsys):
-    from arvcas.scenario import default_scenario_path
+    from arvcas.sim.scenario import default_scenario_path
 
     bad = tmp_path / "s.toml"
     bad.write_text(default_scenario_path().read_text().replace("duration =", "durration ="))

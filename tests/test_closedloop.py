@@ -7,9 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from arvcas import calls, closedloop, codegen, gains, metrics, scenario, schedule
+from arvcas.build import calls, codegen
+from arvcas.sim import closedloop, scenario, schedule
+from arvcas.controllers import gains
+from arvcas import metrics
 from arvcas.params import load as load_params
-from arvcas.simulation import SimulationError, simulate, simulate_batch
+from arvcas.sim.simulation import SimulationError, simulate, simulate_batch
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +168,7 @@ def test_divergence_is_reported_not_raised(cfg):
 
 def test_simulate_many_rows_equal_single_runs(cfg):
     """Monte Carlo batch: each row reproduces the single run with its own seed, factors and phases."""
-    from arvcas.simulation import simulate_many
+    from arvcas.sim.simulation import simulate_many
 
     seeds = [0, 5, 9]
     U = np.array([cfg.uncertainty, [1.2, 0.8, 0.9, 0.5], [1.0, 1.0, 1.0, 1.0]])

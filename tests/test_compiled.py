@@ -1,4 +1,4 @@
-"""The build cache of arvcas.codegen: generated C against the SX graph, reuse across processes,
+"""The build cache of arvcas.build.codegen: generated C against the SX graph, reuse across processes,
 concurrent builds, tampered artifacts, unsafe directories and flags.
 
 Every test runs against a temporary cache (``ARVCAS_CACHE``). The five plant functions are compiled
@@ -22,8 +22,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from arvcas import codegen as C
-from arvcas import uvms
+from arvcas.build import codegen as C
+from arvcas.model import uvms
 from arvcas.params import load
 
 RTOL = 1e-12
@@ -52,7 +52,7 @@ def toy_ref(c: float) -> np.ndarray:
 
 def run_child(cache: Path, body: str, timeout: float = 120) -> dict:
     """Run ``body`` in a fresh Python process with ARVCAS_CACHE=cache; it prints one JSON line."""
-    code = TOY_SRC + "\nimport json, sys, time\nfrom arvcas import codegen as C\n" + textwrap.dedent(body)
+    code = TOY_SRC + "\nimport json, sys, time\nfrom arvcas.build import codegen as C\n" + textwrap.dedent(body)
     env = dict(os.environ, ARVCAS_CACHE=str(cache))
     r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=timeout)
     assert r.returncode == 0, r.stderr
@@ -196,7 +196,7 @@ def test_memo_does_not_rehash(fresh_cache, monkeypatch):
 
 
 def test_compile_is_logged(fresh_cache, caplog):
-    with caplog.at_level(logging.INFO, logger="arvcas.codegen"):
+    with caplog.at_level(logging.INFO, logger="arvcas.build.codegen"):
         C.build(make_toy("toy_log", 1.0))
     msgs = [r.getMessage() for r in caplog.records]
     assert any(m.startswith("compiling toy_log (") and "instructions)" in m and "done in" in m for m in msgs), msgs
@@ -212,7 +212,7 @@ def test_concurrent_builds_compile_once(fresh_cache):
     while not os.path.exists(other):
         time.sleep(0.001)
     """
-    code = TOY_SRC + "\nimport json, sys, time\nfrom arvcas import codegen as C\n"
+    code = TOY_SRC + "\nimport json, sys, time\nfrom arvcas.build import codegen as C\n"
     env = dict(os.environ, ARVCAS_CACHE=str(fresh_cache))
     procs = [
         subprocess.Popen(
@@ -294,7 +294,7 @@ def test_lock_timeout_builds_privately(fresh_cache, caplog):
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)  # "another process" holds the build lock forever
         n = C.stats()
-        with caplog.at_level(logging.WARNING, logger="arvcas.codegen"):
+        with caplog.at_level(logging.WARNING, logger="arvcas.build.codegen"):
             f = C.build(make_toy("toy_lock", 3.0), lock_timeout=0.2)
     finally:
         os.close(fd)

@@ -12,8 +12,9 @@ import subprocess
 import numpy as np
 import pytest
 
-from arvcas import cli, uvms
-from arvcas.export import FILES, example_inputs, export_c
+from arvcas import cli
+from arvcas.model import uvms
+from arvcas.build.export import FILES, example_inputs, export_c
 from arvcas.params import load
 
 RTOL = 1e-12
@@ -169,7 +170,7 @@ def test_demo_table(cache, plant, capsys):
 
 
 def test_cache_command(cache, plant, capsys):
-    from arvcas.codegen import build
+    from arvcas.build.codegen import build
 
     build(plant["arm_wrench"])  # into this module's cache (compiled() may be memoized from elsewhere)
     assert cli.main(["cache"]) == 0

@@ -7,16 +7,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from arvcas.controllers.gsta import (
-    gsta_explicit,
-    gsta_implicit,
-    k1_next_agsta,
-    k1_next_proposed,
-    k1_next_traditional,
-    k2_of_k1,
-    phi1,
-    phi2,
-)
+from arvcas.controllers.gsta import gsta_explicit, gsta_implicit, k1_next_agsta, k1_next_proposed, k1_next_traditional, k2_of_k1, phi1, phi2
 
 
 # ---------------------------------------------------------------- phi, k2 -----------------------

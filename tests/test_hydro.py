@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad_vec
 
-from arvcas import hydro, manipulator
+from arvcas.model import hydro, manipulator
 from arvcas import params as ap
 
 N_LIST = (1, 2, 3, 5, 8)

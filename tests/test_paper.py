@@ -17,8 +17,9 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from arvcas import paper, scenario  # noqa: E402
-from arvcas.results import ResultsError, read_result  # noqa: E402
+from arvcas.experiments import paper  # noqa: E402
+from arvcas.sim import scenario
+from arvcas.io.results import ResultsError, read_result  # noqa: E402
 
 DOF_MD = ("x", "y", "z", "φ", "θ", "ψ")
 

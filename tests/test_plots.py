@@ -1,4 +1,4 @@
-"""Figures 5-11 (arvcas.plots) on short synthetic Results: axes, lines, labels, legends; no simulation."""
+"""Figures 5-11 (arvcas.io.plots) on short synthetic Results: axes, lines, labels, legends; no simulation."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from arvcas import gains as gains_mod  # noqa: E402
-from arvcas import plots  # noqa: E402
+from arvcas.controllers import gains as gains_mod  # noqa: E402
+from arvcas.io import plots  # noqa: E402
 from arvcas.params import load as load_params  # noqa: E402
-from arvcas.simulation import Result  # noqa: E402
+from arvcas.sim.simulation import Result  # noqa: E402
 
 N = 51  # 5 s at h = 0.1 s
 H = 0.1

@@ -1,4 +1,4 @@
-"""Result files (arvcas.results): round trip, layout attributes, atomic writes, refusals.
+"""Result files (arvcas.io.results): round trip, layout attributes, atomic writes, refusals.
 
 All on small synthetic Results (no simulation): a real run's round trip is in test_paper.py.
 """
@@ -13,11 +13,11 @@ import h5py
 import numpy as np
 import pytest
 
-from arvcas import gains as gains_mod
-from arvcas import results
+from arvcas.controllers import gains as gains_mod
+from arvcas.io import results
 from arvcas.params import SCHEMA
-from arvcas.results import ResultsError, read_result, write_result
-from arvcas.simulation import Result
+from arvcas.io.results import ResultsError, read_result, write_result
+from arvcas.sim.simulation import Result
 
 SERIES = ("t", "eta", "nu", "eta_hat", "eta_ref", "tau_cmd", "thrust", "s", "k1", "k2", "f_hat", "f_true", "q",
           "payload")

@@ -9,9 +9,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from arvcas import scenario
+from arvcas.sim import scenario
 from arvcas.params import load as load_params
-from arvcas.scenario import ScenarioError, default_scenario_path, load_scenario, loads_scenario
+from arvcas.sim.scenario import ScenarioError, default_scenario_path, load_scenario, loads_scenario
 
 TEXT = default_scenario_path().read_text()
 

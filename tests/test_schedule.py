@@ -1,4 +1,4 @@
-"""The run's time table (arvcas.schedule) against the models it replaces on the hot path.
+"""The run's time table (arvcas.sim.schedule) against the models it replaces on the hot path.
 
 References are independent implementations, not the table itself: the recursive Newton-Euler
 ``arm_wrench`` (itself checked against Pinocchio in test_arm_pinocchio.py), CasADi's AD for the time
@@ -12,10 +12,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from arvcas import calls, manipulator, scenario, schedule, vehicle
-from arvcas.linalg import lu_nopivot, lu_pack, lu_solve, lu_unpack, solve_nopivot
+from arvcas.build import calls
+from arvcas.model import manipulator, vehicle
+from arvcas.sim import scenario, schedule
+from arvcas.model.linalg import lu_nopivot, lu_pack, lu_solve, lu_unpack, solve_nopivot
 from arvcas.params import SCHEMA, view
-from arvcas.uvms import ModelOptions, coupled_terms, coupled_terms_scheduled
+from arvcas.model.uvms import ModelOptions, coupled_terms, coupled_terms_scheduled
 
 NP = len(SCHEMA)
 

@@ -11,7 +11,7 @@ import pytest
 
 from arvcas import cli
 from arvcas.metrics import normalised_objectives
-from arvcas.simulation import simulate, simulate_batch
+from arvcas.sim.simulation import simulate, simulate_batch
 from arvcas.tuning import compare_fronts, export_front, knee_index, member_gains, read_front, replay, run_study
 from arvcas.tuning import load_study
 

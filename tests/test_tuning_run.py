@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from arvcas import cli
-from arvcas.gains import default_gains
+from arvcas.controllers.gains import default_gains
 from arvcas.tuning import load_study, run_study
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.engines import LocalEngine

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from arvcas import params as ap
-from arvcas import spatial, thrusters, vehicle
+from arvcas.model import spatial, thrusters, vehicle
 
 RTOL = 1e-9
 
@@ -28,7 +28,7 @@ def _np(x):
 
 
 def _Rzyx(phi, theta, psi):
-    """R^n_b = Rz(psi) Ry(theta) Rx(phi), written here independently of arvcas.spatial."""
+    """R^n_b = Rz(psi) Ry(theta) Rx(phi), written here independently of arvcas.model.spatial."""
     cx, sx, cy, sy, cz, sz = np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta), np.cos(psi), np.sin(psi)
     Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
     Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])

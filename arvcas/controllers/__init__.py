@@ -9,18 +9,9 @@ All steps are pure functions over any CasADi type, elementwise per DOF, for use 
 compiled closed-loop step function.
 """
 
-from .atd import atd_params, atd_step, fhan
-from .gsta import (
-    gsta_explicit,
-    gsta_implicit,
-    k1_next_agsta,
-    k1_next_proposed,
-    k1_next_traditional,
-    k2_of_k1,
-    phi1,
-    phi2,
-)
-from .reso import check_reso_stability, reso_gains, reso_poles, reso_step
+from arvcas.controllers.atd import atd_params, atd_step, fhan
+from arvcas.controllers.gsta import gsta_explicit, gsta_implicit, k1_next_agsta, k1_next_proposed, k1_next_traditional, k2_of_k1, phi1, phi2
+from arvcas.controllers.reso import check_reso_stability, reso_gains, reso_poles, reso_step
 
 __all__ = [
     "fhan",

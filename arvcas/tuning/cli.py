@@ -39,9 +39,9 @@ def _add_tune(p: argparse.ArgumentParser) -> None:
 def _run_tune(a: argparse.Namespace) -> int:
     import dataclasses
 
-    from .compare import compare_fronts, format_comparison
-    from .run import run_study
-    from .study import ENGINES, StudyError, load_study
+    from arvcas.tuning.compare import compare_fronts, format_comparison
+    from arvcas.tuning.run import run_study
+    from arvcas.tuning.study import ENGINES, StudyError, load_study
 
     study = load_study(a.study)
     eng = study.engine
@@ -92,7 +92,7 @@ def _add_front(p: argparse.ArgumentParser) -> None:
 
 
 def _write_text(path: Path, text: str) -> None:
-    from .checkpoint import CheckpointError
+    from arvcas.tuning.checkpoint import CheckpointError
 
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
@@ -107,7 +107,7 @@ def _write_text(path: Path, text: str) -> None:
 
 
 def _run_front(a: argparse.Namespace) -> int:
-    from .front import export_front, plot_front, read_front, resolve_front_path
+    from arvcas.tuning.front import export_front, plot_front, read_front, resolve_front_path
 
     if a.action == "export":
         text = export_front(a.file, a.format)
@@ -143,8 +143,8 @@ def _add_compare(p: argparse.ArgumentParser) -> None:
 
 
 def _run_compare(a: argparse.Namespace) -> int:
-    from .compare import compare_fronts, format_comparison
-    from .front import plot_fronts, read_front
+    from arvcas.tuning.compare import compare_fronts, format_comparison
+    from arvcas.tuning.front import plot_fronts, read_front
 
     ref = None
     if a.ref is not None:
@@ -172,7 +172,7 @@ def _run_compare(a: argparse.Namespace) -> int:
 
 def register(commands: dict) -> None:
     """Add ``tune``, ``front`` and ``compare`` to the CLI's command table."""
-    from ..cli import Command
+    from arvcas.cli import Command
 
     commands["tune"] = Command("NSGA-II on the CHAT/RMSE front from a study file (resumable, local or Dask)",
                                _add_tune, _run_tune)

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .front import Front, read_front
-from .run import hypervolume
+from arvcas.tuning.front import Front, read_front
+from arvcas.tuning.run import hypervolume
 
 __all__ = ["Comparison", "compare_fronts", "format_comparison"]
 

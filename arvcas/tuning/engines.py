@@ -1,13 +1,13 @@
 """Where a generation is evaluated: ``local`` (all cores of this machine) or ``dask`` (a cluster).
 
 Both call the same top-level function, :func:`evaluate_rows`, which runs
-:func:`arvcas.simulation.simulate_batch` once per draw on a block of gain sets and returns the
+:func:`arvcas.sim.simulation.simulate_batch` once per draw on a block of gain sets and returns the
 per-DOF metrics with the build key of the compiled run it used. The ``dask`` engine splits the
 population into contiguous chunks, ``client.map`` s them to the workers and concatenates the results
 in order; every run is independent of the others in its batch, so the generation's numbers, and
 therefore the front, are the same bit for bit as with the ``local`` engine, provided the workers run
 the same compiled code. Each worker builds the run function or loads it from its compile cache by
-content hash (:mod:`arvcas.codegen`); the engine checks that every chunk reports the client's key
+content hash (:mod:`arvcas.build.codegen`); the engine checks that every chunk reports the client's key
 and refuses to mix results from different compiled code.
 """
 
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..params import Params
-from ..scenario import ScenarioConfig
+from arvcas.params import Params
+from arvcas.sim.scenario import ScenarioConfig
 
 __all__ = ["EngineError", "EvalTask", "evaluate_rows", "run_key", "LocalEngine", "DaskEngine", "make_engine"]
 
@@ -41,8 +41,8 @@ class EvalTask:
 
 def run_key(controller: str, cfg: ScenarioConfig) -> str:
     """Content hash of the compiled metrics-only run (built or loaded from the cache)."""
-    from .. import codegen
-    from ..simulation import run_function
+    from arvcas.build import codegen
+    from arvcas.sim.simulation import run_function
 
     m = codegen.artifact_of(run_function(controller, cfg, trace=False))
     return "" if m is None else str(m["key"])
@@ -54,7 +54,7 @@ def evaluate_rows(task: EvalTask, gains: np.ndarray, n_threads: int | None = Non
     Returns ``(chat (K, n, 6), rmse (K, n, 6), ok (K, n), t_fail (K, n), key)``.
     Top level (importable) so that Dask workers can run it.
     """
-    from ..simulation import simulate_batch
+    from arvcas.sim.simulation import simulate_batch
 
     outs = [simulate_batch(task.controller, gains, seed=seed, params=task.params, cfg=task.cfg,
                            uncertainty=unc, phase=ph, n_threads=n_threads, return_status=True)

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..metrics import DOFS, table3
-from . import checkpoint as ck
+from arvcas.metrics import DOFS, table3
+from arvcas.tuning import checkpoint as ck
 
 __all__ = ["Front", "read_front", "knee_index", "export_front", "plot_front", "plot_fronts", "member_gains",
            "replay", "resolve_front_path"]
@@ -89,7 +89,7 @@ class Front:
     @property
     def hv(self) -> float:
         """Hypervolume of the front against the study's reference point."""
-        from .run import hypervolume
+        from arvcas.tuning.run import hypervolume
 
         return hypervolume(self.F, self.G, self.reference_point)
 
@@ -276,7 +276,7 @@ def _member(fr: Front, index: int) -> int:
 def member_gains(path: str | Path, index: int):
     """``(controller, gains, seed, scenario text)`` of front member ``index`` (sorted by f_chat).
 
-    Replaying these with :func:`arvcas.simulation.simulate` (the gains, the noise seed, the scenario
+    Replaying these with :func:`arvcas.sim.simulation.simulate` (the gains, the noise seed, the scenario
     text, the packaged parameters) reproduces the member's stored per-DOF CHAT and RMSE, and so its
     objectives, bit for bit. Only for single-draw studies that use the scenario's own uncertainty
     factors and phases; otherwise use :func:`replay`.
@@ -286,7 +286,7 @@ def member_gains(path: str | Path, index: int):
     if fr.draw_seeds.size != 1:
         raise ValueError(f"{fr.path}: the objectives average {fr.draw_seeds.size} draws; one simulate run cannot "
                          f"reproduce them (use arvcas.tuning.front.replay)")
-    from ..scenario import loads_scenario
+    from arvcas.sim.scenario import loads_scenario
 
     cfg = loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)")
     if not (np.array_equal(fr.draw_uncertainty[0], cfg.uncertainty)
@@ -301,10 +301,10 @@ def replay(path: str | Path, index: int, n_threads: int | None = None):
 
     Returns the :class:`~arvcas.tuning.problem.Evaluation` of that one member (F, G, per-DOF metrics).
     """
-    from ..params import Params, load as load_params
-    from ..scenario import loads_scenario
-    from .engines import EvalTask, LocalEngine
-    from .run import evaluate_gains
+    from arvcas.params import Params, load as load_params
+    from arvcas.sim.scenario import loads_scenario
+    from arvcas.tuning.engines import EvalTask, LocalEngine
+    from arvcas.tuning.run import evaluate_gains
 
     fr = read_front(path)
     i = _member(fr, index)

@@ -1,7 +1,7 @@
 """The tuning problem as a vectorised pymoo :class:`~pymoo.core.problem.Problem` (SPEC 7).
 
 Decision vector ``x`` (n_var,): ``log10`` of the controller's flat gain vector (Table 2 order,
-:func:`arvcas.gains.gain_names`), within the study's bounds. Each call evaluates the whole
+:func:`arvcas.controllers.gains.gain_names`), within the study's bounds. Each call evaluates the whole
 population in one batched call of the compiled run per draw (through an engine).
 
 Objectives ``F = (f_chat, f_rmse)``: :func:`arvcas.metrics.normalised_objectives` of each draw,
@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from pymoo.core.problem import Problem
 
-from ..metrics import normalised_objectives
+from arvcas.metrics import normalised_objectives
 
 __all__ = ["INFEASIBLE_F", "Evaluation", "GainProblem", "to_gains", "assemble"]
 

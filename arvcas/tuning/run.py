@@ -42,11 +42,11 @@ from pymoo.operators.crossover.sbx import SBX
 from pymoo.operators.mutation.pm import PM
 from pymoo.operators.sampling.rnd import FloatRandomSampling
 
-from ..params import load as load_params
-from . import checkpoint as ck
-from .engines import EngineError, EvalTask, make_engine
-from .problem import Evaluation, GainProblem, assemble, pymoo_F
-from .study import Study, StudyError
+from arvcas.params import load as load_params
+from arvcas.tuning import checkpoint as ck
+from arvcas.tuning.engines import EngineError, EvalTask, make_engine
+from arvcas.tuning.problem import Evaluation, GainProblem, assemble, pymoo_F
+from arvcas.tuning.study import Study, StudyError
 
 __all__ = ["TuningError", "Outcome", "StudyTermination", "hypervolume", "run_study", "front_path", "evaluate_gains"]
 

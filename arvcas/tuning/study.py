@@ -38,9 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from .. import gains as gains_mod
-from .. import tomlfile
-from .. import scenario as scenario_mod
+from arvcas.controllers import gains as gains_mod
+from arvcas import tomlfile
+from arvcas.sim import scenario as scenario_mod
 
 __all__ = [
     "StudyError", "Study", "AlgorithmConfig", "TerminationConfig", "ObjectivesConfig", "EngineConfig",

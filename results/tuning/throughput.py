@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from arvcas.gains import default_gains
-from arvcas.simulation import simulate_batch
+from arvcas.controllers.gains import default_gains
+from arvcas.sim.simulation import simulate_batch
 
 N = 64
 REPS = 10

@@ -4,9 +4,9 @@
 with the traditional decreasing law (Fig. 10), each with its Table 2 gains, one seed for all (common
 random numbers), and writes into ``out_dir``::
 
-    proposed.h5  agsta.h5  traditional.h5     result files (arvcas.results layout)
+    proposed.h5  agsta.h5  traditional.h5     result files (arvcas.io.results layout)
     table3.md                                 paper's Table 3 and ours, ratios, the SPEC 6 checks
-    fig05.png ... fig11.png                   the paper's Figures 5-11 (arvcas.plots)
+    fig05.png ... fig11.png                   the paper's Figures 5-11 (arvcas.io.plots)
 
 Every file is written atomically (temporary name in ``out_dir``, then ``os.replace``).
 """
@@ -21,10 +21,13 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from . import __version__, gains as gains_mod, metrics, plots, results, scenario
-from .results import ResultsError
-from .scenario import ScenarioConfig
-from .simulation import Result, simulate
+from arvcas import __version__, metrics
+from arvcas.controllers import gains as gains_mod
+from arvcas.io import plots, results
+from arvcas.sim import scenario
+from arvcas.io.results import ResultsError
+from arvcas.sim.scenario import ScenarioConfig
+from arvcas.sim.simulation import Result, simulate
 
 __all__ = ["run_paper", "table3_markdown", "compare", "CONTROLLERS", "FIGURE_FILES", "RMSE_TOLERANCE"]
 

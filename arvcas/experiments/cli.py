@@ -1,11 +1,11 @@
-"""Command-line entries of :mod:`arvcas.beyond`: ``sweep``, ``montecarlo``, ``front robust`` and
+"""Command-line entries of :mod:`arvcas.experiments`: ``sweep``, ``montecarlo``, ``front robust`` and
 ``compare`` on Monte Carlo files.
 
 :func:`register` adds ``sweep`` and ``montecarlo`` to :data:`arvcas.cli.COMMANDS` and extends the
 tuning package's commands, which must be registered first: ``front`` gains the action ``robust``
 (through argparse's public API: the ``front`` parser's sub-parsers action is captured while the
 tuning package builds it) and ``compare`` dispatches on the file type (two fronts: the tuning
-package's comparison; two Monte Carlo files: :func:`arvcas.beyond.montecarlo.compare_markdown`).
+package's comparison; two Monte Carlo files: :func:`arvcas.experiments.montecarlo.compare_markdown`).
 No file of the tuning package is edited. Each ``_run_*`` calls a library function with typed
 arguments; errors are ValueError/OSError (one line via arvcas.cli).
 """
@@ -62,10 +62,10 @@ def _add_sweep(p: argparse.ArgumentParser) -> None:
 
 
 def _run_sweep(a: argparse.Namespace) -> int:
-    from .. import scenario
-    from ..params import load
-    from . import _io
-    from .sweep import CONTROLLERS, reproduce_sweep, run_sweep, sweep_markdown, write_sweep_dir
+    from arvcas.sim import scenario
+    from arvcas.params import load
+    from arvcas.experiments import _io
+    from arvcas.experiments.sweep import CONTROLLERS, reproduce_sweep, run_sweep, sweep_markdown, write_sweep_dir
 
     if a.check is not None:
         if a.h is not None or a.out is not None:
@@ -113,10 +113,10 @@ def _add_montecarlo(p: argparse.ArgumentParser) -> None:
 
 
 def _run_montecarlo(a: argparse.Namespace) -> int:
-    from .. import scenario
-    from ..params import load
-    from . import _io
-    from .montecarlo import read_montecarlo, reproduce, run_montecarlo, summary_markdown, write_montecarlo
+    from arvcas.sim import scenario
+    from arvcas.params import load
+    from arvcas.experiments import _io
+    from arvcas.experiments.montecarlo import read_montecarlo, reproduce, run_montecarlo, summary_markdown, write_montecarlo
 
     if a.check is not None:
         if any(v is not None for v in (a.controller, a.runs, a.out, a.from_front)):
@@ -130,7 +130,7 @@ def _run_montecarlo(a: argparse.Namespace) -> int:
         print(f"{a.check}: reproduced bit for bit ({old.runs} runs: draws, chat, rmse, ok, t_fail)")
         return 0
     if a.draws_toml:
-        from .montecarlo import draw, draws_toml
+        from arvcas.experiments.montecarlo import draw, draws_toml
 
         if a.runs is None:
             raise ValueError("--draws-toml: give --runs K")
@@ -142,12 +142,12 @@ def _run_montecarlo(a: argparse.Namespace) -> int:
     cfg = scenario.load_scenario(a.config)
     controller, gains, source, front_path = a.controller, None, None, None
     if a.from_front is not None:
-        from .robust import front_member
+        from arvcas.experiments.robust import front_member
 
         if a.index is None:
             raise ValueError("--from-front needs --index I (or --index knee)")
         controller_f, gains, cfg_text, source = front_member(a.from_front, a.index)
-        from ..tuning.front import resolve_front_path
+        from arvcas.tuning.front import resolve_front_path
 
         front_path = str(resolve_front_path(a.from_front))
         if controller is not None and controller != controller_f:
@@ -200,9 +200,9 @@ def _add_robust(sub) -> None:
 
 
 def _run_robust(a: argparse.Namespace) -> int:
-    from ..tuning.front import resolve_front_path
-    from . import _io
-    from .robust import robust_front, robust_markdown, write_robust_dir
+    from arvcas.tuning.front import resolve_front_path
+    from arvcas.experiments import _io
+    from arvcas.experiments.robust import robust_front, robust_markdown, write_robust_dir
 
     out = a.out if a.out is not None else resolve_front_path(a.file).parent
     _io.prepare_dir(out, f"--out {out}")
@@ -216,13 +216,13 @@ def _run_robust(a: argparse.Namespace) -> int:
 
 def _with_robust(front):
     """The tuning package's ``front`` command with the ``robust`` action added."""
-    from ..cli import Command
+    from arvcas.cli import Command
 
     def add(p: argparse.ArgumentParser) -> None:
         cap = _CaptureSubparsers(p)
         front.add_arguments(cap)
         if cap.subparsers is None:
-            raise RuntimeError("arvcas.beyond: the 'front' command has no actions to extend")
+            raise RuntimeError("arvcas.experiments: the 'front' command has no actions to extend")
         _add_robust(cap.subparsers)
 
     def run(a: argparse.Namespace) -> int:
@@ -237,15 +237,15 @@ def _with_robust(front):
 
 def _run_compare_mc(a: argparse.Namespace, kind: str) -> int:
     """``kind``: "montecarlo" (two Monte Carlo files) or "robust" (two robust.h5 of ``front robust``)."""
-    from . import _io
+    from arvcas.experiments import _io
 
     if kind == "montecarlo":
-        from .montecarlo import compare_markdown as markdown, is_montecarlo_file as is_kind, plot_compare as plot
-        from .montecarlo import read_montecarlo as read
+        from arvcas.experiments.montecarlo import compare_markdown as markdown, is_montecarlo_file as is_kind, plot_compare as plot
+        from arvcas.experiments.montecarlo import read_montecarlo as read
         what = "Monte Carlo file"
     else:
-        from .robust import compare_robust_markdown as markdown, is_robust_file as is_kind
-        from .robust import plot_compare_robust as plot, read_robust as read
+        from arvcas.experiments.robust import compare_robust_markdown as markdown, is_robust_file as is_kind
+        from arvcas.experiments.robust import plot_compare_robust as plot, read_robust as read
         what = "robust-front file (front robust)"
     for p in (a.a, a.b):
         if not is_kind(p):
@@ -271,7 +271,7 @@ def _run_compare_mc(a: argparse.Namespace, kind: str) -> int:
 def _with_montecarlo_compare(compare):
     """The tuning package's ``compare`` command, dispatching to the paired Monte Carlo comparison when
     given Monte Carlo files (``format = "arvcas-montecarlo"``) instead of fronts."""
-    from ..cli import Command
+    from arvcas.cli import Command
 
     def add(p: argparse.ArgumentParser) -> None:
         compare.add_arguments(p)
@@ -279,8 +279,8 @@ def _with_montecarlo_compare(compare):
                        help="Monte Carlo or robust-front files: also write the comparison as Markdown")
 
     def run(a: argparse.Namespace) -> int:
-        from .montecarlo import is_montecarlo_file
-        from .robust import is_robust_file
+        from arvcas.experiments.montecarlo import is_montecarlo_file
+        from arvcas.experiments.robust import is_robust_file
 
         if is_montecarlo_file(a.a) or is_montecarlo_file(a.b):
             return _run_compare_mc(a, "montecarlo")
@@ -296,7 +296,7 @@ def _with_montecarlo_compare(compare):
 
 def register(commands: dict) -> None:
     """Add this package's subcommands to the ``arvcas`` command registry (``arvcas.cli.COMMANDS``)."""
-    from ..cli import Command
+    from arvcas.cli import Command
 
     commands["sweep"] = Command(
         "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 (table, plot)",

@@ -18,7 +18,7 @@ disturbance phases and model parameters are inputs: a new gain set or seed never
 
 What depends on time but not on the state (the arm's trajectory and the terms of its wrench that
 follow from it, the LU factors of ``M + M_arm``, the disturbance's ``sin``/``cos`` of time) comes in
-as the run's last input, the time table of :mod:`arvcas.schedule`, one column per sample with the
+as the run's last input, the time table of :mod:`arvcas.sim.schedule`, one column per sample with the
 records of its RK4 stage times: computed once per (scenario, p), shared by every run of a batch.
 """
 
@@ -29,13 +29,14 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from . import gains as gains_mod
-from . import manipulator, scenario, schedule, thrusters, vehicle
-from .controllers import atd, gsta, reso
-from .params import SCHEMA, view
-from .scenario import ScenarioConfig
-from .spatial import J, J_dot, J_inv
-from .uvms import ModelOptions, coupled_terms_scheduled
+from arvcas.controllers import gains as gains_mod
+from arvcas.model import manipulator, thrusters, vehicle
+from arvcas.sim import scenario, schedule
+from arvcas.controllers import atd, gsta, reso
+from arvcas.params import SCHEMA, view
+from arvcas.sim.scenario import ScenarioConfig
+from arvcas.model.spatial import J, J_dot, J_inv
+from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
 
 __all__ = ["Layout", "build_step", "build_run", "TRACE_FIELDS", "derived_constants"]
 
@@ -163,7 +164,7 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
 
     An MX function calling three generated SX functions: the controller part, ``h / h_plant`` RK4
     substeps of the plant, and the divergence check. ``sched_*_k`` are column k of the run's time
-    table (:class:`arvcas.schedule.Table`): the records at the sample's RK4 stage times. Without ``trace`` the
+    table (:class:`arvcas.sim.schedule.Table`): the records at the sample's RK4 stage times. Without ``trace`` the
     per-sample outputs that only the trace needs (e.g. ``f_true``) are not computed.
     """
     controller, cfg, opts = spec.controller, spec.cfg, spec.opts
@@ -344,7 +345,7 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
 
     ``ekf = [q_eta, q_nu, var_position, var_attitude, var_velocity]``: EKF process noise per step and
     the sensor variances its R assumes (the noise input itself is drawn outside). ``sched_time`` and
-    ``sched_arm`` are the time table of (scenario, p) from :func:`arvcas.schedule.table` (the same for
+    ``sched_arm`` are the time table of (scenario, p) from :func:`arvcas.sim.schedule.table` (the same for
     every gain set, seed and controller, so a batch computes it once).
 
     ``trace=False``: outputs (chat[6], rmse[6], ok, t_fail); ``trace=True``: also the per-sample trace.

@@ -1,4 +1,4 @@
-"""The paper's Figures 5-11 from :class:`arvcas.simulation.Result` objects.
+"""The paper's Figures 5-11 from :class:`arvcas.sim.simulation.Result` objects.
 
 Every function takes results and an optional ``fig`` (an empty :class:`matplotlib.figure.Figure`
 to draw into) and returns the Figure; nothing here calls ``pyplot`` (no global figure registry, no
@@ -29,9 +29,9 @@ from collections.abc import Iterable
 import numpy as np
 from matplotlib.figure import Figure
 
-from . import gains as gains_mod
-from .params import SCHEMA as PARAM_SCHEMA
-from .params import load as load_params
+from arvcas.controllers import gains as gains_mod
+from arvcas.params import SCHEMA as PARAM_SCHEMA
+from arvcas.params import load as load_params
 
 __all__ = [
     "plot_states", "plot_errors", "plot_thrusts", "plot_sliding", "plot_gains", "plot_zigzag",

@@ -18,7 +18,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from . import tomlfile
+from arvcas import tomlfile
 
 __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
@@ -292,7 +292,7 @@ def disturbance_tabulated(cfg: ScenarioConfig, dist_sin, dist_cos, phase_cs):
     """eq. 41 from tabulated ``sin(freq t)``, ``cos(freq t)`` and ``phase_cs = [cos(phase); sin(phase)]``.
 
     ``sin(w t + phase) = sin(w t) cos(phase) + cos(w t) sin(phase)``: the run tabulates the time part
-    once (:mod:`arvcas.schedule`) and the phase part once per run.
+    once (:mod:`arvcas.sim.schedule`) and the phase part once per run.
     """
     off, amp = ca.DM(cfg.disturbance_offset), ca.DM(cfg.disturbance_amplitude)
     return off + amp * (dist_sin * phase_cs[0:6] + dist_cos * phase_cs[6:12])

@@ -1,6 +1,6 @@
 """Result files: the HDF5 layout of one closed-loop run, in one place.
 
-:func:`write_result` stores a :class:`arvcas.simulation.Result`; :func:`read_result` gives it back,
+:func:`write_result` stores a :class:`arvcas.sim.simulation.Result`; :func:`read_result` gives it back,
 field for field (arrays bit for bit).
 
 Layout (``format = "arvcas-result"``, ``format_version = 1``)
@@ -55,10 +55,10 @@ import casadi as ca
 import h5py
 import numpy as np
 
-from . import gains as gains_mod
-from .closedloop import TRACE_FIELDS
-from .params import SCHEMA as PARAM_SCHEMA
-from .simulation import Result
+from arvcas.controllers import gains as gains_mod
+from arvcas.sim.closedloop import TRACE_FIELDS
+from arvcas.params import SCHEMA as PARAM_SCHEMA
+from arvcas.sim.simulation import Result
 
 __all__ = ["ResultsError", "write_result", "read_result", "check_dir", "FORMAT", "FORMAT_VERSION", "DATASETS"]
 
@@ -166,7 +166,7 @@ def _status(result: Result) -> str:
 def _collect(result: Result) -> tuple[dict[str, np.ndarray], dict[str, object]]:
     """Validate the Result and turn it into (datasets, root attributes); raises ResultsError."""
     if not isinstance(result, Result):
-        raise ResultsError(f"write_result: expected arvcas.simulation.Result, got {type(result).__name__}")
+        raise ResultsError(f"write_result: expected arvcas.sim.simulation.Result, got {type(result).__name__}")
     try:
         gains_mod.check_controller(result.controller)
     except ValueError as e:

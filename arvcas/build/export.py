@@ -1,6 +1,6 @@
 """Export the public plant functions as a standalone C library with a Makefile, an example and a README.
 
-Nothing here runs a compiler (that is :mod:`arvcas.codegen`'s job): the output directory holds
+Nothing here runs a compiler (that is :mod:`arvcas.build.codegen`'s job): the output directory holds
 sources only, and ``make`` there builds ``libarvcas_plant.so`` and ``example``.
 """
 
@@ -88,7 +88,7 @@ def _c_double(v: float) -> str:
 
 
 def _si_unit(dimension: str) -> str:
-    from .params import UNITS
+    from arvcas.params import UNITS
 
     return next(u for u, (dim, factor) in UNITS.items() if dim == dimension and factor == 1.0)
 
@@ -98,8 +98,8 @@ def _macro(name: str) -> str:
 
 
 def _params_header(P, opts) -> str:
-    from . import __version__
-    from .params import SCHEMA
+    from arvcas import __version__
+    from arvcas.params import SCHEMA
 
     names = P.names()
     values = P.vector()
@@ -264,7 +264,7 @@ def _shape(f: ca.Function, i: int, out: bool) -> str:
 
 
 def _readme(fns: dict[str, ca.Function], opts, P, inputs: dict[str, np.ndarray]) -> str:
-    from . import __version__
+    from arvcas import __version__
 
     lines = [
         "# arvcas plant functions in C",
@@ -312,18 +312,18 @@ def _readme(fns: dict[str, ca.Function], opts, P, inputs: dict[str, np.ndarray])
 def export_c(out_dir, opts=None, params=None) -> list[Path]:
     """Write the C library sources, default parameters, Makefile, example and README into ``out_dir``.
 
-    ``opts``: :class:`arvcas.uvms.ModelOptions` (default ``ModelOptions()``); ``params``: a
+    ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``params``: a
     :class:`arvcas.params.Params` for the defaults in ``params_default.h`` (default: the packaged
     file). ``out_dir`` is created if its parent exists. Returns the written paths, in :data:`FILES`
     order. Raises :class:`ExportError` (a ValueError) for an unusable ``out_dir``.
     """
-    from .params import Params, load
-    from .uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
+    from arvcas.params import Params, load
+    from arvcas.model.uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
 
     out = _check_out_dir(out_dir)
     opts = ModelOptions() if opts is None else opts
     if not isinstance(opts, ModelOptions):
-        raise ValueError(f"export-c: opts must be arvcas.uvms.ModelOptions, got {type(opts).__name__}")
+        raise ValueError(f"export-c: opts must be arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
     P = load() if params is None else params
     if not isinstance(P, Params):
         raise ValueError(f"export-c: params must be arvcas.params.Params, got {type(P).__name__}")

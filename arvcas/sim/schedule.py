@@ -16,8 +16,8 @@ of the run, so most stage times repeat the one before (equal inputs, bitwise equ
 batch of runs, or once per process for repeated single runs (:func:`table` keeps the last few).
 It is the same for every controller, gain set and seed.
 
-Exactness: :func:`arvcas.manipulator.arm_wrench_scheduled` with these terms equals the recursive
-Newton-Euler :func:`arvcas.manipulator.arm_wrench` to round-off (tests/test_schedule.py).
+Exactness: :func:`arvcas.model.manipulator.arm_wrench_scheduled` with these terms equals the recursive
+Newton-Euler :func:`arvcas.model.manipulator.arm_wrench` to round-off (tests/test_schedule.py).
 """
 
 from __future__ import annotations
@@ -30,11 +30,13 @@ from typing import NamedTuple
 import casadi as ca
 import numpy as np
 
-from . import calls, codegen, manipulator, scenario, vehicle
-from .linalg import lu_nopivot, lu_pack, lu_unpack
-from .params import SCHEMA, view
-from .scenario import ScenarioConfig
-from .uvms import ModelOptions
+from arvcas.build import calls, codegen
+from arvcas.model import manipulator, vehicle
+from arvcas.sim import scenario
+from arvcas.model.linalg import lu_nopivot, lu_pack, lu_unpack
+from arvcas.params import SCHEMA, view
+from arvcas.sim.scenario import ScenarioConfig
+from arvcas.model.uvms import ModelOptions
 
 __all__ = [
     "RECORD_FIELDS", "RECORD_SIZE", "ARM_FIELDS", "ARM_SIZE", "TIME_FIELDS", "TIME_SIZE", "Table",
@@ -188,7 +190,7 @@ class Table(NamedTuple):
 def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions()) -> Table:
     """The run's time table for (scenario, parameter vector ``p``), kept for the last few in this process.
 
-    Fortran-ordered arrays, so the run reads them in place (:func:`arvcas.calls.call`).
+    Fortran-ordered arrays, so the run reads them in place (:func:`arvcas.build.calls.call`).
     """
     p = np.ascontiguousarray(p, dtype=float).ravel()
     key = (cfg.graph_key(), hashlib.sha256(p.tobytes()).hexdigest(), opts)

@@ -32,11 +32,13 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from .. import gains as gains_mod, metrics, scenario
-from ..params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
-from ..scenario import ScenarioConfig
-from ..simulation import simulate
-from . import _io
+from arvcas.controllers import gains as gains_mod
+from arvcas import metrics
+from arvcas.sim import scenario
+from arvcas.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
+from arvcas.sim.scenario import ScenarioConfig
+from arvcas.sim.simulation import simulate
+from arvcas.experiments import _io
 
 __all__ = ["Sweep", "zigzag", "zigzag_time_fraction", "run_sweep", "reproduce_sweep", "write_sweep", "read_sweep",
            "sweep_markdown", "plot_sweep", "write_sweep_dir", "CONTROLLERS", "FORMAT", "FORMAT_VERSION"]
@@ -122,7 +124,7 @@ def run_sweep(hs: Sequence[float], controllers: Sequence[str] = CONTROLLERS, see
     and ``h``, cached on disk); the Table 2 gains unless ``gains[controller]`` is given.
 
     ``noise_scale`` multiplies the sensor noise (0: perfect measurements, the EKF unchanged), as in
-    :func:`arvcas.simulation.simulate`: it separates discretisation chattering from noise.
+    :func:`arvcas.sim.simulation.simulate`: it separates discretisation chattering from noise.
     """
     say = progress or (lambda _m: None)
     cfg = cfg if cfg is not None else scenario.load_scenario()

@@ -11,7 +11,7 @@ master seed draws, for each run ``i`` independently,
   traditional, implicit) know only ``Mhat = diag(M)``, which is not drawn;
 - the six disturbance phases of eq. 41, uniform in ``[0, 2 pi)``;
 
-and all runs go to the compiled run as one batch (:func:`arvcas.simulation.simulate_many`).
+and all runs go to the compiled run as one batch (:func:`arvcas.sim.simulation.simulate_many`).
 
 Draw rule: ``numpy.random.SeedSequence(master_seed).spawn(runs)``; child ``i`` seeds
 ``numpy.random.default_rng``, which then draws, in this order, ``integers(0, 2**62)`` (noise seed),
@@ -39,14 +39,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import codegen, gains as gains_mod, metrics, scenario
-from ..params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
-from ..results import ResultsError
-from ..scenario import ScenarioConfig
-from ..simulation import run_function, simulate_many
-from ..uvms import ModelOptions
-from . import _io
-from .stats import Interval, mean_ci, median_ci, paired_ci, paired_median_ci, welch_ci, wilson
+from arvcas.build import codegen
+from arvcas.controllers import gains as gains_mod
+from arvcas import metrics
+from arvcas.sim import scenario
+from arvcas.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
+from arvcas.io.results import ResultsError
+from arvcas.sim.scenario import ScenarioConfig
+from arvcas.sim.simulation import run_function, simulate_many
+from arvcas.model.uvms import ModelOptions
+from arvcas.experiments import _io
+from arvcas.experiments.stats import Interval, mean_ci, median_ci, paired_ci, paired_median_ci, welch_ci, wilson
 
 __all__ = [
     "Draws", "MonteCarlo", "draw", "run_montecarlo", "write_montecarlo", "read_montecarlo", "reproduce",

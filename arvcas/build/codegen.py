@@ -216,7 +216,7 @@ def _compiler_id() -> str:
 
 
 def _key(c_text: str, compiler: str, cmd_flags: list[str]) -> str:
-    from . import __version__ as arvcas_version  # late: arvcas/__init__ may import this module
+    from arvcas import __version__ as arvcas_version  # late: arvcas/__init__ may import this module
 
     h = hashlib.sha256()
     for part in ("arvcas-build-1", c_text, compiler, "\0".join(cmd_flags), ca.__version__, arvcas_version):
@@ -351,7 +351,7 @@ def _compile(plan: _Plan, work: Path) -> tuple[Path, float]:
 
 
 def _manifest(plan: _Plan, so_sha256: str, compile_s: float) -> dict:
-    from . import __version__ as arvcas_version
+    from arvcas import __version__ as arvcas_version
 
     return {
         "format": MANIFEST_FORMAT,
@@ -491,19 +491,19 @@ def artifact_of(f: ca.Function) -> dict | None:
 
 
 def compiled(name: str, opts=None) -> ca.Function:
-    """The public plant function ``name`` (see :data:`arvcas.uvms.PUBLIC_FUNCTIONS`), compiled to C.
+    """The public plant function ``name`` (see :data:`arvcas.model.uvms.PUBLIC_FUNCTIONS`), compiled to C.
 
-    ``opts`` is an :class:`arvcas.uvms.ModelOptions` (default: ``ModelOptions()``). Memoized per
+    ``opts`` is an :class:`arvcas.model.uvms.ModelOptions` (default: ``ModelOptions()``). Memoized per
     process by ``(name, opts.tag())``; the library comes from the build cache when it is there.
     """
-    from .uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
+    from arvcas.model.uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
 
     if name not in PUBLIC_FUNCTIONS:
         raise ValueError(f"unknown plant function {name!r}; allowed: {', '.join(PUBLIC_FUNCTIONS)}")
     if opts is None:
         opts = ModelOptions()
     if not isinstance(opts, ModelOptions):
-        raise ValueError(f"opts: expected arvcas.uvms.ModelOptions, got {type(opts).__name__}")
+        raise ValueError(f"opts: expected arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
     tag = opts.tag()
     with _LOCK:
         f = _COMPILED.get((name, tag))

@@ -11,7 +11,7 @@ import math
 
 import casadi as ca
 
-from .spatial import J, Rzyx, skew
+from arvcas.model.spatial import J, Rzyx, skew
 
 __all__ = ["r_G", "I_b", "M_RB", "M_A", "M", "C_RB", "D", "g_vec", "delta_s_term", "rhs"]
 

@@ -1,7 +1,7 @@
 """Python API of the closed-loop experiment: :func:`simulate`, :func:`simulate_batch`, :class:`Result`.
 
 Both call compiled C (the whole run is one CasADi function, built once and cached by content hash):
-a new gain set, seed or parameter value never recompiles. The run's time table (:mod:`arvcas.schedule`:
+a new gain set, seed or parameter value never recompiles. The run's time table (:mod:`arvcas.sim.schedule`:
 the arm's and the disturbance's time-only terms) is computed once per (scenario, p) and shared by
 every run of a batch.
 """
@@ -14,10 +14,13 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from . import __version__, calls, closedloop, codegen, gains as gains_mod, scenario, schedule
-from .params import Params, load as load_params
-from .scenario import ScenarioConfig
-from .uvms import ModelOptions
+from arvcas import __version__
+from arvcas.build import calls, codegen
+from arvcas.sim import closedloop, scenario, schedule
+from arvcas.controllers import gains as gains_mod
+from arvcas.params import Params, load as load_params
+from arvcas.sim.scenario import ScenarioConfig
+from arvcas.model.uvms import ModelOptions
 
 __all__ = ["Result", "simulate", "simulate_batch", "simulate_many", "default_gains", "run_function", "SimulationError"]
 

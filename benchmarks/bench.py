@@ -56,8 +56,12 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from . import __version__, calls, closedloop, codegen, export, gains as gains_mod, scenario, schedule, simulation, uvms
-from .params import load as load_params
+from arvcas import __version__
+from arvcas.build import calls, codegen, export
+from arvcas.sim import closedloop, scenario, schedule, simulation
+from arvcas.controllers import gains as gains_mod
+from arvcas.model import uvms
+from arvcas.params import load as load_params
 
 __all__ = ["BenchError", "Settings", "run", "write", "render_markdown", "REQUIRED_KEYS"]
 
@@ -949,7 +953,7 @@ def render_markdown(res: dict) -> str:
     b = cl["batch"]
     L += [
         "",
-        f"The run's time table (`arvcas.schedule`: the arm's and the disturbance's time-only terms at every "
+        f"The run's time table (`arvcas.sim.schedule`: the arm's and the disturbance's time-only terms at every "
         f"RK4 stage time) takes {_g(_m(cl['table_s']))} s ({_spread(cl['table_s'])}) to build. It depends only "
         f"on the scenario and the parameters, so a batch builds it once and `simulate` keeps the last few; "
         f"the metrics-only and trace rows reuse it, the second row builds it every time.",

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from . import manipulator, thrusters, vehicle
-from .linalg import lu_solve, solve_nopivot
-from .params import SCHEMA
-from .spatial import J
+from arvcas.model import manipulator, thrusters, vehicle
+from arvcas.model.linalg import lu_solve, solve_nopivot
+from arvcas.params import SCHEMA
+from arvcas.model.spatial import J
 
 __all__ = ["ModelOptions", "coupled_terms", "coupled_terms_scheduled", "coupled_accel", "uvms_xdot", "plant_functions", "PUBLIC_FUNCTIONS"]
 
@@ -52,10 +52,10 @@ def coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOp
 
 
 def coupled_terms_scheduled(P, eta, nu, tau, rec: dict, tau_extra, opts: ModelOptions):
-    """:func:`coupled_terms` from a record of the run's time table (:func:`arvcas.schedule.unpack`).
+    """:func:`coupled_terms` from a record of the run's time table (:func:`arvcas.sim.schedule.unpack`).
 
     The same equations: the arm's wrench from its time-only terms and the vehicle state
-    (:func:`arvcas.manipulator.arm_wrench_scheduled`), and ``(M + M_arm) nu_dot = b`` by the tabulated
+    (:func:`arvcas.model.manipulator.arm_wrench_scheduled`), and ``(M + M_arm) nu_dot = b`` by the tabulated
     LU factors. Equal to :func:`coupled_terms` to round-off.
     """
     tm0 = manipulator.arm_wrench_scheduled(P, rec, eta, nu, opts.n_quad)
@@ -80,7 +80,7 @@ def uvms_xdot(P, x, tau, q, qd, qdd, payload, opts: ModelOptions, trim=None):
 
 def plant_functions(opts: ModelOptions = ModelOptions()) -> dict[str, ca.Function]:
     """The public plant functions (issue 2), as SX Functions, by their exact names and input orders."""
-    from .params import view
+    from arvcas.params import view
 
     p = ca.SX.sym("p", NP)
     P = view(p)

@@ -1,4 +1,4 @@
-"""Atomic file writes and the provenance attributes every ``arvcas.beyond`` file carries."""
+"""Atomic file writes and the provenance attributes every ``arvcas.experiments`` file carries."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import casadi as ca
 import h5py
 import numpy as np
 
-from .. import __version__
-from ..results import ResultsError, atomic_write, check_dir
+from arvcas import __version__
+from arvcas.io.results import ResultsError, atomic_write, check_dir
 
 __all__ = ["atomic_write", "write_text", "provenance", "prepare_dir", "target", "str_attr", "check_format"]
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import casadi as ca
 
-from . import hydro
-from .spatial import Rx, Rz, Rzyx, skew
+from arvcas.model import hydro
+from arvcas.model.spatial import Rx, Rz, Rzyx, skew
 
 __all__ = [
     "N_JOINTS", "dh", "link_vectors", "link_inertia", "forward_kinematics", "rnea", "arm_wrench",
@@ -238,7 +238,7 @@ def arm_schedule(P, q, qd, qdd, payload) -> dict:
     - ``W`` (kg): mass minus displaced water of the arm + payload, ``S`` (kg m): its first moment in {b},
     - ``drag_frames``: per link, in {b}, the angular velocity ``Omega`` of the joint motion, the origin
       ``r`` (from the COB) and its velocity ``V`` from the joint motion, and a basis ``e1, e2`` of the
-      plane normal to the link (:func:`arvcas.hydro.normal_basis`): the drag's geometry
+      plane normal to the link (:func:`arvcas.model.hydro.normal_basis`): the drag's geometry
       (:func:`drag_wrench`).
 
     The payload fraction enters as a mass, not differentiated in time, like :func:`rnea`'s point mass.
@@ -310,7 +310,7 @@ def drag_wrench(P, nu, frames, n_quad: int = 5):
     Everything in {b}: link i turns at ``w_i = w + Omega_i`` and its origin moves at
     ``v + w x r_i + V_i`` (the vehicle's ``nu = [v; w]`` plus the joint motion); the normal velocity
     along the link, in the basis ``e1, e2``, is affine in x and integrated by
-    :func:`arvcas.hydro.planar_drag`. ``frames``: the ``drag_frames`` of :func:`arm_schedule`.
+    :func:`arvcas.model.hydro.planar_drag`. ``frames``: the ``drag_frames`` of :func:`arm_schedule`.
     Equals the drag in :func:`rnea` (test_schedule.py).
     """
     rho, Cd = P["env.rho"], P["env.Cd"]

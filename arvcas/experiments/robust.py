@@ -33,12 +33,14 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from .. import gains as gains_mod, metrics, scenario
-from ..params import SCHEMA as PARAM_SCHEMA, load as load_params
-from ..simulation import simulate_many
-from . import _io
-from .montecarlo import CHUNK, DRAW_RULE, Draws, draw
-from .stats import mean_ci, paired_ci, wilson
+from arvcas.controllers import gains as gains_mod
+from arvcas import metrics
+from arvcas.sim import scenario
+from arvcas.params import SCHEMA as PARAM_SCHEMA, load as load_params
+from arvcas.sim.simulation import simulate_many
+from arvcas.experiments import _io
+from arvcas.experiments.montecarlo import CHUNK, DRAW_RULE, Draws, draw
+from arvcas.experiments.stats import mean_ci, paired_ci, wilson
 
 __all__ = ["RobustFront", "front_member", "robust_front", "write_robust", "read_robust", "robust_markdown",
            "plot_robust", "write_robust_dir", "compare_robust", "compare_robust_markdown", "plot_compare_robust",
@@ -49,7 +51,7 @@ FORMAT_VERSION = 1
 
 
 def _front(path):
-    from ..tuning.front import read_front
+    from arvcas.tuning.front import read_front
 
     return read_front(path)
 
@@ -148,7 +150,7 @@ def robust_front(path, runs: int, seed: int = 0, spread: float = 0.3, n_threads:
     cfg = scenario.loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)") if fr.scenario_text \
         else scenario.load_scenario()
     params = load_params()
-    from ..tuning.checkpoint import read_checkpoint
+    from arvcas.tuning.checkpoint import read_checkpoint
 
     if not np.array_equal(params.vector(), read_checkpoint(fr.path).params):
         raise ValueError(f"{fr.path}: the study used other parameter values than the packaged file")

@@ -1,0 +1,1 @@
+"""Files and figures: HDF5 results (:mod:`.results`) and plots (:mod:`.plots`)."""
