@@ -86,7 +86,7 @@ SI = "SI"  # accepted for every dimension, factor 1
 
 # The largest table a scenario or a study may ask the run to hold (documented in README/issue 11):
 # the 100 s paper run's time table is 36 MB; a request beyond this is refused before any work.
-MEMORY_CAP_BYTES = 2 * 1024**3
+MEMORY_CAP_BYTES = 2_000_000_000
 
 
 class Invalid(Exception):
@@ -178,6 +178,7 @@ class Spec:
     n: int | None = None  # length of a tuple[float, ...]
     required: bool = False  # required in the file although the dataclass has a default
     scalar_ok: bool = False  # a tuple[str, ...] may be written as one string
+    per: str | None = None  # a quantity per step, per sample...: its unit may end in " per <per>"
     doc: str = ""
 
 
@@ -195,8 +196,11 @@ def _field(spec: Spec, default: Any, default_factory: Any) -> Any:
 
 def quantity(dim: str | tuple[str, ...], *rules: Any, default: Any = dataclasses.MISSING,
              default_factory: Any = dataclasses.MISSING, unit: str | None = None, key: str | None = None,
-             n: int | None = None, required: bool = False, doc: str = "") -> Any:
-    """A physical number (or vector) of dimension ``dim``; ``rules`` apply to its SI value."""
+             n: int | None = None, required: bool = False, per: str | None = None, doc: str = "") -> Any:
+    """A physical number (or vector) of dimension ``dim``; ``rules`` apply to its SI value.
+
+    ``per``: the value is an amount per ``per`` (e.g. ``"step"``), and its unit string may say so
+    (``"m^2 or rad^2 per step"``); the qualifier does not change the factor."""
     dims = dim if isinstance(dim, tuple) else (dim,)
     for d in dims:
         for part in d.split(" or "):
@@ -208,7 +212,7 @@ def quantity(dim: str | tuple[str, ...], *rules: Any, default: Any = dataclasses
         n = len(dim)
     if unit is not None:
         _factor_of(unit, dims[0] if len(dims) == 1 else None)
-    return _field(Spec(dim=dim, rules=tuple(rules), unit=unit, key=key, n=n, required=required, doc=doc),
+    return _field(Spec(dim=dim, rules=tuple(rules), unit=unit, key=key, n=n, required=required, per=per, doc=doc),
                   default, default_factory)
 
 
@@ -231,6 +235,10 @@ def _factor_of(unit: str, dim: str | None) -> float:
 def si_unit(dim: str) -> str:
     """The SI unit string of a dimension (``"length or angle"`` -> ``"m or rad"``)."""
     return " or ".join(next(u for u, (d, f) in UNITS.items() if d == part and f == 1.0) for part in dim.split(" or "))
+
+
+def _a(dim: str) -> str:
+    return ("an " if dim[0] in "aeiou" else "a ") + dim
 
 
 def _allowed(dim: str) -> list[str]:
@@ -564,7 +572,7 @@ def _leaf(ctx: _Ctx, f: _F, v: Any, key: str, unit: str | None, pre: str) -> Any
     if f.kind == "float":
         dim = spec.dim if isinstance(spec.dim, str) else spec.dim[0]
         x = _number(ctx, v, key, pre)
-        fac = _unit_factor(ctx, unit, dim, key, "")
+        fac = _unit_factor(ctx, unit, dim, key, "", spec.per)
         si = x * fac
         _rules(ctx, spec, si, key, pre, dim, _shown(x, si, fac, unit))
         return si
@@ -575,10 +583,14 @@ def _leaf(ctx: _Ctx, f: _F, v: Any, key: str, unit: str | None, pre: str) -> Any
         xs = [_number(ctx, x, key, pre, f" (element {i + 1} of {n})") for i, x in enumerate(v)]
         dims = spec.dim if isinstance(spec.dim, tuple) else (spec.dim,) * n
         units = _split_units(ctx, unit, n, key)
+        if units is not None and unit is not None and "," not in unit and unit != SI and len(set(dims)) > 1:
+            example = ",".join(si_unit(d) for d in dims)
+            raise ctx.fail(key, f"one unit '{unit}' for elements of {' and '.join(dict.fromkeys(dims))}: "
+                                f"give one per element (e.g. '{example}') or two for the halves")
         out = []
         for i, x in enumerate(xs):
             el = f" of element {i + 1}" if units is not None and len(set(units)) > 1 else ""
-            fac = _unit_factor(ctx, None if units is None else units[i], dims[i], key, el)
+            fac = _unit_factor(ctx, None if units is None else units[i], dims[i], key, el, spec.per)
             si = x * fac
             _rules(ctx, spec, si, key, pre, dims[i], _shown(x, si, fac, None if units is None else units[i])
                    + f" (element {i + 1} of {n})")
@@ -605,22 +617,23 @@ def _split_units(ctx: _Ctx, unit: str | None, n: int, key: str) -> list[str] | N
                         f"(give one unit, one per element, or two for the halves)")
 
 
-def _unit_factor(ctx: _Ctx, unit: str | None, dim: str, key: str, el: str) -> float:
+def _unit_factor(ctx: _Ctx, unit: str | None, dim: str, key: str, el: str, per: str | None = None) -> float:
     """SI factor of ``unit`` for a value of dimension ``dim`` (None: the number is SI)."""
     if unit is None or unit == SI:
         return 1.0
     dims = dim.split(" or ")
-    parts = [u.strip() for u in unit.split(" or ")]
+    bare = unit[: -len(f" per {per}")] if per and unit.endswith(f" per {per}") else unit
+    parts = [u.strip() for u in bare.split(" or ")]
     allowed = ", ".join(_allowed(dim))
     if len(parts) != len(dims):
-        raise ctx.fail(key, f"unit '{unit}'{el} is not a {dim} (allowed: {allowed})")
+        raise ctx.fail(key, f"unit '{unit}'{el} is not {_a(dim)} (allowed: {allowed})")
     facs = []
     for u, d in zip(parts, dims):
         if u not in UNITS:
-            raise ctx.fail(key, f"unknown unit '{u}'{el} (allowed for a {dim}: {allowed})")
+            raise ctx.fail(key, f"unknown unit '{u}'{el} (allowed for {_a(dim)}: {allowed})")
         udim, fac = UNITS[u]
         if udim != d:
-            raise ctx.fail(key, f"unit '{unit}'{el} is not a {dim} (allowed: {allowed})")
+            raise ctx.fail(key, f"unit '{unit}'{el} is not {_a(dim)} (allowed: {allowed})")
         facs.append(fac)
     if len(set(facs)) != 1:
         raise ctx.fail(key, f"unit '{unit}'{el}: one number for {' and '.join(dims)} needs units of one scale "
