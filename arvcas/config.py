@@ -84,8 +84,10 @@ UNITS: dict[str, tuple[str, float]] = {
 DIMENSIONS: tuple[str, ...] = tuple(dict.fromkeys(d for d, _ in UNITS.values()))
 SI = "SI"  # accepted for every dimension, factor 1
 
-# The largest table a scenario or a study may ask the run to hold (documented in README/issue 11):
-# the 100 s paper run's time table is 36 MB; a request beyond this is refused before any work.
+# The largest table a scenario or a study may ask a run to hold, 2 GB: a request whose estimate is
+# larger is refused at load, before any work. The scenario's estimate is its time table
+# (arvcas.sim.scenario.table_bytes: 36 MB for the 100 s paper run at h_plant = 0.01 s), a study's the
+# per-draw metrics of one generation (arvcas.tuning.study).
 MEMORY_CAP_BYTES = 2_000_000_000
 
 
@@ -491,7 +493,7 @@ def _value(ctx: _Ctx, f: _F, v: Any, key: str) -> Any:
     if f.kind == "tables":
         if not isinstance(v, list) or not all(isinstance(d, dict) for d in v):
             raise ctx.fail(key, f"expected one or more [[{_schema_path(key)}]] tables, got {_got(v)}")
-        _count(ctx, f.spec, len(v), key, "tables")
+        _count(ctx, f.spec, len(v), key)
         return tuple(_table(ctx, f.sub, d, f"{key}[{j + 1}]") for j, d in enumerate(v))
     if f.kind == "map":
         if not isinstance(v, dict):
@@ -520,14 +522,14 @@ def _value(ctx: _Ctx, f: _F, v: Any, key: str) -> Any:
     return _leaf(ctx, f, v, key, unit, pre)
 
 
-def _count(ctx: _Ctx, spec: Spec, n: int, key: str, what: str) -> None:
+def _count(ctx: _Ctx, spec: Spec, n: int, key: str) -> None:
     for r in spec.rules:
         if isinstance(r, Count):
             why = f" ({r.why})" if r.why else ""
             if n < r.lo:
-                raise ctx.fail(key, f"needs at least {r.lo} {what}{why}, got {n}")
+                raise ctx.fail(key, f"must list at least {r.lo}{why}, got {n}")
             if r.hi is not None and n > r.hi:
-                raise ctx.fail(key, f"allows at most {r.hi} {what}{why}, got {n}")
+                raise ctx.fail(key, f"must list at most {r.hi}{why}, got {n}")
 
 
 def _number(ctx: _Ctx, v: Any, key: str, pre: str, suffix: str = "") -> float:
@@ -561,7 +563,7 @@ def _leaf(ctx: _Ctx, f: _F, v: Any, key: str, unit: str | None, pre: str) -> Any
         if not isinstance(items, list) or not all(isinstance(c, str) for c in items):
             what = "a name or an array of names" if spec.scalar_ok else "an array of strings"
             raise ctx.fail(key, f"{pre}must be {what}, got {_got(v)}")
-        _count(ctx, spec, len(items), key, "names")
+        _count(ctx, spec, len(items), key)
         _choices(ctx, spec, items, key, pre)
         if any(isinstance(r, Unique) for r in spec.rules):
             dup = next((c for i, c in enumerate(items) if c in items[:i]), None)
