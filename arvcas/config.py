@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import math
 import numbers
 import re
@@ -181,7 +182,6 @@ class Spec:
     required: bool = False  # required in the file although the dataclass has a default
     scalar_ok: bool = False  # a tuple[str, ...] may be written as one string
     per: str | None = None  # a quantity per step, per sample...: its unit may end in " per <per>"
-    doc: str = ""
 
 
 _META = "arvcas.config"
@@ -198,7 +198,7 @@ def _field(spec: Spec, default: Any, default_factory: Any) -> Any:
 
 def quantity(dim: str | tuple[str, ...], *rules: Any, default: Any = dataclasses.MISSING,
              default_factory: Any = dataclasses.MISSING, unit: str | None = None, key: str | None = None,
-             n: int | None = None, required: bool = False, per: str | None = None, doc: str = "") -> Any:
+             n: int | None = None, required: bool = False, per: str | None = None) -> Any:
     """A physical number (or vector) of dimension ``dim``; ``rules`` apply to its SI value.
 
     ``per``: the value is an amount per ``per`` (e.g. ``"step"``), and its unit string may say so
@@ -214,14 +214,14 @@ def quantity(dim: str | tuple[str, ...], *rules: Any, default: Any = dataclasses
         n = len(dim)
     if unit is not None:
         _factor_of(unit, dims[0] if len(dims) == 1 else None)
-    return _field(Spec(dim=dim, rules=tuple(rules), unit=unit, key=key, n=n, required=required, per=per, doc=doc),
+    return _field(Spec(dim=dim, rules=tuple(rules), unit=unit, key=key, n=n, required=required, per=per),
                   default, default_factory)
 
 
 def setting(*rules: Any, default: Any = dataclasses.MISSING, default_factory: Any = dataclasses.MISSING,
-            key: str | None = None, required: bool = False, scalar_ok: bool = False, doc: str = "") -> Any:
+            key: str | None = None, required: bool = False, scalar_ok: bool = False) -> Any:
     """A non-physical value (int, str, bool, section, list of tables) with its rules."""
-    return _field(Spec(rules=tuple(rules), key=key, required=required, scalar_ok=scalar_ok, doc=doc),
+    return _field(Spec(rules=tuple(rules), key=key, required=required, scalar_ok=scalar_ok),
                   default, default_factory)
 
 
@@ -345,11 +345,23 @@ class Leaf:
 
 def leaves(cls: type, prefix: str = "", attrs: tuple[str, ...] = ()) -> list[Leaf]:
     """Every leaf of ``cls`` (sections expanded, in declaration order)."""
+    if not prefix and not attrs:
+        cached = _LEAVES.get(cls)
+        if cached is None:
+            cached = _LEAVES[cls] = tuple(_leaves(cls, "", ()))
+        return list(cached)
+    return _leaves(cls, prefix, attrs)
+
+
+_LEAVES: dict[type, tuple[Leaf, ...]] = {}
+
+
+def _leaves(cls: type, prefix: str, attrs: tuple[str, ...]) -> list[Leaf]:
     out: list[Leaf] = []
     for f in _fields(cls):
         key = f"{prefix}{f.key}"
         if f.kind == "section":
-            out += leaves(f.sub, key + ".", attrs + (f.name,))
+            out += _leaves(f.sub, key + ".", attrs + (f.name,))
         else:
             out.append(Leaf(key, attrs + (f.name,), f.kind, f.spec, f.n))
     return out
@@ -668,9 +680,14 @@ def _equals(ctx: _Ctx, spec: Spec, v: Any, key: str, pre: str, shown: Any = None
             raise ctx.fail(key, f"{pre}must be {want!r}{why}, got {(v if shown is None else shown)!r}")
 
 
+@functools.lru_cache(maxsize=None)
+def _leaf_by_key(cls: type) -> dict[str, Leaf]:
+    return {x.key: x for x in leaves(cls)}
+
+
 def check_value(cls: type, key: str, value: Any, where: str, error: type[Exception]) -> Any:
     """Check an SI value against the rules of leaf ``key`` of ``cls`` (e.g. a value replaced at run time)."""
-    leaf = next((x for x in leaves(cls) if x.key == key), None)
+    leaf = _leaf_by_key(cls).get(key)
     if leaf is None:
         raise error(f"{where}: unknown key '{key}'{closest(key, [x.key for x in leaves(cls)])}")
     ctx = _Ctx(cls, where, error, entry_style=True)

@@ -271,7 +271,7 @@ def check_physical(values: Mapping[str, float], where: str) -> None:
     """
     from arvcas.model import manipulator, thrusters, vehicle  # the model imports this module
 
-    P = _NumView(values)
+    P = view(np.array([values[k] for k in SCHEMA], dtype=float))
     inertia = [f"vehicle.{k}" for k in ("Ixx", "Iyy", "Izz", "Ixy", "Iyz", "Ixz")]
     I_b = np.array(vehicle.I_b(P), dtype=float)
     lam = np.linalg.eigvalsh(I_b)
@@ -322,22 +322,6 @@ def check_physical(values: Mapping[str, float], where: str) -> None:
             raise _fail(where, keys, f"link {i} has zero length (diameter {values[f'arm.link{i}.diameter']:g} m, "
                                      f"drag coefficient env.Cd {values['env.Cd']:g}): its drag and inertia "
                                      f"are along its axis")
-
-
-class _NumView(Mapping[str, float]):
-    """Name access to plain floats (the model functions evaluate them to CasADi DM)."""
-
-    def __init__(self, values: Mapping[str, float]):
-        self._v = values
-
-    def __getitem__(self, name: str) -> float:
-        return float(self._v[name])
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._v)
-
-    def __len__(self) -> int:
-        return len(self._v)
 
 
 class _View(Mapping[str, Any]):

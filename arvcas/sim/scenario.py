@@ -12,7 +12,6 @@ import math
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
-from typing import Any
 
 import casadi as ca
 import numpy as np
