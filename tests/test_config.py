@@ -95,7 +95,7 @@ TEXT = default_scenario_path().read_text(encoding="utf-8")
 
 UNIT_FAULTS = [
     # the example: "degrees" used to be read silently as radians
-    ('unit = "deg", source = "SPEC 4" }', 'unit = "degrees", source = "SPEC 4" }',
+    ('0.0, 60.0, 0.0], unit = "deg"', '0.0, 60.0, 0.0], unit = "degrees"',
      "arm.qg: unknown unit 'degrees' (allowed for an angle: rad, deg)"),
     ('unit = "m,m,m,deg,deg,deg"', 'unit = "m,m,m,degrees,deg,deg"', "initial.eta0: unknown unit 'degrees' of element 4"),
     ('unit = "m,m,m,deg,deg,deg"', 'unit = "deg,m,m,deg,deg,deg"',
@@ -105,7 +105,7 @@ UNIT_FAULTS = [
     ('unit = "m/s,rad/s"', 'unit = "m/s,rad/s,m/s"', "initial.nu0: unit list 'm/s,rad/s,m/s' does not match 6 values"),
     ('unit = "N,N,N,N*m,N*m,N*m", source = "eq. 41" }\namplitude', 'unit = "N,N,N,N,N*m,N*m", source = "eq. 41" }\namplitude',
      "disturbance.offset: unit 'N' of element 4 is not a torque (allowed: N*m)"),
-    ('unit = "s", source = "SPEC 4 (the length', 'unit = "min", source = "SPEC 4 (the length',
+    ('duration = { value = 100.0, unit = "s"', 'duration = { value = 100.0, unit = "min"',
      "time.duration: unknown unit 'min' (allowed for a time: s, ms)"),
     ('unit = "m or rad"', 'unit = "m or deg"', "atd.A_min: unit 'm or deg': one number for length and angle needs units of one scale"),
     ('unit = "m or rad"', 'unit = "m"', "atd.A_min: unit 'm' is not a length or angle (allowed: m or rad)"),
