@@ -41,7 +41,7 @@ import types
 import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Generic, Mapping, TypeVar
+from typing import Any, Callable, Generic, Mapping, TypeVar
 
 from arvcas import tomlfile
 
@@ -141,10 +141,15 @@ def le(limit: float, why: str = "") -> Bound:
 
 @dataclass(frozen=True)
 class Choices:
-    """A string (or each string of a list) is one of ``options``; ``noun`` names what it is."""
+    """A string (or each string of a list) is one of ``allowed`` (a tuple, or a function giving one when
+    a file is read: e.g. the controllers registered by then); ``noun`` names what it is."""
 
-    options: tuple[str, ...]
+    allowed: tuple[str, ...] | Callable[[], tuple[str, ...]]
     noun: str = "value"
+
+    @property
+    def options(self) -> tuple[str, ...]:
+        return tuple(self.allowed() if callable(self.allowed) else self.allowed)
 
 
 @dataclass(frozen=True)

@@ -241,7 +241,7 @@ class Study:
 @dataclass(frozen=True)
 class _StudySection:
     name: str = setting()
-    controllers: tuple[str, ...] = setting(Choices(tuple(gains_mod.CONTROLLERS), "controller"), Unique(), Count(1),
+    controllers: tuple[str, ...] = setting(Choices(gains_mod.controllers, "controller"), Unique(), Count(1),
                                            scalar_ok=True)
     seed: int = setting(ge(0))  # NSGA-II's generator
     description: str = setting(default="")
@@ -328,12 +328,12 @@ def _variables(sec: _VariablesSection, controllers: tuple[str, ...], cfg, where:
                 key = n if any(k == n for k, _, _ in bounds) else col
                 raise StudyError(f"{where}: variables.bounds.{key}: [{lo[i]:g}, {hi[i]:g}] does not contain "
                                  f"Table 2's {c} {n} = {g0[i]:g} (bounds must contain Table 2)")
-        if "omega" in gains_mod.columns(c):
-            lim = 2.0 / cfg.time_h
-            for d in gains_mod.DOFS:
-                i = names.index(f"{d}.omega")
-                if hi[i] >= lim:
-                    raise StudyError(f"{where}: variables.bounds.omega: upper bound {hi[i]:g} for {d}.omega gives "
-                                     f"h*omega >= 2 (explicit RESO unstable at h = {cfg.time_h:g} s): "
-                                     f"need upper < {lim:g}")
+        lims = gains_mod.upper_limits(c, cfg.time_h)  # the limits the controller's gains declare for h
+        for i, n in enumerate(names):
+            if hi[i] >= lims[i]:
+                col = n.split(".", 1)[1]
+                gain = next(g for g in gains_mod.get(c).gains if g.name == col)
+                raise StudyError(f"{where}: variables.bounds.{col}: upper bound {hi[i]:g} for {n} is not below "
+                                 f"{lims[i]:g}, the stability limit at h = {cfg.time_h:g} s ({gain.description}): "
+                                 f"need upper < {lims[i]:g}")
     return var
