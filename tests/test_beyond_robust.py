@@ -8,32 +8,12 @@ import numpy as np
 import pytest
 
 from arvcas.controllers import gains
+from studytext import tiny_study
 from arvcas.experiments.montecarlo import run_montecarlo, write_montecarlo
 from arvcas.experiments.robust import front_member, read_robust, robust_front, robust_markdown, write_robust_dir
 from arvcas.cli import main
 
-STUDY = """
-[study]
-name = "tiny"
-controllers = "proposed"
-seed = 3
-[variables]
-scale = 3.0
-[algorithm]
-name = "nsga2"
-population = 8
-include_table2 = true
-[termination]
-max_generations = 2
-[objectives]
-names = ["chat", "rmse"]
-reference_point = [300.0, 4.0]
-[evaluation]
-[[evaluation.draws]]
-noise_seed = 0
-[engine]
-name = "local"
-"""
+STUDY = tiny_study(controller="proposed", seed=3, population=8, generations=2, scale=3.0, include_table2=True)
 
 
 @pytest.fixture(scope="module")

@@ -10,38 +10,10 @@ import pytest
 from arvcas import cli
 from arvcas.tuning import load_study, loads_study
 from arvcas.tuning.study import StudyError
-
-TINY = """\
-[study]
-name = "tiny"
-controllers = "{controller}"
-seed = {seed}
-
-[variables]
-scale = 2.0
-
-[algorithm]
-name = "nsga2"
-population = {population}
-
-[termination]
-max_generations = {generations}
-
-[objectives]
-names = ["chat", "rmse"]
-reference_point = [300.0, 4.0]
-
-[evaluation]
-[[evaluation.draws]]
-noise_seed = 0
-
-[engine]
-name = "local"
-"""
-
+from studytext import tiny_study
 
 def tiny_text(controller="agsta", seed=3, population=8, generations=3, **_) -> str:
-    return TINY.format(controller=controller, seed=seed, population=population, generations=generations)
+    return tiny_study(controller=controller, seed=seed, population=population, generations=generations)
 
 
 def write_tiny(path, **kw):

@@ -23,6 +23,7 @@ from arvcas.sim import signals as signals_mod
 from arvcas.sim.signals import DOFS, WRENCH_UNITS, Signal
 from arvcas.tuning import loads_study, run_study
 from arvcas.tuning.front import read_front
+from studytext import tiny_study
 
 T_FILTER = 0.5  # s
 
@@ -100,29 +101,7 @@ def test_result_file_round_trip(toy_result, tmp_path):
     assert sig.units == WRENCH_UNITS and sig.frame == "{n}"
 
 
-STUDY = """
-[study]
-name = "toy"
-description = "a tiny study of a controller defined in a test"
-controllers = "toy_filtered_pd"
-seed = 5
-[variables]
-scale = 2.0
-[algorithm]
-name = "nsga2"
-population = 6
-include_table2 = true
-[termination]
-max_generations = 2
-[objectives]
-names = ["chat", "rmse"]
-reference_point = [300.0, 4.0]
-[evaluation]
-[[evaluation.draws]]
-noise_seed = 0
-[engine]
-name = "local"
-"""
+STUDY = tiny_study(controller="toy_filtered_pd", seed=5, population=6, generations=2, include_table2=True, name="toy")
 
 
 def test_tuned_in_a_tiny_study(toy, tmp_path):
