@@ -37,6 +37,7 @@ import json
 import logging
 import os
 import shutil
+import signal
 import stat
 import subprocess
 import tempfile
@@ -328,6 +329,27 @@ def _verify(plan, so: Path, man: Path) -> tuple[dict | None, str]:
     return m, ""
 
 
+def _run_compiler(cmd: list[str], work: Path, name: str) -> subprocess.CompletedProcess:
+    """Run the compiler in its own process group; on any interruption (an exception, KeyboardInterrupt,
+    the SystemExit a SIGTERM handler raises, a timeout) the whole group (cc, cc1, as, ld) is killed
+    and reaped before the exception goes on, so no compiler outlives the build."""
+    try:
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=work,
+                                start_new_session=True)
+    except FileNotFoundError:
+        raise CompileError(f"C compiler '{CC}' not found on PATH; install gcc or clang") from None
+    try:
+        out, err = proc.communicate(timeout=COMPILE_TIMEOUT_S)
+    except BaseException as e:
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        if isinstance(e, subprocess.TimeoutExpired):
+            raise CompileError(f"compiling {name} took longer than {COMPILE_TIMEOUT_S:.0f} s") from None
+        raise
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
 def _compile(plan: _Plan, work: Path) -> tuple[Path, float]:
     src = work / f"{plan.name}.c"
     out = work / f"{plan.name}.so"
@@ -336,12 +358,7 @@ def _compile(plan: _Plan, work: Path) -> tuple[Path, float]:
     cmd = [CC, *compile_flags, "-o", str(out), str(src), *LIBS]
     log.info("compiling %s (%d instructions) with %s %s ...", plan.name, plan.n_instructions, CC, " ".join(compile_flags))
     t0 = time.perf_counter()
-    try:
-        r = subprocess.run(cmd, capture_output=True, text=True, timeout=COMPILE_TIMEOUT_S, cwd=work)
-    except FileNotFoundError:
-        raise CompileError(f"C compiler '{CC}' not found on PATH; install gcc or clang") from None
-    except subprocess.TimeoutExpired:
-        raise CompileError(f"compiling {plan.name} took longer than {COMPILE_TIMEOUT_S:.0f} s") from None
+    r = _run_compiler(cmd, work, plan.name)
     dt = time.perf_counter() - t0
     if r.returncode != 0:
         first = next((ln for ln in r.stderr.splitlines() if "error" in ln), r.stderr.strip()[:200])
