@@ -11,6 +11,8 @@ __all__ = ["AGSTA"]
 
 class AGSTA(SlidingModeController):
     name = "agsta"
+    label = "AGSTA"
+    color = "tab:red"
     description = "original AGSTA with nominal-model compensation (the paper's baseline)"
     # Table 2's column order for AGSTA
     gains = (G_SURFACE, *G_GSTA, G_ADAPT["l"], G_ADAPT["eps"], G_ADAPT["beta"], G_ADAPT["k1_0"], G_ADAPT["sigma"])

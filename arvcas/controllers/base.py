@@ -59,6 +59,8 @@ class Controller:
     and implement :meth:`initial` and :meth:`step`; instances are stateless descriptions."""
 
     name: str = ""
+    label: str = ""  # the name in figures and tables (default: name)
+    color: str = ""  # its matplotlib colour in figures (default: the colour cycle)
     description: str = ""
     gains: tuple[Gain, ...] = ()
     defaults_block: str = ""  # block of the system's gain table holding the default gains

@@ -10,6 +10,8 @@ __all__ = ["Implicit"]
 
 class Implicit(Proposed):
     name = "implicit"
+    label = "Implicit GSTA"
+    color = "tab:green"
     description = "the proposed controller with the implicit GSTA step (docs/model.md §5b)"
     implicit = True
 

@@ -33,6 +33,8 @@ __all__ = ["PID"]
 
 class PID(Controller):
     name = "pid"
+    label = "PID"
+    color = "tab:purple"
     description = "per-DOF PID with restoring-force feed-forward (ArduSub-style baseline)"
     gains = (
         Gain("kp", "1/s^2", "proportional gain, acceleration per unit error"),

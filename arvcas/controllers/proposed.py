@@ -15,6 +15,8 @@ PROPOSED_GAINS = (G_SURFACE, *G_GSTA, G_ADAPT["l"], G_ADAPT["r"], G_ADAPT["k1_0"
 
 class Proposed(SlidingModeController):
     name = "proposed"
+    label = "Proposed"
+    color = "tab:blue"
     description = "modified AGSTA (eq. 19) with the ATD reference and the RESO (eq. 14-16, 20)"
     gains = PROPOSED_GAINS
     defaults_block = "proposed"

@@ -11,6 +11,8 @@ __all__ = ["Traditional"]
 
 class Traditional(Proposed):
     name = "traditional"
+    label = "Traditional law"
+    color = "tab:orange"
     description = "the proposed controller with the traditional decreasing law of Fig. 10"
 
     def k1_next(self, G, k1, s, h):

@@ -33,6 +33,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from arvcas.controllers import gains as gains_mod
+from arvcas.io.plots import controller_color
 from arvcas import metrics
 from arvcas.sim import scenario
 from arvcas.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
@@ -329,7 +330,6 @@ def sweep_markdown(sw: Sweep) -> str:
     return "\n".join(L)
 
 
-_COLORS = {"proposed": "tab:blue", "agsta": "tab:red", "traditional": "tab:orange", "implicit": "tab:green"}
 
 
 def zigzag_time_fraction(sw: Sweep) -> np.ndarray:
@@ -353,7 +353,7 @@ def plot_sweep(sw: Sweep, fig: Figure | None = None, dof: int = 0,
     hs = np.array(sw.hs)
     frac = zigzag_time_fraction(sw)
     for i, c in enumerate(sw.controllers):
-        col = _COLORS.get(c, f"C{i}")
+        col = controller_color(c, i)
         for k, ax in enumerate((axs[0, 0], axs[0, 1])):
             # CHAT per sample grows with h for the same slew rate: scale it to the paper's h = 0.1 s
             v = obj[i, :, :, k] * (0.1 / hs[:, None] if k == 0 else 1.0)

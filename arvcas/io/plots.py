@@ -45,8 +45,23 @@ _FORCE = ("N", "N", "N", "N m", "N m", "N m")
 THRUSTER_LABELS = ("T1 stern left", "T2 stern right", "T3 side (bow)", "T4 side (stern)",
                    "T5 vertical (port)", "T6 vertical (starboard)")
 
-_NAMES = {"proposed": "Proposed", "agsta": "AGSTA", "traditional": "Traditional law", "implicit": "Implicit GSTA"}
-_COLORS = {"proposed": "tab:blue", "agsta": "tab:red", "traditional": "tab:orange", "implicit": "tab:green"}
+
+
+def controller_label(name: str) -> str:
+    """A controller's display name (its ``label``; the name itself for one not registered here)."""
+    try:
+        return gains_mod.get(name).label or name
+    except ValueError:
+        return name
+
+
+def controller_color(name: str, i: int = 0) -> str:
+    """A controller's colour (its ``color``, else matplotlib's cycle colour ``i``)."""
+    try:
+        c = gains_mod.get(name).color
+    except ValueError:
+        c = ""
+    return c or f"C{i % 10}"
 _FIGSIZE = (10.0, 8.0)
 
 
@@ -69,12 +84,12 @@ def _as_list(results) -> list:
 
 
 def _label(r) -> str:
-    name = _NAMES.get(r.controller, r.controller)
+    name = controller_label(r.controller)
     return name if r.ok else f"{name} (diverged at {r.t_fail:g} s)"
 
 
 def _color(r, i: int) -> str:
-    return _COLORS.get(r.controller, f"C{i % 10}")
+    return controller_color(r.controller, i)
 
 
 def _z(j: int) -> float:
@@ -167,7 +182,7 @@ def plot_states(results, fig: Figure | None = None) -> Figure:
             ax.plot(r.t[k], r.eta[k, i], color=_color(r, j), lw=1.0, label=_label(r), zorder=_z(j))
         for j, r in enumerate(rs[:1] if shared else rs):
             k = _valid(r)
-            lab = "ATD reference $y_1$" if shared else f"reference $y_1$ ({_NAMES.get(r.controller, r.controller)})"
+            lab = "ATD reference $y_1$" if shared else f"reference $y_1$ ({controller_label(r.controller)})"
             ax.plot(r.t[k], r.eta_ref[k, i], ls="--", lw=1.0, color="k" if shared else _color(r, j), label=lab)
         ax.set_ylabel(f"{DOF_LABELS[i]} ({_LIN[i]})")
     _legend(fig, axes)
@@ -232,7 +247,7 @@ def plot_sliding(results, fig: Figure | None = None) -> Figure:
             ax.plot(r.t[k], s, color=c, lw=0.8, label=_label(r), zorder=_z(j))
             sig = _gain(r, "sigma")
             if sig is not None:
-                name = _NAMES.get(r.controller, r.controller)
+                name = controller_label(r.controller)
                 ax.axhspan(-sig[i], sig[i], facecolor=(c, 0.13), edgecolor=c, ls="--", lw=0.8, zorder=1, label=rf"$\pm\sigma$ ({name})")
                 ymax = max(ymax, 1.5 * sig[i])
             finite = s[np.isfinite(s)]
@@ -259,7 +274,7 @@ def plot_gains(results, fig: Figure | None = None) -> Figure:
             ax.plot(r.t[k], np.asarray(r.k1)[k, i], color=c, lw=1.0, label=_label(r), zorder=_z(j))
             kmin = _gain(r, "k1min")
             if kmin is not None:
-                name = _NAMES.get(r.controller, r.controller)
+                name = controller_label(r.controller)
                 ax.axhline(kmin[i], color=c, ls=":", lw=0.9, label=f"$k_{{1\\min}}$ ({name})")
         ax.set_ylabel(f"$k_{{1,{_sub(i)}}}$")
     _legend(fig, axes)
@@ -340,7 +355,7 @@ def plot_disturbance(result, fig: Figure | None = None) -> Figure:
     total disturbance f_true of eq. 6, per DOF (N, N m; {n}), for one run (the proposed controller)."""
     r = _as_list(result)[0]
     est = "RESO estimate" if r.controller != "agsta" else "nominal-model estimate"
-    fig, axes = _six(fig, f"Total disturbance: {est} vs simulated (Fig. 11, {_NAMES.get(r.controller, r.controller)})")
+    fig, axes = _six(fig, f"Total disturbance: {est} vs simulated (Fig. 11, {controller_label(r.controller)})")
     k = _valid(r)
     for i, ax in enumerate(axes):
         ax.plot(r.t[k], np.asarray(r.f_true)[k, i], color="k", lw=1.0, label="simulated $f$ (eq. 6)")
