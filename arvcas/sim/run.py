@@ -61,7 +61,8 @@ class Run:
     options: ModelOptions = ModelOptions()
 
     def compile(self) -> "CompiledRun":
-        """The compiled run (memoised per process for equal descriptions)."""
+        """The compiled run. Cheap when repeated: its compiled functions are memoised per process by
+        description, loaded from the compile cache on a warm start, and its time table is kept."""
         with_law = get_controller(self.controller)
         cfg = self.scenario if isinstance(self.scenario, ScenarioConfig) else scenario.load_scenario(self.scenario)
         params = self.params if isinstance(self.params, Params) else load_params(self.params)
