@@ -283,14 +283,21 @@ def test_model_exchange_cvode_matches_cvodes(fmu_path, md, params, plant):
     assert err < 1e-8
 
 
-def test_thruster_inputs(tmp_path, params):
-    """inputs="thrusters": the derivatives are uvms_rhs at tau = thrust(u) (B_T sat(u))."""
-    path = fmu_mod.export_fmu(tmp_path / "thr.fmu", inputs="thrusters")
+def test_thruster_inputs_params_and_options(tmp_path, params):
+    """inputs="thrusters": the derivatives are uvms_rhs at tau = thrust(u) = B_T sat(u); the FMU's
+    parameter start values are the Params given (here with a dry vehicle, rho = 0, and a heavier link),
+    and ModelOptions reach the generated graph (n_quad = 3, against compiled("uvms_rhs", opts))."""
+    from arvcas.model.uvms import ModelOptions
+
+    opts = ModelOptions(n_quad=3)
+    P = params.replace({"env.rho": 0.0, "arm.link2.mass": 30.0})
+    path = fmu_mod.export_fmu(tmp_path / "thr.fmu", params=P, opts=opts, inputs="thrusters")
     assert validate_fmu(str(path)) == []
     md = fmpy.read_model_description(str(path))
     names = [f"u[{i}]" for i in range(1, 7)] + INPUTS[6:]
     assert [v.name for v in md.modelVariables if v.causality == "input"] == names
-    f, thrust, p = compiled("uvms_rhs"), compiled("thrust"), params.vector()
+    assert {v.name: float(v.start) for v in md.modelVariables if v.causality == "parameter"}["env.rho"] == 0.0
+    f, thrust, p = compiled("uvms_rhs", opts), compiled("thrust"), P.vector()
     rng = np.random.default_rng(4)
     with _instance(path, md, "t") as m:
         for _ in range(3):
@@ -355,6 +362,12 @@ def test_foreign_file_refused_then_forced(tmp_path, fmu_path):
     mine = tmp_path / "mine.fmu"
     shutil.copyfile(fmu_path, mine)
     assert fmu_mod._check_path(mine, force=False) == mine
+    # a symbolic link is not replaced, even one to an FMU arvcas wrote
+    link = tmp_path / "link.fmu"
+    link.symlink_to(mine)
+    with pytest.raises(fmu_mod.FMUError, match=r"^path: .*link\.fmu is a symbolic link; pass force=True"):
+        fmu_mod.export_fmu(link)
+    link.unlink()
     # force replaces the foreign file with a valid FMU, atomically (no temporary left behind)
     out = fmu_mod.export_fmu(foreign, force=True)
     assert out == foreign and validate_fmu(str(out)) == []

@@ -73,8 +73,20 @@ _DIM_UNIT = {
     "force": "N",
     "hydro": None,
 }
-_DOF = ("x", "y", "z", "phi", "theta", "psi")
-_NU = ("u", "v", "w", "p", "q", "r")
+_STATE_DESCRIPTIONS = (
+    "x: north position of the COB in {n} (NED)",
+    "y: east position of the COB in {n}",
+    "z: depth (down) of the COB in {n}",
+    "phi: roll (ZYX Euler angle of {b} in {n})",
+    "theta: pitch (ZYX Euler angle)",
+    "psi: yaw (ZYX Euler angle)",
+    "u: surge velocity of the COB in {b}",
+    "v: sway velocity in {b}",
+    "w: heave velocity in {b}",
+    "p: roll rate in {b}",
+    "q: pitch rate in {b}",
+    "r: yaw rate in {b}",
+)
 
 
 class FMUError(ValueError):
@@ -108,8 +120,7 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
     units_x = ["m"] * 3 + ["rad"] * 3 + ["m/s"] * 3 + ["rad/s"] * 3
     for i in range(12):
         vec, k = ("eta", i) if i < 6 else ("nu", i - 6)
-        what = (f"{_DOF[k]}: NED position in {{n}}" if i < 3 else f"{_DOF[k]}: ZYX Euler angle") if i < 6 else (
-            f"{_NU[k]}: body {'linear' if k < 3 else 'angular'} velocity in {{b}} at the COB")
+        what = _STATE_DESCRIPTIONS[i]
         add(f"{vec}[{k + 1}]", "output", "continuous", units_x[i], what, start=x0[i], initial="exact")
     units_dx = ["m/s"] * 3 + ["rad/s"] * 3 + ["m/s2"] * 3 + ["rad/s2"] * 3
     for i in range(12):
@@ -343,7 +354,9 @@ def _check_path(path, force: bool) -> Path:
     if not os.access(p.parent, os.W_OK | os.X_OK):
         raise FMUError(f"path: directory {p.parent} is not writable")
     if p.exists() or p.is_symlink():
-        if p.is_dir() or not p.is_file():
+        if p.is_symlink() and not force:
+            raise FMUError(f"path: {p} is a symbolic link; pass force=True (--force) to replace the link")
+        if p.is_dir() or (p.exists() and not p.is_file()):
             raise FMUError(f"path: {p} exists and is not a regular file")
         if not force and not _written_by_arvcas(p):
             raise FMUError(f"path: {p} exists and is not an FMU written by arvcas; pass force=True (--force) to replace it")
