@@ -31,6 +31,7 @@ T_END = 30.0  # arm reach 5-20 s, payload ramp 22-22.5 s, return from 25 s
 INPUTS = ([f"tau[{i}]" for i in range(1, 7)] + [f"{n}[{i}]" for n in ("q", "qd", "qdd") for i in range(1, 7)]
           + ["payload"])
 STATES = [f"eta[{i}]" for i in range(1, 7)] + [f"nu[{i}]" for i in range(1, 7)]
+PROFILE_FN: dict[str, ca.Function] = {}  # the input profile as a function of time (set by the fixture)
 
 
 @pytest.fixture(scope="module")
@@ -59,6 +60,7 @@ def profile(params):
     U = np.array(f.map(ts.size)(ts.reshape(1, -1)))
     assert U.shape == (25, ts.size)
     assert np.ptp(U[6:12], axis=1).max() > 0.5 and U[24, -1] == 1.0  # the arm moves, the payload is on
+    PROFILE_FN["inputs"] = f
     return ts, U
 
 
@@ -230,33 +232,71 @@ def test_co_simulation_rk4_matches_arvcas_integration(fmu_path, profile, params)
     assert err < 1e-8
 
 
+def _cs_master(fmu_path, md, U, derivs, ts):
+    """A Co-Simulation master loop on FMU2Slave: at each t_k set the inputs U[:, k] and their time
+    derivatives derivs[order] (order 1, 2: arrays like U), then fmi2DoStep(t_k, H). (FMPy's
+    simulate_fmu sizes its input-derivative buffer for 9 inputs, so the loop is written here.)"""
+    with _instance(fmu_path, md, "cs", cls=FMU2Slave) as sl:
+        vin, vout = [sl.vr[n_] for n_ in INPUTS], [sl.vr[n_] for n_ in STATES]
+        X = np.empty((12, ts.size))
+        X[:, 0] = sl.getReal(vout)
+        for k in range(ts.size - 1):
+            sl.setReal(vin, list(U[:, k]))
+            for order, D in derivs.items():
+                sl.setRealInputDerivatives(vin, [order] * 25, list(D[:, k]))
+            sl.doStep(currentCommunicationPoint=ts[k], communicationStepSize=H)
+            X[:, k + 1] = sl.getReal(vout)
+        u_end = np.array(sl.getReal(vin))
+    return X, u_end
+
+
 def test_co_simulation_interpolated_inputs(fmu_path, md, profile, params):
     """fmi2SetRealInputDerivatives (order 1): the inputs are linear over each communication step, so
-    the RK4 stages see the piecewise-linear interpolation of the samples at their own times, as
-    arvcas's plant evaluates the arm trajectory at the stage times. (FMPy's simulate_fmu sizes its
-    input-derivative buffer for 9 inputs, so the master loop is written here with FMU2Slave.)"""
+    the RK4 stages see the piecewise-linear interpolation of the samples at their own times."""
     ts, U = profile
     n = 600  # the arm is moving from 5 s on: 0-6 s covers the start of the reach
     ts, U = ts[: n + 1], U[:, : n + 1]
     slopes = np.zeros_like(U)
     slopes[:, :-1] = np.diff(U, axis=1) / H
-    with _instance(fmu_path, md, "cs", cls=FMU2Slave) as sl:
-        vin, vout = [sl.vr[n_] for n_ in INPUTS], [sl.vr[n_] for n_ in STATES]
-        X = np.empty((12, ts.size))
-        X[:, 0] = sl.getReal(vout)
-        for k in range(n):
-            sl.setReal(vin, list(U[:, k]))
-            sl.setRealInputDerivatives(vin, [1] * 25, list(slopes[:, k]))
-            sl.doStep(currentCommunicationPoint=ts[k], communicationStepSize=H)
-            X[:, k + 1] = sl.getReal(vout)
-        # after the step the inputs sit at the end of their line
-        np.testing.assert_allclose(sl.getReal(vin), U[:, n], rtol=0, atol=1e-12)
+    X, u_end = _cs_master(fmu_path, md, U, {1: slopes}, ts)
+    np.testing.assert_allclose(u_end, U[:, n], rtol=0, atol=1e-12)  # after the step: the end of the line
     ref = _rk4_reference(ts, U, params, slopes)
     held = _rk4_reference(ts, U, params, np.zeros_like(U))
     err = np.abs(X - ref).max()
     print("CS RK4, interpolated inputs: max |FMU - reference| =", err, "; vs held inputs:", np.abs(X - held).max())
     assert err < 1e-8
     assert np.abs(X - held).max() > 1e3 * max(err, 1e-15)  # the derivatives were used
+
+
+def test_co_simulation_matches_arvcas_plant_integration(fmu_path, md, profile, params):
+    """The scenario's thrust profile and arm motion through the CS FMU, the master passing the exact
+    first and second time derivatives of the inputs, against arvcas's plant integration (docs/model.md
+    §4): classic RK4 at h_plant with every input evaluated at the stage times t_k, t_k + h/2, t_k + h.
+    The FMU sees the inputs as their second-order Taylor expansion about t_k, off at the stage times by
+    about h^3/6 times the third derivative (a linear interpolation of the samples would give 2.4e-8)."""
+    ts, U = profile
+    f = PROFILE_FN["inputs"]
+    t = ca.SX.sym("t")
+    d1 = ca.jacobian(f(t), t)
+    d2 = ca.jacobian(d1, t)
+    fd = ca.Function("dinputs", [t], [d1, d2]).map(ts.size - 1)
+    D1, D2 = (np.array(a) for a in fd((ts[:-1] + 1e-12).reshape(1, -1)))  # right-hand limits at the kinks
+    X, _ = _cs_master(fmu_path, md, U, {1: D1, 2: D2}, ts)
+    rhs, p = _rhs(), params.vector()
+    Um = np.array(f.map(ts.size - 1)((ts[:-1] + 0.5 * H).reshape(1, -1)))
+    ref = np.empty((12, ts.size))
+    ref[:, 0] = _x0()
+    for k in range(ts.size - 1):
+        x = ref[:, k]
+        k1 = rhs(x, U[:, k], p)
+        k2 = rhs(x + 0.5 * H * k1, Um[:, k], p)
+        k3 = rhs(x + 0.5 * H * k2, Um[:, k], p)
+        k4 = rhs(x + H * k3, U[:, k + 1], p)
+        ref[:, k + 1] = x + H / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    err = np.abs(X - ref).max()
+    print("CS RK4 with exact input derivatives vs arvcas's RK4 at the stage times:", err)
+    assert np.abs(ref[:, -1] - ref[:, 0]).max() > 1e-2
+    assert err < 1e-8
 
 
 def test_model_exchange_cvode_matches_cvodes(fmu_path, md, params, plant):

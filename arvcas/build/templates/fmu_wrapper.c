@@ -46,7 +46,7 @@ typedef enum { S_INSTANTIATED, S_INIT, S_EVENT, S_CONT, S_STEP, S_TERMINATED, S_
 
 typedef struct {
     double r[NVR];       /* every Real variable, by value reference */
-    double du[NU];       /* Co-Simulation: first time derivatives of the inputs over the next step */
+    double du[2][NU];    /* Co-Simulation: first and second time derivatives of the inputs over the next step */
     double t;
     double t_last_ok;    /* Co-Simulation: end of the last successful step */
     fmi2Type type;
@@ -251,7 +251,7 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
             return fail(c, "fmi2SetReal", "the states eta, nu are set before initialization only (Model Exchange: fmi2SetContinuousStates)");
         if (k >= VR_H && !before_init)
             return fail(c, "fmi2SetReal", "parameters are fixed: set them before fmi2ExitInitializationMode");
-        if (k >= VR_U && k < VR_U + NU) c->du[k - VR_U] = 0.0;  /* a new value: held unless derivatives follow */
+        if (k >= VR_U && k < VR_U + NU) c->du[0][k - VR_U] = c->du[1][k - VR_U] = 0.0;  /* held unless derivatives follow */
         c->r[k] = value[i];
     }
     c->dirty = 1;
@@ -413,8 +413,9 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueRefere
     CHECK_CS(c, "fmi2SetRealInputDerivatives");
     for (i = 0; i < nvr; i++) {
         if (vr[i] < VR_U || vr[i] >= VR_U + NU) return fail(c, "fmi2SetRealInputDerivatives", "not an input");
-        if (order[i] != 1) return fail(c, "fmi2SetRealInputDerivatives", "only first derivatives (order 1) are supported");
-        c->du[vr[i] - VR_U] = value[i];
+        if (order[i] != 1 && order[i] != 2)
+            return fail(c, "fmi2SetRealInputDerivatives", "only first and second derivatives (order 1, 2) are supported");
+        c->du[order[i] - 1][vr[i] - VR_U] = value[i];
     }
     return fmi2OK;
 }
@@ -425,9 +426,10 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueRefer
     return fail((Inst *)comp, "fmi2GetRealOutputDerivatives", "not supported (maxOutputDerivativeOrder = 0)");
 }
 
+/* the inputs s seconds into the step: u + u' s + u'' s^2 / 2 */
 static void inputs_at(const Inst *c, double s, double *u) {
     int i;
-    for (i = 0; i < NU; i++) u[i] = c->r[VR_U + i] + c->du[i] * s;
+    for (i = 0; i < NU; i++) u[i] = c->r[VR_U + i] + (c->du[0][i] + 0.5 * c->du[1][i] * s) * s;
 }
 
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real tc, fmi2Real H, fmi2Boolean noSetPrior) {
@@ -464,7 +466,8 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real tc, fmi2Real H, fmi2Boolean n
     }
     memcpy(c->r + VR_X, x, sizeof x);
     /* the inputs at the end of the step, so a master reading derivatives sees consistent values */
-    for (i = 0; i < NU; i++) c->r[VR_U + i] += c->du[i] * H;
+    inputs_at(c, H, u);
+    memcpy(c->r + VR_U, u, sizeof u);
     memset(c->du, 0, sizeof c->du);
     c->t = tc + H;
     c->t_last_ok = c->t;
