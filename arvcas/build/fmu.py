@@ -215,13 +215,13 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
     src = f'<SourceFiles><File name="{_WRAPPER_C}"/></SourceFiles>'
     L.append(f'  <ModelExchange modelIdentifier="{MODEL_IDENTIFIER}" needsExecutionTool="false" '
              'completedIntegratorStepNotNeeded="true" canBeInstantiatedOnlyOncePerProcess="false" '
-             'canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="false" '
-             f'canSerializeFMUstate="false" providesDirectionalDerivative="false">{src}</ModelExchange>')
+             'canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="true" '
+             f'canSerializeFMUstate="true" providesDirectionalDerivative="false">{src}</ModelExchange>')
     L.append(f'  <CoSimulation modelIdentifier="{MODEL_IDENTIFIER}" needsExecutionTool="false" '
              'canHandleVariableCommunicationStepSize="true" canInterpolateInputs="true" '
              'maxOutputDerivativeOrder="0" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" '
-             'canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="false" '
-             f'canSerializeFMUstate="false" providesDirectionalDerivative="false">{src}</CoSimulation>')
+             'canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="true" '
+             f'canSerializeFMUstate="true" providesDirectionalDerivative="false">{src}</CoSimulation>')
     L.append("  <UnitDefinitions>")
     for u in used:
         base = "".join(f' {k}="{e}"' for k, e in _UNITS[u].items())

@@ -283,25 +283,100 @@ fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size
     return nvr == 0 ? fmi2OK : fail((Inst *)comp, "fmi2SetString", "this FMU has no String variables");
 }
 
-/* canGetAndSetFMUstate = false, canSerializeFMUstate = false, providesDirectionalDerivative = false */
-fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *s) {
-    (void)s; return fail((Inst *)comp, "fmi2GetFMUstate", "not supported (canGetAndSetFMUstate = false)");
+/* FMU state: everything that evolves (variables, input derivatives, time, mode), as one flat record;
+   serialized as its bytes behind a tag that names this FMU (GUID) and the record's size */
+typedef struct {
+    double r[NVR];
+    double du[2][NU];
+    double t, t_last_ok;
+    int type, mode, dirty;
+} Snapshot;
+
+#define TAG_LEN 40  /* GUID: "{" 36 "}" plus NUL, padded */
+
+static void snap(const Inst *c, Snapshot *s) {
+    memset(s, 0, sizeof *s);
+    memcpy(s->r, c->r, sizeof s->r);
+    memcpy(s->du, c->du, sizeof s->du);
+    s->t = c->t;
+    s->t_last_ok = c->t_last_ok;
+    s->type = (int)c->type;
+    s->mode = (int)c->mode;
+    s->dirty = c->dirty;
 }
-fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate s) {
-    (void)s; return fail((Inst *)comp, "fmi2SetFMUstate", "not supported (canGetAndSetFMUstate = false)");
+
+static void restore(Inst *c, const Snapshot *s) {
+    memcpy(c->r, s->r, sizeof s->r);
+    memcpy(c->du, s->du, sizeof s->du);
+    c->t = s->t;
+    c->t_last_ok = s->t_last_ok;
+    c->mode = (Mode)s->mode;
+    c->dirty = 1;
 }
-fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *s) {
-    (void)s; return fail((Inst *)comp, "fmi2FreeFMUstate", "not supported (canGetAndSetFMUstate = false)");
+
+fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *state) {
+    Inst *c = (Inst *)comp;
+    CHECK(c, "fmi2GetFMUstate");
+    if (!state) return fail(c, "fmi2GetFMUstate", "null argument");
+    if (!*state) *state = calloc(1, sizeof(Snapshot));
+    if (!*state) return fail(c, "fmi2GetFMUstate", "out of memory");
+    snap(c, (Snapshot *)*state);
+    return fmi2OK;
 }
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate s, size_t *size) {
-    (void)s; (void)size; return fail((Inst *)comp, "fmi2SerializedFMUstateSize", "not supported (canSerializeFMUstate = false)");
+
+fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
+    Inst *c = (Inst *)comp;
+    if (!c) return fmi2Error;
+    if (!state) return fail(c, "fmi2SetFMUstate", "null state");
+    if (((const Snapshot *)state)->type != (int)c->type)
+        return fail(c, "fmi2SetFMUstate", "the state belongs to an instance of the other interface (ME / CS)");
+    restore(c, (const Snapshot *)state);
+    return fmi2OK;
 }
-fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate s, fmi2Byte b[], size_t size) {
-    (void)s; (void)b; (void)size; return fail((Inst *)comp, "fmi2SerializeFMUstate", "not supported (canSerializeFMUstate = false)");
+
+fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *state) {
+    (void)comp;
+    if (state && *state) {
+        free(*state);
+        *state = NULL;
+    }
+    return fmi2OK;
 }
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte b[], size_t size, fmi2FMUstate *s) {
-    (void)b; (void)size; (void)s; return fail((Inst *)comp, "fmi2DeSerializeFMUstate", "not supported (canSerializeFMUstate = false)");
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate state, size_t *size) {
+    (void)state;
+    if (!comp || !size) return fmi2Error;
+    *size = TAG_LEN + sizeof(Snapshot);
+    return fmi2OK;
 }
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate state, fmi2Byte b[], size_t size) {
+    Inst *c = (Inst *)comp;
+    char tag[TAG_LEN];
+    if (!c) return fmi2Error;
+    if (!state || !b || size < TAG_LEN + sizeof(Snapshot)) return fail(c, "fmi2SerializeFMUstate", "buffer too small");
+    memset(tag, 0, sizeof tag);
+    strncpy(tag, GUID, TAG_LEN - 1);
+    memcpy(b, tag, TAG_LEN);
+    memcpy(b + TAG_LEN, state, sizeof(Snapshot));
+    return fmi2OK;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte b[], size_t size, fmi2FMUstate *state) {
+    Inst *c = (Inst *)comp;
+    char tag[TAG_LEN];
+    if (!c) return fmi2Error;
+    if (!b || !state || size != TAG_LEN + sizeof(Snapshot)) return fail(c, "fmi2DeSerializeFMUstate", "not a state of this FMU (size)");
+    memset(tag, 0, sizeof tag);
+    strncpy(tag, GUID, TAG_LEN - 1);
+    if (memcmp(b, tag, TAG_LEN) != 0) return fail(c, "fmi2DeSerializeFMUstate", "not a state of this FMU (GUID)");
+    if (!*state) *state = calloc(1, sizeof(Snapshot));
+    if (!*state) return fail(c, "fmi2DeSerializeFMUstate", "out of memory");
+    memcpy(*state, b + TAG_LEN, sizeof(Snapshot));
+    return fmi2OK;
+}
+
+/* providesDirectionalDerivative = false (docs/fmu.md, Not provided) */
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueReference vu[], size_t nu,
                                         const fmi2ValueReference vk[], size_t nk, const fmi2Real dvk[], fmi2Real dvu[]) {
     (void)vu; (void)nu; (void)vk; (void)nk; (void)dvk; (void)dvu;
