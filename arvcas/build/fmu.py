@@ -28,10 +28,9 @@ import uuid
 import zipfile
 from importlib import resources
 from pathlib import Path
-from xml.sax.saxutils import escape, quoteattr
+from xml.sax.saxutils import quoteattr
 
 import casadi as ca
-import numpy as np
 
 __all__ = ["FMUError", "export_fmu", "MODEL_IDENTIFIER", "INPUTS", "variables"]
 
