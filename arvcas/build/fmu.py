@@ -1,0 +1,432 @@
+"""Export the coupled vehicle + manipulator as an FMI 2.0 FMU (Model Exchange and Co-Simulation).
+
+:func:`export_fmu` generates C for ``uvms_rhs`` with CasADi's :class:`casadi.CodeGenerator` (the same
+graph and options as the compile cache, :mod:`arvcas.build.codegen`), wraps it in the FMI 2.0 C
+interface (``templates/fmu_wrapper.c``; the standard's headers in ``templates/fmi2/``, 2-clause
+BSD), writes ``modelDescription.xml``, compiles ``binaries/<platform>/<modelIdentifier>.so`` with
+the cache's compiler flags and zips it all, sources included, to ``FILE.fmu`` (a temporary file in
+the same directory, then :func:`os.replace`).
+
+The FMU: states ``eta`` (pose in {n}) and ``nu`` (velocity in {b} at the COB), which are also its
+outputs; inputs the body wrench ``tau`` at the COB in {b} (or, with ``inputs="thrusters"``, the six
+thruster commands ``u``, realised as ``B_T sat(u)``), the joint positions, velocities and
+accelerations ``q, qd, qdd`` and the payload fraction; parameters every number of ``Params`` (SI,
+with units) and ``h_rk4``, the Co-Simulation RK4 step. Variables, units and use: docs/fmu.md.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+import zipfile
+from importlib import resources
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import casadi as ca
+
+__all__ = ["FMUError", "export_fmu", "MODEL_IDENTIFIER", "INPUTS", "variables"]
+
+MODEL_IDENTIFIER = "arvcas_uvms"
+INPUTS = ("wrench", "thrusters")
+_MODEL_C = f"{MODEL_IDENTIFIER}_model.c"
+_WRAPPER_C = f"{MODEL_IDENTIFIER}.c"
+_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+_H_RK4_DEFAULT = 0.01  # the scenario's plant step (docs/model.md §4, Plant integration)
+
+# FMI units (SI) with their base-unit exponents; display units for the files' mm and deg
+_UNITS: dict[str, dict[str, int]] = {
+    "m": {"m": 1},
+    "rad": {"rad": 1},
+    "m/s": {"m": 1, "s": -1},
+    "rad/s": {"rad": 1, "s": -1},
+    "m/s2": {"m": 1, "s": -2},
+    "rad/s2": {"rad": 1, "s": -2},
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "N.m": {"kg": 1, "m": 2, "s": -2},
+    "kg": {"kg": 1},
+    "kg/m3": {"kg": 1, "m": -3},
+    "kg.m2": {"kg": 1, "m": 2},
+    "m3": {"m": 3},
+    "s": {"s": 1},
+    "1": {},
+}
+_DISPLAY = {"m": ("mm", 1000.0), "rad": ("deg", 180.0 / math.pi)}
+# Params dimension -> FMI unit; hydrodynamic derivatives are per unit density (docs/model.md §2)
+_DIM_UNIT = {
+    "density": "kg/m3",
+    "acceleration": "m/s2",
+    "dimensionless": "1",
+    "mass": "kg",
+    "inertia": "kg.m2",
+    "length": "m",
+    "volume": "m3",
+    "angle": "rad",
+    "force": "N",
+    "hydro": None,
+}
+_STATE_DESCRIPTIONS = (
+    "x: north position of the COB in {n} (NED)",
+    "y: east position of the COB in {n}",
+    "z: depth (down) of the COB in {n}",
+    "phi: roll (ZYX Euler angle of {b} in {n})",
+    "theta: pitch (ZYX Euler angle)",
+    "psi: yaw (ZYX Euler angle)",
+    "u: surge velocity of the COB in {b}",
+    "v: sway velocity in {b}",
+    "w: heave velocity in {b}",
+    "p: roll rate in {b}",
+    "q: pitch rate in {b}",
+    "r: yaw rate in {b}",
+)
+
+
+class FMUError(ValueError):
+    """The FMU cannot be written (one line naming the argument and what is allowed)."""
+
+
+# ---------------------------------------------------------------------------------------------
+# variables
+
+
+def variables(params=None, inputs: str = "wrench") -> list[dict]:
+    """The FMU's ScalarVariables in order (value reference = index): name, causality, unit, start, ...
+
+    ``params`` gives the parameters' start values (default: the packaged ``haidou1.toml``); the states'
+    start values are the scenario's ``eta0``, ``nu0`` (``data/scenario.toml``), the joints' the stowed
+    pose ``arm.stow``.
+    """
+    from arvcas.params import SCHEMA
+    from arvcas.sim.scenario import load_scenario
+
+    P = _check_params(params)
+    _check_inputs(inputs)
+    cfg = load_scenario()
+    x0 = [*cfg.initial_eta0, *cfg.initial_nu0]
+    V: list[dict] = []
+
+    def add(name, causality, variability, unit, description, start=None, initial=None, **kw):
+        V.append(dict(name=name, causality=causality, variability=variability, unit=unit,
+                      description=description, start=start, initial=initial, **kw))
+
+    units_x = ["m"] * 3 + ["rad"] * 3 + ["m/s"] * 3 + ["rad/s"] * 3
+    for i in range(12):
+        vec, k = ("eta", i) if i < 6 else ("nu", i - 6)
+        what = _STATE_DESCRIPTIONS[i]
+        add(f"{vec}[{k + 1}]", "output", "continuous", units_x[i], what, start=x0[i], initial="exact")
+    units_dx = ["m/s"] * 3 + ["rad/s"] * 3 + ["m/s2"] * 3 + ["rad/s2"] * 3
+    for i in range(12):
+        add(f"der({V[i]['name']})", "local", "continuous", units_dx[i], f"time derivative of {V[i]['name']}",
+            derivative=i + 1)
+    if inputs == "wrench":
+        for k in range(6):
+            add(f"tau[{k + 1}]", "input", "continuous", "N" if k < 3 else "N.m",
+                f"body wrench at the COB in {{b}}: {'XYZKMN'[k]} ({'force' if k < 3 else 'moment'})", start=0.0)
+    else:
+        names = ("stern-left", "stern-right", "side 1", "side 2", "vertical 1", "vertical 2")
+        for k in range(6):
+            add(f"u[{k + 1}]", "input", "continuous", "N",
+                f"thrust command of the {names[k]} thruster (saturated to [thrusters.u_min, thrusters.u_max])",
+                start=0.0)
+    q0 = [P[f"arm.stow.q{j}"] for j in range(1, 7)]
+    for vec, unit, what, starts in (("q", "rad", "joint angle", q0), ("qd", "rad/s", "joint rate", [0.0] * 6),
+                                     ("qdd", "rad/s2", "joint acceleration", [0.0] * 6)):
+        for j in range(6):
+            add(f"{vec}[{j + 1}]", "input", "continuous", unit, f"{what} of joint {j + 1}", start=starts[j])
+    add("payload", "input", "continuous", "1",
+        "payload fraction in [0, 1]: scales payload.mass and payload.volume at the tool point", start=0.0)
+    add("h_rk4", "parameter", "fixed", "s", "Co-Simulation only: the RK4 step (each communication step is "
+        "split into ceil(H / h_rk4) equal steps)", start=_H_RK4_DEFAULT, initial="exact")
+    vals = P.vector()
+    for i, name in enumerate(SCHEMA):
+        dim = SCHEMA[name][0]
+        unit = _DIM_UNIT[dim]
+        src = P.source(name)
+        desc = src if dim != "hydro" else f"per unit density (SI coefficient = env.rho * value); {src}"
+        file_unit = P.unit(name)
+        display = None
+        if unit in _DISPLAY and file_unit == _DISPLAY[unit][0]:
+            display = file_unit
+        add(name, "parameter", "fixed", unit, desc, start=float(vals[i]), initial="exact", display=display)
+    assert len(V) == 50 + len(SCHEMA)
+    return V
+
+
+def _check_params(params):
+    from arvcas import params as params_mod
+
+    if params is None:
+        return params_mod.load()
+    if isinstance(params, (str, os.PathLike)):
+        return params_mod.load(params)
+    if not isinstance(params, params_mod.Params):
+        raise FMUError(f"params: expected arvcas.params.Params, a parameter file path or None, got {type(params).__name__}")
+    return params
+
+
+def _check_inputs(inputs) -> None:
+    if inputs not in INPUTS:
+        raise FMUError(f"inputs: expected one of {', '.join(INPUTS)}, got {inputs!r}")
+
+
+# ---------------------------------------------------------------------------------------------
+# model description
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
+def _dependencies(fn: ca.Function) -> list[list[int]]:
+    """For each of the 12 derivatives, the 1-based indices of the states and inputs it depends on."""
+    syms = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
+    xdot = fn.call(syms)[0]
+    known = ca.vertcat(*syms[:-1])  # x (indices 1..12), then the 25 inputs (indices 25..49)
+    sp = ca.jacobian_sparsity(xdot, known)
+    cols = [1 + j if j < 12 else 25 + (j - 12) for j in range(known.numel())]
+    rows, cs = sp.get_triplet()
+    deps: list[list[int]] = [[] for _ in range(12)]
+    for r, c in zip(rows, cs):
+        deps[r].append(cols[c])
+    return [sorted(d) for d in deps]
+
+
+def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: str) -> str:
+    from arvcas import __version__
+
+    used = sorted({v["unit"] for v in V if v["unit"]}, key=list(_UNITS).index)
+    L = ['<?xml version="1.0" encoding="UTF-8"?>']
+    stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    desc = ("Haidou-1 ARV with its 6-DOF manipulator (Ding et al. 2021), exactly coupled (arvcas uvms_rhs, "
+            f"docs/model.md); inputs: {'body wrench tau' if inputs == 'wrench' else 'thruster commands u'}, "
+            "q, qd, qdd, payload")
+    L.append(f'<fmiModelDescription fmiVersion="2.0" modelName="arvcas_uvms" guid={quoteattr(guid)} '
+             f'description={quoteattr(desc)} version={quoteattr(__version__)} '
+             f'generationTool={quoteattr("arvcas " + __version__)} generationDateAndTime="{stamp}" '
+             'variableNamingConvention="structured" numberOfEventIndicators="0">')
+    src = f'<SourceFiles><File name="{_WRAPPER_C}"/></SourceFiles>'
+    L.append(f'  <ModelExchange modelIdentifier="{MODEL_IDENTIFIER}" needsExecutionTool="false" '
+             'completedIntegratorStepNotNeeded="true" canBeInstantiatedOnlyOncePerProcess="false" '
+             'canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="true" '
+             f'canSerializeFMUstate="true" providesDirectionalDerivative="false">{src}</ModelExchange>')
+    L.append(f'  <CoSimulation modelIdentifier="{MODEL_IDENTIFIER}" needsExecutionTool="false" '
+             'canHandleVariableCommunicationStepSize="true" canInterpolateInputs="true" '
+             'maxOutputDerivativeOrder="0" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" '
+             'canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="true" '
+             f'canSerializeFMUstate="true" providesDirectionalDerivative="false">{src}</CoSimulation>')
+    L.append("  <UnitDefinitions>")
+    for u in used:
+        base = "".join(f' {k}="{e}"' for k, e in _UNITS[u].items())
+        disp = ""
+        if u in _DISPLAY:
+            dn, fac = _DISPLAY[u]
+            disp = f'<DisplayUnit name="{dn}" factor="{_fmt(fac)}"/>'
+        L.append(f'    <Unit name="{u}"><BaseUnit{base}/>{disp}</Unit>')
+    L.append("  </UnitDefinitions>")
+    L.append('  <LogCategories><Category name="logStatusError" description="errors"/>'
+             '<Category name="logAll" description="everything"/></LogCategories>')
+    L.append('  <DefaultExperiment startTime="0.0" stopTime="100.0" tolerance="1e-08" stepSize="0.01"/>')
+    L.append("  <ModelVariables>")
+    for i, v in enumerate(V):
+        attrs = [f"name={quoteattr(v['name'])}", f'valueReference="{i}"',
+                 f"description={quoteattr(v['description'])}", f'causality="{v["causality"]}"',
+                 f'variability="{v["variability"]}"']
+        if v["initial"]:
+            attrs.append(f'initial="{v["initial"]}"')
+        real = []
+        if v["unit"]:
+            real.append(f'unit="{v["unit"]}"')
+        if v.get("display"):
+            real.append(f'displayUnit="{v["display"]}"')
+        if v["start"] is not None:
+            real.append(f'start="{_fmt(v["start"])}"')
+        if v.get("derivative"):
+            real.append(f'derivative="{v["derivative"]}"')
+        L.append(f'    <ScalarVariable {" ".join(attrs)}><Real {" ".join(real)}/></ScalarVariable>'
+                 f"<!-- {i + 1} -->")
+    L.append("  </ModelVariables>")
+    L.append("  <ModelStructure>")
+    L.append("    <Outputs>")
+    for i in range(12):
+        L.append(f'      <Unknown index="{i + 1}" dependencies="{i + 1}"/>')
+    L.append("    </Outputs>")
+    L.append("    <Derivatives>")
+    for i in range(12):
+        L.append(f'      <Unknown index="{13 + i}" dependencies="{" ".join(map(str, deps[i]))}"/>')
+    L.append("    </Derivatives>")
+    L.append("    <InitialUnknowns>")
+    for i in range(12):
+        L.append(f'      <Unknown index="{13 + i}"/>')
+    L.append("    </InitialUnknowns>")
+    L.append("  </ModelStructure>")
+    L.append("</fmiModelDescription>")
+    return "\n".join(L) + "\n"
+
+
+# ---------------------------------------------------------------------------------------------
+# C
+
+
+def _rhs_function(opts, inputs: str) -> ca.Function:
+    from arvcas.model.uvms import plant_functions
+
+    fns = plant_functions(opts)
+    f = fns["uvms_rhs"]
+    if inputs == "wrench":
+        return f
+    x, u, pl = ca.SX.sym("x", 12), ca.SX.sym("u", 6), ca.SX.sym("payload", 1)
+    q, qd, qdd = ca.SX.sym("q", 6), ca.SX.sym("qd", 6), ca.SX.sym("qdd", 6)
+    p = ca.SX.sym("p", f.size1_in(6))
+    tau = fns["thrust"](u, p)
+    return ca.Function("uvms_rhs_u", [x, u, q, qd, qdd, pl, p], [f(x, tau, q, qd, qdd, pl, p)],
+                       ["x", "u", "q", "qd", "qdd", "payload", "p"], ["xdot"])
+
+
+def _c_double(v: float) -> str:
+    v = float(v)
+    if not math.isfinite(v):
+        raise FMUError(f"params: every start value must be finite, got {v}")
+    return f"{v:.17g}"
+
+
+def _templates() -> Path:
+    return Path(str(resources.files("arvcas") / "build" / "templates"))
+
+
+def _platform() -> tuple[str, str]:
+    """(FMI 2.0 platform folder, shared library suffix) of this machine."""
+    bits64 = sys.maxsize > 2**32
+    if sys.platform.startswith("linux"):
+        return ("linux64" if bits64 else "linux32"), ".so"
+    if sys.platform == "darwin":
+        return "darwin64", ".dylib"
+    raise FMUError(f"export-fmu: platform {sys.platform} is not supported (Linux and macOS build the binary)")
+
+
+def _compile(src_dir: Path, out: Path) -> None:
+    from arvcas.build import codegen
+
+    flags = [*codegen.BASE_FLAGS, codegen.DEFAULT_OPT_LEVEL, *codegen.FIXED_FLAGS, "-fvisibility=hidden"]
+    cmd = [codegen.CC, *flags, f"-I{src_dir}", "-o", str(out), str(src_dir / _WRAPPER_C), *codegen.LIBS]
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=codegen.COMPILE_TIMEOUT_S, cwd=src_dir)
+    except FileNotFoundError:
+        raise codegen.CompileError(f"C compiler '{codegen.CC}' not found on PATH; install gcc or clang") from None
+    except subprocess.TimeoutExpired:
+        raise codegen.CompileError(f"compiling the FMU took longer than {codegen.COMPILE_TIMEOUT_S:.0f} s") from None
+    if r.returncode != 0:
+        first = next((ln for ln in r.stderr.splitlines() if "error" in ln), r.stderr.strip()[:200])
+        raise codegen.CompileError(f"{codegen.CC} failed compiling the FMU (exit {r.returncode}): {first.strip()}")
+
+
+# ---------------------------------------------------------------------------------------------
+# the output file
+
+
+def _written_by_arvcas(path: Path) -> bool:
+    """True if ``path`` is a zip whose modelDescription.xml says generationTool="arvcas ..."."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            root = ET.fromstring(zf.read("modelDescription.xml"))
+    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError, ValueError):
+        return False
+    return root.tag == "fmiModelDescription" and root.get("generationTool", "").startswith("arvcas ")
+
+
+def _check_path(path, force: bool) -> Path:
+    if not isinstance(path, (str, os.PathLike)) or not str(path):
+        raise FMUError(f"path: expected a file name ending in .fmu, got {path!r}")
+    p = Path(os.path.abspath(Path(path).expanduser()))
+    if p.suffix.lower() != ".fmu":
+        raise FMUError(f"path: the file name must end in .fmu, got {p.name!r}")
+    if not p.parent.is_dir():
+        raise FMUError(f"path: directory {p.parent} does not exist")
+    if not os.access(p.parent, os.W_OK | os.X_OK):
+        raise FMUError(f"path: directory {p.parent} is not writable")
+    if p.exists() or p.is_symlink():
+        if p.is_symlink() and not force:
+            raise FMUError(f"path: {p} is a symbolic link; pass force=True (--force) to replace the link")
+        if p.is_dir() or (p.exists() and not p.is_file()):
+            raise FMUError(f"path: {p} exists and is not a regular file")
+        if not force and not _written_by_arvcas(p):
+            raise FMUError(f"path: {p} exists and is not an FMU written by arvcas; pass force=True (--force) to replace it")
+    return p
+
+
+def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = "wrench") -> Path:
+    """Write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm to ``path``.
+
+    ``path`` must end in ``.fmu``; an existing file is replaced only if it is an FMU arvcas wrote, or
+    with ``force=True``. ``params`` (:class:`arvcas.params.Params`, a parameter file, or None for the
+    packaged one) sets the parameters' start values; every one stays settable in the FMU. ``opts`` is
+    an :class:`arvcas.model.uvms.ModelOptions` (n_quad of the link drag). ``inputs``: ``"wrench"``
+    (the body wrench ``tau``, 6) or ``"thrusters"`` (the six thrust commands ``u``, realised as
+    ``B_T sat(u)``). Returns the absolute path written. Raises :class:`FMUError` for bad arguments,
+    :class:`arvcas.build.codegen.CompileError` if the C compiler fails.
+    """
+    from arvcas.build import codegen
+    from arvcas.model.uvms import ModelOptions
+
+    if not isinstance(force, bool):
+        raise FMUError(f"force: expected True or False, got {force!r}")
+    _check_inputs(inputs)
+    if opts is None:
+        opts = ModelOptions()
+    if not isinstance(opts, ModelOptions):
+        raise FMUError(f"opts: expected arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
+    P = _check_params(params)
+    out = _check_path(path, force)
+    platform, suffix = _platform()
+
+    V = variables(P, inputs)
+    fn = _rhs_function(opts, inputs)
+    deps = _dependencies(fn)
+    cg = ca.CodeGenerator(_MODEL_C[:-2], dict(codegen._CODEGEN_OPTS))
+    cg.add(fn)
+    model_c = cg.dump()
+
+    start = ",\n".join("    " + _c_double(v["start"] if v["start"] is not None else 0.0) for v in V)
+    # the GUID: a digest of everything that defines the FMU's interface and behaviour
+    h = hashlib.sha256()
+    for part in (model_c, start, repr([(v["name"], v["unit"]) for v in V]), inputs):
+        h.update(part.encode())
+        h.update(b"\0")
+    guid = "{" + str(uuid.UUID(bytes=h.digest()[:16])) + "}"
+    wrapper = (_templates() / "fmu_wrapper.c").read_text(encoding="utf-8")
+    for k, v in {"@MODEL_C@": _MODEL_C, "@NP@": str(len(V) - 50), "@GUID@": guid, "@RHS@": fn.name(),
+                 "@START@": start, "@IN@": "tau" if inputs == "wrench" else "u"}.items():
+        wrapper = wrapper.replace(k, v)
+    md = _model_description(V, deps, guid, inputs)
+
+    work = Path(tempfile.mkdtemp(prefix=".arvcas-fmu-", dir=out.parent))
+    try:
+        src = work / "sources"
+        src.mkdir()
+        (src / _MODEL_C).write_text(model_c, encoding="utf-8")
+        (src / _WRAPPER_C).write_text(wrapper, encoding="utf-8")
+        for hdr in _HEADERS:
+            shutil.copyfile(_templates() / "fmi2" / hdr, src / hdr)
+        binary = work / f"{MODEL_IDENTIFIER}{suffix}"
+        _compile(src, binary)
+        tmp = work / "out.fmu"
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr("modelDescription.xml", md)
+            zf.write(binary, f"binaries/{platform}/{MODEL_IDENTIFIER}{suffix}")
+            for f in sorted(src.iterdir()):
+                zf.write(f, f"sources/{f.name}")
+        os.chmod(tmp, 0o644)
+        if out.exists() and not force and not _written_by_arvcas(out):  # appeared meanwhile
+            raise FMUError(f"path: {out} exists and is not an FMU written by arvcas; pass force=True (--force) to replace it")
+        os.replace(tmp, out)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return out
