@@ -141,3 +141,23 @@ def test_stale_temporaries_of_killed_runs_are_removed(tmp_path, front, capsys):
     live.write_bytes(b"being written")
     assert run(["front", "plot", front], capsys)[0] == 0
     assert not stale.exists() and live.exists()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_tune_ended_by_sigterm_or_sighup_keeps_its_checkpoint(tmp_path, sig):
+    from arvcas.tuning import checkpoint as ck
+
+    from test_tuning_run import _tune_process, _wait_for
+    from test_tuning_study import write_tiny
+
+    study = write_tiny(tmp_path / "tiny.toml", generations=50)
+    out = tmp_path / "out"
+    p = _tune_process(study, out)
+    _wait_for(p, "gen 1/")
+    p.send_signal(sig)
+    _stdout, stderr = p.communicate(timeout=120)
+    assert p.returncode == 128 + sig, stderr
+    assert f"terminated ({signal.Signals(sig).name})" in stderr and "Traceback" not in stderr, stderr
+    c = ck.read_checkpoint(out / "front.h5")
+    assert 1 <= c.n_gen < 50
+    assert not [n for n in os.listdir(out) if files.TMP_MARK in n] and not (out / ck.StudyLock.NAME).exists()
