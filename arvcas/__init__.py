@@ -1,13 +1,17 @@
 """arvcas: the Haidou-1 ARV and its manipulator as CasADi graphs, compiled to C.
 
-Entry points: :func:`compiled` (the plant functions backed by compiled C), :func:`simulate`,
-:func:`simulate_batch`, :func:`simulate_many` and :func:`default_gains` (the closed-loop experiment of
-the paper's section 4, one compiled function per controller).
+Entry points: :class:`Run` (a closed-loop run described; ``.compile()`` gives a :class:`CompiledRun`
+with ``simulate``, ``batch`` and ``many``), the thin wrappers :func:`simulate`, :func:`simulate_batch`,
+:func:`simulate_many`, :func:`default_gains`; :func:`compiled` (the plant functions backed by compiled
+C); :class:`Controller` and :func:`register_controller` for a control law of your own.
 """
 
 __version__ = "0.1.0"
 
 from arvcas.build.codegen import compiled  # noqa: E402
+from arvcas.sim.run import CompiledRun, Run  # noqa: E402
 from arvcas.sim.simulation import Result, default_gains, simulate, simulate_batch, simulate_many  # noqa: E402
+from arvcas.controllers import Controller, Gain, register as register_controller  # noqa: E402
 
-__all__ = ["__version__", "compiled", "simulate", "simulate_batch", "simulate_many", "default_gains", "Result"]
+__all__ = ["__version__", "Run", "CompiledRun", "Result", "compiled", "simulate", "simulate_batch", "simulate_many",
+           "default_gains", "Controller", "Gain", "register_controller"]

@@ -1,15 +1,16 @@
 """Model parameters: load and validate ``data/haidou1.toml`` into an immutable :class:`Params`.
 
 Every physical number of the model lives in that one file, each with its unit and its source. The
-loader converts to SI (mm -> m, deg -> rad). ``Params.vector()`` is the runtime input ``p`` of every
-compiled function, in the order of ``Params.names()``; model code reads it through
-:func:`view`, so changing a number never recompiles.
+file's schema is the dataclasses below (:mod:`arvcas.config`: dimension and rule beside each field);
+the loader converts to SI (mm -> m, deg -> rad) and then checks that the numbers describe a physical
+vehicle (:func:`check_physical`). ``Params.vector()`` is the runtime input ``p`` of every compiled
+function, in the order of ``Params.names()``; model code reads it through :func:`view`, so changing
+a number never recompiles.
 """
 
 from __future__ import annotations
 
-import difflib
-import math
+import dataclasses
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -17,30 +18,45 @@ from typing import Any, Iterator, Mapping
 
 import numpy as np
 
-from arvcas import tomlfile
+from arvcas import config
+from arvcas.config import ge, gt, quantity
 
-__all__ = ["Params", "ParamsError", "load", "view", "SCHEMA", "default_path"]
+__all__ = ["Params", "ParamsError", "load", "view", "SCHEMA", "UNITS", "default_path", "check_physical"]
 
 
 class ParamsError(ValueError):
     """A one-line error naming the parameter file and the key at fault."""
 
 
-# unit string -> (dimension, factor to SI)
-UNITS: dict[str, tuple[str, float]] = {
-    "1": ("dimensionless", 1.0),
-    "kg": ("mass", 1.0),
-    "kg/m^3": ("density", 1.0),
-    "m/s^2": ("acceleration", 1.0),
-    "kg*m^2": ("inertia", 1.0),
-    "m": ("length", 1.0),
-    "mm": ("length", 1e-3),
-    "m^3": ("volume", 1.0),
-    "deg": ("angle", math.pi / 180.0),
-    "rad": ("angle", 1.0),
-    "N": ("force", 1.0),
-    "per_rho": ("hydro", 1.0),  # hydrodynamic derivative per unit density (SPEC 2)
-}
+UNITS = config.UNITS  # unit string -> (dimension, factor to SI)
+
+# ---- the file's schema (declaration order = the order of Params.vector()) ---------------------------
+
+
+@dataclass(frozen=True)
+class Env:
+    rho: float = quantity("density", ge(0))  # rho = 0 is the no-fluid reference case
+    g: float = quantity("acceleration", gt(0))
+    Cd: float = quantity("1", ge(0))
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    m: float = quantity("mass", gt(0))
+    buoyancy_excess: float = quantity("mass")
+    Ixx: float = quantity("inertia", gt(0))
+    Iyy: float = quantity("inertia", gt(0))
+    Izz: float = quantity("inertia", gt(0))
+    Ixy: float = quantity("inertia")
+    Iyz: float = quantity("inertia")
+    Ixz: float = quantity("inertia")
+    xG: float = quantity("length")
+    yG: float = quantity("length")
+    zG: float = quantity("length")
+    xB: float = quantity("length")
+    yB: float = quantity("length")
+    zB: float = quantity("length")
+
 
 _HYDRO = (
     "X_u X_v X_w X_q X_r X_udot X_vdot X_wdot X_qdot X_rdot X_v_absw X_u_absw X_ds "
@@ -50,52 +66,96 @@ _HYDRO = (
     "M_u M_w M_q M_udot M_wdot M_qdot M_uw M_w_absw M_dsds M_ds "
     "N_u N_v N_r N_udot N_vdot N_rdot N_v_absv"
 ).split()
+# Table A1's hydrodynamic derivatives, per unit density (the model multiplies by rho)
+Hydro = dataclasses.make_dataclass(
+    "Hydro", [(k, float, quantity("per_rho")) for k in _HYDRO], frozen=True)
 
 
-def _schema() -> dict[str, tuple[str, str]]:
-    """name -> (dimension, sign rule); sign rule in {"any", "nonneg", "pos"}."""
-    s: dict[str, tuple[str, str]] = {
-        "env.rho": ("density", "nonneg"),  # rho = 0 is the no-fluid reference case
-        "env.g": ("acceleration", "pos"),
-        "env.Cd": ("dimensionless", "nonneg"),
-        "vehicle.m": ("mass", "pos"),
-        "vehicle.buoyancy_excess": ("mass", "any"),
-    }
-    for k in ("Ixx", "Iyy", "Izz"):
-        s[f"vehicle.{k}"] = ("inertia", "pos")
-    for k in ("Ixy", "Iyz", "Ixz"):
-        s[f"vehicle.{k}"] = ("inertia", "any")
-    for k in ("xG", "yG", "zG", "xB", "yB", "zB"):
-        s[f"vehicle.{k}"] = ("length", "any")
-    for k in _HYDRO:
-        s[f"hydro.{k}"] = ("hydro", "any")
-    s["thrusters.delta_sL"] = ("angle", "any")
-    s["thrusters.delta_sR"] = ("angle", "any")
-    for k in ("x_stn", "y_stn", "z_stn", "x_bow", "y_bow", "x_hB", "x_hS"):
-        s[f"thrusters.{k}"] = ("length", "any")
-    s["thrusters.u_min"] = ("force", "any")
-    s["thrusters.u_max"] = ("force", "any")
-    for k in ("x", "y", "z"):
-        s[f"arm.mount.{k}"] = ("length", "any")
-    s["arm.tool.length"] = ("length", "nonneg")
-    for i in range(1, 7):
-        s[f"arm.joint{i}.a"] = ("length", "any")
-        s[f"arm.joint{i}.d"] = ("length", "any")
-        s[f"arm.joint{i}.alpha"] = ("angle", "any")
-        s[f"arm.joint{i}.qmin"] = ("angle", "any")
-        s[f"arm.joint{i}.qmax"] = ("angle", "any")
-    for i in range(1, 7):
-        s[f"arm.link{i}.mass"] = ("mass", "pos")
-        s[f"arm.link{i}.volume"] = ("volume", "nonneg")
-        s[f"arm.link{i}.diameter"] = ("length", "pos")
-    for i in range(1, 7):
-        s[f"arm.stow.q{i}"] = ("angle", "any")
-    s["payload.mass"] = ("mass", "nonneg")
-    s["payload.volume"] = ("volume", "nonneg")
-    return s
+@dataclass(frozen=True)
+class Thrusters:
+    delta_sL: float = quantity("angle")
+    delta_sR: float = quantity("angle")
+    x_stn: float = quantity("length")
+    y_stn: float = quantity("length")
+    z_stn: float = quantity("length")
+    x_bow: float = quantity("length")
+    y_bow: float = quantity("length")
+    x_hB: float = quantity("length")
+    x_hS: float = quantity("length")
+    u_min: float = quantity("force")
+    u_max: float = quantity("force")
 
 
-SCHEMA: dict[str, tuple[str, str]] = _schema()
+@dataclass(frozen=True)
+class Mount:
+    x: float = quantity("length")
+    y: float = quantity("length")
+    z: float = quantity("length")
+
+
+@dataclass(frozen=True)
+class Tool:
+    length: float = quantity("length", ge(0))
+
+
+@dataclass(frozen=True)
+class Joint:
+    """Craig's modified DH row of joint i (a_{i-1}, d_i, alpha_{i-1}) and its limits (Table 1)."""
+
+    a: float = quantity("length")
+    d: float = quantity("length")
+    alpha: float = quantity("angle")
+    qmin: float = quantity("angle")
+    qmax: float = quantity("angle")
+
+
+@dataclass(frozen=True)
+class Link:
+    mass: float = quantity("mass", gt(0))
+    volume: float = quantity("volume", ge(0))
+    diameter: float = quantity("length", gt(0))
+
+
+N_JOINTS = 6
+Stow = dataclasses.make_dataclass(
+    "Stow", [(f"q{i}", float, quantity("angle")) for i in range(1, N_JOINTS + 1)], frozen=True)
+Arm = dataclasses.make_dataclass(
+    "Arm",
+    [("mount", Mount, config.setting()), ("tool", Tool, config.setting())]
+    + [(f"joint{i}", Joint, config.setting()) for i in range(1, N_JOINTS + 1)]
+    + [(f"link{i}", Link, config.setting()) for i in range(1, N_JOINTS + 1)]
+    + [("stow", Stow, config.setting())],
+    frozen=True)
+
+
+@dataclass(frozen=True)
+class Payload:
+    mass: float = quantity("mass", ge(0))
+    volume: float = quantity("volume", ge(0))
+
+
+@dataclass(frozen=True)
+class ParamFile:
+    """The parameter file: every section is required, every entry is { value, unit, source }."""
+
+    env: Env = config.setting()
+    vehicle: Vehicle = config.setting()
+    hydro: Hydro = config.setting()  # type: ignore[valid-type]
+    thrusters: Thrusters = config.setting()
+    arm: Arm = config.setting()  # type: ignore[valid-type]
+    payload: Payload = config.setting()
+
+
+def _rule_name(spec: config.Spec) -> str:
+    for r in spec.rules:
+        if isinstance(r, config.Bound) and r.limit == 0 and r.op in (">", ">="):
+            return "pos" if r.op == ">" else "nonneg"
+    return "any"
+
+
+# name -> (dimension, sign rule in {"any", "nonneg", "pos"}), in the order of Params.vector()
+SCHEMA: dict[str, tuple[str, str]] = {
+    leaf.key: (leaf.spec.dim, _rule_name(leaf.spec)) for leaf in config.leaves(ParamFile)}
 
 
 def default_path() -> Path:
@@ -138,12 +198,16 @@ class Params:
         return dict(zip(SCHEMA, self._values))
 
     def replace(self, mapping: Mapping[str, float]) -> "Params":
-        """A new ``Params`` with the given SI values replaced (unknown names and bad values refused)."""
+        """A new ``Params`` with the given SI values replaced (unknown names and bad values refused).
+
+        Each value is checked against its field's rule; the physical checks of :func:`check_physical`
+        are not repeated (a study may vary a parameter through a non-physical value on purpose).
+        """
         vals = list(self._values)
         srcs = list(self._sources)
         for name, v in mapping.items():
             i = _index(name, "Params.replace")
-            vals[i] = _check_value(name, v, "Params.replace")
+            vals[i] = config.check_value(ParamFile, name, v, "Params.replace", ParamsError)
             srcs[i] = "replaced at run time"
         return Params(tuple(vals), self._units, tuple(srcs), self.path)
 
@@ -152,83 +216,112 @@ def _index(name: str, where: str) -> int:
     try:
         return _INDEX[name]
     except KeyError:
-        raise ParamsError(f"{where}: unknown parameter '{name}'{_suggest(name)}") from None
+        raise ParamsError(f"{where}: unknown parameter '{name}'{config.closest(name, SCHEMA)}") from None
 
 
 _INDEX = {n: i for i, n in enumerate(SCHEMA)}
-
-
-def _suggest(name: str) -> str:
-    close = difflib.get_close_matches(name, list(SCHEMA), n=1, cutoff=0.6)
-    return f" (did you mean '{close[0]}'?)" if close else ""
-
-
-def _check_value(name: str, v: Any, where: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)):
-        raise ParamsError(f"{where}: {name}: value must be a number, got {type(v).__name__}")
-    v = float(v)
-    if not math.isfinite(v):
-        raise ParamsError(f"{where}: {name}: value must be finite, got {v}")
-    rule = SCHEMA[name][1]
-    if rule == "pos" and v <= 0:
-        raise ParamsError(f"{where}: {name}: value must be > 0, got {v}")
-    if rule == "nonneg" and v < 0:
-        raise ParamsError(f"{where}: {name}: value must be >= 0, got {v}")
-    return v
-
-
-def _flatten(table: Mapping[str, Any], prefix: str, out: dict[str, Any], where: str) -> None:
-    for k, v in table.items():
-        name = f"{prefix}{k}"
-        if isinstance(v, dict) and "value" not in v:
-            _flatten(v, name + ".", out, where)
-        else:
-            out[name] = v
 
 
 def load(path: str | Path | None = None) -> Params:
     """Load and validate a parameter file (default: the packaged ``data/haidou1.toml``).
 
     Raises :class:`ParamsError` with one line naming the file and key for a missing, unreadable,
-    non-UTF-8 or malformed file, an unknown or missing key, a wrong unit or type, or a non-finite value.
+    non-UTF-8 or malformed file, an unknown or missing key, a wrong unit or type, a non-finite value,
+    a broken rule, or numbers that do not describe a physical vehicle (:func:`check_physical`).
     """
     p = Path(path) if path is not None else default_path()
-    where = str(p)
-    doc = tomlfile.parse(tomlfile.read_text(p, ParamsError), where, ParamsError)
-    flat: dict[str, Any] = {}
-    _flatten(doc, "", flat, where)
-    for name in flat:
-        if name not in SCHEMA:
-            raise ParamsError(f"{where}: unknown key '{name}'{_suggest(name)}")
-    missing = [n for n in SCHEMA if n not in flat]
-    if missing:
-        more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
-        raise ParamsError(f"{where}: missing key '{missing[0]}'{more}")
-    values, units, sources = [], [], []
-    for name, (dim, _rule) in SCHEMA.items():
-        entry = flat[name]
-        if not isinstance(entry, dict):
-            raise ParamsError(f"{where}: {name}: expected a table {{ value, unit, source }}")
-        extra = set(entry) - {"value", "unit", "source"}
-        if extra:
-            raise ParamsError(f"{where}: {name}: unknown field '{sorted(extra)[0]}' (allowed: value, unit, source)")
-        for field in ("value", "unit", "source"):
-            if field not in entry:
-                raise ParamsError(f"{where}: {name}: missing field '{field}'")
-        unit = entry["unit"]
-        if unit not in UNITS:
-            raise ParamsError(f"{where}: {name}: unknown unit '{unit}' (allowed: {', '.join(UNITS)})")
-        udim, factor = UNITS[unit]
-        if udim != dim:
-            allowed = ", ".join(u for u, (d, _) in UNITS.items() if d == dim)
-            raise ParamsError(f"{where}: {name}: unit '{unit}' is not a {dim} (allowed: {allowed})")
-        if not isinstance(entry["source"], str) or not entry["source"].strip():
-            raise ParamsError(f"{where}: {name}: 'source' must be a non-empty string")
-        v = _check_value(name, entry["value"], where)
-        values.append(v * factor)
-        units.append(unit)
-        sources.append(entry["source"])
-    return Params(tuple(values), tuple(units), tuple(sources), where)
+    loaded = config.load_file(ParamFile, p, ParamsError, entries=True)
+    flat = config.flatten(loaded.value)
+    assert [k for k, _ in flat] == list(SCHEMA)
+    values = tuple(float(v) for _, v in flat)
+    check_physical(dict(zip(SCHEMA, values)), loaded.where)
+    units = tuple(loaded.entries[k][0] for k in SCHEMA)
+    sources = tuple(loaded.entries[k][1] for k in SCHEMA)
+    return Params(values, units, sources, loaded.where)
+
+
+# ---- physical validity ------------------------------------------------------------------------------
+
+
+def _fail(where: str, keys: list[str], msg: str) -> ParamsError:
+    return ParamsError(f"{where}: {', '.join(keys)}: {msg}")
+
+
+def _eig_min(A: np.ndarray) -> float:
+    return float(np.linalg.eigvalsh(0.5 * (A + A.T))[0])
+
+
+def check_physical(values: Mapping[str, float], where: str) -> None:
+    """Refuse SI parameter values that do not describe a physical vehicle-manipulator system.
+
+    One-line :class:`ParamsError` naming ``where`` and the keys at fault, for:
+
+    * a vehicle inertia tensor (Ixx..Ixz about the body origin) that is not positive definite, or
+      whose principal moments break the triangle inequality (no mass distribution has them);
+    * a rigid-body mass matrix M_RB (mass, inertia and centre of gravity) that is not positive definite;
+    * a total inertia M = M_RB + M_A (added mass from the hydro ``*dot`` derivatives times rho) whose
+      symmetric part is not positive definite: then ``M + M_arm`` may be singular, and the run
+      factors it without pivoting (kinetic energy must be positive for every motion);
+    * thrust limits u_min >= u_max, joint limits qmin >= qmax, a stowed pose outside its joint limits;
+    * a thruster layout whose allocation matrix B_T (Appendix B) is not of rank 6;
+    * an arm link of zero length (the cylinder's drag and inertia are along its axis).
+
+    The matrices are the model's own (:mod:`arvcas.model.vehicle`, :mod:`arvcas.model.thrusters`,
+    :mod:`arvcas.model.manipulator`), evaluated on numbers, so the check tests what the run will use.
+    """
+    from arvcas.model import manipulator, thrusters, vehicle  # the model imports this module
+
+    P = view(np.array([values[k] for k in SCHEMA], dtype=float))
+    inertia = [f"vehicle.{k}" for k in ("Ixx", "Iyy", "Izz", "Ixy", "Iyz", "Ixz")]
+    I_b = np.array(vehicle.I_b(P), dtype=float)
+    lam = np.linalg.eigvalsh(I_b)
+    if lam[0] <= 0:
+        raise _fail(where, inertia, f"the inertia tensor is not positive definite "
+                                    f"(eigenvalues {', '.join(f'{x:.6g}' for x in lam)} kg*m^2)")
+    if lam[0] + lam[1] < lam[2] * (1 - 1e-12):
+        raise _fail(where, inertia, f"the principal moments {', '.join(f'{x:.6g}' for x in lam)} kg*m^2 "
+                                    f"break the triangle inequality (no mass distribution has them)")
+    rb = ["vehicle.m", *inertia, "vehicle.xG", "vehicle.yG", "vehicle.zG"]
+    M_RB = np.array(vehicle.M_RB(P), dtype=float)
+    e = _eig_min(M_RB)
+    if e <= 0:
+        raise _fail(where, rb, f"the rigid-body mass matrix M_RB is not positive definite (smallest "
+                               f"eigenvalue {e:.6g}: the inertia about the centre of gravity is not)")
+    M = np.array(vehicle.M(P), dtype=float)
+    sym = 0.5 * (M + M.T)
+    for k in range(1, 7):  # the first leading block that fails names its degree of freedom
+        if _eig_min(sym[:k, :k]) <= 0:
+            row = [f"hydro.{name}" for i, j, name in vehicle._MA_ENTRIES if i == k - 1]
+            raise _fail(where, ["env.rho", *row],
+                        f"the inertia M = M_RB + M_A (added mass = -rho * derivative) is not positive "
+                        f"definite in DOF {k} (symmetric part's {k}x{k} leading block has eigenvalue "
+                        f"{_eig_min(sym[:k, :k]):.6g}): M + M_arm could be singular")
+    if not values["thrusters.u_min"] < values["thrusters.u_max"]:
+        raise _fail(where, ["thrusters.u_min", "thrusters.u_max"],
+                    f"u_min ({values['thrusters.u_min']:g} N) must be < u_max ({values['thrusters.u_max']:g} N)")
+    for i in range(1, N_JOINTS + 1):
+        lo, hi = values[f"arm.joint{i}.qmin"], values[f"arm.joint{i}.qmax"]
+        if not lo < hi:
+            raise _fail(where, [f"arm.joint{i}.qmin", f"arm.joint{i}.qmax"],
+                        f"qmin ({np.degrees(lo):g} deg) must be < qmax ({np.degrees(hi):g} deg)")
+        q = values[f"arm.stow.q{i}"]
+        if not lo <= q <= hi:
+            raise _fail(where, [f"arm.stow.q{i}"], f"stowed angle {np.degrees(q):g} deg is outside joint {i}'s "
+                                                   f"limits [{np.degrees(lo):g}, {np.degrees(hi):g}] deg")
+    B = np.array(thrusters.B_T(P), dtype=float)
+    sv = np.linalg.svd(B, compute_uv=False)
+    rank = int(np.sum(sv > 1e-9 * sv[0]))
+    if rank < 6:
+        keys = [k for k in SCHEMA if k.startswith("thrusters.") and k not in ("thrusters.u_min", "thrusters.u_max")]
+        raise _fail(where, keys, f"the thruster allocation matrix B_T has rank {rank}, not 6 (singular values "
+                                 f"{', '.join(f'{x:.3g}' for x in sv)}): the thrusters cannot produce every wrench")
+    for i, s in enumerate(manipulator.link_vectors(P), start=1):
+        L = float(np.linalg.norm(np.array(s, dtype=float)))
+        if L < 1e-9:
+            keys = [f"arm.joint{i + 1}.a", f"arm.joint{i + 1}.d"] if i < N_JOINTS else ["arm.tool.length"]
+            raise _fail(where, keys, f"link {i} has zero length (diameter {values[f'arm.link{i}.diameter']:g} m, "
+                                     f"drag coefficient env.Cd {values['env.Cd']:g}): its drag and inertia "
+                                     f"are along its axis")
 
 
 class _View(Mapping[str, Any]):

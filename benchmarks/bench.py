@@ -89,6 +89,8 @@ REQUIRED_KEYS = (
     "closed_loop.batch.runs_per_s_1", "closed_loop.batch.runs_per_s_2", "closed_loop.batch.ratio_2_over_1",
     "compile.uvms_rhs.cold_build_s", "compile.uvms_rhs.warm_build_s", "compile.run.cold_build_s",
     "compile.run.warm_build_s", "compile.opt_sweep.run", "compile.opt_sweep.uvms_rhs", "recommendation.opt_level",
+    "startup.warm_simulate_wall_s", "startup.warm_simulate_peak_rss_mb", "startup.cold_graph_metrics_s",
+    "startup.cold_graph_trace_s", "startup.cold_graph_peak_rss_mb",
 )
 
 
@@ -805,6 +807,52 @@ def _recommend(comp: dict) -> dict:
 # the whole benchmark
 
 
+_GRAPH_CHILD = """
+import json, time, resource
+from arvcas.sim import closedloop, scenario
+spec = closedloop.RunSpec({controller!r}, scenario.load_scenario().graph_key())
+t0 = time.perf_counter(); closedloop.build_run(spec, trace=False); t1 = time.perf_counter()
+closedloop.build_run(spec, trace=True); t2 = time.perf_counter()
+print(json.dumps({{"metrics_s": t1 - t0, "trace_s": t2 - t1,
+                  "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}}))
+"""
+
+
+def _child(cmd: list[str]) -> tuple[float, float, str]:
+    """(wall s, peak RSS MB, stdout) of a fresh process."""
+    t0 = time.perf_counter()
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    out, err = p.communicate(timeout=600)
+    status = p.returncode
+    wall = time.perf_counter() - t0
+    if status != 0:
+        raise BenchError(f"{' '.join(cmd[:3])}...: exit {status}: {err.strip().splitlines()[-1] if err.strip() else ''}")
+    return wall, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024, out
+
+
+def _bench_startup(s: Settings, log) -> dict:
+    """A fresh process: warm ``arvcas simulate`` (the libraries in the cache: no graph is built) and
+    the cold graph build of the 100 s run (what a cache miss pays before compiling)."""
+    log("startup: warm `arvcas simulate` in fresh processes ...")
+    exe = [sys.executable, "-c", "import sys; from arvcas.cli import main; sys.exit(main(sys.argv[1:]))",
+           "simulate", "--controller", CONTROLLER]
+    _child(exe)  # make sure the cache is warm
+    walls, rss = [], []
+    for _ in range(s.reps):
+        w, r, _ = _child(exe)
+        walls.append(w)
+        rss.append(r)
+    log("startup: cold graph build of the run in a fresh process ...")
+    # ru_maxrss of RUSAGE_CHILDREN is the largest child so far: measure the graph child last
+    g = json.loads(_child([sys.executable, "-c", _GRAPH_CHILD.format(controller=CONTROLLER)])[2].strip().splitlines()[-1])
+    return {"warm_simulate_wall_s": _stat(walls), "warm_simulate_peak_rss_mb": max(rss),
+            "cold_graph_metrics_s": g["metrics_s"], "cold_graph_trace_s": g["trace_s"],
+            "cold_graph_peak_rss_mb": g["peak_rss_mb"],
+            "note": "warm: `arvcas simulate --controller proposed` (import, cache lookup, time table, "
+                    "one 100 s run with trace); RSS of the largest child process; cold graph: build_run in a fresh "
+                    "process (metrics-only then trace), peak RSS of that process"}
+
+
 def run(out: str | Path | None = "results", quick: bool = False, wait_load: float | None = None,
         wait_max_s: float = 900.0, log: Callable[[str], None] | None = None) -> dict:
     """Measure everything once; write ``bench.json`` and ``bench.md`` to ``out`` (unless None).
@@ -834,6 +882,7 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
             ("plant", lambda: _bench_plant(s, driver, work, P.vector(), log)),
             ("closed_loop", lambda: _bench_closed_loop(s, cfg, P, log)),
             ("compile", lambda: _bench_compile(s, cfg, P, driver, work, log)),
+            ("startup", lambda: _bench_startup(s, log)),
         ):
             m = _CpuMeter()
             t0 = time.perf_counter()
@@ -1016,5 +1065,14 @@ def render_markdown(res: dict) -> str:
         L.append(f"| {r['opt_level']} | {_g(_m(r['cc_s']))} ({_spread(r['cc_s'])}) | "
                  f"{_g(_m(r['c_ns_per_eval']))} ({_spread(r['c_ns_per_eval'])}) | {r['speedup_vs_base']:.2f}x | "
                  f"{r['cc_ratio_vs_base']:.2f}x |")
+    st = res["startup"]
+    L += ["", "## 4. Starting up (issue 11)", "",
+          "| what | measured | target |", "|---|---|---|",
+          f"| warm `arvcas simulate` in a fresh process (wall, median) | {_g(_m(st['warm_simulate_wall_s']))} s | <= 1.0 s |",
+          f"| its peak resident memory | {_g(st['warm_simulate_peak_rss_mb'])} MB | <= 300 MB |",
+          f"| cold graph build of the 100 s run, metrics only / with trace | {_g(st['cold_graph_metrics_s'])} s / "
+          f"{_g(st['cold_graph_trace_s'])} s | <= 1.5 s |",
+          f"| its peak resident memory | {_g(st['cold_graph_peak_rss_mb'])} MB | <= 500 MB |",
+          "", st["note"] + "."]
     L += ["", "## Recommendation", "", rec["text"], ""]
     return "\n".join(L)

@@ -120,7 +120,7 @@ def test_cli_same_seed_same_file_bit_for_bit(tmp_path, capsys):
 
 
 def test_cli_errors_are_one_line(tmp_path, capsys):
-    assert main(["montecarlo", "--controller", "pid", "--runs", "2", "--out", str(tmp_path / "x.h5")]) == 2
+    assert main(["montecarlo", "--controller", "lqr", "--runs", "2", "--out", str(tmp_path / "x.h5")]) == 2
     assert main(["montecarlo", "--controller", "proposed", "--runs", "2", "--out", str(tmp_path / "no/x.h5")]) == 2
     assert main(["montecarlo", "--controller", "proposed", "--runs", "0", "--out", str(tmp_path / "x.h5")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

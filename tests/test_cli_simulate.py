@@ -24,7 +24,7 @@ def test_simulate_writes_result_and_prints_table(tmp_path, capsys):
 
 def test_simulate_bad_inputs_one_line(tmp_path, capsys):
     cases = [
-        (["simulate", "--controller", "pid"], "unknown 'pid'"),
+        (["simulate", "--controller", "lqr"], "unknown 'lqr'"),
         (["simulate", "--controller", "proposed", "--out", str(tmp_path / "missing" / "x.h5")], "does not exist"),
         (["simulate", "--controller", "proposed", "--config", str(tmp_path / "nope.toml")], "file not found"),
         (["simulate"], "--controller: required"),

@@ -120,7 +120,7 @@ def test_traditional_law_zigzags_proposed_does_not(cfg):
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        ({"controller": "pid"}, "unknown 'pid'"),
+        ({"controller": "lqr"}, "unknown 'lqr'"),
         ({"gains": np.ones(5)}, "takes 66 gains"),
         ({"gains": -gains.default_gains("proposed")}, "must be > 0"),
         ({"gains": np.full(66, np.nan)}, "not finite"),

@@ -161,8 +161,9 @@ def test_second_process_reuses_artifact(built, cache):
         f"""
         import numpy as np
         from arvcas.params import load
+        from arvcas.model.uvms import plant_functions
         t0 = time.perf_counter()
-        f = C.compiled("uvms_rhs")
+        f = C.build(plant_functions()["uvms_rhs"])  # keyed by its C text, as the module's fixture built it
         dt = time.perf_counter() - t0
         xdot = f({x!r}, [10, 0, 5, 0, 0, 1], [1.5, 1.5, -1.5, 0, 1.5, 0], [0.1] * 6, [0] * 6, 0.5, load().vector())
         print(json.dumps({{"stats": C.stats(), "path": C.artifact_of(f)["path"], "load_s": dt,

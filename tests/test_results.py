@@ -41,7 +41,9 @@ def synthetic(controller="proposed", n=21, ok=True, t_fail=None, seed=3, optiona
 
 
 def assert_same(a: Result, b: Result) -> None:
-    for name in Result.__dataclass_fields__:
+    assert list(a.series) == list(b.series)
+    assert [s.name for s in a.signals] == [s.name for s in b.signals] == list(a.series)
+    for name in (*Result.FIELDS, *a.series):
         va, vb = getattr(a, name), getattr(b, name)
         if isinstance(va, np.ndarray) or isinstance(vb, np.ndarray):
             assert va is not None and vb is not None, name
@@ -141,11 +143,11 @@ def test_interrupted_write_leaves_no_file(tmp_path, monkeypatch, exc):
     calls = []
     real_put = results._put
 
-    def put(f, name, data):
+    def put(f, name, data, *sig):
         calls.append(name)
         if len(calls) == 4:  # midway through the datasets
             raise exc
-        real_put(f, name, data)
+        real_put(f, name, data, *sig)
 
     monkeypatch.setattr(results, "_put", put)
     with pytest.raises(type(exc)):
@@ -159,7 +161,7 @@ def test_interrupted_write_keeps_previous_file(tmp_path, monkeypatch):
     write_result(synthetic(seed=1), p)
     before = p.read_bytes()
 
-    def put(f, name, data):
+    def put(f, name, data, *sig):
         raise RuntimeError("interrupted")
 
     monkeypatch.setattr(results, "_put", put)
@@ -176,7 +178,7 @@ def test_full_disk_is_one_line_and_keeps_previous_file(tmp_path, monkeypatch):
     write_result(synthetic(seed=1), p)
     before = p.read_bytes()
 
-    def put(f, name, data):
+    def put(f, name, data, *sig):
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(results, "_put", put)

@@ -42,7 +42,7 @@ def _write(tmp_path, text, name="s.toml", binary=False):
         (lambda t: t.replace("duration = { value = 100.0,", "duration = { value = -1.0,"), "time.duration: value must be > 0"),
         (lambda t: t.replace("h = { value = 0.1,", "h = { value = 0.015,"), "must be a whole multiple of time.h_plant"),
         (lambda t: t.replace("q_nu = { value = 1e-7,", "q_nu = { value = 0.0,"), "ekf.q_nu: value must be > 0"),
-        (lambda t: t.replace("qg = { value = [60.0, 60.0, -60.0, 0.0, 60.0, 0.0],", "qg = { value = [60.0, 60.0],"), "arm.qg: expected a list of 6 numbers"),
+        (lambda t: t.replace("qg = { value = [60.0, 60.0, -60.0, 0.0, 60.0, 0.0],", "qg = { value = [60.0, 60.0],"), "arm.qg: value must be a list of 6 numbers"),
         (lambda t: t.replace("reach_end = { value = 20.0,", "reach_end = { value = 30.0,"), "arm times must satisfy"),
         (lambda t: t.replace('duration = { value = 100.0, unit = "s", source', 'duration = { value = 100.0, unit = "s", sauce'), "expected a table { value, unit, source }"),
     ],

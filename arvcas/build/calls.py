@@ -25,7 +25,7 @@ from concurrent.futures import ThreadPoolExecutor
 import casadi as ca
 import numpy as np
 
-__all__ = ["call", "call_many", "fortran"]
+__all__ = ["call", "call_many", "call_named", "fortran"]
 
 
 def fortran(a, shape: tuple[int, int]) -> np.ndarray:
@@ -152,3 +152,21 @@ def call_many(f: ca.Function, n: int, args, per_run, n_threads: int = 1) -> list
     if errors:
         raise RuntimeError(errors[0])
     return outs
+
+
+def call_named(f: ca.Function, inputs: dict, n: int = 1, per_run=(), n_threads: int = 1) -> dict[str, np.ndarray]:
+    """:func:`call_many` with the inputs bound by name (``f.name_in()``) and the outputs returned by name.
+
+    ``per_run``: names of the inputs with a column block per run. Every input must be given once.
+    """
+    names = list(f.name_in())
+    unknown = sorted(set(inputs) - set(names))
+    missing = [k for k in names if k not in inputs]
+    if unknown or missing:
+        raise ValueError(f"{f.name()}: inputs {names}; unknown {unknown}, missing {missing}")
+    bad = sorted(set(per_run) - set(names))
+    if bad:
+        raise ValueError(f"{f.name()}: per_run names {bad} are not inputs of {names}")
+    idx = [f.index_in(k) for k in per_run]
+    outs = call_many(f, n, [inputs[k] for k in names], per_run=idx, n_threads=n_threads)
+    return dict(zip(f.name_out(), outs))

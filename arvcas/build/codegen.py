@@ -45,11 +45,12 @@ import time
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 import casadi as ca
 
 __all__ = [
+    "build_described",
     "CacheError",
     "CompileError",
     "Artifact",
@@ -262,13 +263,13 @@ def _plan(fn: ca.Function, cmd_flags: list[str]) -> _Plan:
 
 
 @contextlib.contextmanager
-def _flock(path: Path, exclusive: bool, timeout: float) -> Iterator[bool]:
-    """Hold an flock on ``path``; yields False if it could not be had within ``timeout`` seconds."""
+def _flock(path: Path, exclusive: bool, timeout: float) -> Iterator[bool | None]:
+    """Hold an flock on ``path``; yields False if it could not be had within ``timeout`` seconds, and
+    None if the lock file cannot be opened at all (a read-only cache)."""
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
-    except OSError as e:
-        log.warning("cannot open lock file %s (%s)", path, e.strerror)
-        yield False
+    except OSError:
+        yield None
         return
     try:
         op = (fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH) | fcntl.LOCK_NB
@@ -300,8 +301,10 @@ def _sha256_file(path: Path) -> str:
     return h.hexdigest()
 
 
-def _verify(plan: _Plan, so: Path, man: Path) -> tuple[dict | None, str]:
-    """(manifest, "") if the artifact may be loaded, else (None, reason); reason "" means absent."""
+def _verify(plan, so: Path, man: Path) -> tuple[dict | None, str]:
+    """(manifest, "") if the artifact may be loaded, else (None, reason); reason "" means absent.
+
+    ``plan`` needs only ``name`` and ``key`` (a :class:`_Plan`, or a :class:`_Lookup` before any graph exists)."""
     if not so.exists() and not man.exists():
         return None, ""
     try:
@@ -416,7 +419,7 @@ def _sweep(d: Path) -> None:
                 pass
 
 
-def _load(plan: _Plan, so: Path, manifest: dict) -> ca.Function:
+def _load(plan, so: Path, manifest: dict) -> ca.Function:
     f = ca.external(plan.name, str(so))
     with _LOCK:
         _KEEP.append(f)
@@ -453,27 +456,99 @@ def build(
 
 def _build(fn: ca.Function, cmd_flags: list[str], d: Path, lock_timeout: float) -> ca.Function:
     plan = _plan(fn, cmd_flags)
-    so, man, lock = d / f"{plan.stem()}.so", d / f"{plan.stem()}.json", d / f"{plan.stem()}.lock"
+    return _lookup_or_publish(plan, lambda: plan, d, lock_timeout)
+
+
+def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_timeout: float) -> ca.Function:
+    """Load the verified artifact of ``look`` (name, key), else build it (``make_plan()``) and publish it.
+
+    A cache whose lock files cannot be created (read-only) still serves verified artifacts: the
+    ``.so`` is checked against its manifest's sha256 and published by ``os.replace``, so loading
+    without the lock is safe; a build there is private (a temporary directory, not published).
+    """
+    so, man, lock = d / f"{look.stem()}.so", d / f"{look.stem()}.json", d / f"{look.stem()}.lock"
     with _flock(lock, exclusive=False, timeout=lock_timeout) as got:
-        if got:
-            m, why = _verify(plan, so, man)
+        if got or got is None:
+            m, why = _verify(look, so, man)
             if m is not None:
                 _STATS["disk_hit"] += 1
-                return _load(plan, so, m)
+                return _load(look, so, m)
     with _flock(lock, exclusive=True, timeout=lock_timeout) as got:
+        if got is None:
+            log.info("cache %s is not writable: building %s privately", d, look.name)
+            return _build_private(make_plan(), d)
         if not got:
-            log.warning("lock %s busy for %.0f s: building %s privately", lock, lock_timeout, plan.name)
-            return _build_private(plan, d)
-        m, why = _verify(plan, so, man)  # another process may have built it meanwhile
+            log.warning("lock %s busy for %.0f s: building %s privately", lock, lock_timeout, look.name)
+            return _build_private(make_plan(), d)
+        m, why = _verify(look, so, man)  # another process may have built it meanwhile
         if m is not None:
             _STATS["disk_hit"] += 1
-            return _load(plan, so, m)
+            return _load(look, so, m)
         if why:
             _STATS["rejected"] += 1
             log.warning("cached %s rejected (%s): rebuilding", so.name, why)
         _sweep(d)
+        plan = make_plan()
         m = _publish(plan, d, so, man)
         return _load(plan, so, m)
+
+
+@dataclass(frozen=True)
+class _Lookup:
+    """What a cache lookup needs before any graph exists: the function's name and its key."""
+
+    name: str
+    key: str
+
+    def stem(self) -> str:
+        return f"{self.name}-{self.key[:20]}"
+
+
+_DESCRIBED: dict[tuple, ca.Function] = {}
+
+
+def build_described(
+    name: str,
+    description: str,
+    make: Callable[[], ca.Function],
+    *,
+    opt_level: str = DEFAULT_OPT_LEVEL,
+    flags: tuple[str, ...] = (),
+    lock_timeout: float = LOCK_TIMEOUT_S,
+) -> ca.Function:
+    """The compiled function ``name`` described by ``description``, built by ``make()`` only on a miss.
+
+    The cache key is sha256 over (``description``, :func:`arvcas.build.provenance.model_hash` — the
+    package's model, simulation, controller and codegen code and its data —, the compiler, the
+    flags, CasADi's and arvcas's versions): a warm start loads the library without building the
+    CasADi graph at all. ``description`` must name everything else that shapes the graph (the caller's
+    options, scenario fields, a user controller's own source). ``make()`` must return a Function
+    called ``name``. Memoized per process.
+    """
+    from arvcas.build.provenance import model_hash
+
+    cmd_flags = _check_flags(opt_level, flags)
+    if not name.isidentifier() or not name.isascii():
+        raise ValueError(f"function name {name!r} is not a C identifier")
+    compiler = _compiler_id()
+    key = _key("described:" + name + "\0" + description + "\0" + model_hash(), compiler, cmd_flags)
+    mkey = (name, key, str(_cache_path()))
+    with _LOCK:
+        f = _DESCRIBED.get(mkey)
+        if f is not None:
+            _STATS["memo_hit"] += 1
+            return f
+
+        def make_plan() -> _Plan:
+            fn = make()
+            if not isinstance(fn, ca.Function) or fn.name() != name:
+                raise TypeError(f"build_described: make() must return a casadi.Function named {name!r}")
+            p = _plan(fn, cmd_flags)
+            return _Plan(p.name, p.n_instructions, p.c_text, p.codegen_s, p.compiler, p.cmd_flags, key)
+
+        f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout)
+        _DESCRIBED[mkey] = f
+        return f
 
 
 def artifact_of(f: ca.Function) -> dict | None:
@@ -508,9 +583,12 @@ def compiled(name: str, opts=None) -> ca.Function:
     with _LOCK:
         f = _COMPILED.get((name, tag))
         if f is None:
-            if tag not in _PLANT:
-                _PLANT[tag] = plant_functions(opts)
-            f = build(_PLANT[tag][name])
+            def make():
+                if tag not in _PLANT:
+                    _PLANT[tag] = plant_functions(opts)
+                return _PLANT[tag][name]
+
+            f = build_described(name, f"plant {name} {opts!r}", make)
             _COMPILED[(name, tag)] = f
         return f
 

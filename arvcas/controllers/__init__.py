@@ -1,32 +1,19 @@
-"""Controller building blocks (paper section 3, SPEC 5 and 5b), one module per idea.
+"""Controllers: each law is an object (:class:`Controller`) in one module, found by name in one registry.
 
-- :mod:`.atd`:  adaptive tracking differentiator (eq. 12-13), the reference ``y1``, ``y2``.
-- :mod:`.reso`: reduced-order extended state observer (eq. 14-16), the disturbance ``chi2_hat``.
-- :mod:`.gsta`: generalised super-twisting (eq. 18, 21), explicit and implicit (SPEC 5b) steps,
-  and the adaptive gain laws (eq. 19; AGSTA; the "traditional" law of Fig. 10).
+- :mod:`.base`: :class:`Controller`, :class:`Gain`, :func:`register`, :func:`get`;
+- :mod:`.gains`: flat gain vectors (names, defaults from the system's gain table, validation);
+- the paper's laws: :mod:`.proposed` (modified AGSTA + ATD + RESO), :mod:`.agsta` (the baseline),
+  :mod:`.traditional` (the zigzagging law of Fig. 10), :mod:`.implicit` (implicit GSTA step), all
+  built on :mod:`.smc`; and :mod:`.pid` (a per-DOF PID baseline);
+- building blocks, pure functions over any CasADi type: :mod:`.atd` (eq. 12-13), :mod:`.reso`
+  (eq. 14-16), :mod:`.gsta` (eq. 18-21 and the adaptive laws).
 
-All steps are pure functions over any CasADi type, elementwise per DOF, for use inside one
-compiled closed-loop step function.
+A controller of your own: subclass :class:`Controller`, declare ``name``, ``gains``, ``state``,
+``signals`` and ``defaults`` (or ``defaults_block``), implement ``initial`` and ``step``, and call
+:func:`register` (docs/adding-a-controller.md).
 """
 
-from arvcas.controllers.atd import atd_params, atd_step, fhan
-from arvcas.controllers.gsta import gsta_explicit, gsta_implicit, k1_next_agsta, k1_next_proposed, k1_next_traditional, k2_of_k1, phi1, phi2
-from arvcas.controllers.reso import check_reso_stability, reso_gains, reso_poles, reso_step
+from arvcas.controllers.base import Controller, ControllerError, Gain, get, names, register, unregister
+from arvcas.controllers import proposed, agsta, traditional, implicit, pid  # noqa: F401,E402  (registers them)
 
-__all__ = [
-    "fhan",
-    "atd_params",
-    "atd_step",
-    "reso_gains",
-    "reso_step",
-    "reso_poles",
-    "check_reso_stability",
-    "phi1",
-    "phi2",
-    "k2_of_k1",
-    "k1_next_proposed",
-    "k1_next_agsta",
-    "k1_next_traditional",
-    "gsta_explicit",
-    "gsta_implicit",
-]
+__all__ = ["Controller", "ControllerError", "Gain", "get", "names", "register", "unregister"]

@@ -1,6 +1,9 @@
-"""Controller gain vectors: Table 2 as data (``data/gains.toml``), names, validation.
+"""Controller gain vectors: names, defaults (the system's gain table, ``data/gains.toml``), validation.
 
-A gain vector is flat, DOF by DOF (x, y, z, phi, theta, psi), each DOF in Table 2's column order.
+A gain vector is flat, DOF by DOF (x, y, z, phi, theta, psi), each DOF in the controller's column
+order (:attr:`arvcas.controllers.Controller.gains`; for the paper's controllers, Table 2's order).
+Every function takes a controller name or a :class:`~arvcas.controllers.Controller` and works for
+any registered controller.
 """
 
 from __future__ import annotations
@@ -10,24 +13,20 @@ from importlib import resources
 
 import numpy as np
 
+from arvcas.controllers.base import DOFS, ControllerError, get, names
+
 __all__ = [
-    "CONTROLLERS", "DOFS", "GainError", "columns", "n_gains", "gain_names", "default_gains",
-    "check_controller", "check_gains", "unpack",
+    "DOFS", "GainError", "columns", "n_gains", "gain_names", "gain_units", "default_gains", "controllers",
+    "check_controller", "check_gains", "unpack", "upper_limits",
 ]
 
-DOFS = ("x", "y", "z", "phi", "theta", "psi")
-
-# controller -> Table 2 block whose columns (and default values) it uses
-CONTROLLERS: dict[str, str] = {
-    "proposed": "proposed",  # modified AGSTA + ATD + RESO (section 3)
-    "agsta": "agsta",  # original AGSTA with nominal-model compensation (SPEC 5)
-    "traditional": "proposed",  # proposed with the zigzagging decreasing law (Fig. 10)
-    "implicit": "proposed",  # proposed with the implicit GSTA step (SPEC 5b)
-}
+GainError = ControllerError
 
 
-class GainError(ValueError):
-    """One-line error about a controller name or a gain vector."""
+def __getattr__(name: str):
+    if name == "CONTROLLERS":  # the registered names, read when asked (a user may register more)
+        return names()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _table() -> dict:
@@ -38,71 +37,102 @@ def _table() -> dict:
 _TABLE = _table()
 
 
-def check_controller(controller: str) -> str:
-    if controller not in CONTROLLERS:
-        raise GainError(f"controller: unknown '{controller}' (allowed: {', '.join(CONTROLLERS)})")
-    return controller
+def controllers() -> tuple[str, ...]:
+    """Names of the registered controllers."""
+    return names()
 
 
-def columns(controller: str) -> list[str]:
-    """Table 2's column order for this controller."""
-    return list(_TABLE[CONTROLLERS[check_controller(controller)]]["columns"])
+def check_controller(controller) -> str:
+    """The controller's name; a one-line :class:`GainError` for an unknown one."""
+    return get(controller).name
 
 
-def n_gains(controller: str) -> int:
+def columns(controller) -> list[str]:
+    """The controller's per-DOF column order."""
+    return get(controller).columns()
+
+
+def n_gains(controller) -> int:
     return 6 * len(columns(controller))
 
 
-def gain_names(controller: str) -> list[str]:
+def gain_names(controller) -> list[str]:
     """Dotted names of the flat vector: ``x.c, x.mu1, ..., psi.omega``."""
     return [f"{d}.{c}" for d in DOFS for c in columns(controller)]
 
 
-def default_gains(controller: str) -> np.ndarray:
-    """Table 2 as the flat vector (DOF by DOF, x to psi, each in the table's column order)."""
-    block = _TABLE[CONTROLLERS[check_controller(controller)]]
+def gain_units(controller) -> list[str]:
+    """The unit of each entry of the flat vector."""
+    units = [g.unit for g in get(controller).gains]
+    return [u for _ in DOFS for u in units]
+
+
+def default_gains(controller) -> np.ndarray:
+    """The system's default gains as the flat vector (DOF by DOF, x to psi, in the column order).
+
+    A controller may carry its own defaults (``defaults``: column -> 6 values, or a flat vector)
+    instead of a block of the gain table.
+    """
+    c = get(controller)
+    own = getattr(c, "defaults", None)
+    if own is not None:
+        g = np.asarray(own, dtype=float).ravel()
+        if g.shape != (n_gains(c),):
+            raise GainError(f"controller {c.name}: defaults has {g.size} values, expected {n_gains(c)}")
+        return g.copy()
+    block = _TABLE.get(c.defaults_block)
+    if block is None:
+        raise GainError(f"controller {c.name}: the gain table arvcas/data/gains.toml has no block "
+                        f"[{c.defaults_block}]; give the controller its own defaults")
+    if list(block.get("columns", ())) != c.columns():
+        raise GainError(f"arvcas/data/gains.toml: [{c.defaults_block}].columns {block.get('columns')} differ from "
+                        f"controller {c.name}'s gain columns {c.columns()}")
     return np.concatenate([np.asarray(block[d], dtype=float) for d in DOFS])
 
 
-def check_gains(controller: str, gains, h: float | None = None, where: str = "gains") -> np.ndarray:
+def upper_limits(controller, h: float) -> np.ndarray:
+    """Per entry of the flat vector, the exclusive upper limit stability sets at sampling period h (inf: none)."""
+    lim = [g.upper_of_h(h) if g.upper_of_h is not None else np.inf for g in get(controller).gains]
+    return np.array([u for _ in DOFS for u in lim], dtype=float)
+
+
+def check_gains(controller, gains, h: float | None = None, where: str = "gains") -> np.ndarray:
     """Validate a gain vector (n_gains,) or a batch (n, n_gains); returns a float array.
 
-    Every gain must be finite and > 0 (section 3: arbitrary positive constants); for RESO
-    controllers ``h * omega < 2`` (SPEC 5 stability of the explicit observer).
+    Every gain must be finite and > 0 (section 3: arbitrary positive constants) and below the limit
+    a gain declares for the sampling period ``h`` (e.g. the explicit RESO: ``h * omega < 2``).
     """
-    check_controller(controller)
+    c = get(controller)
     g = np.asarray(gains, dtype=float)
-    n = n_gains(controller)
+    n = n_gains(c)
     if g.ndim not in (1, 2) or g.shape[-1] != n:
-        raise GainError(f"{where}: controller '{controller}' takes {n} gains per set, got shape {g.shape}")
-    names = gain_names(controller)
+        raise GainError(f"{where}: controller '{c.name}' takes {n} gains per set, got shape {g.shape}")
+    names_ = gain_names(c)
     flat = g.reshape(-1, n)
     bad = ~np.isfinite(flat)
     if bad.any():
-        r, c = np.argwhere(bad)[0]
-        raise GainError(f"{where}: set {r}: {names[c]} is not finite ({flat[r, c]})")
+        r, k = np.argwhere(bad)[0]
+        raise GainError(f"{where}: set {r}: {names_[k]} is not finite ({flat[r, k]})")
     bad = flat <= 0
     if bad.any():
-        r, c = np.argwhere(bad)[0]
-        raise GainError(f"{where}: set {r}: {names[c]} must be > 0, got {flat[r, c]}")
-    if h is not None and "omega" in columns(controller):
-        idx = [names.index(f"{d}.omega") for d in DOFS]
-        hw = h * flat[:, idx]
-        if (hw >= 2).any():
-            r, c = np.argwhere(hw >= 2)[0]
+        r, k = np.argwhere(bad)[0]
+        raise GainError(f"{where}: set {r}: {names_[k]} must be > 0, got {flat[r, k]}")
+    if h is not None:
+        lim = upper_limits(c, h)
+        bad = flat >= lim
+        if bad.any():
+            r, k = np.argwhere(bad)[0]
+            col = names_[k].split(".", 1)[1]
+            gain = next(x for x in c.gains if x.name == col)
             raise GainError(
-                f"{where}: set {r}: {DOFS[c]}.omega = {flat[r, idx[c]]} gives h*omega = {hw[r, c]:.3g} >= 2: "
-                f"the explicit RESO is unstable (need omega < {2 / h:.4g} at h = {h})"
+                f"{where}: set {r}: {names_[k]} = {flat[r, k]} must be < {lim[k]:.4g} at h = {h} "
+                f"({gain.description}: h*{col} = {h * flat[r, k]:.3g} >= {h * lim[k]:.3g} is unstable)"
             )
     return g
 
 
-def unpack(controller: str, gains) -> dict[str, object]:
+def unpack(controller, gains) -> dict[str, object]:
     """Column name -> 6-vector (one entry per DOF), for any indexable gain vector (NumPy or CasADi)."""
     cols = columns(controller)
     k = len(cols)
-    out = {}
-    for j, c in enumerate(cols):
-        out[c] = [gains[d * k + j] for d in range(6)]
-    return out
-
+    return {c: [gains[d * k + j] for d in range(6)] for j, c in enumerate(cols)}

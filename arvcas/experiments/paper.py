@@ -21,7 +21,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from arvcas import __version__, metrics
+from arvcas import metrics
 from arvcas.controllers import gains as gains_mod
 from arvcas.io import files as _files, plots, results
 from arvcas.sim import scenario
@@ -29,11 +29,19 @@ from arvcas.io.results import ResultsError
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.sim.simulation import Result, simulate
 
-__all__ = ["run_paper", "table3_markdown", "compare", "CONTROLLERS", "FIGURE_FILES", "RMSE_TOLERANCE"]
+__all__ = [
+    "run_paper", "table3_markdown", "table3_from_results", "rewrite_table3", "chat_log_reading", "compare",
+    "CONTROLLERS", "FIGURE_FILES", "RMSE_TOLERANCE", "LOG_STEP_HYPOTHESIS",
+]
 
 CONTROLLERS = ("proposed", "agsta", "traditional")
 FIGURE_FILES = ("fig05", "fig06", "fig07", "fig08", "fig09", "fig10", "fig11")
 RMSE_TOLERANCE = 1.1  # proposed RMSE may exceed AGSTA's by at most 10 % (SPEC 6: "not above it")
+# A second reading of eq. 42's N, reported beside ours in table3.md, never used as an objective: the
+# paper simulates in MATLAB/Simscape (section 4), and if its CHAT divided by the samples of a signal
+# log at this step rather than by the controller samples, N is t_f / LOG_STEP_HYPOTHESIS (a hypothesis:
+# the paper states no log step).
+LOG_STEP_HYPOTHESIS = 1e-3  # s
 _DOFS = metrics.DOFS
 _DOF_MD = ("x", "y", "z", "φ", "θ", "ψ")
 
@@ -73,21 +81,46 @@ def _zigzag_reversals(r: Result) -> np.ndarray | None:
     return np.sum(rev & near, axis=0)
 
 
+def chat_log_reading(chat, n_controller: int, duration: float, log_step: float = LOG_STEP_HYPOTHESIS):
+    """CHAT of eq. 42 with N counting log samples at ``log_step`` instead of controller samples.
+
+    The command is held between controller samples, so a log at ``log_step`` sees the same changes
+    (their absolute sum is unchanged) and only the divisor differs:
+    ``chat * n_controller / n_log`` with ``n_log = round(duration / log_step)``.
+
+    Args:
+        chat: CHAT per DOF with N = ``n_controller`` (:func:`arvcas.metrics.chat`).
+        n_controller: controller sampling intervals of the run (1000 for 100 s at h = 0.1 s).
+        duration: length of the run (s).
+        log_step: sampling step of the hypothetical log (s).
+
+    Returns:
+        ``(chat_log, n_log)``.
+    """
+    n_log = int(round(duration / log_step))
+    return np.asarray(chat, dtype=float) * n_controller / n_log, n_log
+
+
 def _status(r: Result) -> str:
     return "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s"
 
 
-def table3_markdown(runs: dict[str, Result], cfg: ScenarioConfig, seed: int) -> str:
-    """The text of ``table3.md``: the paper's Table 3 and ours side by side, ratios, checks."""
+def table3_markdown(runs: dict[str, Result], cfg: ScenarioConfig, seed: int, created: str | None = None) -> str:
+    """The text of ``table3.md``: the paper's Table 3 and ours side by side, ratios, checks.
+
+    ``created``: the time stamp to print (default: now, UTC). The versions printed are those the
+    proposed run records (its ``version`` and ``meta["casadi_version"]``).
+    """
     p, a = runs["proposed"], runs["agsta"]
     t3 = metrics.table3()
     cmp_ = compare(p, a)
-    created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    created = created or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    casadi_version = p.meta.get("casadi_version", ca.__version__)
     L = [
         "# Table 3: performance indices, paper vs arvcas",
         "",
         f"Scenario: {cfg.time_duration:g} s at h = {cfg.time_h:g} s ({len(p.t) - 1} controller intervals), "
-        f"seed {seed}, Table 2 gains. arvcas {__version__}, CasADi {ca.__version__}, {created}.",
+        f"seed {seed}, Table 2 gains. arvcas {p.version}, CasADi {casadi_version}, {created}.",
         "Runs: " + ", ".join(f"{c} {_status(r)}" for c, r in runs.items()) + ".",
         "",
         "CHAT (eq. 42): mean |tau_v,k+1 - tau_v,k| of the commanded tau_v per controller sample, "
@@ -107,7 +140,8 @@ def table3_markdown(runs: dict[str, Result], cfg: ScenarioConfig, seed: int) -> 
             f"| {t3.rmse_agsta[i]:.4e} | {t3.rmse_proposed[i]:.4e} | {t3.rmse_proposed[i] / t3.rmse_agsta[i]:.3f} "
             f"| {a.rmse[i]:.4e} | {p.rmse[i]:.4e} | {c['rmse_ratio']:.3f} |"
         )
-    L += ["", f"## Comparison (SPEC 6): proposed CHAT < AGSTA CHAT and proposed RMSE <= {RMSE_TOLERANCE:g} x AGSTA RMSE", ""]
+    L += _two_readings_markdown(p, a, cfg, t3)
+    L += ["", f"## Comparison (docs/model.md §6): proposed CHAT < AGSTA CHAT and proposed RMSE <= {RMSE_TOLERANCE:g} x AGSTA RMSE", ""]
     if not (p.ok and a.ok):
         L.append(f"Not assessed: proposed {_status(p)}, AGSTA {_status(a)}; the metrics above are not meaningful.")
         L.append("")
@@ -144,6 +178,49 @@ def table3_markdown(runs: dict[str, Result], cfg: ScenarioConfig, seed: int) -> 
             L.append(f"| {d} | {tr.chat[i]:.4g} | {p.chat[i]:.4g} | {tr.rmse[i]:.4e} | {p.rmse[i]:.4e} |")
     L.append("")
     return "\n".join(L)
+
+
+def _two_readings_markdown(p: Result, a: Result, cfg: ScenarioConfig, t3) -> list[str]:
+    """The CHAT table under both readings of eq. 42's N (see :func:`chat_log_reading`)."""
+    n_ctrl = len(p.t) - 1
+    a_log, n_log = chat_log_reading(a.chat, n_ctrl, cfg.time_duration)
+    p_log, _ = chat_log_reading(p.chat, n_ctrl, cfg.time_duration)
+    step_ms = f"{LOG_STEP_HYPOTHESIS * 1e3:g} ms"
+    L = ["", "## CHAT under two readings of eq. 42's N (the second is a hypothesis)", "",
+         f"Eq. 42 divides by N without saying what N counts. Reading 1 (the table above, and the tuning "
+         f"objectives of docs/model.md §7): the controller samples, N = t_f / h = {n_ctrl}. Reading 2, a "
+         f"hypothesis: the samples of a simulator log at {step_ms} (the paper simulates in MATLAB/Simscape "
+         f"and states no log step), N = t_f / {step_ms} = {n_log}. The command is held between controller "
+         f"samples, so the sum of |tau_v,k+1 - tau_v,k| is the same under both readings and "
+         f"CHAT_2 = CHAT_1 x {n_ctrl} / {n_log}.", "",
+         f"| DOF | CHAT AGSTA paper | AGSTA ours, N = {n_ctrl} | AGSTA ours, N = {n_log} | AGSTA ours (N = {n_log}) / paper "
+         f"| CHAT proposed paper | proposed ours, N = {n_ctrl} | proposed ours, N = {n_log} | proposed ours (N = {n_log}) / paper |",
+         "|---|" + "---:|" * 8]
+    ra, rp = a_log / t3.chat_agsta, p_log / t3.chat_proposed
+    for i, d in enumerate(_DOF_MD):
+        L.append(f"| {d} | {t3.chat_agsta[i]:.4f} | {a.chat[i]:.4g} | {a_log[i]:.4g} | {ra[i]:.3f} "
+                 f"| {t3.chat_proposed[i]:.4f} | {p.chat[i]:.4g} | {p_log[i]:.4g} | {rp[i]:.3f} |")
+    lin, ang = np.r_[ra[:3], rp[:3]], np.r_[ra[3:], rp[3:]]
+    r1 = np.r_[a.chat / t3.chat_agsta, p.chat / t3.chat_proposed]
+    L += ["", f"Ours / paper, both controllers: reading 1 {r1.min():.1f} to {r1.max():.1f}; reading 2 "
+              f"{lin.min():.2f} to {lin.max():.2f} in x, y, z and {ang.min():.2f} to {ang.max():.2f} in φ, θ, ψ."]
+    return L
+
+
+def table3_from_results(out_dir, created: str | None = None) -> str:
+    """The text of ``table3.md`` rebuilt from the result files ``proposed.h5``, ``agsta.h5`` and
+    ``traditional.h5`` in ``out_dir`` (scenario and seed as the proposed run records them)."""
+    out = Path(out_dir)
+    runs = {c: results.read_result(out / f"{c}.h5") for c in CONTROLLERS}
+    p = runs["proposed"]
+    cfg = scenario.loads_scenario(p.config_text, str(out / "proposed.h5"))
+    return table3_markdown(runs, cfg, p.seed, created=created)
+
+
+def rewrite_table3(out_dir, created: str | None = None) -> Path:
+    """Write ``table3.md`` in ``out_dir`` from its result files (:func:`table3_from_results`), atomically."""
+    text = table3_from_results(out_dir, created=created)
+    return _files.write_text(Path(out_dir) / "table3.md", text, ResultsError)
 
 
 def _prepare_out_dir(out_dir) -> Path:

@@ -136,6 +136,12 @@ def run_sweep(hs: Sequence[float], controllers: Sequence[str] = CONTROLLERS, see
         raise ValueError(f"--h: repeated sampling period in {hs}")
     cfgs = [_check_h(cfg, h) for h in hs]
     controllers = tuple(gains_mod.check_controller(c) for c in controllers)
+    for c in controllers:  # the sweep measures the adaptive gain's zigzag: it needs the k1 and s signals
+        have = {s.name for s in gains_mod.get(c).signals}
+        if not {"k1", "s"} <= have:
+            raise ValueError(f"sweep: controller '{c}' traces no adaptive gain k1 and sliding variable s "
+                             f"(the sweep measures their zigzag); allowed: "
+                             f"{', '.join(n for n in gains_mod.controllers() if {'k1', 's'} <= {x.name for x in gains_mod.get(n).signals})}")
     if not controllers:
         raise ValueError("--controllers: give at least one controller")
     seeds = tuple(int(s) for s in seeds)

@@ -3,29 +3,13 @@
 :func:`write_result` stores a :class:`arvcas.sim.simulation.Result`; :func:`read_result` gives it back,
 field for field (arrays bit for bit).
 
-Layout (``format = "arvcas-result"``, ``format_version = 1``)
+Layout (``format = "arvcas-result"``, ``format_version = 2``)
 ------------------------------------------------------------
-Datasets, one row per controller sample ``t_k = k h``, ``k = 0..N`` (float64), each with the
-attributes ``units``, ``description``, ``columns`` (comma-separated column names) and, where a
-frame matters, ``frame`` (``{n}`` NED inertial, ``{b}`` body at the COB):
-
-====== ======= ================================================================================
-name   shape   content
-====== ======= ================================================================================
-t      (N+1,)  sample time, s
-eta    (N+1,6) true pose [x y z phi theta psi], m and rad, {n}
-nu     (N+1,6) true body velocity [u v w p q r], m/s and rad/s, {b}
-eta_hat(N+1,6) EKF estimate of eta, {n}
-eta_ref(N+1,6) ATD reference y1 (eq. 12-13), {n}
-tau_cmd(N+1,6) commanded tau_v (before allocation and saturation), N and N m, {b}
-thrust (N+1,6) thrust per thruster after saturation, N
-s      (N+1,6) sliding variable s = e_dot + c e (eq. 17), m/s and rad/s, {n}
-k1, k2 (N+1,6) adaptive GSTA gains (eq. 19)
-f_hat  (N+1,6) total-disturbance estimate, N and N m, {n}
-f_true (N+1,6) total disturbance of eq. 6, N and N m, {n}
-q      (N+1,6) joint angles, rad
-payload(N+1,)  payload fraction in [0, 1]
-====== ======= ================================================================================
+One dataset per traced signal of the run (:mod:`arvcas.sim.signals`: the signals every run has, then
+the controller's own), one row per controller sample ``t_k = k h``, ``k = 0..N`` (float64), each with
+the signal's attributes ``units``, ``description``, ``columns`` (comma-separated column names) and,
+where a frame matters, ``frame`` (``{n}`` NED inertial, ``{b}`` body at the COB). The root attribute
+``signals`` lists them in order. Format version 1 files (a fixed list of datasets) are read too.
 
 Root attributes: ``format``, ``format_version``, ``controller``, ``chat`` and ``rmse`` (6 each,
 eq. 42-43; with ``chat_units``, ``rmse_units``, ``dofs``), ``seed``, ``gains`` and ``gain_names``,
@@ -54,48 +38,18 @@ import numpy as np
 
 from arvcas.controllers import gains as gains_mod
 from arvcas.io import files
-from arvcas.sim.closedloop import TRACE_FIELDS
 from arvcas.params import SCHEMA as PARAM_SCHEMA
+from arvcas.sim.signals import Signal
 from arvcas.sim.simulation import Result
 
-__all__ = ["ResultsError", "write_result", "read_result", "check_dir", "FORMAT", "FORMAT_VERSION", "DATASETS"]
+__all__ = ["ResultsError", "write_result", "read_result", "check_dir", "FORMAT", "FORMAT_VERSION"]
 
 FORMAT = "arvcas-result"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+_V1_DATASETS = ("t", "eta", "nu", "eta_hat", "eta_ref", "tau_cmd", "thrust", "s", "k1", "k2", "f_hat", "f_true", "q",
+                "payload")
 
 _DOFS = "x, y, z, phi, theta, psi"
-_POSE_UNITS = "m, m, m, rad, rad, rad"
-_RATE_UNITS = "m/s, m/s, m/s, rad/s, rad/s, rad/s"
-_WRENCH_UNITS = "N, N, N, N m, N m, N m"
-_THRUSTERS = "stern_left, stern_right, side_bow, side_stern, vertical_port, vertical_starboard"
-_GAIN_NOTE = ("dimensionless gain as in Table 2; the GSTA term k1 phi1(s) of eq. 21 is an acceleration "
-              "(m/s^2, rad/s^2)")
-
-# name -> (width, units, frame or "", columns, description). Order = write order.
-DATASETS: dict[str, tuple[int, str, str, str, str]] = {
-    "t": (1, "s", "", "t", "time of controller sample k, t_k = k h"),
-    "eta": (6, _POSE_UNITS, "{n}", _DOFS, "true pose eta = [x y z phi theta psi] (ZYX Euler angles)"),
-    "nu": (6, _RATE_UNITS, "{b}", "u, v, w, p, q, r", "true body velocity nu = [u v w p q r] about the COB"),
-    "eta_hat": (6, _POSE_UNITS, "{n}", _DOFS, "EKF estimate of eta (the controller's input)"),
-    "eta_ref": (6, _POSE_UNITS, "{n}", _DOFS, "ATD reference y1 (eq. 12-13) tracked by the controller"),
-    "tau_cmd": (6, _WRENCH_UNITS, "{b}", "X, Y, Z, K, M, N",
-                "commanded tau_v = J(eta_hat)^T tau_eta (eq. 20), before allocation and saturation; CHAT's input"),
-    "thrust": (6, "N", "", _THRUSTERS,
-               "thrust per thruster after saturation to [u_min, u_max], held over the sample (App. B)"),
-    "s": (6, _RATE_UNITS, "{n}", _DOFS, "sliding variable s = e_dot + c e (eq. 17), e = eta_hat - y1"),
-    "k1": (6, "1", "", _DOFS, "adaptive gain k1 (eq. 19): " + _GAIN_NOTE),
-    "k2": (6, "1", "", _DOFS, "gain k2 = 2 eps k1 + beta + 4 eps^2 (eq. 19): " + _GAIN_NOTE),
-    "f_hat": (6, _WRENCH_UNITS, "{n}", _DOFS,
-              "controller's total-disturbance estimate in force units: Mhat z2 of the RESO (proposed, "
-              "traditional, implicit) or -f_n of the nominal model (agsta)"),
-    "f_true": (6, _WRENCH_UNITS, "{n}", _DOFS,
-               "true total disturbance of eq. 6: Mhat eta_ddot - J^-T tau_v,realised"),
-    "q": (6, "rad", "", "q1, q2, q3, q4, q5, q6", "manipulator joint angles (prescribed trajectory)"),
-    "payload": (1, "1", "", "payload", "payload fraction in [0, 1] (ramped over 0.5 s)"),
-}
-
-_TRACE_WIDTH = dict(TRACE_FIELDS)
-assert all(_TRACE_WIDTH[k] == v[0] for k, v in DATASETS.items()), "results.DATASETS out of step with TRACE_FIELDS"
 
 _ROOT_ARRAYS_OPTIONAL = {"params": "params_vector", "uncertainty": "uncertainty", "phase": "phase"}
 
@@ -118,9 +72,11 @@ def _check_target(path: Path) -> Path:
     return files.target(path, str(path), ResultsError)
 
 
-def _series(result: Result, name: str, n: int | None) -> np.ndarray:
-    width = DATASETS[name][0]
-    a = np.asarray(getattr(result, name), dtype=float)
+def _series(result: Result, sig: Signal, n: int | None) -> np.ndarray:
+    name, width = sig.name, sig.width
+    a = np.asarray(result.series[name], dtype=float)
+    if width is None:  # one column per thruster
+        width = a.shape[1] if a.ndim == 2 else 0
     want = (a.shape[0],) if width == 1 else (a.shape[0], width)
     if a.ndim == 0 or a.shape != want or (n is not None and a.shape[0] != n):
         exp = f"({n if n is not None else 'N+1'}{'' if width == 1 else f', {width}'})"
@@ -150,13 +106,20 @@ def _collect(result: Result) -> tuple[dict[str, np.ndarray], dict[str, object]]:
         gains_mod.check_controller(result.controller)
     except ValueError as e:
         raise ResultsError(f"Result.controller: {e}") from None
+    if "t" not in result.series:
+        raise ResultsError("Result: has no 't' series")
     n = len(np.asarray(result.t))
-    data = {name: _series(result, name, n) for name in DATASETS}
+    sigs = {s.name: s for s in result.signals}
+    for name in result.series:
+        if name not in sigs:
+            raise ResultsError(f"Result: series {name!r} has no signal description (units, frame)")
+    data = {name: (_series(result, sig, n), sig) for name, sig in sigs.items()}
     gain_names = gains_mod.gain_names(result.controller)
     attrs: dict[str, object] = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "controller": result.controller,
+        "signals": np.array(list(data), dtype=object),
         "dofs": np.array(_DOFS.split(", "), dtype=object),
         "chat": _vector(result, "chat", 6, "chat"),
         "chat_units": "N (x, y, z), N m (phi, theta, psi) per controller sample; eq. 42 on tau_cmd",
@@ -194,15 +157,14 @@ def _collect(result: Result) -> tuple[dict[str, np.ndarray], dict[str, object]]:
     return data, attrs
 
 
-def _put(f: h5py.File, name: str, data: np.ndarray) -> None:
-    """One dataset with its attributes (the writer's unit of work)."""
-    _, units, frame, columns, description = DATASETS[name]
+def _put(f: h5py.File, name: str, data: np.ndarray, sig: Signal) -> None:
+    """One dataset with its signal's attributes (the writer's unit of work)."""
     ds = f.create_dataset(name, data=data, dtype="f8")
-    ds.attrs["units"] = units
-    ds.attrs["description"] = description
-    ds.attrs["columns"] = columns
-    if frame:
-        ds.attrs["frame"] = frame
+    ds.attrs["units"] = sig.units
+    ds.attrs["description"] = sig.description
+    ds.attrs["columns"] = ", ".join(sig.column_names(data.shape[1] if data.ndim == 2 else 1))
+    if sig.frame:
+        ds.attrs["frame"] = sig.frame
 
 
 def atomic_write(path, write: Callable[[Path], None]) -> Path:
@@ -223,8 +185,8 @@ def write_result(result: Result, path) -> Path:
         with h5py.File(tmp, "w") as f:
             for k, v in attrs.items():
                 f.attrs[k] = v
-            for name, a in data.items():
-                _put(f, name, a)
+            for name, (arr, sig) in data.items():
+                _put(f, name, arr, sig)
             f.flush()
 
     return atomic_write(path, fill)
@@ -280,15 +242,24 @@ def _read(f: h5py.File, path: Path) -> Result:
     ver = int(a.get("format_version", -1))
     if not 1 <= ver <= FORMAT_VERSION:
         raise ResultsError(f"{path}: format_version {ver} is not supported (this arvcas reads 1..{FORMAT_VERSION})")
-    missing = [k for k in DATASETS if k not in f]
+    names = _strs(a["signals"]) if ver >= 2 else list(_V1_DATASETS)
+    missing = [k for k in names if k not in f]
     if missing:
         raise ResultsError(f"{path}: damaged result file: missing dataset(s) {', '.join(missing)}")
-    cols = {k: np.array(f[k][()], dtype=float) for k in DATASETS}
+    cols = {k: np.array(f[k][()], dtype=float) for k in names}
+    if "t" not in cols:
+        raise ResultsError(f"{path}: damaged result file: no dataset 't'")
     n = cols["t"].shape[0]
-    for k, (w, *_rest) in DATASETS.items():
-        want = (n,) if w == 1 else (n, w)
-        if cols[k].shape != want:
-            raise ResultsError(f"{path}: damaged result file: dataset {k} has shape {cols[k].shape}, expected {want}")
+    sigs = []
+    for k in names:
+        if cols[k].ndim not in (1, 2) or cols[k].shape[0] != n:
+            raise ResultsError(f"{path}: damaged result file: dataset {k} has shape {cols[k].shape}, expected ({n}, ...)")
+        at = f[k].attrs
+        try:
+            sigs.append(Signal(k, 1 if cols[k].ndim == 1 else cols[k].shape[1], _str(at["units"]),
+                               _str(at.get("frame", "")), _str(at["columns"]), _str(at["description"]), None))
+        except KeyError as e:
+            raise ResultsError(f"{path}: damaged result file: dataset {k} lacks its attribute {e}") from None
     controller = _str(a["controller"])
     gains = np.array(a["gains"], dtype=float)
     try:
@@ -305,8 +276,7 @@ def _read(f: h5py.File, path: Path) -> Result:
     t_fail = float(a["t_fail"])
     ok = bool(a["ok"])
     return Result(
-        controller=controller, gains=gains, seed=int(a["seed"]),
-        **cols,
+        controller=controller, gains=gains, seed=int(a["seed"]), series=cols, signals=tuple(sigs),
         chat=np.array(a["chat"], dtype=float), rmse=np.array(a["rmse"], dtype=float),
         ok=ok, t_fail=None if ok or math.isnan(t_fail) else t_fail,
         config_text=_str(a["config"]), h=float(a["h"]), version=_str(a["arvcas_version"]),

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-__all__ = ["solve_nopivot", "lu_nopivot", "lu_solve", "lu_size", "lu_pack", "lu_unpack"]
+__all__ = ["solve_nopivot", "lu_nopivot", "lu_solve", "lu_pack", "lu_unpack"]
 
 
 def lu_nopivot(A):
@@ -58,9 +58,6 @@ def solve_nopivot(A, b):
     return lu_solve(*lu_nopivot(A), b)
 
 
-def lu_size(n: int) -> int:
-    """Entries of a packed no-pivot LU of an n x n matrix: n(n-1)/2 multipliers + n(n+1)/2 of U."""
-    return n * n
 
 
 def lu_pack(F, U):

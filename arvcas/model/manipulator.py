@@ -18,7 +18,7 @@ from arvcas.model.spatial import Rx, Rz, Rzyx, skew
 
 __all__ = [
     "N_JOINTS", "dh", "link_vectors", "link_inertia", "forward_kinematics", "rnea", "arm_wrench",
-    "tool_position", "stow_pose", "trim_wrench", "trim_static", "trim_from_static", "base_inertia",
+    "stow_pose", "trim_wrench", "trim_static", "trim_from_static", "base_inertia",
     "SCHEDULE_FIELDS", "arm_schedule", "drag_wrench", "arm_wrench_scheduled",
 ]
 
@@ -69,11 +69,6 @@ def forward_kinematics(P, q):
     return out
 
 
-def tool_position(P, q):
-    """Tool point in {b} (SPEC 3 mount, link 6 length)."""
-    R6, p6 = forward_kinematics(P, q)[-1]
-    mount = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
-    return mount + p6 + ca.mtimes(R6, ca.vertcat(0, 0, P["arm.tool.length"]))
 
 
 def rnea(P, q, qd, qdd, w0, wd0, v0, a0, g0, payload, n_quad: int = 5, drag: bool = True):

@@ -11,7 +11,7 @@ import math
 
 import casadi as ca
 
-from arvcas.model.spatial import J, Rzyx, skew
+from arvcas.model.spatial import J, skew
 
 __all__ = ["r_G", "I_b", "M_RB", "M_A", "M", "C_RB", "D", "g_vec", "delta_s_term", "rhs"]
 
@@ -21,8 +21,6 @@ def r_G(P):
     return ca.vertcat(P["vehicle.xG"], P["vehicle.yG"], P["vehicle.zG"])
 
 
-def r_B(P):
-    return ca.vertcat(P["vehicle.xB"], P["vehicle.yB"], P["vehicle.zB"])
 
 
 def I_b(P):
@@ -149,8 +147,3 @@ def rhs(P, x, tau):
     nud = ca.solve(M(P), tau - forces(P, eta, nu))
     return ca.vertcat(ca.mtimes(J(eta), nu), nud)
 
-
-def gravity_body(P, eta):
-    """Gravity acceleration expressed in {b}: R(eta)^T [0, 0, g] (NED, z down)."""
-    R = Rzyx(eta[3], eta[4], eta[5])
-    return ca.mtimes(R.T, ca.vertcat(0, 0, P["env.g"]))

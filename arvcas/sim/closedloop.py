@@ -1,19 +1,20 @@
-"""The whole closed-loop experiment as one CasADi function (SPEC 4-6).
+"""The whole closed-loop experiment as one CasADi function (docs/model.md §4-6).
 
 One controller sample k (t_k = k h) of :func:`step`:
 
 1. sensors: ``y_k = [eta; nu](t_k) + noise_k`` (noise is an input: a seeded sequence);
 2. EKF update on ``[eta; nu]`` (measuring both; its prediction for k+1 ends the step);
-3. ATD reference ``(y1, y2)``, errors ``e = eta_hat - y1``, ``e_dot = eta_dot_hat - y2``,
-   ``s = e_dot + c e`` (eq. 17);
-4. the controller: GSTA (eq. 18, 21) with its adaptive law, plus the RESO (proposed, eq. 20) or the
-   nominal model (AGSTA), ``tau_v = J^T tau_eta``;
+3. the reference ``(y1, y2)`` of the adaptive tracking differentiator (eq. 12-13) and the errors
+   ``e = eta_hat - y1``, ``e_dot = eta_dot_hat - y2``;
+4. the controller (an :class:`arvcas.controllers.Controller` object: its ``step`` from the
+   :class:`StepContext` and its own state to ``tau_v``), the same code path for every law;
 5. thrust allocation and saturation (eq. 2, App. B), held over the sample;
 6. plant: ``h / h_plant`` RK4 steps of the exactly coupled vehicle + arm with the prescribed arm
    trajectory, payload ramp and disturbance eq. 41.
 
 The run is ``step.fold(N + 1)`` (metrics only: CHAT and RMSE accumulated in the state) or
-``step.mapaccum(N + 1)`` (a trace of every sample). Gains, noise, nominal-model factors,
+``step.mapaccum(N + 1)`` (a trace of every sample), built by :func:`_fold` / :func:`_mapaccum`
+(CasADi's own nesting without the unused level that cost 3 s and 1.5 GB at 1001 samples). Gains, noise, nominal-model factors,
 disturbance phases and model parameters are inputs: a new gain set or seed never recompiles.
 
 What depends on time but not on the state (the arm's trajectory and the terms of its wrench that
@@ -29,24 +30,21 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from arvcas.controllers import gains as gains_mod
+from arvcas.controllers import atd
+from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model import manipulator, thrusters, vehicle
-from arvcas.sim import scenario, schedule
-from arvcas.controllers import atd, gsta, reso
+from arvcas.sim import scenario, schedule, signals as signals_mod
 from arvcas.params import SCHEMA, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.spatial import J, J_dot, J_inv
 from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
 
-__all__ = ["Layout", "build_step", "build_run", "TRACE_FIELDS", "derived_constants"]
+__all__ = ["Layout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "INPUTS"]
 
 NP = len(SCHEMA)
 
-# the per-sample trace (name, width): stored in result files
-TRACE_FIELDS: tuple[tuple[str, int], ...] = (
-    ("t", 1), ("eta", 6), ("nu", 6), ("eta_hat", 6), ("eta_ref", 6), ("tau_cmd", 6), ("thrust", 6),
-    ("s", 6), ("k1", 6), ("k2", 6), ("f_hat", 6), ("f_true", 6), ("q", 6), ("payload", 1), ("ok", 1),
-)
+# the run's inputs, in the order of the compiled function (everything else binds them by name)
+INPUTS: tuple[str, ...] = ("gains", "noise", "unc", "phase", "ekf", "p", "sched_time", "sched_arm")
 
 
 class Layout:
@@ -66,18 +64,16 @@ class Layout:
     def pack(self, values: dict):
         return ca.vertcat(*[values[name] for name in self.slices])
 
-    def unpack_np(self, arr: np.ndarray, axis: int = 0) -> dict[str, np.ndarray]:
-        return {k: np.take(arr, range(s.start, s.stop), axis=axis) for k, s in self.slices.items()}
 
-
-def state_layout(n_gains: int, n_pc: int) -> Layout:
+def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int) -> Layout:
+    """The loop state: the plant, EKF and reference; the controller's own state; the metrics and
+    status; then the run's constants (carried through the loop, never changed)."""
     return Layout([
         ("x", 12),  # true plant state [eta; nu]
         ("xh", 12), ("Pc", 144),  # EKF prior for this sample
-        ("y1", 6), ("y2", 6), ("r0", 6),  # ATD
-        ("z1", 6), ("z2", 6), ("tau_eta_prev", 6),  # RESO (+ the previous sample's tau_eta)
-        ("w", 6), ("k1", 6),  # GSTA integral state and adaptive gain
-        ("tau_prev", 6), ("u_hold", 6),  # previous command (CHAT) and held realised thrust
+        ("y1", 6), ("y2", 6), ("r0", 6),  # ATD reference
+        *[(f"c_{name}", n) for name, n in ctrl.state],  # the controller's state
+        ("tau_prev", 6), ("u_hold", n_thr),  # previous command (CHAT) and held realised thrust
         ("chat_sum", 6), ("e2_sum", 6), ("ok", 1), ("t_fail", 1),
         # constants of the run carried through the loop
         ("gains", n_gains), ("unc", 4), ("phase_cs", 12), ("ekf", 5), ("p", NP), ("consts", 9), ("pc", n_pc),
@@ -92,30 +88,33 @@ def derived_constants(P, opts: ModelOptions):
 
 @dataclass(frozen=True)
 class RunSpec:
-    controller: str
+    """What shapes the run's graph: the controller, the scenario's graph-shaping fields, the model options."""
+
+    controller: Controller | str
     cfg: ScenarioConfig
     opts: ModelOptions = ModelOptions()
-    reso_rule: str = "spec"
+
+    @property
+    def law(self) -> Controller:
+        return get_controller(self.controller)
 
 
-def _nominal_force(P, unc, eta, nu, tau_m_plus_trim):
-    """f_n of the AGSTA baseline in {n} (SPEC 5), eq. 3 mapping, with the nominal factors ``unc``.
+class StepContext:
+    """What a controller's step sees at sample k (all CasADi expressions; {n} unless stated).
 
-    ``C_n,eta eta_dot + D_n,eta eta_dot + g_n,eta - a (tau_m + trim)_eta`` with
-    ``C_eta eta_dot = J^-T (C_n nu - M J^-1 Jdot nu)``.
+    ``t``, ``h`` (s), ``first`` (true at k = 0); ``eta_hat``, ``nu_hat`` (EKF estimate; nu in {b}),
+    ``eta_dot_hat = J(eta_hat) nu_hat``; ``eta_ref``, ``eta_ref_dot`` (the ATD's y1, y2),
+    ``e = eta_hat - y1``, ``e_dot = eta_dot_hat - y2``; ``eta_d`` (the set point); ``P`` (parameter
+    view), ``Mhat`` (the diagonal of M, 6), ``unc`` (nominal-model factors [C, D, g, arm]);
+    ``tau_arm`` (the true arm wrench on the vehicle plus the trim, {b}: an oracle the AGSTA's nominal
+    model uses a fraction of); ``out``: a dict the step may fill for its signals. After the step the
+    loop adds ``tau_v``, ``u_sat``, ``f_true`` and the true ``eta``, ``nu``, ``q``, ``payload`` for the
+    signals of :mod:`arvcas.sim.signals`.
     """
-    Ji = J_inv(eta)
-    eta_dot = ca.mtimes(J(eta), nu)
-    Jdot = J_dot(eta, eta_dot)  # dJ/dt along the motion
-    Jdot_nu = ca.mtimes(Jdot, nu)
-    body = (
-        unc[0] * ca.mtimes(vehicle.C_RB(P, nu), nu)
-        - ca.mtimes(vehicle.M(P), ca.mtimes(Ji, Jdot_nu))
-        + unc[1] * ca.mtimes(vehicle.D(P, nu), nu)
-        + unc[2] * vehicle.g_vec(P, eta)
-        - unc[3] * tau_m_plus_trim
-    )
-    return ca.mtimes(Ji.T, body)
+
+    def __init__(self, **kw):
+        self.out: dict = {}
+        self.__dict__.update(kw)
 
 
 def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
@@ -164,21 +163,24 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
 
     An MX function calling three generated SX functions: the controller part, ``h / h_plant`` RK4
     substeps of the plant, and the divergence check. ``sched_*_k`` are column k of the run's time
-    table (:class:`arvcas.sim.schedule.Table`): the records at the sample's RK4 stage times. Without ``trace`` the
-    per-sample outputs that only the trace needs (e.g. ``f_true``) are not computed.
+    table (:class:`arvcas.sim.schedule.Table`): the records at the sample's RK4 stage times. The trace
+    is the run's signals (:func:`arvcas.sim.signals.trace_signals`) stacked in table order; without
+    ``trace`` the per-sample outputs that only the trace needs (e.g. ``f_true``) are not computed.
     """
-    controller, cfg, opts = spec.controller, spec.cfg, spec.opts
-    gains_mod.check_controller(controller)
-    ng = gains_mod.n_gains(controller)
+    law, cfg, opts = spec.law, spec.cfg, spec.opts
+    cols = law.columns()
+    ng = 6 * len(cols)
     rk4, pc_fn = _plant_substep(spec)
-    L = state_layout(ng, pc_fn.size1_out(0))
+    n_thr = thrusters.B_T(view(ca.SX.sym("p", NP))).shape[1]
+    L = state_layout(law, ng, n_thr, pc_fn.size1_out(0))
     S = ca.SX.sym("S", L.size)
     tk = ca.SX.sym("t_k")
     noise = ca.SX.sym("noise", 12)
     rec0_t, rec0_a = ca.SX.sym("rec0_time", schedule.TIME_SIZE), ca.SX.sym("rec0_arm", schedule.ARM_SIZE)
     R0 = schedule.unpack(ca.vertcat(rec0_t, rec0_a))  # the time table's record at t_k
     g = L.get(S, "gains")
-    G = {k: ca.vertcat(*v) for k, v in gains_mod.unpack(controller, g).items()}
+    k = len(cols)
+    G = {c: ca.vertcat(*[g[d * k + j] for d in range(6)]) for j, c in enumerate(cols)}
     P = view(L.get(S, "p"))
     consts = L.get(S, "consts")
     Fz, Mx, My, Mhat = consts[0], consts[1], consts[2], consts[3:9]
@@ -201,25 +203,15 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     eta_hat, nu_hat = xh[0:6], xh[6:12]
     eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
 
-    # 3. ATD (SPEC 5): y1(0) = eta_hat(0), y2(0) = 0, A = max(|eta_d - eta_hat(0)|, A_min)
+    # 3. ATD reference (docs/model.md §5): y1(0) = eta_hat(0), y2(0) = 0, A = max(|eta_d - eta_hat(0)|, A_min)
     r0_first, h0 = atd.atd_params(eta_d - eta_hat, cfg.atd_T, h, cfg.atd_A_min)
     r0 = ca.if_else(first, r0_first, L.get(S, "r0"))
     y1 = ca.if_else(first, eta_hat, L.get(S, "y1"))
     y2 = ca.if_else(first, ca.DM.zeros(6), L.get(S, "y2"))
     e = eta_hat - y1
     e_dot = eta_dot_hat - y2
-    s = e_dot + G["c"] * e  # eq. 17
 
-    # 4. controller
-    k1 = ca.if_else(first, G["k1_0"], L.get(S, "k1"))
-    w = ca.if_else(first, ca.DM.zeros(6), L.get(S, "w"))
-    k2 = gsta.k2_of_k1(k1, G["eps"], G["beta"])  # eq. 19
-    if controller == "implicit":
-        v, w_next = gsta.gsta_implicit(s, w, k1, k2, G["mu1"], G["mu2"], h)  # SPEC 5b
-    else:
-        v, w_next = gsta.gsta_explicit(s, w, k1, k2, G["mu1"], G["mu2"], h)  # eq. 21
-
-    # the true state's coupled terms at t_k with the held thrust: f_true (eq. 6) and the AGSTA's tau_m
+    # the true state's coupled terms at t_k with the held thrust: f_true (eq. 6) and the arm's wrench
     q, pl = R0["q"], R0["payload"]
     eta, nu = x[0:6], x[6:12]
     u_hold = L.get(S, "u_hold")
@@ -228,32 +220,13 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     tau_dist = scenario.disturbance_tabulated(cfg, R0["dist_sin"], R0["dist_cos"], phase_cs)
     nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist, R0, trim, opts)
 
-    if controller == "agsta":
-        # SPEC 5: tau_eta = Mhat (eta_ddot_d - c e_dot + v) + f_n, nominal model in place of the RESO
-        f_n = _nominal_force(P, unc, eta_hat, nu_hat, tau_m_true + trim)
-        tau_eta = Mhat * (-G["c"] * e_dot + v) + f_n
-        z1 = L.get(S, "z1")
-        z2 = L.get(S, "z2")
-        f_hat = -f_n  # the nominal model's estimate of the total disturbance, force units
-    else:
-        # RESO (SPEC 5): update with eta_dot_k and the previous sample's tau_eta, then chi2_hat = z2
-        beta1, beta2 = reso.reso_gains(G["omega"], spec.reso_rule)
-        z1 = ca.if_else(first, eta_dot_hat, L.get(S, "z1"))
-        z2 = ca.if_else(first, ca.DM.zeros(6), L.get(S, "z2"))
-        tprev = ca.if_else(first, ca.DM.zeros(6), L.get(S, "tau_eta_prev"))
-        z1, z2 = reso.reso_step(z1, z2, eta_dot_hat, tprev, 1 / Mhat, beta1, beta2, h)
-        # eq. 20 with the sign of c e_dot fixed (SPEC 5), eta_ddot_d = 0
-        tau_eta = Mhat * (-G["c"] * e_dot - z2 + v)
-        f_hat = Mhat * z2
-    tau_v = ca.mtimes(J(eta_hat).T, tau_eta)  # eq. 20: tau_v = J^T tau_eta
-
-    # adaptive law for the next sample
-    if controller == "agsta":
-        k1_next = gsta.k1_next_agsta(k1, s, G["sigma"], G["l"], h)
-    elif controller == "traditional":
-        k1_next = gsta.k1_next_traditional(k1, s, G["sigma"], G["l"], G["k1min"], h)
-    else:
-        k1_next = gsta.k1_next_proposed(k1, s, G["sigma"], G["l"], G["r"], G["k1min"], h)
+    # 4. the controller: its state (initial values at the first sample), its step
+    ctx = StepContext(t=tk, h=h, first=first, P=P, Mhat=Mhat, unc=unc, eta_d=eta_d, eta_hat=eta_hat,
+                      nu_hat=nu_hat, eta_dot_hat=eta_dot_hat, eta_ref=y1, eta_ref_dot=y2, e=e, e_dot=e_dot,
+                      tau_arm=tau_m_true + trim)
+    init = law.initial(ctx, G)
+    xc = {name: ca.if_else(first, init[name], L.get(S, f"c_{name}")) for name, _ in law.state}
+    tau_v, xc_next = law.step(ctx, G, xc)
 
     # 5. allocation and saturation
     u_cmd = thrusters.allocate(P, tau_v)
@@ -265,7 +238,7 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     eta_ddot = ca.mtimes(J(eta), nud_true) + ca.mtimes(Jdot, nu)
     f_true = Mhat * eta_ddot - ca.mtimes(J_inv(eta).T, tau_real_held)
 
-    # metrics (SPEC 6) and divergence of the controller part
+    # metrics (docs/model.md §6) and divergence of the controller part
     e_true = eta - y1
     chat_sum = L.get(S, "chat_sum") + ca.if_else(first, 0, ca.fabs(tau_v - L.get(S, "tau_prev")))
     # RMSE over k = 0..N-1 (eq. 43); the last sample k = N only closes CHAT's last difference
@@ -276,15 +249,17 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
     C = L.pack({
         "x": x, "xh": _ekf_f(xh, h), "Pc": ca.vec(_ekf_cov(xh, Pc, h, ekf[0], ekf[1])),
-        "y1": y1n, "y2": y2n, "r0": r0, "z1": z1, "z2": z2, "tau_eta_prev": tau_eta,
-        "w": w_next, "k1": k1_next, "tau_prev": tau_v, "u_hold": u_sat,
+        "y1": y1n, "y2": y2n, "r0": r0, **{f"c_{name}": xc_next[name] for name, _ in law.state},
+        "tau_prev": tau_v, "u_hold": u_sat,
         "chat_sum": chat_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
         "gains": g, "unc": unc, "phase_cs": phase_cs, "ekf": ekf, "p": L.get(S, "p"), "consts": consts,
         "pc": L.get(S, "pc"),
     })
-    tr_vec = ca.vertcat(tk, eta, nu, eta_hat, y1, tau_v, u_sat, s, k1, k2, f_hat, f_true, q, pl, ok)
-    outs = [C, tau_real] + ([tr_vec] if trace else [])
-    ctrl = ca.Function(f"cl_ctrl_{controller}" + ("_tr" if trace else ""), [S, tk, noise, rec0_t, rec0_a], ca.cse(outs))
+    outs = [C, tau_real]
+    if trace:
+        ctx.__dict__.update(tau_v=tau_v, u_sat=u_sat, f_true=f_true, eta=eta, nu=nu, q=q, payload=pl)
+        outs.append(ca.vertcat(*[sig.value(ctx) for sig in signals_mod.trace_signals(law)]))
+    ctrl = ca.Function(f"cl_ctrl_{law.name}" + ("_tr" if trace else ""), [S, tk, noise, rec0_t, rec0_a], ca.cse(outs))
 
     # finalize: a run that diverges (non-finite state, error bound) is frozen with ok = 0, t_fail set
     Cs, Ss, xn, tks = ca.SX.sym("C", L.size), ca.SX.sym("S", L.size), ca.SX.sym("xn", 12), ca.SX.sym("t")
@@ -306,7 +281,7 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     for i in range(n_sub):
         xm = rk4(xm, sch_t[2 * i * TS:(2 * i + 3) * TS], sch_a[2 * i * AS:(2 * i + 3) * AS], tau_m_real, pm, cm, phm, pcm)
     Snext = fin(Cm, Sm, xm, tkm)
-    fn = ca.Function(f"cl_step_{controller}", [Sm, tkm, nm, sch_t, sch_a], [Snext] + list(res[2:]),
+    fn = ca.Function(f"cl_step_{law.name}", [Sm, tkm, nm, sch_t, sch_a], [Snext] + list(res[2:]),
                      ["S", "t", "noise", "sched_time", "sched_arm"], ["S_next"] + (["trace"] if trace else []))
     return fn, L, pc_fn
 
@@ -351,9 +326,9 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     ``trace=False``: outputs (chat[6], rmse[6], ok, t_fail); ``trace=True``: also the per-sample trace.
     """
     step, L, pc_fn = build_step(spec, trace=trace)
-    cfg = spec.cfg
+    cfg, law = spec.cfg, spec.law
     n = scenario.n_samples(cfg)
-    ng = gains_mod.n_gains(spec.controller)
+    ng = 6 * len(law.columns())
     G = ca.MX.sym("gains", ng)
     noise = ca.MX.sym("noise", 12, n)
     unc = ca.MX.sym("unc", 4)
@@ -366,27 +341,69 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     x0 = ca.DM(list(cfg.initial_eta0) + list(cfg.initial_nu0))
     z = lambda k: ca.MX.zeros(k)  # noqa: E731
     phase_cs = ca.vertcat(ca.cos(phase), ca.sin(phase))
-    S0 = ca.vertcat(
-        x0, z(12), z(144), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6), z(6),
-        ca.MX(1), ca.MX(-1), G, unc, phase_cs, ekf, p, consts, pc_fn(p, consts, phase_cs),
-    )
+    i_ok = L.slices["ok"].start  # every loop state before "ok" starts at zero (first-sample values are set in the step)
+    S0 = ca.vertcat(x0, z(i_ok - 12), ca.MX(1), ca.MX(-1), G, unc, phase_cs, ekf, p, consts, pc_fn(p, consts, phase_cs))
     assert S0.shape[0] == L.size
     tgrid = ca.DM(np.arange(n) * cfg.time_h).T
     N = n - 1
     if trace:
-        S_all, tr = step.mapaccum(n)(S0, tgrid, noise, sched_t, sched_a)
+        S_all, tr = _mapaccum(step, n)(S0, tgrid, noise, sched_t, sched_a)
         Sf = S_all[:, -1]
     else:
-        Sf = step.fold(n)(S0, tgrid, noise, sched_t, sched_a)
+        Sf = _fold(step, n)(S0, tgrid, noise, sched_t, sched_a)
     chat = Sf[L.slices["chat_sum"]] / N
     rmse = ca.sqrt(Sf[L.slices["e2_sum"]] / N)
     ok = Sf[L.slices["ok"]]
     t_fail = Sf[L.slices["t_fail"]]
     outs = [chat, rmse, ok, t_fail] + ([tr] if trace else [])
     names = ["chat", "rmse", "ok", "t_fail"] + (["trace"] if trace else [])
-    name = f"run_{spec.controller}" + ("_trace" if trace else "")
-    return ca.Function(name, [G, noise, unc, phase, ekf, p, sched_t, sched_a], outs,
-                       ["gains", "noise", "unc", "phase", "ekf", "p", "sched_time", "sched_arm"], names)
+    name = f"run_{law.name}" + ("_trace" if trace else "")
+    ins = {"gains": G, "noise": noise, "unc": unc, "phase": phase, "ekf": ekf, "p": p, "sched_time": sched_t,
+           "sched_arm": sched_a}
+    return ca.Function(name, [ins[k] for k in INPUTS], outs, list(INPUTS), names)
+
+
+def _mapaccum(f: ca.Function, n: int, base: int = 10) -> ca.Function:
+    """``f.mapaccum(n)`` (state = input/output 0) built as CasADi 3.8 builds it, less its unused level.
+
+    CasADi writes n in base 10 and chains 10-fold nested mapaccums of ``f``, but its loop also
+    builds the level above the top digit, which nothing calls: 10**4 samples for n = 1001 (3.4 s,
+    1.5 GB for the time table's symbols, where the run itself needs 0.5 s). The levels, the chain
+    and so the generated C here are CasADi's own (same text, same build-cache key).
+    """
+    chain, c, m = [], f, n
+    while True:
+        chain += [c] * (m % base)
+        m //= base
+        if m == 0:
+            break
+        c = c.mapaccum(c.name() + "_acc" + str(base), base, 1, {"base": -1})  # one level: base calls of c
+    if len(chain) == 1:
+        return chain[0]
+    # CasADi's Function::mapaccum(name, chain, n_accum = 1) (private in C++)
+    arg = f.mx_in()
+    varg = [[arg[0]]] + [[] for _ in range(1, f.n_in())]
+    vres = [[] for _ in range(f.n_out())]
+    for g in chain:
+        for i in range(1, f.n_in()):
+            arg[i] = ca.MX.sym(f.name_in(i) + "_" + str(i), g.sparsity_in(i))
+            varg[i].append(arg[i])
+        res = g.call(arg)
+        for i, r in enumerate(res):
+            vres[i].append(r)
+        ncol_out, ncol_in = g.size2_out(0), f.size2_in(0)
+        arg[0] = ca.horzsplit(res[0], [0, ncol_out - ncol_in, ncol_out])[-1] if ncol_out > ncol_in else res[0]
+    return ca.Function("mapaccum_" + f.name(), [ca.horzcat(*v) for v in varg], [ca.horzcat(*v) for v in vres],
+                       f.name_in(), f.name_out())
+
+
+def _fold(f: ca.Function, n: int) -> ca.Function:
+    """``f.fold(n)``: CasADi's fold (the last column of the state) over :func:`_mapaccum`."""
+    acc = _mapaccum(f, n)
+    a = acc.mx_in()
+    out = acc.call(a)
+    out[0] = out[0][:, list(range((n - 1) * f.size2_out(0), n * f.size2_out(0)))]
+    return ca.Function("fold_" + f.name(), a, out, f.name_in(), f.name_out())
 
 
 def _consts_fn(opts: ModelOptions) -> ca.Function:

@@ -8,22 +8,21 @@ CasADi types, so the compiled closed loop evaluates them inside its time loop.
 
 from __future__ import annotations
 
-import difflib
 import math
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
-from typing import Any
 
 import casadi as ca
 import numpy as np
 
-from arvcas import tomlfile
+from arvcas import config, tomlfile
+from arvcas.config import ge, gt, le, quantity
 
 __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
     "quintic", "joint_trajectory", "payload_profile", "disturbance", "disturbance_tabulated", "noise_sequence",
-    "check_joint_limits", "n_samples",
+    "check_joint_limits", "n_samples", "table_bytes", "ScenarioFile", "MAX_SUBSTEPS",
 ]
 
 
@@ -31,39 +30,95 @@ class ScenarioError(ValueError):
     """One-line error naming the scenario file (or argument) and key."""
 
 
-# section.key -> (length or 0 for scalar, sign rule)
-_SCHEMA: dict[str, tuple[int, str]] = {
-    "time.duration": (0, "pos"),
-    "time.h_plant": (0, "pos"),
-    "time.h": (0, "pos"),
-    "initial.eta0": (6, "any"),
-    "initial.nu0": (6, "any"),
-    "initial.eta_d": (6, "any"),
-    "arm.qg": (6, "any"),
-    "arm.hold_until": (0, "nonneg"),
-    "arm.reach_end": (0, "pos"),
-    "arm.payload_on": (0, "nonneg"),
-    "arm.payload_ramp": (0, "pos"),
-    "arm.return_start": (0, "nonneg"),
-    "arm.return_end": (0, "pos"),
-    "disturbance.offset": (6, "any"),
-    "disturbance.amplitude": (6, "any"),
-    "disturbance.freq": (6, "nonneg"),
-    "disturbance.phase": (6, "any"),
-    "sensors.var_position": (0, "nonneg"),
-    "sensors.var_attitude": (0, "nonneg"),
-    "sensors.var_velocity": (0, "nonneg"),
-    "ekf.q_eta": (0, "pos"),
-    "ekf.q_nu": (0, "pos"),
-    "uncertainty.C_factor": (0, "nonneg"),
-    "uncertainty.D_factor": (0, "nonneg"),
-    "uncertainty.g_factor": (0, "nonneg"),
-    "uncertainty.arm_factor": (0, "nonneg"),
-    "atd.T": (0, "pos"),
-    "atd.A_min": (0, "pos"),
-    "limits.e_position": (0, "pos"),
-    "limits.e_attitude": (0, "pos"),
-}
+# ---- the file's schema: dimension and rule beside each key (values in SI after loading) --------------
+_POSE = ("length",) * 3 + ("angle",) * 3  # x, y, z, phi, theta, psi
+_RATE = ("velocity",) * 3 + ("angular_velocity",) * 3  # u, v, w, p, q, r
+_WRENCH = ("force",) * 3 + ("torque",) * 3  # X, Y, Z, K, M, N
+MAX_SUBSTEPS = 1000  # h / h_plant: the plant's RK4 steps of one sample are unrolled in the compiled graph
+
+
+@dataclass(frozen=True)
+class _Time:
+    duration: float = quantity("time", gt(0), le(1e6))
+    h_plant: float = quantity("time", gt(0), ge(1e-6))
+    h: float = quantity("time", gt(0), ge(1e-6))
+
+
+@dataclass(frozen=True)
+class _Initial:
+    eta0: tuple[float, ...] = quantity(_POSE)
+    nu0: tuple[float, ...] = quantity(_RATE)
+    eta_d: tuple[float, ...] = quantity(_POSE)
+
+
+@dataclass(frozen=True)
+class _Arm:
+    qg: tuple[float, ...] = quantity("angle", n=6)
+    hold_until: float = quantity("time", ge(0))
+    reach_end: float = quantity("time", gt(0))
+    payload_on: float = quantity("time", ge(0))
+    payload_ramp: float = quantity("time", gt(0))
+    return_start: float = quantity("time", ge(0))
+    return_end: float = quantity("time", gt(0))
+
+
+@dataclass(frozen=True)
+class _Disturbance:
+    offset: tuple[float, ...] = quantity(_WRENCH)
+    amplitude: tuple[float, ...] = quantity(_WRENCH)
+    freq: tuple[float, ...] = quantity("angular_velocity", ge(0), n=6)
+    phase: tuple[float, ...] = quantity("angle", n=6)
+
+
+@dataclass(frozen=True)
+class _Sensors:
+    var_position: float = quantity("length^2", ge(0))
+    var_attitude: float = quantity("angle^2", ge(0))
+    var_velocity: float = quantity("velocity^2 or angular_velocity^2", ge(0))
+
+
+@dataclass(frozen=True)
+class _Ekf:
+    q_eta: float = quantity("length^2 or angle^2", gt(0), per="step")  # random-walk variance per step h
+    q_nu: float = quantity("velocity^2 or angular_velocity^2", gt(0), per="step")
+
+
+@dataclass(frozen=True)
+class _Uncertainty:
+    C_factor: float = quantity("1", ge(0))
+    D_factor: float = quantity("1", ge(0))
+    g_factor: float = quantity("1", ge(0))
+    arm_factor: float = quantity("1", ge(0))
+
+
+@dataclass(frozen=True)
+class _Atd:
+    T: float = quantity("time", gt(0))
+    A_min: float = quantity("length or angle", gt(0))
+
+
+@dataclass(frozen=True)
+class _Limits:
+    e_position: float = quantity("length", gt(0))
+    e_attitude: float = quantity("angle", gt(0))
+
+
+@dataclass(frozen=True)
+class ScenarioFile:
+    """The scenario file's schema; key ``a.b`` of the file is field ``a_b`` of :class:`ScenarioConfig`."""
+
+    time: _Time = config.setting()
+    initial: _Initial = config.setting()
+    arm: _Arm = config.setting()
+    disturbance: _Disturbance = config.setting()
+    sensors: _Sensors = config.setting()
+    ekf: _Ekf = config.setting()
+    uncertainty: _Uncertainty = config.setting()
+    atd: _Atd = config.setting()
+    limits: _Limits = config.setting()
+
+
+_LEAVES = config.leaves(ScenarioFile)
 
 
 def _field(name: str) -> str:
@@ -133,13 +188,13 @@ class ScenarioConfig:
         """
         lines = ["# arvcas scenario, effective values in SI units (angles in rad)"]
         section = None
-        for name, (n, _rule) in _SCHEMA.items():
-            sec, key = name.split(".")
+        for leaf in _LEAVES:
+            sec, key = leaf.key.split(".")
             if sec != section:
                 lines.append(f"\n[{sec}]")
                 section = sec
-            v = getattr(self, _field(name))
-            val = "[" + ", ".join(repr(float(x)) for x in v) + "]" if n else repr(float(v))
+            v = getattr(self, _field(leaf.key))
+            val = "[" + ", ".join(repr(float(x)) for x in v) + "]" if leaf.n else repr(float(v))
             lines.append(f'{key} = {{ value = {val}, unit = "SI", source = "effective value" }}')
         return "\n".join(lines) + "\n"
 
@@ -158,26 +213,14 @@ class ScenarioConfig:
 
     def with_h(self, h: float) -> "ScenarioConfig":
         """The same scenario at another controller sampling period (plant unchanged)."""
-        cfg = replace(self, time_h=float(h))
+        h = config.check_value(ScenarioFile, "time.h", h, "ScenarioConfig.with_h", ScenarioError)
+        cfg = replace(self, time_h=h)
         _check_consistency(cfg, "ScenarioConfig.with_h")
         return cfg
 
 
 def default_scenario_path() -> Path:
     return Path(str(resources.files("arvcas") / "data" / "scenario.toml"))
-
-
-def _unit_factors(unit: str, n: int, where: str) -> np.ndarray:
-    """Per-element SI factors of a unit string: one unit for all, two for the halves of a 6-vector,
-    or one per element; "deg" converts to rad."""
-    parts = [u.strip() for u in unit.split(",")]
-    if len(parts) == 1:
-        parts = parts * n
-    elif len(parts) == 2 and n == 6:
-        parts = [parts[0]] * 3 + [parts[1]] * 3
-    elif len(parts) != n:
-        raise ScenarioError(f"{where}: unit list '{unit}' does not match {n} values")
-    return np.array([math.pi / 180.0 if u == "deg" else 1.0 for u in parts])
 
 
 def load_scenario(path: str | Path | None = None) -> ScenarioConfig:
@@ -188,61 +231,35 @@ def load_scenario(path: str | Path | None = None) -> ScenarioConfig:
 
 def loads_scenario(text: str, where: str = "<scenario text>") -> ScenarioConfig:
     """Validate scenario TOML text (e.g. stored in a result file); ``where`` names it in errors."""
-    doc = tomlfile.parse(text, where, ScenarioError)
-    flat: dict[str, Any] = {}
-    for sec, table in doc.items():
-        if not isinstance(table, dict):
-            raise ScenarioError(f"{where}: '{sec}' must be a table")
-        for k, v in table.items():
-            flat[f"{sec}.{k}"] = v
-    for name in flat:
-        if name not in _SCHEMA:
-            close = difflib.get_close_matches(name, list(_SCHEMA), n=1)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
-            raise ScenarioError(f"{where}: unknown key '{name}'{hint}")
-    values: dict[str, Any] = {}
-    for name, (n, rule) in _SCHEMA.items():
-        if name not in flat:
-            raise ScenarioError(f"{where}: missing key '{name}'")
-        entry = flat[name]
-        if not isinstance(entry, dict) or set(entry) != {"value", "unit", "source"}:
-            raise ScenarioError(f"{where}: {name}: expected a table {{ value, unit, source }}")
-        v = entry["value"]
-        if n:
-            if not isinstance(v, list) or len(v) != n:
-                raise ScenarioError(f"{where}: {name}: expected a list of {n} numbers")
-            arr = [_number(x, f"{where}: {name}", rule) for x in v]
-        else:
-            arr = [_number(v, f"{where}: {name}", rule)]
-        fac = _unit_factors(str(entry["unit"]), max(n, 1), f"{where}: {name}")
-        arr = np.array(arr) * fac
-        values[_field(name)] = tuple(float(a) for a in arr) if n else float(arr[0])
+    loaded = config.load_text(ScenarioFile, text, where, ScenarioError, entries=True)
+    values = {_field(k): v for k, v in config.flatten(loaded.value)}
     cfg = ScenarioConfig(**values, text=text, path=where)
     _check_consistency(cfg, where)
     return cfg
 
 
-def _number(x: Any, where: str, rule: str) -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
-        raise ScenarioError(f"{where}: value must be a number, got {type(x).__name__}")
-    x = float(x)
-    if not math.isfinite(x):
-        raise ScenarioError(f"{where}: value must be finite, got {x}")
-    if rule == "pos" and x <= 0:
-        raise ScenarioError(f"{where}: value must be > 0, got {x}")
-    if rule == "nonneg" and x < 0:
-        raise ScenarioError(f"{where}: value must be >= 0, got {x}")
-    return x
+def table_bytes(cfg: ScenarioConfig) -> int:
+    """Bytes of the run's time table (:func:`arvcas.sim.schedule.table`): a record of
+    ``schedule.RECORD_SIZE`` doubles at each of the ``2 h / h_plant + 1`` stage times of every sample,
+    about 36 MB for the 100 s paper run at h_plant = 0.01 s. Building it holds about twice that."""
+    from arvcas.sim import schedule  # schedule imports this module
+
+    return n_samples(cfg) * schedule.n_stages(cfg) * schedule.RECORD_SIZE * 8
 
 
 def _check_consistency(cfg: ScenarioConfig, where: str) -> None:
     r = cfg.time_h / cfg.time_h_plant
     if abs(r - round(r)) > 1e-9 or round(r) < 1:
         raise ScenarioError(f"{where}: time.h ({cfg.time_h}) must be a whole multiple of time.h_plant ({cfg.time_h_plant})")
+    if round(r) > MAX_SUBSTEPS:
+        raise ScenarioError(f"{where}: time.h: h / h_plant = {round(r)} plant steps per sample, at most "
+                            f"{MAX_SUBSTEPS} (they are unrolled in the compiled sample step)")
     if not (cfg.arm_hold_until < cfg.arm_reach_end <= cfg.arm_return_start < cfg.arm_return_end):
         raise ScenarioError(f"{where}: arm times must satisfy hold_until < reach_end <= return_start < return_end")
     if cfg.time_duration < cfg.time_h:
         raise ScenarioError(f"{where}: time.duration must be at least one sample time.h")
+    config.check_memory(table_bytes(cfg), f"the run's time table ({n_samples(cfg)} samples of "
+                        f"{cfg.substeps} plant steps)", where, "time.duration", ScenarioError)
 
 
 def n_samples(cfg: ScenarioConfig) -> int:

@@ -147,10 +147,13 @@ _TABLES_KEEP = 4  # a table is ~20 MB at the paper's sampling
 
 
 def _compiled(kind: str, key, make) -> ca.Function:
+    """The compiled table function ``kind`` for ``key`` (a frozen description of what shapes it):
+    loaded from the cache by that description, its graph built only on a miss."""
+    name = {"time": "sched_time_map", "arm": "sched_arm_map"}[kind]
     with _FUNCS_LOCK:
         f = _FUNCS.get((kind, key))
         if f is None:
-            f = codegen.build(make())
+            f = codegen.build_described(name, f"schedule {kind} {key!r} chunk={ARM_CHUNK}", make)
             _FUNCS[(kind, key)] = f
         return f
 

@@ -1,0 +1,269 @@
+"""A run is a description; compiling it gives an object that owns its inputs by name.
+
+:class:`Run` is frozen and hashable: the controller, the scenario, the parameters and the model
+options. :meth:`Run.compile` returns a :class:`CompiledRun` (as acados keeps the problem description
+apart from the built solver): it owns the compiled closed-loop functions (metrics only, and with the
+trace), their cache keys, the run's time table, and the named inputs of one run
+(:data:`arvcas.sim.closedloop.INPUTS`), and returns :class:`~arvcas.sim.simulation.Result` objects::
+
+    run = arvcas.Run(controller="proposed").compile()
+    r = run.simulate(seed=0)                       # one run with its trace
+    chat, rmse = run.batch(gains_matrix, seed=0)   # many gain sets, all cores
+    chat, rmse, ok, t_fail = run.many(gains, seeds=range(100), uncertainty=U)   # Monte Carlo draws
+
+Compiling never builds a CasADi graph when the compile cache holds the library: the cache key is
+the description (controller identity and source, the scenario's graph-shaping fields, the options)
+plus the package's model code and data (:func:`arvcas.build.provenance.model_hash`) and the
+toolchain, so a warm start only loads a shared library.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from arvcas import __version__
+from arvcas.build import calls, codegen
+from arvcas.controllers import gains as gains_mod
+from arvcas.controllers.base import Controller, get as get_controller
+from arvcas.model.uvms import ModelOptions
+from arvcas.params import Params, load as load_params
+from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
+from arvcas.sim.scenario import ScenarioConfig
+
+__all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS"]
+
+MAX_RUNS = 10_000_000  # runs in one batch call (the outputs alone take 100 bytes a run)
+
+
+class SimulationError(ValueError):
+    """Bad input to a simulation (one line), raised before anything runs."""
+
+
+@dataclass(frozen=True)
+class Run:
+    """The description of a closed-loop run: what to compile.
+
+    ``controller``: a registered name or a :class:`~arvcas.controllers.Controller`; ``scenario``: a
+    :class:`~arvcas.sim.scenario.ScenarioConfig`, a scenario file, or None (the packaged one);
+    ``params``: :class:`~arvcas.params.Params`, a parameter file, or None (the packaged one);
+    ``options``: :class:`~arvcas.model.uvms.ModelOptions`.
+    """
+
+    controller: str | Controller = "proposed"
+    scenario: ScenarioConfig | str | Path | None = None
+    params: Params | str | Path | None = None
+    options: ModelOptions = ModelOptions()
+
+    def compile(self) -> "CompiledRun":
+        """The compiled run (memoised per process for equal descriptions)."""
+        with_law = get_controller(self.controller)
+        cfg = self.scenario if isinstance(self.scenario, ScenarioConfig) else scenario.load_scenario(self.scenario)
+        params = self.params if isinstance(self.params, Params) else load_params(self.params)
+        if not isinstance(self.options, ModelOptions):
+            raise SimulationError(f"options: expected arvcas.model.uvms.ModelOptions, got {type(self.options).__name__}")
+        scenario.check_joint_limits(cfg, params)
+        return CompiledRun(with_law, cfg, params, self.options)
+
+
+def _file_digest(paths) -> str:
+    h = hashlib.sha256()
+    for p in paths:
+        try:
+            h.update(Path(p).read_bytes())
+        except OSError:
+            h.update(f"<unreadable {p}>".encode())
+    return h.hexdigest()
+
+
+class CompiledRun:
+    """A compiled closed-loop run (see the module docstring). Build it with :meth:`Run.compile`.
+
+    ``inputs``: the names of one run's inputs; ``signals``: the traced signals
+    (:mod:`arvcas.sim.signals`); ``artifact(trace)``: the compiled library's manifest (key, path...).
+    """
+
+    def __init__(self, controller: Controller, cfg: ScenarioConfig, params: Params, opts: ModelOptions):
+        self.controller = controller
+        self.cfg = cfg
+        self.params = params
+        self.opts = opts
+        self.signals = signals_mod.trace_signals(controller)
+        self.inputs = closedloop.INPUTS
+        self._fns: dict[bool, ca.Function] = {}
+        self._pv = params.vector()
+
+    # -- compiled functions ----------------------------------------------------------------------------
+    def description(self, trace: bool) -> str:
+        """What keys the compiled run in the cache (beside the package's model hash and the toolchain)."""
+        law = self.controller
+        own = [f for f in law.source_files() if not f.startswith(str(Path(codegen.__file__).resolve().parents[1]))]
+        return (f"run controller={law.identity()} own_source={_file_digest(own)} trace={trace} "
+                f"scenario={self.cfg.graph_key()!r} options={self.opts!r}")
+
+    def function(self, trace: bool) -> ca.Function:
+        """The compiled run function (metrics only, or with the trace), loaded from the cache when it is there."""
+        fn = self._fns.get(trace)
+        if fn is None:
+            spec = closedloop.RunSpec(self.controller, self.cfg.graph_key(), self.opts)
+            name = f"run_{self.controller.name}" + ("_trace" if trace else "")
+            fn = _FUNCTIONS.get((name, self.description(trace)))
+            if fn is None:
+                fn = codegen.build_described(name, self.description(trace), lambda: closedloop.build_run(spec, trace))
+                _FUNCTIONS[(name, self.description(trace))] = fn
+            self._fns[trace] = fn
+        return fn
+
+    def artifact(self, trace: bool = False) -> dict:
+        return codegen.artifact_of(self.function(trace)) or {}
+
+    @property
+    def table(self) -> schedule.Table:
+        """The run's time table (computed once per (scenario, p, options) and kept)."""
+        return schedule.table(self.cfg, self._pv, self.opts)
+
+    # -- inputs ------------------------------------------------------------------------------------------
+    def default_gains(self) -> np.ndarray:
+        return gains_mod.default_gains(self.controller)
+
+    def gain_names(self) -> list[str]:
+        return gains_mod.gain_names(self.controller)
+
+    def _gains(self, gains, batch: bool) -> np.ndarray:
+        g = self.default_gains() if gains is None else gains
+        g = gains_mod.check_gains(self.controller, g, h=self.cfg.time_h)
+        if batch and g.ndim == 1:
+            g = g[None, :]
+        if not batch and g.ndim != 1:
+            raise SimulationError(f"gains: simulate takes one gain vector of {gains_mod.n_gains(self.controller)}, "
+                                  f"got shape {g.shape}")
+        return g
+
+    def _unc_phase(self, uncertainty, phase):
+        unc = self.cfg.uncertainty if uncertainty is None else np.asarray(uncertainty, dtype=float)
+        ph = np.array(self.cfg.disturbance_phase) if phase is None else np.asarray(phase, dtype=float)
+        if unc.shape != (4,) or not np.isfinite(unc).all():
+            raise SimulationError(f"uncertainty: expected 4 finite factors [C, D, g, arm], got {unc}")
+        if ph.shape != (6,) or not np.isfinite(ph).all():
+            raise SimulationError(f"phase: expected 6 finite disturbance phases (rad), got {ph}")
+        return unc, ph
+
+    def _shared(self) -> dict[str, np.ndarray]:
+        tab = self.table
+        return {"ekf": self.cfg.ekf_vector, "p": self._pv, "sched_time": tab.time, "sched_arm": tab.arm}
+
+    # -- running ---------------------------------------------------------------------------------------
+    def simulate(self, gains=None, seed: int = 0, uncertainty=None, phase=None, noise_scale: float = 1.0):
+        """One run with its trace: a :class:`~arvcas.sim.simulation.Result`.
+
+        ``noise_scale`` multiplies the drawn sensor noise (0: perfect measurements) while the EKF keeps
+        the nominal sensor covariance: an analysis knob for how much noise reaches the thrusters.
+        """
+        from arvcas.sim.simulation import Result
+
+        g = self._gains(gains, batch=False)
+        if not (isinstance(noise_scale, (int, float)) and np.isfinite(noise_scale) and noise_scale >= 0):
+            raise SimulationError(f"noise_scale: must be a finite number >= 0, got {noise_scale!r}")
+        noise = scenario.noise_sequence(self.cfg, seed) * float(noise_scale)
+        unc, ph = self._unc_phase(uncertainty, phase)
+        fn = self.function(trace=True)
+        out = calls.call_named(fn, {"gains": g, "noise": noise, "unc": unc, "phase": ph, **self._shared()})
+        tr = out["trace"]
+        series, i = {}, 0
+        n_thr = tr.shape[0] - sum(s.width for s in self.signals if s.width is not None)  # per-thruster widths
+        for sig in self.signals:
+            w = sig.n(n_thr)
+            block = tr[i:i + w, :].T
+            series[sig.name] = block[:, 0].copy() if w == 1 else block.copy()
+            i += w
+        ok_b = bool(out["ok"].item() > 0.5)
+        meta = self._meta(fn) | ({"noise_scale": float(noise_scale)} if noise_scale != 1.0 else {})
+        return Result(
+            controller=self.controller.name, gains=np.asarray(g, dtype=float), seed=int(seed),
+            chat=out["chat"].ravel(), rmse=out["rmse"].ravel(), ok=ok_b,
+            t_fail=None if ok_b else float(out["t_fail"].item()),
+            config_text=self.cfg.to_toml(), params_vector=self._pv.copy(), uncertainty=unc, phase=ph, h=self.cfg.time_h,
+            meta=meta, signals=self.signals, series=series,
+        )
+
+    def _meta(self, fn: ca.Function) -> dict:
+        art = codegen.artifact_of(fn) or {}
+        return {"artifact_key": art.get("key"), "artifact_flags": art.get("flags"),
+                "scenario_file": self.cfg.path, "casadi_version": ca.__version__, "arvcas_version": __version__}
+
+    def batch(self, gains, seed: int = 0, uncertainty=None, phase=None, n_threads: int | None = None,
+              return_status: bool = False):
+        """Many gain sets (n x n_gains) on the same noise (``seed``), uncertainty and disturbance.
+
+        Returns ``(chat (n x 6), rmse (n x 6))``; with ``return_status`` also ``(ok (n,), t_fail (n,))``.
+        A diverged run has ``ok = False`` and NaN metrics.
+        """
+        g = self._gains(gains, batch=True)
+        unc, ph = self._unc_phase(uncertainty, phase)
+        noise = scenario.noise_sequence(self.cfg, seed)
+        chat, rmse, ok, t_fail = self._evaluate(g.shape[0], {"gains": g.T, "noise": noise, "unc": unc, "phase": ph},
+                                                {"gains"}, n_threads)
+        return (chat, rmse, ok, t_fail) if return_status else (chat, rmse)
+
+    def many(self, gains, seeds, uncertainty=None, phase=None, n_threads: int | None = None):
+        """n draws: row i has its own gains (or shared), noise seed, uncertainty factors and phases.
+
+        ``gains``: (n_gains,) or (n, n_gains); ``seeds``: (n,) non-negative integers; ``uncertainty``:
+        None, (4,) or (n, 4); ``phase``: None, (6,) or (n, 6). Returns ``(chat, rmse, ok, t_fail)``.
+        """
+        seeds = np.asarray(seeds)
+        if seeds.ndim != 1 or seeds.size == 0:
+            raise SimulationError(f"seeds: expected a non-empty 1-D sequence of integers, got shape {seeds.shape}")
+        n = seeds.size
+        g = self._gains(gains, batch=True)
+        if g.shape[0] not in (1, n):
+            raise SimulationError(f"gains: {g.shape[0]} gain sets for {n} seeds (give 1 or {n})")
+        G = np.broadcast_to(g, (n, g.shape[1]))
+        unc0, ph0 = self._unc_phase(None, None)
+
+        def rows(v, default, k, name):
+            a = np.asarray(default if v is None else v, dtype=float)
+            if a.shape == (k,):
+                a = np.broadcast_to(a, (n, k))
+            if a.shape != (n, k) or not np.isfinite(a).all():
+                raise SimulationError(f"{name}: expected ({k},) or ({n}, {k}) finite values, got shape {a.shape}")
+            return a
+
+        U = rows(uncertainty, unc0, 4, "uncertainty")
+        PH = rows(phase, ph0, 6, "phase")
+        noise = np.hstack([scenario.noise_sequence(self.cfg, int(sd)) for sd in seeds])
+        return self._evaluate(n, {"gains": G.T, "noise": noise, "unc": U.T, "phase": PH.T},
+                              {"gains", "noise", "unc", "phase"}, n_threads)
+
+    def _evaluate(self, n: int, varying: dict, per_run: set, n_threads):
+        """n metrics-only runs on the thread pool; the inputs in ``per_run`` have a column block per run,
+        the others and the time table are shared. NaN metrics for a diverged run."""
+        if n > MAX_RUNS:
+            raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
+        fn = self.function(trace=False)
+        out = calls.call_named(fn, {**varying, **self._shared()}, n=n, per_run=per_run,
+                               n_threads=_n_threads(n_threads))
+        ok = out["ok"].ravel() > 0.5
+        chat, rmse = out["chat"].T.copy(), out["rmse"].T.copy()
+        chat[~ok] = np.nan
+        rmse[~ok] = np.nan
+        return chat, rmse, ok, np.where(ok, np.nan, out["t_fail"].ravel())
+
+
+_FUNCTIONS: dict[tuple, ca.Function] = {}
+
+
+def _n_threads(n_threads: int | None) -> int:
+    if n_threads is None:
+        try:
+            return max(1, len(os.sched_getaffinity(0)))
+        except AttributeError:  # pragma: no cover
+            return max(1, os.cpu_count() or 1)
+    if isinstance(n_threads, bool) or not isinstance(n_threads, int) or not 1 <= n_threads <= 1024:
+        raise SimulationError(f"n_threads: must be an integer in [1, 1024], got {n_threads!r}")
+    return n_threads
