@@ -72,3 +72,22 @@ def test_reader_never_blocks_on_a_fifo(tmp_path):
 def test_front_given_as_a_directory_is_still_an_input(tmp_path, capsys):
     front = synthetic_front(tmp_path / "front.h5")
     assert_refused(["front", "export", tmp_path, "--format", "csv", "--out", front], capsys, tmp_path, "is the input")
+
+
+def test_format_sniffing_never_opens_a_fifo(tmp_path):
+    from arvcas.experiments.montecarlo import is_montecarlo_file
+    from arvcas.experiments.robust import is_robust_file
+
+    import threading
+
+    fifo = tmp_path / "p.h5"
+    os.mkfifo(fifo)
+    got = []
+    t = threading.Thread(target=lambda: got.append((files.hdf5_format(fifo), is_montecarlo_file(fifo),
+                                                    is_robust_file(fifo), files.hdf5_format("/dev/zero"))),
+                         daemon=True)
+    t.start()
+    t.join(60)
+    assert not t.is_alive(), "sniffing the format of a FIFO blocked"
+    assert got == [(None, False, False, None)]
+    assert files.hdf5_format(tmp_path / "missing.h5") is None

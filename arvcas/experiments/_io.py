@@ -87,12 +87,4 @@ def open_h5(path, fmt: str, version: int):
 
 def h5_format(path) -> str | None:
     """The ``format`` attribute of an HDF5 file, or None if it is not HDF5 or has none."""
-    path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            if fh.read(8) != b"\x89HDF\r\n\x1a\n":
-                return None
-        with h5py.File(path, "r") as f:
-            return str_attr(f.attrs["format"]) if "format" in f.attrs else None
-    except OSError:
-        return None
+    return files.hdf5_format(path)

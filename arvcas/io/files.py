@@ -53,7 +53,7 @@ from pathlib import Path
 __all__ = [
     "FileError", "Terminated", "MAX_TEXT_BYTES", "TMP_MARK", "MANIFEST", "check_input", "read_bytes", "read_text",
     "check_dir", "prepare_dir", "target", "atomic_write", "write_text", "write_figure", "remove_stale_temps",
-    "install_signal_handlers", "written_by_arvcas", "permit_replace", "check_outputs", "same_file",
+    "install_signal_handlers", "written_by_arvcas", "hdf5_format", "permit_replace", "check_outputs", "same_file",
 ]
 
 MAX_TEXT_BYTES = 16 * 1024 * 1024  # parameter, scenario and study files are a few KiB
@@ -219,8 +219,12 @@ def permit_replace(paths: Iterable) -> None:
     _PERMITTED.update(_key(p) for p in paths)
 
 
-def _hdf5_format(path: Path) -> str | None:
+def hdf5_format(path) -> str | None:
+    """The ``format`` attribute of the HDF5 file ``path``; None if it is not a regular HDF5 file or has none
+    (a FIFO or device is never opened)."""
     try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return None
         with open(path, "rb") as fh:
             if fh.read(8) != _HDF5_SIG:
                 return None
@@ -260,7 +264,7 @@ def _read_manifest(d: Path) -> dict:
 def written_by_arvcas(path) -> bool:
     """Whether the existing file ``path`` is one arvcas wrote (see the module docstring)."""
     p = Path(path)
-    fmt = _hdf5_format(p)
+    fmt = hdf5_format(p)
     if fmt is not None:
         return fmt.startswith("arvcas")
     try:
@@ -353,7 +357,7 @@ def atomic_write(path, write: Callable[[Path], None], error: type[ValueError] = 
         _fsync_path(path.parent, directory=True)
     except OSError:  # pragma: no cover - some filesystems refuse fsync on directories
         pass
-    fmt = _hdf5_format(path)
+    fmt = hdf5_format(path)
     if fmt is None or not fmt.startswith("arvcas"):
         try:
             _record(path)
