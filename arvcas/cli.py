@@ -300,6 +300,7 @@ def _run_simulate(a: argparse.Namespace) -> int:
                  opts=_model_options(a.n_quad))
     if a.from_front is not None and changed:
         r.meta["model_change_allowed"] = changed
+        print(f"note: replayed under another model than the study's ({changed}), as allowed by --allow-model-change")
     status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s"
     print(f"{controller}: seed {r.seed}, {r.t[-1]:g} s, {status}")
     print(_metrics_table(r.chat, r.rmse))

@@ -15,7 +15,7 @@ from arvcas.tuning import checkpoint as ck
 from arvcas.tuning import load_study, run_study
 
 from test_tuning_study import write_tiny
-from trust_helpers import assert_refused, run, synthetic_front
+from trust_helpers import assert_refused, run, run3, synthetic_front
 
 OLD = "0" * 64
 
@@ -46,13 +46,16 @@ def test_replays_refuse_another_model(tmp_path, capsys):
 def test_allowed_model_change_is_recorded(tmp_path, capsys):
     front = synthetic_front(tmp_path / "front.h5", model_hash=OLD)
     out = tmp_path / "r.h5"
-    rc, err = run(["simulate", "--from-front", front, "--index", "1", "--allow-model-change", "--out", out], capsys)
+    rc, text, err = run3(["simulate", "--from-front", front, "--index", "1", "--allow-model-change", "--out", out],
+                         capsys)
     assert rc in (0, 1), err
     assert "the model code or data changed" in read_result(out).meta["model_change_allowed"]
+    assert "note: replayed under another model" in text
     (tmp_path / "g").mkdir()
     good = synthetic_front(tmp_path / "g" / "front.h5")
-    rc, err = run(["compare", good, front, "--allow-model-change"], capsys)
+    rc, text, err = run3(["compare", good, front, "--allow-model-change"], capsys)
     assert rc == 0, err
+    assert "note: the two fronts were computed with different models (model hash" in text
 
 
 def test_resume_refuses_another_model_and_records_an_allowed_one(tmp_path, capsys):

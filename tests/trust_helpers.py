@@ -13,8 +13,14 @@ from arvcas.io.files import TMP_MARK
 
 
 def run(argv, capsys, timeout: float = 300.0):
+    """``cli.main(argv)`` in a thread that must end within ``timeout``; returns (exit code, stderr)."""
+    rc, _out, err = run3(argv, capsys, timeout)
+    return rc, err
+
+
+def run3(argv, capsys, timeout: float = 300.0):
     """``cli.main(argv)`` in a thread that must end within ``timeout`` (a hang fails the test, not the run);
-    returns (exit code, stderr)."""
+    returns (exit code, stdout, stderr)."""
     box = {}
 
     def target():
@@ -29,7 +35,8 @@ def run(argv, capsys, timeout: float = 300.0):
     assert not t.is_alive(), f"arvcas {' '.join(map(str, argv))} did not return within {timeout} s"
     if "exc" in box:
         raise box["exc"]
-    return box["rc"], capsys.readouterr().err
+    cap = capsys.readouterr()
+    return box["rc"], cap.out, cap.err
 
 
 def snapshot(d) -> dict:

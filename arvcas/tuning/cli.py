@@ -179,7 +179,10 @@ def run_compare(a: argparse.Namespace) -> int:
         if ref is None or len(ref) != 2:
             raise ValueError(f"--ref: expected two numbers 'f_chat,f_rmse', got {a.ref!r}")
     fa, fb = read_front(a.a), read_front(a.b)
-    check_same_model(fa.path, fb.path, a.allow_model_change)
+    changed = check_same_model(fa.path, fb.path, a.allow_model_change)
+    if changed:
+        print(f"note: the two fronts were computed with different models ({changed}); compared as allowed by "
+              f"--allow-model-change")
     if a.plot is not None:
         files.target(a.plot, f"--plot {a.plot}")
     c = compare_fronts(fa, fb, ref)

@@ -279,8 +279,9 @@ def check_provenance(path: str | Path, params, allow: bool, what: str) -> str:
     return "; ".join(diff)
 
 
-def check_same_model(a: str | Path, b: str | Path, allow: bool) -> None:
-    """Refuse to compare two fronts computed with different model code, data or parameters."""
+def check_same_model(a: str | Path, b: str | Path, allow: bool) -> str:
+    """Refuse to compare two fronts computed with different model code, data or parameters; with
+    ``allow`` returns what differs (empty if nothing)."""
     ca, cb = ck.read_checkpoint(resolve_front_path(a)), ck.read_checkpoint(resolve_front_path(b))
     why = []
     if ca.model_hash != cb.model_hash:
@@ -290,6 +291,7 @@ def check_same_model(a: str | Path, b: str | Path, allow: bool) -> None:
     if why and not allow:
         raise ck.CheckpointError(f"compare: {a} and {b} were computed with different models ({', '.join(why)}); "
                                  f"their objectives are not comparable (--allow-model-change to compare anyway)")
+    return ", ".join(why)
 
 
 # ---- replay ------------------------------------------------------------------------------------------
