@@ -1,9 +1,22 @@
-"""The ``arvcas`` command: parse arguments, call a library function with typed arguments, print.
+"""The ``arvcas`` command: one table of every command, the policies applied to each, and dispatch.
 
-Subcommands live in :data:`COMMANDS` (name -> :class:`Command`); add one by writing an ``_add_*``
-function for its arguments and a ``_run_*`` function taking the parsed namespace and returning the exit
-code. Library errors (ValueError and subclasses such as ``ParamsError``, ``CacheError``) and OS errors
-are printed as one line ``arvcas: error: ...`` with exit code 2, without a traceback.
+:data:`TABLE` lists every command and sub-command (``"front export"``) as a :class:`Command`: its
+name, help, ``add_arguments`` and ``run`` (the handlers live with their packages: here, in
+:mod:`arvcas.tuning.cli` and :mod:`arvcas.experiments.cli`), the arguments that are input files,
+the files it will write and a ``check`` of the options that do not apply. :func:`main` parses, then,
+before calling ``run``:
+
+* input policy (:func:`arvcas.io.files.check_input`): every declared input is a regular file
+  (a front may also be a study directory); FIFOs, devices and directories are refused by name;
+* output policy (:func:`arvcas.io.files.check_outputs`): no output is an input or another output,
+  none is a special file, an existing file arvcas did not write is refused without ``--force``
+  (added to every command that writes); stale temporary files of killed runs are removed;
+* bounds: counts, seeds and timeouts are checked by their argparse types (:func:`seed_arg`,
+  :func:`count_arg`, :func:`seconds_arg`) and the memory a request would take by the command's check.
+
+Errors (ValueError and subclasses, OSError) are printed as one line ``arvcas: error: ...`` with exit
+code 2, usage errors likewise (``arvcas: error: CMD: argument ...``); SIGTERM and SIGHUP end the
+command like Ctrl-C (temporary files removed), exit 128 + signal.
 """
 
 from __future__ import annotations
@@ -15,14 +28,96 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["main", "COMMANDS", "Command"]
+__all__ = ["main", "TABLE", "COMMANDS", "Command", "seed_arg", "count_arg", "seconds_arg", "check_memory",
+           "MAX_SEED", "refuse"]
+
+Paths = Callable[[argparse.Namespace], list]
 
 
 @dataclass(frozen=True)
 class Command:
+    """One command of the table. ``inputs``: ``(dest, kind[, what])`` of arguments that name input files
+    (kind ``"file"``, or ``"front"``: a front.h5 or a study directory holding one; ``what`` names the file
+    in messages, default "file"); ``outputs``: the
+    ``(label, path)`` files the command will write, from the parsed arguments; ``check``: raises
+    ValueError for options that do not apply or requests too large, before any work."""
+
+    name: str
     help: str
     add_arguments: Callable[[argparse.ArgumentParser], None]
     run: Callable[[argparse.Namespace], int]
+    inputs: tuple = ()
+    outputs: Paths | None = None
+    check: Callable[[argparse.Namespace], None] | None = None
+
+
+# ---- bounds (argparse types: refused at parse time, before any work) ------------------------------------
+
+MAX_SEED = 2**63  # seeds are stored as int64 and fed to numpy's SeedSequence
+
+
+def seed_arg(text: str) -> int:
+    """A seed: an integer with 0 <= seed < 2**63."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer seed, got {text!r}") from None
+    if not 0 <= v < MAX_SEED:
+        raise argparse.ArgumentTypeError(f"{text} is out of range (allowed: 0 <= seed < 2**63)")
+    return v
+
+
+def count_arg(lo: int, hi: int, what: str = "count"):
+    """An argparse type: an integer ``lo <= n <= hi``."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"{v} is out of range (allowed: {lo}..{hi})")
+        return v
+
+    parse.__name__ = what
+    return parse
+
+
+def seconds_arg(text: str) -> float:
+    """A duration in seconds: finite and positive (not nan, inf, 0 or negative)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"{text}: must be a finite number of seconds > 0")
+    return v
+
+
+def _total_memory() -> int | None:
+    import os
+
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError):  # pragma: no cover
+        return None
+
+
+def check_memory(what: str, n_bytes: float, share: float = 0.5) -> None:
+    """Refuse a request whose results would take more than ``share`` of this machine's memory."""
+    total = _total_memory()
+    if total is None:  # pragma: no cover
+        return
+    if n_bytes > share * total:
+        raise ValueError(f"{what}: would need about {n_bytes / 2**30:.3g} GiB for its results, more than "
+                         f"{share:.0%} of this machine's {total / 2**30:.3g} GiB; ask for less")
+
+
+def refuse(a: argparse.Namespace, names, why: str) -> None:
+    """ValueError if any of the options ``names`` (dest names) was given (is not None/False)."""
+    for n in names:
+        v = getattr(a, n, None)
+        if v is not None and v is not False:
+            raise ValueError(f"--{n.replace('_', '-')}: {why}")
 
 
 def _model_options(n_quad: int):
@@ -34,7 +129,7 @@ def _model_options(n_quad: int):
 def _add_model_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", metavar="FILE", type=Path, default=None,
                    help="parameter file (default: the packaged haidou1.toml)")
-    p.add_argument("--n-quad", metavar="N", type=int, default=5,
+    p.add_argument("--n-quad", metavar="N", type=count_arg(1, 20, "--n-quad"), default=5,
                    help="Gauss-Legendre points per link for the drag integral (default: 5)")
 
 
@@ -148,13 +243,23 @@ def _add_simulate(p: argparse.ArgumentParser) -> None:
     p.add_argument("--controller", default=None,
                    help="proposed, agsta, traditional or implicit (required unless --from-front)")
     p.add_argument("--out", type=Path, default=None, metavar="FILE.h5", help="write the result here (HDF5)")
-    p.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=None, help="sensor-noise seed (default 0; 0 <= seed < 2**63)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="scenario file (default: the packaged scenario.toml)")
     p.add_argument("--from-front", type=Path, default=None, metavar="FRONT.h5",
                    help="replay a member of a tuning front (with --index)")
     p.add_argument("--index", type=int, default=None, help="front member to replay")
+    p.add_argument("--allow-model-change", action="store_true",
+                   help="with --from-front: replay even if the model code or parameters changed since the study "
+                        "(the result records it)")
     _add_model_args(p)
+
+
+def _check_simulate(a: argparse.Namespace) -> None:
+    if a.from_front is None:
+        refuse(a, ("index", "allow_model_change"), "only with --from-front")
+    elif a.index is None:
+        raise ValueError("--from-front needs --index I")
 
 
 def _metrics_table(chat, rmse) -> str:
@@ -173,15 +278,15 @@ def _run_simulate(a: argparse.Namespace) -> int:
     from arvcas.sim.simulation import simulate
 
     if a.out is not None:
-        results.check_dir(a.out.parent if str(a.out.parent) else Path("."), f"--out {a.out}")
+        results.check_dir(a.out.parent, f"--out {a.out}")
+    params = load(a.params)
     cfg = scenario.load_scenario(a.config)
     gains = None
     controller, seed = a.controller, a.seed
     if a.from_front is not None:
-        from arvcas.tuning.front import member_gains
+        from arvcas.tuning.front import check_provenance, member_gains
 
-        if a.index is None:
-            raise ValueError("--from-front needs --index I")
+        changed = check_provenance(a.from_front, params, a.allow_model_change, "--from-front")
         controller_f, gains, seed_f, cfg_text = member_gains(a.from_front, a.index)
         if controller is not None and controller != controller_f:
             raise ValueError(f"--controller {controller} differs from the front's controller {controller_f}")
@@ -191,8 +296,11 @@ def _run_simulate(a: argparse.Namespace) -> int:
             cfg = scenario.loads_scenario(cfg_text, f"{a.from_front} (study scenario)")
     if controller is None:
         raise ValueError("--controller: required (proposed, agsta, traditional, implicit)")
-    r = simulate(controller, gains=gains, seed=0 if seed is None else seed, params=load(a.params), cfg=cfg,
+    r = simulate(controller, gains=gains, seed=0 if seed is None else seed, params=params, cfg=cfg,
                  opts=_model_options(a.n_quad))
+    if a.from_front is not None and changed:
+        r.meta["model_change_allowed"] = changed
+        print(f"note: replayed under another model than the study's ({changed}), as allowed by --allow-model-change")
     status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s"
     print(f"{controller}: seed {r.seed}, {r.t[-1]:g} s, {status}")
     print(_metrics_table(r.chat, r.rmse))
@@ -206,7 +314,7 @@ def _run_simulate(a: argparse.Namespace) -> int:
 
 def _add_paper(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
-    p.add_argument("--seed", type=int, default=0, help="sensor-noise seed shared by the runs (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="sensor-noise seed shared by the runs (default 0)")
 
 
 def _run_paper(a: argparse.Namespace) -> int:
@@ -226,8 +334,19 @@ def _add_bench(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quick", action="store_true", help="tiny repetition counts, no opt-level sweep (CI check)")
     p.add_argument("--out", type=Path, default=Path("results"), metavar="DIR",
                    help="where bench.json and bench.md go (default: results/)")
-    p.add_argument("--wait-load", type=float, default=None, metavar="L",
+    p.add_argument("--wait-load", type=_load_arg, default=None, metavar="L",
                    help="first wait (up to 15 min) until the 1-min load average is at most L")
+
+
+def _load_arg(text: str) -> float:
+    """A 1-minute load average to wait for: finite and >= 0 (a load average is never negative)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a load average, got {text!r}") from None
+    if not math.isfinite(v) or v < 0:
+        raise argparse.ArgumentTypeError(f"{text}: a load average is a finite number >= 0")
+    return v
 
 
 def bench_module():
@@ -243,44 +362,157 @@ def bench_module():
 
 
 def _run_bench(a: argparse.Namespace) -> int:
+    from arvcas.io import files
+
+    files.prepare_dir(a.out, f"--out {a.out}")  # before measuring
     run = bench_module().run
     run(a.out, quick=a.quick, wait_load=a.wait_load)
     print(f"wrote {a.out / 'bench.json'} and {a.out / 'bench.md'}")
     return 0
 
 
-COMMANDS: dict[str, Command] = {
-    "export-c": Command("write the plant functions as a C library with Makefile, example and README",
-                        _add_export_c, _run_export_c),
-    "cache": Command("show the build cache directory and its compiled libraries", _add_cache, _run_cache),
-    "demo": Command("print the arm's coupling wrench on the vehicle along a simple arm motion",
-                    _add_demo, _run_demo),
-    "simulate": Command("run the station-keeping experiment once and print CHAT/RMSE per DOF",
-                        _add_simulate, _run_simulate),
-    "paper": Command("the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
-                     _add_paper, _run_paper),
-    "bench": Command("measure plant, closed-loop and compile speed; write bench.json and bench.md",
-                     _add_bench, _run_bench),
-}
-__import__("arvcas.tuning.cli", fromlist=["register"]).register(COMMANDS)  # tune, front, compare (arvcas/tuning)
-__import__("arvcas.experiments.cli", fromlist=["register"]).register(COMMANDS)  # after tuning: extends front, compare
+# ---- declared outputs -------------------------------------------------------------------------------------
+
+
+def _out_file(dest: str, label: str | None = None) -> Paths:
+    def outs(a):
+        p = getattr(a, dest)
+        return [] if p is None else [(label or f"--{dest.replace('_', '-')}", Path(p))]
+
+    return outs
+
+
+def _paper_outputs(a):
+    from arvcas.experiments.paper import output_files
+
+    return [(f"--out {a.out}", p) for p in output_files(a.out)]
+
+
+def _bench_outputs(a):
+    return [(f"--out {a.out}", a.out / n) for n in ("bench.json", "bench.md")]
+
+
+def _table() -> tuple[Command, ...]:
+    from arvcas.experiments import cli as x
+    from arvcas.tuning import cli as t
+
+    return (
+        Command("export-c", "write the plant functions as a C library with Makefile, example and README",
+                _add_export_c, _run_export_c, inputs=(("params", "file"),)),
+        Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
+        Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
+                _add_demo, _run_demo, inputs=(("params", "file"),)),
+        Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
+                _add_simulate, _run_simulate, inputs=(("config", "file"), ("params", "file"), ("from_front", "front")),
+                outputs=_out_file("out"), check=_check_simulate),
+        Command("paper", "the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
+                _add_paper, _run_paper, outputs=_paper_outputs),
+        Command("bench", "measure plant, closed-loop and compile speed; write bench.json and bench.md",
+                _add_bench, _run_bench, outputs=_bench_outputs),
+        Command("tune", "NSGA-II on the CHAT/RMSE front from a study file (resumable, local or Dask)",
+                t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune),
+        Command("front export", "the front as CSV or JSON (stdout, or --out FILE)", t.add_front_export,
+                t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out")),
+        Command("front plot", "plot the front, Table 2 on the same draws and the knee point (PNG)", t.add_front_plot,
+                t.run_front_plot, inputs=(("file", "front"),), outputs=t.front_plot_outputs),
+        Command("front robust", "re-evaluate every front member under Monte Carlo; mark the robust non-dominated "
+                "ones (robust.h5, robust.md, robust.png)", x.add_robust, x.run_robust, inputs=(("file", "front"),),
+                outputs=x.robust_outputs, check=x.check_robust),
+        Command("compare", "hypervolumes of two fronts against one reference point, and who dominates where; or two "
+                "Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
+                "(front robust)", x.add_compare, x.run_compare, inputs=(("a", "front"), ("b", "front")),
+                outputs=x.compare_outputs, check=x.check_compare),
+        Command("sweep", "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 "
+                "(table, plot)", x.add_sweep, x.run_sweep,
+                inputs=(("config", "file"), ("params", "file"), ("check", "file")),
+                outputs=x.sweep_outputs, check=x.check_sweep),
+        Command("montecarlo", "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance "
+                "phases: CIs, failure rate", x.add_montecarlo, x.run_montecarlo,
+                inputs=(("config", "file"), ("params", "file"), ("from_front", "front"), ("check", "file")),
+                outputs=x.montecarlo_outputs, check=x.check_montecarlo),
+    )
+
+
+TABLE: tuple[Command, ...] = _table()
+COMMANDS: dict[str, Command] = {c.name: c for c in TABLE}
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line (``arvcas: error: CMD: ...``), exit code 2."""
+
+    def error(self, message):
+        cmd = self.prog.partition(" ")[2]
+        where = f"{cmd}: " if cmd else ""
+        self.exit(2, f"arvcas: error: {where}{' '.join(message.split())} (see {self.prog} --help)\n")
 
 
 def _parser() -> argparse.ArgumentParser:
     from arvcas import __version__
 
-    ap = argparse.ArgumentParser(prog="arvcas", description="Haidou-1 ARV + manipulator: CasADi models compiled to C")
+    ap = _Parser(prog="arvcas", description="Haidou-1 ARV + manipulator: CasADi models compiled to C")
     ap.add_argument("--version", action="version", version=f"arvcas {__version__}")
     ap.add_argument("-v", "--verbose", action="store_true", help="log progress (compiles, cache hits)")
-    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name, cmd in COMMANDS.items():
-        sp = sub.add_parser(name, help=cmd.help, description=cmd.help)
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
+    groups: dict[str, argparse._SubParsersAction] = {}
+    for cmd in TABLE:
+        head, _, action = cmd.name.partition(" ")
+        if action:
+            if head not in groups:
+                actions = [c.name.partition(" ")[2] for c in TABLE if c.name.startswith(head + " ")]
+                hp = f"tuning fronts: {', '.join(actions)}"
+                gp = sub.add_parser(head, help=hp, description=hp)
+                groups[head] = gp.add_subparsers(dest="action", metavar="ACTION", required=True, parser_class=_Parser)
+            sp = groups[head].add_parser(action, help=cmd.help, description=cmd.help)
+        else:
+            sp = sub.add_parser(head, help=cmd.help, description=cmd.help)
         cmd.add_arguments(sp)
+        if cmd.outputs is not None:
+            sp.add_argument("--force", action="store_true",
+                            help="replace existing output files that arvcas did not write")
+        sp.set_defaults(_command=cmd.name)
     return ap
+
+
+def _inputs(cmd: Command, a: argparse.Namespace) -> list[tuple[str, Path]]:
+    """Apply the input policy to the declared inputs; returns them as (label, path of the file)."""
+    from arvcas.io import files
+
+    out = []
+    for dest, kind, *what in cmd.inputs:
+        p = getattr(a, dest, None)
+        if p is None:
+            continue
+        label = dest if dest in ("file", "study", "a", "b") else f"--{dest.replace('_', '-')}"
+        p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
+        if kind == "front" and p.is_dir():
+            p = p / "front.h5"
+            if not p.exists():
+                continue  # the handler names what the directory holds
+            files.check_input(p)
+        out.append((label, p))
+    return out
+
+
+def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
+    from arvcas.io import files
+
+    inputs = _inputs(cmd, a)
+    if cmd.check is not None:
+        cmd.check(a)
+    if cmd.outputs is not None:
+        outs = cmd.outputs(a)
+        files.check_outputs(outs, inputs, force=a.force)
+        for d in {p.parent if str(p.parent) else Path(".") for _, p in outs}:
+            if d.is_dir():
+                files.remove_stale_temps(d)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the ``arvcas`` command line; returns the exit code (0 ok, 2 usage or library error)."""
+    import signal
+
+    from arvcas.io import files
+
     ap = _parser()
     try:
         a = ap.parse_args(argv)
@@ -290,15 +522,29 @@ def main(argv: list[str] | None = None) -> int:
         import logging
 
         logging.basicConfig(level=logging.INFO, format="arvcas: %(message)s")
+    old = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP)}
+    files.install_signal_handlers()
     try:
-        return COMMANDS[a.command].run(a)
+        cmd = COMMANDS[a._command]
+        _apply_policies(cmd, a)
+        return cmd.run(a)
     except (ValueError, OSError) as e:
         msg = " ".join(str(e).split()) or type(e).__name__
         print(f"arvcas: error: {msg}", file=sys.stderr)
         return 2
+    except files.Terminated as e:
+        print(f"arvcas: terminated ({e})", file=sys.stderr)
+        return 128 + e.signum
     except KeyboardInterrupt:
         print("arvcas: interrupted", file=sys.stderr)
         return 130
+    finally:
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            for s, h in old.items():
+                if h is not None:
+                    signal.signal(s, h)
 
 
 if __name__ == "__main__":

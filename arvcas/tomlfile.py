@@ -10,22 +10,11 @@ __all__ = ["read_text", "parse"]
 
 
 def read_text(path: str | Path, error: type[ValueError], what: str = "file") -> str:
-    """The UTF-8 text of ``path``; a missing, unreadable, directory or non-UTF-8 path raises ``error``."""
-    p = Path(path)
-    where = str(p)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise error(f"{where}: {what} not found") from None
-    except IsADirectoryError:
-        raise error(f"{where}: is a directory, expected a TOML {what}") from None
-    except OSError as e:
-        raise error(f"{where}: cannot read {what} ({e.strerror})") from None
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        line = raw[: e.start].count(b"\n") + 1
-        raise error(f"{where}: not UTF-8 text (line {line}, byte {e.start})") from None
+    """The UTF-8 text of ``path`` (:func:`arvcas.io.files.read_text`: regular files only, never blocking on
+    a FIFO, a size cap, no byte-order mark); any problem raises ``error`` naming the file."""
+    from arvcas.io.files import read_text as _read
+
+    return _read(path, what, error)
 
 
 def parse(text: str, where: str, error: type[ValueError]) -> dict[str, Any]:

@@ -902,12 +902,15 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
 
 
 def write(res: dict, out: str | Path) -> tuple[Path, Path]:
-    """Write ``bench.json`` and ``bench.md`` into the directory ``out`` (created if needed)."""
-    d = Path(out)
-    d.mkdir(parents=True, exist_ok=True)
+    """Write ``bench.json`` and ``bench.md`` into the directory ``out`` (created if its parent exists),
+    atomically and only over files arvcas wrote (:mod:`arvcas.io.files`)."""
+    from arvcas.io import files
+
+    d = files.prepare_dir(Path(out), f"bench: --out {out}")
     pj, pm = d / "bench.json", d / "bench.md"
-    pj.write_text(json.dumps(res, indent=1, allow_nan=False) + "\n", encoding="utf-8")
-    pm.write_text(render_markdown(res), encoding="utf-8")
+    text_json = json.dumps(res, indent=1, allow_nan=False) + "\n"
+    files.write_text(pj, text_json)
+    files.write_text(pm, render_markdown(res))
     return pj, pm
 
 

@@ -182,7 +182,7 @@ def test_cache_command(cache, plant, capsys):
 def test_errors_are_one_line_exit_2(tmp_path, monkeypatch, capsys):
     cases = [
         (["demo", "--params", str(tmp_path / "nope.toml")], "nope.toml: file not found"),
-        (["demo", "--n-quad", "0"], "n_quad"),
+        (["demo", "--n-quad", "0"], "--n-quad: 0 is out of range"),
     ]
     shared = tmp_path / "shared"
     shared.mkdir()

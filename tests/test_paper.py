@@ -40,7 +40,8 @@ def paper_run(tmp_path_factory, short_cfg):
 def test_files_written(paper_run):
     out, res, messages = paper_run
     expected = ["proposed.h5", "agsta.h5", "traditional.h5", "table3.md", "ekf.md"] + [f"{f}.png" for f in paper.FIGURE_FILES]
-    assert sorted(os.listdir(out)) == sorted(expected)  # and no temporary files left
+    # and no temporary files left; the manifest records the text and PNG files arvcas wrote
+    assert sorted(os.listdir(out)) == sorted(expected + [".arvcas-manifest.json"])
     for name in expected:
         assert (out / name).stat().st_size > 0
     assert set(res["files"]) == {"proposed", "agsta", "traditional", "table3", "ekf", *paper.FIGURE_FILES}

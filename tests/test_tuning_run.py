@@ -15,6 +15,7 @@ import pytest
 
 from arvcas import cli
 from arvcas.controllers.gains import default_gains
+from arvcas.io.files import TMP_MARK
 from arvcas.tuning import load_study, run_study
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.engines import LocalEngine
@@ -121,10 +122,10 @@ def test_sigkill_then_resume_is_identical(reference, tmp_path, marker, delay):
     p.wait(timeout=30)
     c = ck.read_checkpoint(out / "front.h5")  # the last complete checkpoint survives the kill
     assert c.status == "running" and c.n_gen < GENS
-    (out / ".front.h5.tmp-99999").write_bytes(b"half a file")  # as if killed while writing
+    (out / f".front.h5{TMP_MARK}99999-x").write_bytes(b"half a file")  # as if killed while writing
     run_study(load_study(study), out, say=quiet, resume=True)
     assert_same_study(ref, ck.read_checkpoint(out / "front.h5"))
-    assert not list(out.glob(".front.h5.tmp-*")) and not (out / ck.StudyLock.NAME).exists()
+    assert not list(out.glob(f".front.h5{TMP_MARK}*")) and not (out / ck.StudyLock.NAME).exists()
 
 
 def test_sigint_finishes_the_generation_and_prints_how_to_resume(reference, tmp_path):
@@ -174,7 +175,7 @@ def test_failed_checkpoint_write_keeps_the_previous_one(reference, tmp_path, mon
     assert calls["n"] == 1
     assert (out / "front.h5").read_bytes() == before
     assert ck.read_checkpoint(out / "front.h5").n_gen == 1
-    assert not list(out.glob(".front.h5.tmp-*")) and not (out / ck.StudyLock.NAME).exists()
+    assert not list(out.glob(f".front.h5{TMP_MARK}*")) and not (out / ck.StudyLock.NAME).exists()
 
 
 def test_foreign_or_truncated_front_files(reference, tmp_path, capsys):

@@ -146,7 +146,7 @@ def test_cli_override_errors(tmp_path, capsys):
     study = write_tiny(tmp_path / "s.toml")
     for argv, msg in [
         (["--engine", "local", "--scheduler", "tcp://127.0.0.1:1"], "--scheduler: only with --engine dask"),
-        (["--threads", "0"], "--threads: must be a positive integer"),
+        (["--threads", "0"], "--threads: 0 is out of range (allowed: 1..1024)"),
         (["--controller", "proposed"], "--controller proposed: not in the study's controllers (agsta)"),
     ]:
         rc = cli.main(["tune", str(study), "--out", str(tmp_path / "o"), *argv])

@@ -1,4 +1,7 @@
-"""Atomic file writes and the provenance attributes every ``arvcas.experiments`` file carries."""
+"""The provenance attributes every ``arvcas.experiments`` file carries, and its HDF5 readers.
+
+Files are written and directories checked by :mod:`arvcas.io.files` (errors as ``ResultsError``).
+"""
 
 from __future__ import annotations
 
@@ -10,13 +13,18 @@ import h5py
 import numpy as np
 
 from arvcas import __version__
-from arvcas.io.results import ResultsError, atomic_write, check_dir
+from arvcas.io import files
+from arvcas.io.results import ResultsError, atomic_write
 
-__all__ = ["atomic_write", "write_text", "provenance", "prepare_dir", "target", "str_attr", "check_format"]
+__all__ = ["atomic_write", "write_text", "write_figure", "provenance", "prepare_dir", "target", "str_attr", "check_format"]
 
 
 def write_text(path: Path, text: str) -> Path:
-    return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"))
+    return files.write_text(path, text, ResultsError)
+
+
+def write_figure(path: Path, fig, dpi: int) -> Path:
+    return files.write_figure(path, fig, dpi, ResultsError)
 
 
 def provenance() -> dict[str, str]:
@@ -32,22 +40,12 @@ def provenance() -> dict[str, str]:
 
 def prepare_dir(d, what: str) -> Path:
     """Create ``d`` if missing (its parent must exist) and check it is a writable directory."""
-    d = Path(d)
-    if not d.exists():
-        try:
-            d.mkdir()
-        except OSError as e:
-            raise ResultsError(f"{what}: cannot create directory {d} ({e.strerror})") from None
-    return check_dir(d, what)
+    return files.prepare_dir(d, what, ResultsError)
 
 
 def target(path, what: str) -> Path:
     """An output file path whose directory exists and is writable (checked before any work)."""
-    path = Path(path)
-    check_dir(path.parent if str(path.parent) else Path("."), what)
-    if path.is_dir():
-        raise ResultsError(f"{what}: {path} is a directory")
-    return path
+    return files.target(path, what, ResultsError)
 
 
 def str_attr(v) -> str:
@@ -89,12 +87,4 @@ def open_h5(path, fmt: str, version: int):
 
 def h5_format(path) -> str | None:
     """The ``format`` attribute of an HDF5 file, or None if it is not HDF5 or has none."""
-    path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            if fh.read(8) != b"\x89HDF\r\n\x1a\n":
-                return None
-        with h5py.File(path, "r") as f:
-            return str_attr(f.attrs["format"]) if "format" in f.attrs else None
-    except OSError:
-        return None
+    return files.hdf5_format(path)

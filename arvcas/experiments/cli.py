@@ -1,12 +1,9 @@
-"""Command-line entries of :mod:`arvcas.experiments`: ``sweep``, ``montecarlo``, ``front robust`` and
-``compare`` on Monte Carlo files.
+"""Command-line handlers of :mod:`arvcas.experiments`: ``sweep``, ``montecarlo``, ``front robust`` and
+``compare`` (fronts, Monte Carlo files or robust fronts).
 
-:func:`register` adds ``sweep`` and ``montecarlo`` to :data:`arvcas.cli.COMMANDS` and extends the
-tuning package's commands, which must be registered first: ``front`` gains the action ``robust``
-(through argparse's public API: the ``front`` parser's sub-parsers action is captured while the
-tuning package builds it) and ``compare`` dispatches on the file type (two fronts: the tuning
-package's comparison; two Monte Carlo files: :func:`arvcas.experiments.montecarlo.compare_markdown`).
-No file of the tuning package is edited. Each ``_run_*`` calls a library function with typed
+The commands are declared in the table of :mod:`arvcas.cli`, which applies the input and output
+policies before calling a handler; ``check_*`` refuse options that do not apply and requests too large,
+``*_outputs`` name the files a command will write. Each ``run_*`` calls a library function with typed
 arguments; errors are ValueError/OSError (one line via arvcas.cli).
 """
 
@@ -15,7 +12,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-__all__ = ["register"]
+__all__ = ["add_sweep", "check_sweep", "run_sweep", "sweep_outputs", "add_montecarlo", "check_montecarlo",
+           "run_montecarlo", "montecarlo_outputs", "add_robust", "check_robust", "run_robust", "robust_outputs",
+           "add_compare", "check_compare", "run_compare", "compare_outputs", "MAX_RUNS", "MAX_SEEDS"]
+
+MAX_RUNS = 1_000_000  # Monte Carlo draws per study (or per front member)
+MAX_SEEDS = 10_000  # noise seeds of a sweep
+_MAX_H = 1_000  # sampling periods of a sweep
 
 
 def _floats(text: str) -> list[float]:
@@ -25,14 +28,39 @@ def _floats(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got '{text}'") from None
 
 
-def _ints(text: str) -> list[int]:
+def _seeds(text: str) -> list[int]:
+    """Seeds ``S1,S2,...`` or ``A..B`` (inclusive): each 0 <= s < 2**63, at most MAX_SEEDS (checked before
+    the list is built)."""
+    from arvcas.cli import MAX_SEED
+
     try:
         if ".." in text:  # a range A..B (inclusive)
-            a, b = text.split("..", 1)
-            return list(range(int(a), int(b) + 1))
-        return [int(x) for x in text.split(",") if x.strip()]
+            a, b = (int(x) for x in text.split("..", 1))
+            lo, hi, n = a, b, b - a + 1
+        else:
+            vals = [int(x) for x in text.split(",") if x.strip()]
+            lo, hi, n = (min(vals), max(vals), len(vals)) if vals else (0, 0, 0)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected comma-separated integers or A..B, got '{text}'") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"'{text}': no seeds")
+    if n > MAX_SEEDS:
+        raise argparse.ArgumentTypeError(f"'{text}': {n} seeds, more than {MAX_SEEDS}")
+    if lo < 0 or hi >= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"'{text}': seeds out of range (allowed: 0 <= seed < 2**63)")
+    return list(range(lo, hi + 1)) if ".." in text else vals
+
+
+def _runs(text: str) -> int:
+    from arvcas.cli import count_arg
+
+    return count_arg(1, MAX_RUNS, "--runs")(text)
+
+
+def _seed(text: str) -> int:
+    from arvcas.cli import seed_arg
+
+    return seed_arg(text)
 
 
 def _names(text: str) -> list[str]:
@@ -46,14 +74,14 @@ def _say(msg: str) -> None:
 # ---- sweep -------------------------------------------------------------------------------------
 
 
-def _add_sweep(p: argparse.ArgumentParser) -> None:
+def add_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--h", type=_floats, default=None, metavar="H1,H2,...",
                    help="controller sampling periods in s (whole multiples of the plant step 0.01 s)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR", help="writes DIR/sweep.h5, sweep.md, sweep.png")
     p.add_argument("--controllers", type=_names, default=None, metavar="A,B,...",
                    help="default: proposed, traditional, implicit, agsta")
-    p.add_argument("--seeds", type=_ints, default=[0], metavar="S1,S2|A..B", help="noise seeds (default 0)")
-    p.add_argument("--noise-scale", type=float, default=1.0, metavar="X",
+    p.add_argument("--seeds", type=_seeds, default=None, metavar="S1,S2|A..B", help="noise seeds (default 0)")
+    p.add_argument("--noise-scale", type=float, default=None, metavar="X",
                    help="multiply the sensor noise by X (0: perfect measurements, the EKF unchanged; default 1)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
     p.add_argument("--params", type=Path, default=None, metavar="FILE", help="parameter file (default: packaged)")
@@ -61,15 +89,41 @@ def _add_sweep(p: argparse.ArgumentParser) -> None:
                    help="re-run a stored sweep from its file alone and compare bit for bit (no other option)")
 
 
-def _run_sweep(a: argparse.Namespace) -> int:
+def check_sweep(a: argparse.Namespace) -> None:
+    from arvcas.cli import check_memory, refuse
+
+    if a.check is not None:
+        refuse(a, ("h", "out", "controllers", "seeds", "noise_scale", "config", "params", "force"),
+               "--check FILE re-runs the file's own configuration: give no other option")
+        return
+    if a.h is None or a.out is None:
+        raise ValueError("sweep: --h H1,H2,... and --out DIR are required (or --check FILE.h5)")
+    if not 1 <= len(a.h) <= _MAX_H:
+        raise ValueError(f"--h: {len(a.h)} sampling periods (allowed: 1..{_MAX_H})")
+    if a.noise_scale is not None and not (a.noise_scale >= 0 and a.noise_scale < float("inf")):
+        raise ValueError(f"--noise-scale: must be a finite number >= 0, got {a.noise_scale}")
+    from arvcas.experiments.sweep import CONTROLLERS
+
+    n_runs = len(a.h) * len(a.controllers or CONTROLLERS) * len(a.seeds or [0])
+    # each run keeps its k1 series: (duration / h + 1) x 6 float64; bounded by the smallest h
+    from arvcas.sim.scenario import load_scenario
+
+    cfg = load_scenario(a.config)
+    h_min = min((h for h in a.h if h > 0), default=cfg.time_h)
+    check_memory("sweep", n_runs * (cfg.time_duration / h_min + 1) * 6 * 8 * 2)
+
+
+def sweep_outputs(a: argparse.Namespace) -> list:
+    return [] if a.out is None else [(f"--out {a.out}", a.out / f"sweep.{e}") for e in ("h5", "md", "png")]
+
+
+def run_sweep(a: argparse.Namespace) -> int:
     from arvcas.sim import scenario
     from arvcas.params import load
     from arvcas.experiments import _io
     from arvcas.experiments.sweep import CONTROLLERS, reproduce_sweep, run_sweep, sweep_markdown, write_sweep_dir
 
     if a.check is not None:
-        if a.h is not None or a.out is not None:
-            raise ValueError("--check FILE re-runs the file's own configuration: give no --h or --out")
         _say(f"re-running {a.check} ...")
         _new, diff = reproduce_sweep(a.check)
         if diff:
@@ -77,11 +131,10 @@ def _run_sweep(a: argparse.Namespace) -> int:
             return 1
         print(f"{a.check}: reproduced bit for bit (chat, rmse, ok, t_fail, zigzag measures, k1 series)")
         return 0
-    if a.h is None or a.out is None:
-        raise ValueError("sweep: --h H1,H2,... and --out DIR are required (or --check FILE.h5)")
     _io.prepare_dir(a.out, f"--out {a.out}")
-    sw = run_sweep(a.h, a.controllers or CONTROLLERS, a.seeds, cfg=scenario.load_scenario(a.config),
-                   params=load(a.params), noise_scale=a.noise_scale, progress=_say)
+    params, cfg = load(a.params), scenario.load_scenario(a.config)
+    sw = run_sweep(a.h, a.controllers or CONTROLLERS, a.seeds or [0], cfg=cfg, params=params,
+                   noise_scale=1.0 if a.noise_scale is None else a.noise_scale, progress=_say)
     files = write_sweep_dir(sw, a.out)
     print(sweep_markdown(sw).split("\n## ", 1)[0])
     for p in files.values():
@@ -92,13 +145,13 @@ def _run_sweep(a: argparse.Namespace) -> int:
 # ---- montecarlo --------------------------------------------------------------------------------
 
 
-def _add_montecarlo(p: argparse.ArgumentParser) -> None:
+def add_montecarlo(p: argparse.ArgumentParser) -> None:
     p.add_argument("--controller", default=None, help="proposed, agsta, traditional or implicit")
-    p.add_argument("--runs", type=int, default=None, metavar="N", help="number of draws")
+    p.add_argument("--runs", type=_runs, default=None, metavar="N", help=f"number of draws (1..{MAX_RUNS})")
     p.add_argument("--out", type=Path, default=None, metavar="FILE.h5",
                    help="result file; a summary FILE.md is written next to it")
-    p.add_argument("--seed", type=int, default=0, help="master seed of the draws (default 0)")
-    p.add_argument("--spread", type=float, default=0.3,
+    p.add_argument("--seed", type=_seed, default=None, help="master seed of the draws (default 0)")
+    p.add_argument("--spread", type=float, default=None,
                    help="half-width of the nominal-model factors' uniform draw around 1 (default 0.3: +-30 %%)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
     p.add_argument("--params", type=Path, default=None, metavar="FILE", help="parameter file (default: packaged)")
@@ -110,17 +163,52 @@ def _add_montecarlo(p: argparse.ArgumentParser) -> None:
                         "(optimise the mean over K draws) and exit")
     p.add_argument("--check", type=Path, default=None, metavar="FILE.h5",
                    help="re-run a stored study from its file alone and compare bit for bit (no other option)")
+    p.add_argument("--allow-model-change", action="store_true",
+                   help="with --from-front: use the member even if the model code or parameters changed since "
+                        "the study (the file records it)")
 
 
-def _run_montecarlo(a: argparse.Namespace) -> int:
+_MC_BYTES_PER_RUN = (6 + 6 + 4 + 6 + 1) * 8 + 8  # chat, rmse, factors, phase, t_fail, seed (+ ok)
+
+
+def check_montecarlo(a: argparse.Namespace) -> None:
+    from arvcas.cli import check_memory, refuse
+
+    if a.check is not None:
+        refuse(a, ("controller", "runs", "out", "seed", "spread", "config", "params", "from_front", "index",
+                   "draws_toml", "allow_model_change", "force"),
+               "--check FILE re-runs the file's own configuration: give no other option")
+        return
+    if a.from_front is None:
+        refuse(a, ("index", "allow_model_change"), "only with --from-front")
+    elif a.index is None:
+        raise ValueError("--from-front needs --index I (or --index knee)")
+    if a.draws_toml:
+        refuse(a, ("out", "controller", "from_front", "config", "params", "force"),
+               "--draws-toml only prints the draws of --runs, --seed and --spread")
+        if a.runs is None:
+            raise ValueError("--draws-toml: give --runs K")
+        return
+    if a.runs is None or a.out is None:
+        raise ValueError("montecarlo: --runs N and --out FILE.h5 are required (or --check FILE.h5)")
+    check_memory("montecarlo --runs", a.runs * _MC_BYTES_PER_RUN * 2)
+
+
+def montecarlo_outputs(a: argparse.Namespace) -> list:
+    if a.out is None or a.check is not None or a.draws_toml:
+        return []
+    return [("--out", a.out), ("--out (its Markdown summary)", a.out.with_suffix(".md"))]
+
+
+def run_montecarlo(a: argparse.Namespace) -> int:
     from arvcas.sim import scenario
     from arvcas.params import load
     from arvcas.experiments import _io
     from arvcas.experiments.montecarlo import read_montecarlo, reproduce, run_montecarlo, summary_markdown, write_montecarlo
 
+    seed = 0 if a.seed is None else a.seed
+    spread = 0.3 if a.spread is None else a.spread
     if a.check is not None:
-        if any(v is not None for v in (a.controller, a.runs, a.out, a.from_front)):
-            raise ValueError("--check FILE re-runs the file's own configuration: give no other study option")
         old = read_montecarlo(a.check)
         _say(f"re-running {old.runs} runs of {old.controller} (master seed {old.draws.master_seed}) ...")
         _new, diff = reproduce(a.check)
@@ -132,22 +220,19 @@ def _run_montecarlo(a: argparse.Namespace) -> int:
     if a.draws_toml:
         from arvcas.experiments.montecarlo import draw, draws_toml
 
-        if a.runs is None:
-            raise ValueError("--draws-toml: give --runs K")
-        print(draws_toml(draw(a.runs, a.seed, a.spread)), end="")
+        print(draws_toml(draw(a.runs, seed, spread)), end="")
         return 0
-    if a.runs is None or a.out is None:
-        raise ValueError("montecarlo: --runs N and --out FILE.h5 are required (or --check FILE.h5)")
     out = _io.target(a.out, f"--out {a.out}")
+    params = load(a.params)
     cfg = scenario.load_scenario(a.config)
+    changed = None
     controller, gains, source, front_path = a.controller, None, None, None
     if a.from_front is not None:
         from arvcas.experiments.robust import front_member
+        from arvcas.tuning.front import check_provenance, resolve_front_path
 
-        if a.index is None:
-            raise ValueError("--from-front needs --index I (or --index knee)")
+        changed = check_provenance(a.from_front, params, a.allow_model_change, "--from-front")
         controller_f, gains, cfg_text, source = front_member(a.from_front, a.index)
-        from arvcas.tuning.front import resolve_front_path
 
         front_path = str(resolve_front_path(a.from_front))
         if controller is not None and controller != controller_f:
@@ -157,10 +242,12 @@ def _run_montecarlo(a: argparse.Namespace) -> int:
             cfg = scenario.loads_scenario(cfg_text, f"{a.from_front} (study scenario)")
     if controller is None:
         raise ValueError("--controller: required (proposed, agsta, traditional, implicit)")
-    mc = run_montecarlo(controller, a.runs, a.seed, gains=gains, spread=a.spread, cfg=cfg, params=load(a.params),
+    mc = run_montecarlo(controller, a.runs, seed, gains=gains, spread=spread, cfg=cfg, params=params,
                         gains_source=source, progress=_say)
     if front_path is not None:
         mc.meta["front_path"] = front_path
+    if changed:
+        mc.meta["model_change_allowed"] = changed
     write_montecarlo(mc, out)
     md = summary_markdown(mc)
     md_path = _io.write_text(out.with_suffix(".md"), md)
@@ -172,64 +259,54 @@ def _run_montecarlo(a: argparse.Namespace) -> int:
 # ---- front robust (an action added to the tuning package's ``front`` command) ----------------------
 
 
-class _CaptureSubparsers:
-    """A parser proxy that records the sub-parsers action another ``add_arguments`` creates, so that
-    one more action can be added to it through argparse's public API."""
-
-    def __init__(self, parser: argparse.ArgumentParser):
-        self._parser = parser
-        self.subparsers = None
-
-    def add_subparsers(self, *args, **kwargs):
-        self.subparsers = self._parser.add_subparsers(*args, **kwargs)
-        return self.subparsers
-
-    def __getattr__(self, name):
-        return getattr(self._parser, name)
-
-
-def _add_robust(sub) -> None:
-    r = sub.add_parser("robust", help="re-evaluate every front member under Monte Carlo; mark the robust "
-                                      "non-dominated ones (robust.h5, robust.md, robust.png)")
+def add_robust(r: argparse.ArgumentParser) -> None:
     r.add_argument("file", type=Path, help="front.h5 (or a study output directory)")
-    r.add_argument("--runs", type=int, required=True, metavar="N", help="Monte Carlo draws per member")
-    r.add_argument("--seed", type=int, default=0, help="master seed of the draws (default 0)")
+    r.add_argument("--runs", type=_runs, required=True, metavar="N", help="Monte Carlo draws per member")
+    r.add_argument("--seed", type=_seed, default=0, help="master seed of the draws (default 0)")
     r.add_argument("--spread", type=float, default=0.3,
                    help="half-width of the nominal-model factors' draw around 1 (default 0.3)")
     r.add_argument("--out", type=Path, default=None, metavar="DIR", help="default: the front's directory")
+    r.add_argument("--allow-model-change", action="store_true",
+                   help="run even if the model code or parameters changed since the study (the file records it)")
 
 
-def _run_robust(a: argparse.Namespace) -> int:
+def _robust_dir(a: argparse.Namespace) -> Path:
     from arvcas.tuning.front import resolve_front_path
+
+    return a.out if a.out is not None else resolve_front_path(a.file).parent
+
+
+def robust_outputs(a: argparse.Namespace) -> list:
+    d = _robust_dir(a)
+    return [(f"--out {d}", d / f"robust.{e}") for e in ("h5", "md", "png")]
+
+
+def check_robust(a: argparse.Namespace) -> None:
+    from arvcas.cli import check_memory
+
+    from arvcas.tuning.checkpoint import read_checkpoint
+    from arvcas.tuning.front import resolve_front_path
+
+    c = read_checkpoint(resolve_front_path(a.file))
+    members = 1 + (int(c.front.size) if c.X is not None else 0)
+    check_memory("front robust --runs", members * a.runs * _MC_BYTES_PER_RUN * 2)
+
+
+def run_robust(a: argparse.Namespace) -> int:
     from arvcas.experiments import _io
     from arvcas.experiments.robust import robust_front, robust_markdown, write_robust_dir
+    from arvcas.params import load
+    from arvcas.tuning.front import check_provenance
 
-    out = a.out if a.out is not None else resolve_front_path(a.file).parent
+    out = _robust_dir(a)
     _io.prepare_dir(out, f"--out {out}")
-    rf = robust_front(a.file, a.runs, a.seed, a.spread, progress=_say)
+    changed = check_provenance(a.file, load(), a.allow_model_change, "front robust")
+    rf = robust_front(a.file, a.runs, a.seed, a.spread, progress=_say, model_change=changed or "")
     files = write_robust_dir(rf, out)
     print(robust_markdown(rf))
     for p in files.values():
         print(f"wrote {p}")
     return 0
-
-
-def _with_robust(front):
-    """The tuning package's ``front`` command with the ``robust`` action added."""
-    from arvcas.cli import Command
-
-    def add(p: argparse.ArgumentParser) -> None:
-        cap = _CaptureSubparsers(p)
-        front.add_arguments(cap)
-        if cap.subparsers is None:
-            raise RuntimeError("arvcas.experiments: the 'front' command has no actions to extend")
-        _add_robust(cap.subparsers)
-
-    def run(a: argparse.Namespace) -> int:
-        return _run_robust(a) if a.action == "robust" else front.run(a)
-
-    return Command(front.help.replace("export (csv, json) or plot", "export (csv, json), plot or robust (Monte Carlo)"),
-                   add, run)
 
 
 # ---- compare on Monte Carlo files ------------------------------------------------------------------
@@ -251,9 +328,7 @@ def _run_compare_mc(a: argparse.Namespace, kind: str) -> int:
         if not is_kind(p):
             raise ValueError(f"compare: {p} is not a {what} like the other; compare takes two fronts, two Monte "
                              "Carlo files or two robust-front files")
-    if getattr(a, "ref", None) is not None:
-        raise ValueError("--ref: only for fronts")
-    report = getattr(a, "report", None)
+    report = a.report
     for p in (report, a.plot):
         if p is not None:
             _io.target(p, f"{p}")
@@ -264,48 +339,52 @@ def _run_compare_mc(a: argparse.Namespace, kind: str) -> int:
         print(f"wrote {_io.write_text(report, text)}")
     if a.plot is not None:
         fig = plot(ma, mb)
-        print(f"wrote {_io.atomic_write(a.plot, lambda p: fig.savefig(p, format='png', dpi=130))}")
+        print(f"wrote {_io.write_figure(a.plot, fig, 130)}")
     return 0
 
 
-def _with_montecarlo_compare(compare):
-    """The tuning package's ``compare`` command, dispatching to the paired Monte Carlo comparison when
-    given Monte Carlo files (``format = "arvcas-montecarlo"``) instead of fronts."""
-    from arvcas.cli import Command
+def add_compare(p: argparse.ArgumentParser) -> None:
+    from arvcas.tuning.cli import add_compare as add_front_compare
 
-    def add(p: argparse.ArgumentParser) -> None:
-        compare.add_arguments(p)
-        p.add_argument("--report", type=Path, default=None, metavar="FILE.md",
-                       help="Monte Carlo or robust-front files: also write the comparison as Markdown")
-
-    def run(a: argparse.Namespace) -> int:
-        from arvcas.experiments.montecarlo import is_montecarlo_file
-        from arvcas.experiments.robust import is_robust_file
-
-        if is_montecarlo_file(a.a) or is_montecarlo_file(a.b):
-            return _run_compare_mc(a, "montecarlo")
-        if is_robust_file(a.a) or is_robust_file(a.b):
-            return _run_compare_mc(a, "robust")
-        if a.report is not None:
-            raise ValueError("--report: only for Monte Carlo or robust-front files")
-        return compare.run(a)
-
-    return Command(compare.help + "; or two Monte Carlo files (per-DOF differences with 95 percent intervals); "
-                   "or two robust fronts (front robust)", add, run)
+    add_front_compare(p)
+    p.add_argument("--report", type=Path, default=None, metavar="FILE.md",
+                   help="Monte Carlo or robust-front files: also write the comparison as Markdown")
 
 
-def register(commands: dict) -> None:
-    """Add this package's subcommands to the ``arvcas`` command registry (``arvcas.cli.COMMANDS``)."""
-    from arvcas.cli import Command
+def _kind(a: argparse.Namespace) -> str:
+    from arvcas.experiments.montecarlo import is_montecarlo_file
+    from arvcas.experiments.robust import is_robust_file
 
-    commands["sweep"] = Command(
-        "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 (table, plot)",
-        _add_sweep, _run_sweep)
-    commands["montecarlo"] = Command(
-        "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance phases: CIs, failure rate",
-        _add_montecarlo, _run_montecarlo)
-    # extend the tuning package's commands when it is registered (before this call in arvcas/cli.py)
-    if "front" in commands:
-        commands["front"] = _with_robust(commands["front"])
-    if "compare" in commands:
-        commands["compare"] = _with_montecarlo_compare(commands["compare"])
+    if is_montecarlo_file(a.a) or is_montecarlo_file(a.b):
+        return "montecarlo"
+    if is_robust_file(a.a) or is_robust_file(a.b):
+        return "robust"
+    return "front"
+
+
+def check_compare(a: argparse.Namespace) -> None:
+    from arvcas.cli import refuse
+
+    if a.plot is None:
+        refuse(a, ("paper",), "only with --plot")
+    kind = _kind(a)
+    if kind == "front":
+        refuse(a, ("report",), "only for Monte Carlo or robust-front files")
+    else:
+        refuse(a, ("ref", "allow_model_change"), "only for fronts")
+        if a.paper:
+            raise ValueError("--paper: only for fronts")
+
+
+def compare_outputs(a: argparse.Namespace) -> list:
+    return [(lab, p) for lab, p in (("--plot", a.plot), ("--report", a.report)) if p is not None]
+
+
+def run_compare(a: argparse.Namespace) -> int:
+    """Two fronts (the tuning package's comparison), two Monte Carlo files or two robust fronts."""
+    kind = _kind(a)
+    if kind == "front":
+        from arvcas.tuning.cli import run_compare as run_front_compare
+
+        return run_front_compare(a)
+    return _run_compare_mc(a, kind)

@@ -8,7 +8,7 @@ random numbers), and writes into ``out_dir``::
     table3.md                                 paper's Table 3 and ours, ratios, the SPEC 6 checks
     fig05.png ... fig11.png                   the paper's Figures 5-11 (arvcas.io.plots)
 
-Every file is written atomically (temporary name in ``out_dir``, then ``os.replace``).
+Every file is written atomically by :mod:`arvcas.io.files` (temporary name in ``out_dir``, then ``os.replace``).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 
 from arvcas import metrics
 from arvcas.controllers import gains as gains_mod
-from arvcas.io import plots, results
+from arvcas.io import files as _files, plots, results
 from arvcas.sim import scenario
 from arvcas.io.results import ResultsError
 from arvcas.sim.scenario import ScenarioConfig
@@ -220,17 +220,19 @@ def table3_from_results(out_dir, created: str | None = None) -> str:
 def rewrite_table3(out_dir, created: str | None = None) -> Path:
     """Write ``table3.md`` in ``out_dir`` from its result files (:func:`table3_from_results`), atomically."""
     text = table3_from_results(out_dir, created=created)
-    return results.atomic_write(Path(out_dir) / "table3.md", lambda path: path.write_text(text, encoding="utf-8"))
+    return _files.write_text(Path(out_dir) / "table3.md", text, ResultsError)
 
 
 def _prepare_out_dir(out_dir) -> Path:
     out = Path(out_dir)
-    if not out.exists():
-        try:
-            out.mkdir(parents=True)
-        except OSError as e:
-            raise ResultsError(f"{out}: cannot create output directory ({e.strerror})") from None
-    return results.check_dir(out, f"run_paper: out_dir {out}")
+    return _files.prepare_dir(out, f"run_paper: out_dir {out}", ResultsError)
+
+
+def output_files(out_dir, ekf_study: bool = True) -> list[Path]:
+    """Every file :func:`run_paper` writes into ``out_dir``."""
+    out = Path(out_dir)
+    names = [f"{c}.h5" for c in CONTROLLERS] + ["table3.md"] + [f"{n}.png" for n in FIGURE_FILES]
+    return [out / n for n in names + (["ekf.md"] if ekf_study else [])]
 
 
 # EKF settings compared in ekf.md: (label, q_eta, q_nu, noise scale)
@@ -307,7 +309,7 @@ def run_paper(out_dir, seed: int = 0, progress: Callable[[str], None] | None = p
         files[c] = results.write_result(r, out / f"{c}.h5")
         say(f"  {c}: {_status(r)} in {time.perf_counter() - t0:.1f} s -> {files[c]}")
     text = table3_markdown(runs, cfg, seed)
-    files["table3"] = results.atomic_write(out / "table3.md", lambda p: p.write_text(text, encoding="utf-8"))
+    files["table3"] = _files.write_text(out / "table3.md", text, ResultsError)
     say(f"  table -> {files['table3']}")
     p, a, t = runs["proposed"], runs["agsta"], runs["traditional"]
     makers = {
@@ -321,12 +323,12 @@ def run_paper(out_dir, seed: int = 0, progress: Callable[[str], None] | None = p
     }
     for name in FIGURE_FILES:
         fig = makers[name]()
-        files[name] = results.atomic_write(out / f"{name}.png", lambda path, f=fig: f.savefig(path, format="png", dpi=150))
+        files[name] = _files.write_figure(out / f"{name}.png", fig, 150, ResultsError)
         say(f"  figure -> {files[name]}")
     if ekf_study:
         say("EKF process-noise study (SPEC 4: its effect on CHAT and RMSE) ...")
         text = ekf_effect_markdown(cfg, seed)
-        files["ekf"] = results.atomic_write(out / "ekf.md", lambda path: path.write_text(text, encoding="utf-8"))
+        files["ekf"] = _files.write_text(out / "ekf.md", text, ResultsError)
         say(f"  table -> {files['ekf']}")
     checks = compare(p, a)
     passed = all(c["chat_lower"] and c["rmse_ok"] for c in checks.values())

@@ -96,6 +96,7 @@ class RobustFront:
     table2_ok: np.ndarray
     config_text: str
     params_vector: np.ndarray
+    model_change: str = ""  # what changed since the study, when that was allowed (empty: nothing)
 
     @property
     def size(self) -> int:
@@ -141,8 +142,12 @@ class RobustFront:
 
 
 def robust_front(path, runs: int, seed: int = 0, spread: float = 0.3, n_threads: int | None = None,
-                 progress: Callable[[str], None] | None = None) -> RobustFront:
-    """Re-evaluate every member of the front in ``path`` (and Table 2) on ``runs`` Monte Carlo draws."""
+                 progress: Callable[[str], None] | None = None, model_change: str = "") -> RobustFront:
+    """Re-evaluate every member of the front in ``path`` (and Table 2) on ``runs`` Monte Carlo draws.
+
+    The study's model and parameters must be this installation's
+    (:func:`arvcas.tuning.front.check_provenance`) unless ``model_change`` says what changed and that
+    it was allowed (recorded in the file as ``model_change_allowed``)."""
     fr = _front(path)
     if fr.size == 0:
         raise ValueError(f"{fr.path}: the front is empty")
@@ -150,10 +155,10 @@ def robust_front(path, runs: int, seed: int = 0, spread: float = 0.3, n_threads:
     cfg = scenario.loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)") if fr.scenario_text \
         else scenario.load_scenario()
     params = load_params()
-    from arvcas.tuning.checkpoint import read_checkpoint
+    if not model_change:
+        from arvcas.tuning.front import check_provenance
 
-    if not np.array_equal(params.vector(), read_checkpoint(fr.path).params):
-        raise ValueError(f"{fr.path}: the study used other parameter values than the packaged file")
+        check_provenance(fr.path, params, False, "front robust")
     c = fr.controller
     table2 = gains_mod.default_gains(c)
     G = np.vstack([fr.gains, table2[None]])  # members, then Table 2
@@ -177,6 +182,7 @@ def robust_front(path, runs: int, seed: int = 0, spread: float = 0.3, n_threads:
         gains=fr.gains.copy(), F_front=fr.F.copy(), chat=chat[:-1], rmse=rmse[:-1], ok=ok[:-1],
         table2_gains=table2, table2_F_front=np.asarray(fr.table2_F, float), table2_chat=chat[-1],
         table2_rmse=rmse[-1], table2_ok=ok[-1], config_text=cfg.to_toml(), params_vector=params.vector(),
+        model_change=model_change,
     )
 
 
@@ -206,6 +212,8 @@ def write_robust(rf: RobustFront, path) -> Path:
             a["params"] = np.asarray(rf.params_vector, float)
             a["param_names"] = np.array(list(PARAM_SCHEMA), dtype=object)
             a["gain_names"] = np.array(gains_mod.gain_names(rf.controller), dtype=object)
+            if rf.model_change:
+                a["model_change_allowed"] = rf.model_change
             a["objectives"] = "f_chat, f_rmse (SPEC 7: per-DOF value / paper's AGSTA value, mean over 6 DOF)"
             for k, v in _io.provenance().items():
                 a[k] = v
@@ -336,7 +344,7 @@ def write_robust_dir(rf: RobustFront, out_dir) -> dict[str, Path]:
     out = _io.prepare_dir(out_dir, f"--out {out_dir}")
     files = {"h5": write_robust(rf, out / "robust.h5"), "md": _io.write_text(out / "robust.md", robust_markdown(rf))}
     fig = plot_robust(rf)
-    files["png"] = _io.atomic_write(out / "robust.png", lambda p: fig.savefig(p, format="png", dpi=140))
+    files["png"] = _io.write_figure(out / "robust.png", fig, 140)
     return files
 
 

@@ -418,5 +418,5 @@ def write_sweep_dir(sw: Sweep, out_dir) -> dict[str, Path]:
     out = _io.prepare_dir(out_dir, f"--out {out_dir}")
     files = {"h5": write_sweep(sw, out / "sweep.h5"), "md": _io.write_text(out / "sweep.md", sweep_markdown(sw))}
     fig = plot_sweep(sw)
-    files["png"] = _io.atomic_write(out / "sweep.png", lambda p: fig.savefig(p, format="png", dpi=130))
+    files["png"] = _io.write_figure(out / "sweep.png", fig, 130)
     return files

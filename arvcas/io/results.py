@@ -19,9 +19,9 @@ factors), ``phase`` (disturbance phases, rad), ``h`` (s), ``ok``, ``t_fail`` (s;
 ``meta`` (JSON text of ``Result.meta``). ``params``/``param_names``, ``uncertainty`` and ``phase``
 are absent when the Result has none.
 
-Writing is atomic: the file is built under a temporary name in the target directory, flushed and
-fsync'ed, then renamed over the final name (``os.replace``); an interrupted write leaves any previous
-file untouched and no partial file under the final name.
+Writing is atomic, through :func:`arvcas.io.files.atomic_write` (temporary name in the target
+directory, fsync, ``os.replace``): an interrupted write leaves any previous file untouched and no
+partial file under the final name; an existing file arvcas did not write is not replaced.
 """
 
 from __future__ import annotations
@@ -29,9 +29,6 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import math
-import os
-import stat
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -40,6 +37,7 @@ import h5py
 import numpy as np
 
 from arvcas.controllers import gains as gains_mod
+from arvcas.io import files
 from arvcas.params import SCHEMA as PARAM_SCHEMA
 from arvcas.sim.signals import Signal
 from arvcas.sim.simulation import Result
@@ -65,32 +63,13 @@ class ResultsError(ValueError):
 
 
 def check_dir(d, what: str | None = None) -> Path:
-    """``d`` as a Path after checking that it is an existing, writable directory.
-
-    A directory without any write permission bit counts as read-only also for root (who bypasses
-    ``access()``). Raises :class:`ResultsError` (one line naming ``what``, default ``d``).
-    """
-    d = Path(d)
-    who = what if what is not None else str(d)
-    try:
-        st = os.stat(d)
-    except FileNotFoundError:
-        raise ResultsError(f"{who}: directory {d} does not exist") from None
-    except OSError as e:
-        raise ResultsError(f"{who}: cannot access directory {d} ({e.strerror})") from None
-    if not stat.S_ISDIR(st.st_mode):
-        raise ResultsError(f"{who}: {d} is not a directory")
-    if not os.access(d, os.W_OK | os.X_OK) or not st.st_mode & 0o222:
-        raise ResultsError(f"{who}: directory {d} is not writable (mode {stat.S_IMODE(st.st_mode):o})")
-    return d
+    """``d`` after checking that it is an existing, writable directory (:func:`arvcas.io.files.check_dir`)."""
+    return files.check_dir(d, what, ResultsError)
 
 
 def _check_target(path: Path) -> Path:
     """The final path, after checking that its directory exists and is writable (before any work)."""
-    check_dir(path.parent, str(path))
-    if path.is_dir():
-        raise ResultsError(f"{path}: is a directory")
-    return path
+    return files.target(path, str(path), ResultsError)
 
 
 def _series(result: Result, sig: Signal, n: int | None) -> np.ndarray:
@@ -188,45 +167,9 @@ def _put(f: h5py.File, name: str, data: np.ndarray, sig: Signal) -> None:
         ds.attrs["frame"] = sig.frame
 
 
-def _fsync_path(path: Path, directory: bool = False) -> None:
-    fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def atomic_write(path, write: Callable[[Path], None]) -> Path:
-    """Call ``write(tmp)`` on a temporary file next to ``path``, fsync it, then ``os.replace``.
-
-    An interrupted or failed write (a full disk) leaves any previous ``path`` untouched and no partial
-    file under its name; an OSError becomes a one-line :class:`ResultsError` naming ``path``. Every
-    arvcas output file (results, tables, figures, Monte Carlo files) is written through here.
-    """
-    path = Path(path)
-    try:
-        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    except OSError as e:
-        raise ResultsError(f"{path}: cannot create a file in {path.parent} ({e.strerror})") from None
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        write(tmp)
-        _fsync_path(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException as e:
-        tmp.unlink(missing_ok=True)
-        if isinstance(e, OSError):
-            raise ResultsError(f"{path}: write failed ({e.strerror or e})") from None
-        raise
-    try:
-        _fsync_path(path.parent, directory=True)
-    except OSError:  # pragma: no cover - some filesystems refuse fsync on directories
-        pass
-    return path
+    """:func:`arvcas.io.files.atomic_write` with errors as :class:`ResultsError`."""
+    return files.atomic_write(path, write, ResultsError)
 
 
 def write_result(result: Result, path) -> Path:

@@ -51,17 +51,18 @@ import datetime as _dt
 import fcntl
 import json
 import os
-import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
 import numpy as np
 
+from arvcas.io import files
+
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "HISTORY_FIELDS", "CheckpointError", "Checkpoint", "write_checkpoint",
     "read_checkpoint", "StudyLock", "check_out_dir", "front_indices", "versions", "FRONT_NAME",
-    "remove_stale_temps",
+    "remove_stale_temps", "provenance_diff",
 ]
 
 FORMAT = "arvcas.tuning.front"
@@ -134,6 +135,8 @@ class Checkpoint:
     table2_t_fail: np.ndarray | None = None
     versions: dict = field(default_factory=dict)
     artifact_key: str = ""
+    model_hash: str = ""  # arvcas.build.provenance.model_hash() of the code and data that computed it
+    model_changes: list = field(default_factory=list)  # resumes allowed under other code or parameters
     engine: str = ""
     created: str = ""
     updated: str = ""
@@ -167,27 +170,7 @@ def front_indices(F: np.ndarray, G: np.ndarray) -> np.ndarray:
 
 def check_out_dir(d: Path, what: str = "--out") -> Path:
     """``d`` exists (or can be created in an existing, writable parent) and is writable; created."""
-    d = Path(d)
-    parent = d.parent if str(d.parent) else Path(".")
-    if not d.exists():
-        if not parent.is_dir():
-            raise CheckpointError(f"{what} {d}: parent directory {parent} does not exist")
-        _writable(parent, f"{what} {d}")
-        try:
-            d.mkdir()
-        except OSError as e:
-            raise CheckpointError(f"{what} {d}: cannot create directory ({e.strerror})") from None
-    if not d.is_dir():
-        raise CheckpointError(f"{what} {d}: exists and is not a directory")
-    _writable(d, f"{what} {d}")
-    return d
-
-
-def _writable(d: Path, who: str) -> None:
-    st = os.stat(d)
-    # root bypasses access(): a directory without any write bit counts as read-only for everyone
-    if not os.access(d, os.W_OK | os.X_OK) or not st.st_mode & 0o222:
-        raise CheckpointError(f"{who}: directory {d} is not writable (mode {stat.S_IMODE(st.st_mode):o})")
+    return files.prepare_dir(Path(d), f"{what} {d}", CheckpointError)
 
 
 class StudyLock:
@@ -244,6 +227,24 @@ class StudyLock:
         self.release()
 
 
+def provenance_diff(c: Checkpoint, params_vector) -> list[str]:
+    """What differs between the code, data and parameters that computed ``c`` and this installation's
+    (``params_vector``): empty when a resume or replay under them reproduces the stored numbers."""
+    from arvcas.build.provenance import model_hash
+
+    out = []
+    if not c.model_hash:
+        out.append("the file records no model hash (written by an older arvcas)")
+    elif c.model_hash != model_hash():
+        out.append(f"the model code or data changed (model hash {c.model_hash[:12]} in the file, "
+                   f"{model_hash()[:12]} now)")
+    pv = np.asarray(params_vector, dtype=float)
+    if pv.shape != c.params.shape or not np.array_equal(pv, c.params):
+        out.append("the study used other parameter values than the packaged file" if pv.shape == c.params.shape
+                   else f"the parameter vector has {pv.size} entries, the file's {c.params.size}")
+    return out
+
+
 # ---- write --------------------------------------------------------------------------------------------
 
 _ATTRS = ("controller", "study_name", "study_text", "study_path", "identity", "scenario_text", "status",
@@ -251,6 +252,56 @@ _ATTRS = ("controller", "study_name", "study_text", "study_path", "identity", "s
 _INT_ATTRS = ("seed", "n_gen", "n_eval")
 _POP = ("X", "gains", "F", "G", "rank", "crowding", "chat", "rmse", "ok", "t_fail")
 _T2 = ("F", "G", "chat", "rmse", "ok", "t_fail")
+
+
+_GAIN_UNITS = "gain units of each variable (Table 2; see variables/names)"
+_OBJ = "f_chat, f_rmse: mean over the 6 DOF of CHAT and RMSE / the paper's AGSTA values (dimensionless)"
+_CHAT_UNITS = "N (x, y, z), N m (phi, theta, psi)"
+_RMSE_UNITS = "m (x, y, z), rad (phi, theta, psi)"
+# dataset (name under population/, front/ or table2/ shared) -> (units, description)
+DATASET_DOC: dict[str, tuple[str, str]] = {
+    "variables/names": ("", "gain names, one per decision variable (x.c ... psi.omega)"),
+    "variables/lower": (_GAIN_UNITS, "lower bound of each gain (the search runs on log10 of the gains)"),
+    "variables/upper": (_GAIN_UNITS, "upper bound of each gain (the search runs on log10 of the gains)"),
+    "variables/table2": (_GAIN_UNITS, "the paper's Table 2 gains"),
+    "draws/noise_seed": ("", "sensor-noise seed of each draw"),
+    "draws/uncertainty": ("1", "nominal-model factors [C, D, g, arm] of each draw"),
+    "draws/phase": ("rad", "disturbance phases of each draw (6 DOF)"),
+    "params": ("SI units of arvcas.params.SCHEMA, in its order", "parameter vector the runs used"),
+    "X": ("log10 of the gain units", "decision vectors: log10 of the gains"),
+    "gains": (_GAIN_UNITS, "gains = 10 ** X, the values the runs used"),
+    "F": ("1", "objectives " + _OBJ + "; NaN when infeasible"),
+    "G": ("1", "constraint, feasible when <= 0: 0 every draw completed; 1 + the lost fraction of the run when a "
+          "draw diverged; 2 non-finite metrics (arvcas.tuning.problem)"),
+    "rank": ("", "NSGA-II non-domination rank (NaN where unset)"),
+    "crowding": ("", "NSGA-II crowding distance (inf at the ends, NaN where unset)"),
+    "chat": (_CHAT_UNITS, "per-DOF CHAT (eq. 42), draws x members x DOF; NaN where the run diverged"),
+    "rmse": (_RMSE_UNITS, "per-DOF RMSE (eq. 43), draws x members x DOF; NaN where the run diverged"),
+    "ok": ("", "draws x members: the run completed without diverging"),
+    "t_fail": ("s", "draws x members: divergence time (NaN when ok)"),
+    "index": ("", "rows of population/ on the feasible non-dominated front, sorted by f_chat"),
+    "history/gen": ("", "generation number"),
+    "history/n_eval": ("", "evaluations (runs of a gain set over all draws) so far"),
+    "history/n_feasible": ("", "feasible members of the population"),
+    "history/hv": ("1", "hypervolume of the feasible front against the study's reference point"),
+    "history/best_chat": ("1", "smallest f_chat in the population"),
+    "history/best_rmse": ("1", "smallest f_rmse in the population"),
+    "history/gen_time_s": ("s", "wall time of the generation"),
+    "history/elapsed_s": ("s", "wall time since the study started (all sessions)"),
+}
+
+
+def _doc(ds: h5py.Dataset) -> None:
+    """``units`` and ``description`` of a dataset, from :data:`DATASET_DOC`."""
+    name = ds.name.lstrip("/")
+    group, _, leaf = name.rpartition("/")
+    units, desc = DATASET_DOC[name] if name in DATASET_DOC else DATASET_DOC[leaf]
+    if group == "front":
+        desc = "front members only: " + desc
+    elif group == "table2":
+        desc = "the Table 2 gains on the same draws: " + desc
+    ds.attrs["units"] = units
+    ds.attrs["description"] = desc
 
 
 def _write(f: h5py.File, c: Checkpoint) -> None:
@@ -262,6 +313,8 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
         f.attrs[k] = int(getattr(c, k))
     f.attrs["reference_point"] = np.asarray(c.reference_point, dtype=float)
     f.attrs["versions"] = json.dumps(c.versions, sort_keys=True)
+    f.attrs["model_hash"] = c.model_hash
+    f.attrs["model_changes"] = json.dumps(list(c.model_changes))
     v = f.create_group("variables")
     v.create_dataset("names", data=np.array(c.names, dtype=object), dtype=h5py.string_dtype())
     for k in ("lower", "upper", "table2"):
@@ -287,6 +340,7 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
         t = f.create_group("table2")
         for k in _T2:
             t.create_dataset(k, data=np.asarray(getattr(c, f"table2_{k}")))
+    f.visititems(lambda name, obj: _doc(obj) if isinstance(obj, h5py.Dataset) else None)
 
 
 def write_checkpoint(c: Checkpoint, path: Path) -> Path:
@@ -298,40 +352,20 @@ def write_checkpoint(c: Checkpoint, path: Path) -> Path:
     c.updated = _now()
     if not c.created:
         c.created = c.updated
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
-        with h5py.File(tmp, "w") as f:
-            _write(f, c)
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, path)
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except BaseException as e:
-        try:
-            tmp.unlink()
-        except FileNotFoundError:
-            pass
-        if isinstance(e, OSError):
-            why = os.strerror(e.errno) if e.errno else " ".join(str(e).split())
-            raise CheckpointError(f"{path}: cannot write the checkpoint ({why}); the previous one is kept") from None
-        raise
-    return path
+        return files.atomic_write(path, lambda tmp: _write_file(tmp, c), CheckpointError)
+    except CheckpointError as e:
+        raise CheckpointError(f"{e}; the previous one is kept") from None
+
+
+def _write_file(tmp: Path, c: Checkpoint) -> None:
+    with h5py.File(tmp, "w") as f:
+        _write(f, c)
 
 
 def remove_stale_temps(d: Path) -> None:
     """Temp files left by a process killed while writing (call while holding the lock)."""
-    for p in Path(d).glob(f".{FRONT_NAME}.tmp-*"):
-        try:
-            p.unlink()
-        except OSError:
-            pass
+    files.remove_stale_temps(d)
 
 
 # ---- read ---------------------------------------------------------------------------------------------
@@ -340,10 +374,9 @@ def remove_stale_temps(d: Path) -> None:
 def read_checkpoint(path: str | Path) -> Checkpoint:
     """Read and validate a ``front.h5``; :class:`CheckpointError` (one line) if it is not one."""
     path = Path(path)
-    if not path.exists():
-        raise CheckpointError(f"{path}: file not found")
     if path.is_dir():
         raise CheckpointError(f"{path}: is a directory (give the front.h5 inside it)")
+    files.check_input(path, "file", CheckpointError)  # regular files only: h5py would block on a FIFO
     try:
         f = h5py.File(path, "r")
     except OSError as e:
@@ -372,8 +405,8 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     for g in ("variables", "draws", "params", "history"):
         if g not in f:
             raise CheckpointError(f"{path}: incomplete arvcas front file (no '{g}')")
-    kw = {k: _s(f.attrs[k]) for k in _ATTRS}
-    kw.update({k: int(f.attrs[k]) for k in _INT_ATTRS})
+    kw = {k: _attr(f, k, path, _s) for k in _ATTRS}
+    kw.update({k: _attr(f, k, path, _int) for k in _INT_ATTRS})
     v = f["variables"]
     kw["names"] = [_s(x) for x in v["names"][()]]
     for k in ("lower", "upper", "table2"):
@@ -382,8 +415,10 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     kw["draw_uncertainty"] = f["draws/uncertainty"][()]
     kw["draw_phase"] = f["draws/phase"][()]
     kw["params"] = f["params"][()]
-    kw["reference_point"] = np.asarray(f.attrs["reference_point"], dtype=float)
-    kw["versions"] = json.loads(_s(f.attrs["versions"]))
+    kw["reference_point"] = _attr(f, "reference_point", path, _point)
+    kw["versions"] = _json_attr(f, "versions", path, dict)
+    kw["model_hash"] = _s(f.attrs["model_hash"]) if "model_hash" in f.attrs else ""
+    kw["model_changes"] = _json_attr(f, "model_changes", path, list) if "model_changes" in f.attrs else []
     if "population" in f:
         for k in _POP:
             kw[k] = f["population"][k][()]
@@ -394,6 +429,38 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     c = Checkpoint(**kw)
     _validate(c, path)
     return c
+
+
+def _int(v) -> int:
+    if isinstance(v, (bytes, str, float)) and not float(v if not isinstance(v, bytes) else v.decode()).is_integer():
+        raise ValueError(v)
+    return int(v)
+
+
+def _point(v) -> np.ndarray:
+    a = np.asarray(v, dtype=float)
+    if a.shape != (2,):
+        raise ValueError(v)
+    return a
+
+
+def _attr(f: h5py.File, name: str, path: Path, conv):
+    if name not in f.attrs:
+        raise CheckpointError(f"{path}: damaged arvcas front file (attribute '{name}' is missing)")
+    try:
+        return conv(f.attrs[name])
+    except (ValueError, TypeError, UnicodeDecodeError, OverflowError):
+        raise CheckpointError(f"{path}: damaged arvcas front file (attribute '{name}' has a wrong type or value)") from None
+
+
+def _json_attr(f: h5py.File, name: str, path: Path, kind: type):
+    try:
+        v = json.loads(_s(f.attrs[name]))
+    except (ValueError, TypeError):
+        v = None
+    if not isinstance(v, kind):
+        raise CheckpointError(f"{path}: damaged arvcas front file (attribute '{name}' is not JSON {kind.__name__})")
+    return v
 
 
 def _validate(c: Checkpoint, path: Path) -> None:

@@ -1,24 +1,26 @@
-"""Command-line front ends of the tuning package: ``tune``, ``front export|plot``, ``compare``.
+"""Command-line handlers of the tuning package: ``tune``, ``front export``, ``front plot``, ``compare`` of fronts.
 
-:func:`register` adds them to :data:`arvcas.cli.COMMANDS`. Handlers parse, call one library
-function with typed arguments and print; library errors are ValueError/OSError subclasses, which
-``arvcas.cli.main`` prints as one line.
+The commands are declared in the table of :mod:`arvcas.cli` (which applies the input and output
+policies before calling a handler). Handlers call one library function with typed arguments and
+print; library errors are ValueError/OSError subclasses, which ``arvcas.cli.main`` prints as one line.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
-__all__ = ["register"]
+__all__ = ["add_tune", "check_tune", "run_tune", "add_front_export", "run_front_export", "add_front_plot",
+           "run_front_plot", "front_plot_outputs", "add_compare", "run_compare"]
 
 
 # ---- tune -----------------------------------------------------------------------------------------
 
 
-def _add_tune(p: argparse.ArgumentParser) -> None:
+def add_tune(p: argparse.ArgumentParser) -> None:
+    from arvcas.cli import count_arg, seconds_arg
+
     p.add_argument("study", type=Path, help="study file (TOML), e.g. studies/quick.toml")
     p.add_argument("--out", type=Path, required=True, metavar="DIR",
                    help="output directory (created if its parent exists): DIR/front.h5, or DIR/<controller>/front.h5 "
@@ -29,14 +31,32 @@ def _add_tune(p: argparse.ArgumentParser) -> None:
     p.add_argument("--engine", choices=("local", "dask"), default=None, help="override the study's engine")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="Dask scheduler address (implies --engine dask); without it dask starts a local cluster")
-    p.add_argument("--threads", type=int, default=None, metavar="N", help="local engine: threads (default all cores)")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
+    p.add_argument("--threads", type=count_arg(1, 1024, "--threads"), default=None, metavar="N",
+                   help="local engine: threads (default all cores)")
+    p.add_argument("--workers", type=count_arg(1, 1024, "--workers"), default=None, metavar="N",
                    help="dask local cluster: single-threaded workers (default one per core)")
-    p.add_argument("--timeout", type=float, default=None, metavar="S",
-                   help="dask: seconds to wait for the scheduler (default: the study's, 10)")
+    p.add_argument("--timeout", type=seconds_arg, default=None, metavar="S",
+                   help="dask: seconds to wait for the scheduler, and for a worker when all are lost "
+                        "(default: the study's, 10)")
+    p.add_argument("--allow-model-change", action="store_true",
+                   help="with --resume: continue even if the model code or parameters changed since the "
+                        "checkpoint was written (the checkpoint records it)")
 
 
-def _run_tune(a: argparse.Namespace) -> int:
+def check_tune(a: argparse.Namespace) -> None:
+    """Options that do not apply (the study's engine is checked in :func:`run_tune`, once it is read)."""
+    from arvcas.cli import refuse
+
+    if not a.resume:
+        refuse(a, ("allow_model_change",), "only with --resume")
+    if a.engine == "local":
+        refuse(a, ("scheduler", "workers", "timeout"), "only with --engine dask")
+    if a.scheduler is not None:
+        refuse(a, ("threads",), "only with the local engine (--scheduler was given)")
+        refuse(a, ("workers",), "a remote scheduler has its own workers (--workers is for a local cluster)")
+
+
+def run_tune(a: argparse.Namespace) -> int:
     import dataclasses
 
     from arvcas.tuning.compare import compare_fronts, format_comparison
@@ -51,11 +71,12 @@ def _run_tune(a: argparse.Namespace) -> int:
         eng = dataclasses.replace(eng, name="dask", scheduler=a.scheduler)
     if a.engine is not None and a.engine != eng.name:
         eng = dataclasses.replace(eng, name=a.engine, scheduler=None if a.engine == "local" else eng.scheduler)
-    for opt, field in (("threads", "threads"), ("workers", "workers"), ("timeout", "timeout_s")):
+    for opt, field, engine in (("threads", "threads", "local"), ("workers", "workers", "dask"),
+                               ("timeout", "timeout_s", "dask")):
         v = getattr(a, opt)
         if v is not None:
-            if v <= 0 or (opt != "timeout" and int(v) != v):
-                raise StudyError(f"--{opt}: must be a positive {'number' if opt == 'timeout' else 'integer'}, got {v}")
+            if eng.name != engine:
+                raise StudyError(f"--{opt}: only with the {engine} engine (this run uses {eng.name})")
             eng = dataclasses.replace(eng, **{field: v})
     assert eng.name in ENGINES
     study = study.with_engine(eng)
@@ -64,7 +85,7 @@ def _run_tune(a: argparse.Namespace) -> int:
         print(msg, flush=True)
 
     outs = run_study(study, a.out, controllers=tuple(a.controller) if a.controller else None, resume=a.resume,
-                     say=say, study_file=str(a.study))
+                     say=say, study_file=str(a.study), allow_model_change=a.allow_model_change)
     for o in outs:
         print(f"{o.controller}: {o.status} after {o.n_gen} generations, {o.n_eval} runs, {o.front_size} on the front, "
               f"HV {o.hv:.6g}; {o.path}")
@@ -79,51 +100,50 @@ def _run_tune(a: argparse.Namespace) -> int:
 # ---- front ---------------------------------------------------------------------------------------
 
 
-def _add_front(p: argparse.ArgumentParser) -> None:
-    sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
-    e = sub.add_parser("export", help="the front as CSV or JSON (stdout, or --out FILE)")
+def add_front_export(e: argparse.ArgumentParser) -> None:
     e.add_argument("file", type=Path, help="front.h5 (or a study output directory)")
     e.add_argument("--format", required=True, choices=("csv", "json"))
-    e.add_argument("--out", type=Path, default=None, metavar="FILE")
-    pl = sub.add_parser("plot", help="plot the front, Table 2 on the same draws and the knee point (PNG)")
+    e.add_argument("--out", type=Path, default=None, metavar="FILE", help="default: standard output")
+
+
+def add_front_plot(pl: argparse.ArgumentParser) -> None:
     pl.add_argument("file", type=Path, help="front.h5 (or a study output directory)")
     pl.add_argument("--out", type=Path, default=None, metavar="PNG", help="default: next to FILE, front.png")
     pl.add_argument("--paper", action="store_true", help="also mark the paper's Table 3 points (their simulator)")
 
 
-def _write_text(path: Path, text: str) -> None:
+def run_front_export(a: argparse.Namespace) -> int:
+    from arvcas.io import files
     from arvcas.tuning.checkpoint import CheckpointError
+    from arvcas.tuning.front import export_front
 
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise CheckpointError(f"--out {path}: directory {parent} does not exist")
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    if a.out is not None:
+        files.target(a.out, f"--out {a.out}", CheckpointError)
+    text = export_front(a.file, a.format)
+    if a.out is None:
+        sys.stdout.write(text)
+    else:
+        files.write_text(a.out, text, CheckpointError)
+        print(f"wrote {a.out}")
+    return 0
 
 
-def _run_front(a: argparse.Namespace) -> int:
-    from arvcas.tuning.front import export_front, plot_front, read_front, resolve_front_path
+def front_plot_outputs(a: argparse.Namespace) -> list:
+    from arvcas.tuning.front import resolve_front_path
 
-    if a.action == "export":
-        text = export_front(a.file, a.format)
-        if a.out is None:
-            sys.stdout.write(text)
-        else:
-            _write_text(a.out, text)
-            print(f"wrote {a.out}")
-        return 0
-    fr = read_front(a.file)
     out = a.out if a.out is not None else resolve_front_path(a.file).with_suffix(".png")
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise ValueError(f"--out {out}: directory {parent} does not exist")
+    return [("--out", out)]
+
+
+def run_front_plot(a: argparse.Namespace) -> int:
+    from arvcas.io import files
+    from arvcas.tuning.front import plot_front, read_front
+
+    fr = read_front(a.file)
+    out = front_plot_outputs(a)[0][1]
+    files.target(out, f"--out {out}")
     fig = plot_front(fr, paper=a.paper)
-    fig.savefig(out, dpi=150)
+    files.write_figure(out, fig, 150)
     k = fr.knee()
     print(f"{fr.controller}: {fr.size} on the front, HV {fr.hv:.6g}; knee: member {k} "
           f"(f_chat {fr.F[k, 0]:.4g}, f_rmse {fr.F[k, 1]:.4g}); wrote {out}")
@@ -133,18 +153,22 @@ def _run_front(a: argparse.Namespace) -> int:
 # ---- compare -------------------------------------------------------------------------------------
 
 
-def _add_compare(p: argparse.ArgumentParser) -> None:
+def add_compare(p: argparse.ArgumentParser) -> None:
     p.add_argument("a", type=Path, metavar="DIR_A", help="study output directory or front.h5")
     p.add_argument("b", type=Path, metavar="DIR_B", help="study output directory or front.h5")
     p.add_argument("--ref", default=None, metavar="F_CHAT,F_RMSE",
                    help="common reference point (default: componentwise max of the two studies' points)")
     p.add_argument("--plot", type=Path, default=None, metavar="PNG", help="both fronts in one figure")
     p.add_argument("--paper", action="store_true", help="with --plot: also mark the paper's Table 3 points")
+    p.add_argument("--allow-model-change", action="store_true",
+                   help="compare fronts computed with different model code or parameters")
 
 
-def _run_compare(a: argparse.Namespace) -> int:
+def run_compare(a: argparse.Namespace) -> int:
+    """Two fronts (``compare`` on Monte Carlo files is :func:`arvcas.experiments.cli.run_compare`)."""
+    from arvcas.io import files
     from arvcas.tuning.compare import compare_fronts, format_comparison
-    from arvcas.tuning.front import plot_fronts, read_front
+    from arvcas.tuning.front import check_same_model, plot_fronts, read_front
 
     ref = None
     if a.ref is not None:
@@ -155,27 +179,18 @@ def _run_compare(a: argparse.Namespace) -> int:
         if ref is None or len(ref) != 2:
             raise ValueError(f"--ref: expected two numbers 'f_chat,f_rmse', got {a.ref!r}")
     fa, fb = read_front(a.a), read_front(a.b)
+    changed = check_same_model(fa.path, fb.path, a.allow_model_change)
+    if changed:
+        print(f"note: the two fronts were computed with different models ({changed}); compared as allowed by "
+              f"--allow-model-change")
     if a.plot is not None:
-        parent = a.plot.parent if str(a.plot.parent) else Path(".")
-        if not parent.is_dir():
-            raise ValueError(f"--plot {a.plot}: directory {parent} does not exist")
+        files.target(a.plot, f"--plot {a.plot}")
     c = compare_fronts(fa, fb, ref)
     print(format_comparison(c))
     if a.plot is not None:
         fig = plot_fronts([fa, fb], labels=list(c.labels), paper=a.paper)
         fig.axes[0].set_title(f"{c.labels[0]} vs {c.labels[1]}: HV {c.hv[0]:.4g} vs {c.hv[1]:.4g} "
                               f"(ref {c.reference_point[0]:g}, {c.reference_point[1]:g})", fontsize=9)
-        fig.savefig(a.plot, dpi=150)
+        files.write_figure(a.plot, fig, 150)
         print(f"wrote {a.plot}")
     return 0
-
-
-def register(commands: dict) -> None:
-    """Add ``tune``, ``front`` and ``compare`` to the CLI's command table."""
-    from arvcas.cli import Command
-
-    commands["tune"] = Command("NSGA-II on the CHAT/RMSE front from a study file (resumable, local or Dask)",
-                               _add_tune, _run_tune)
-    commands["front"] = Command("export (csv, json) or plot a tuning front", _add_front, _run_front)
-    commands["compare"] = Command("hypervolumes of two fronts against one reference point, and who dominates where",
-                                  _add_compare, _run_compare)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import os
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -108,8 +109,13 @@ class DaskEngine:
     """A Dask cluster: ``scheduler`` address, or a local cluster on 127.0.0.1 when None.
 
     Connecting is bounded by ``timeout_s``; an unreachable scheduler is an :class:`EngineError`.
-    The population is split into one chunk per worker thread (at most one row per chunk).
+    The population is split into one chunk per worker thread (at most one row per chunk). Every wait
+    is bounded: while a generation runs, a cluster with no worker (all lost) or a lost scheduler for
+    more than ``timeout_s`` ends the generation with an :class:`EngineError` (the study keeps the last
+    checkpoint); a generation that merely takes long is not cut short.
     """
+
+    POLL_S = 0.5
 
     name = "dask"
 
@@ -119,7 +125,10 @@ class DaskEngine:
         except ImportError:
             raise EngineError("engine dask: the 'distributed' package is not installed "
                               "(pip install 'arvcas[dask]')") from None
+        if not (isinstance(timeout_s, (int, float)) and 0 < timeout_s < float("inf")):
+            raise EngineError(f"engine dask: timeout must be a finite number of seconds > 0, got {timeout_s!r}")
         self.scheduler = scheduler
+        self.timeout_s = float(timeout_s)
         self._cluster = None
         self._keys: dict = {}
         try:
@@ -167,6 +176,7 @@ class DaskEngine:
         try:
             futures = self.client.map(_chunk, [task] * len(blocks), [gains[b] for b in blocks],
                                       [1] * len(blocks), pure=False)
+            self._wait(futures)
             parts = self.client.gather(futures)
         except (ValueError, KeyboardInterrupt):
             raise
@@ -182,6 +192,34 @@ class DaskEngine:
         ok = np.concatenate([p[2] for p in parts], axis=1)
         t_fail = np.concatenate([p[3] for p in parts], axis=1)
         return chat, rmse, ok, t_fail
+
+    def _wait(self, futures) -> None:
+        """Until every future is done; EngineError once the cluster has had no worker (or no scheduler
+        connection) for ``timeout_s``."""
+        since = None
+        while True:
+            if all(f.done() for f in futures):
+                return
+            time.sleep(min(self.POLL_S, self.timeout_s))
+            if all(f.done() for f in futures):
+                return
+            if self.client.status != "running":
+                problem = f"lost the connection to the scheduler ({self.client.status})"
+            else:
+                problem = "" if self.client.nthreads() else "every worker was lost"
+            if not problem:
+                since = None
+                continue
+            now = time.monotonic()
+            since = now if since is None else since
+            if now - since >= self.timeout_s:
+                try:
+                    self.client.cancel(futures)
+                except Exception:  # noqa: BLE001 - best effort: the cluster is gone
+                    pass
+                where = self.scheduler or "local cluster"
+                raise EngineError(f"engine dask ({where}): {problem} and none came back within {self.timeout_s:g} s; "
+                                  f"the generation is abandoned") from None
 
     def close(self) -> None:
         c = getattr(self, "client", None)

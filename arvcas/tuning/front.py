@@ -26,7 +26,7 @@ from arvcas.metrics import DOFS, table3
 from arvcas.tuning import checkpoint as ck
 
 __all__ = ["Front", "read_front", "knee_index", "export_front", "plot_front", "plot_fronts", "member_gains",
-           "replay", "resolve_front_path"]
+           "replay", "resolve_front_path", "check_provenance", "check_same_model"]
 
 
 def resolve_front_path(p: str | Path) -> Path:
@@ -262,6 +262,38 @@ def plot_front(front: Front | str | Path, ax=None, **kw):
     return fig
 
 
+# ---- provenance -------------------------------------------------------------------------------------
+
+
+def check_provenance(path: str | Path, params, allow: bool, what: str) -> str:
+    """Refuse to re-run a front's members under other model code, data or parameters (``params``: a
+    :class:`arvcas.params.Params` or its vector) than the study's: the stored numbers would not be
+    reproduced. With ``allow`` returns what differs (empty if nothing), for the output to record."""
+    path = resolve_front_path(path)
+    c = ck.read_checkpoint(path)
+    vec = params.vector() if hasattr(params, "vector") else params
+    diff = ck.provenance_diff(c, vec)
+    if diff and not allow:
+        raise ck.CheckpointError(f"{what} {path}: {'; '.join(diff)}; a re-run would not reproduce the study "
+                                 f"(--allow-model-change to run anyway; the output records it)")
+    return "; ".join(diff)
+
+
+def check_same_model(a: str | Path, b: str | Path, allow: bool) -> str:
+    """Refuse to compare two fronts computed with different model code, data or parameters; with
+    ``allow`` returns what differs (empty if nothing)."""
+    ca, cb = ck.read_checkpoint(resolve_front_path(a)), ck.read_checkpoint(resolve_front_path(b))
+    why = []
+    if ca.model_hash != cb.model_hash:
+        why.append(f"model hash {ca.model_hash[:12] or 'none'} vs {cb.model_hash[:12] or 'none'}")
+    if ca.params.shape != cb.params.shape or not np.array_equal(ca.params, cb.params):
+        why.append("different parameter vectors")
+    if why and not allow:
+        raise ck.CheckpointError(f"compare: {a} and {b} were computed with different models ({', '.join(why)}); "
+                                 f"their objectives are not comparable (--allow-model-change to compare anyway)")
+    return ", ".join(why)
+
+
 # ---- replay ------------------------------------------------------------------------------------------
 
 
@@ -310,8 +342,7 @@ def replay(path: str | Path, index: int, n_threads: int | None = None):
     i = _member(fr, index)
     cfg = loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)")
     p = load_params()
-    if not np.array_equal(p.vector(), ck.read_checkpoint(fr.path).params):
-        raise ValueError(f"{fr.path}: the study used other parameter values than the packaged file")
+    check_provenance(fr.path, p, False, "replay")
     draws = tuple((int(s), u, ph) for s, u, ph in zip(fr.draw_seeds, fr.draw_uncertainty, fr.draw_phase))
     task = EvalTask(controller=fr.controller, draws=draws, cfg=cfg, params=p)
     assert isinstance(p, Params)

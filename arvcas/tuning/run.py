@@ -42,6 +42,7 @@ from pymoo.operators.crossover.sbx import SBX
 from pymoo.operators.mutation.pm import PM
 from pymoo.operators.sampling.rnd import FloatRandomSampling
 
+from arvcas.build.provenance import model_hash
 from arvcas.params import load as load_params
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.engines import EngineError, EvalTask, make_engine
@@ -225,7 +226,7 @@ def _new_checkpoint(study: Study, controller: str, task: EvalTask) -> ck.Checkpo
         draw_seeds=np.array([d[0] for d in task.draws], dtype=np.int64),
         draw_uncertainty=np.array([d[1] for d in task.draws]), draw_phase=np.array([d[2] for d in task.draws]),
         params=task.params.vector(), reference_point=np.asarray(study.objectives.reference_point, dtype=float),
-        versions=ck.versions(),
+        versions=ck.versions(), model_hash=model_hash(),
     )
 
 
@@ -294,13 +295,16 @@ def _rng_json(alg: NSGA2) -> str:
 
 def run_study(study: Study, out: str | Path, *, controllers: tuple[str, ...] | None = None, resume: bool = False,
               say: Callable[[str], None] = print, stop_after: int | None = None, study_file: str | None = None,
-              params=None) -> list[Outcome]:
+              params=None, allow_model_change: bool = False) -> list[Outcome]:
     """Run (or resume) the study's controllers into ``out``; returns one :class:`Outcome` each.
 
     All checks happen before any simulation: output directory (created if its parent exists),
     the lock, existing checkpoints (refused without ``resume``; validated and compared with the
     study with it), the engine (a Dask scheduler must answer within the study's timeout).
     ``stop_after`` stops after that many generations in total as if interrupted (tests).
+    A checkpoint computed with other model code, data or parameters (:func:`ck.provenance_diff`) is
+    refused on resume unless ``allow_model_change``; then the checkpoint records it in ``model_changes``
+    and continues under this installation's model.
     """
     out = ck.check_out_dir(Path(out))
     ctrls = study.controllers if controllers is None else tuple(controllers)
@@ -328,6 +332,16 @@ def run_study(study: Study, out: str | Path, *, controllers: tuple[str, ...] | N
                 if diff:
                     raise TuningError(f"--resume: {study.path} differs from the study in {path} in {', '.join(diff)} "
                                       f"(only [termination] and [engine] may change between sessions)")
+                changed = ck.provenance_diff(existing, (params if params is not None else load_params()).vector())
+                if changed and not allow_model_change:
+                    raise TuningError(f"--resume {path}: {'; '.join(changed)}; continuing would mix two models in "
+                                      f"one front (--allow-model-change to continue anyway; the checkpoint records it)")
+                if changed:
+                    existing.model_changes = list(existing.model_changes) + [
+                        f"{ck._now()}: resumed at generation {existing.n_gen} with --allow-model-change: "
+                        + "; ".join(changed)]
+                    existing.model_hash = model_hash()
+                    existing.params = (params if params is not None else load_params()).vector()
             elif resume:
                 say(f"{c}: no checkpoint at {path}: starting the study")
             plan.append((c, path, existing))
@@ -413,7 +427,8 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
             alg.evaluator.eval(problem, off)
         except EngineError as e:
             if not stop.requested:
-                raise
+                raise EngineError(f"{e}; the checkpoint of generation {c.n_gen} is kept in {path}; "
+                                  f"resume with: {resume_cmd}") from None
             # Ctrl-C reached the workers too (same process group): this generation is lost, the last is kept
             c.status, c.stop_reason = "interrupted", "interrupted"
             ck.write_checkpoint(c, path)

@@ -1,0 +1,484 @@
+"""Every file arvcas reads or writes goes through here: one input policy, one output policy, one writer.
+
+Reading (:func:`read_bytes`, :func:`read_text`, :func:`check_input`)
+    Only regular files: FIFOs, devices, sockets and directories are refused by name after an
+    ``os.stat`` and before opening, and the file is opened with ``O_NONBLOCK`` (a FIFO swapped in
+    between the two never blocks; the opened descriptor is checked again with ``fstat``). A file
+    larger than the cap (default :data:`MAX_TEXT_BYTES`) is refused before it is read. Text must be
+    UTF-8 without a byte-order mark; a UTF-8, UTF-16 or UTF-32 BOM is named as such.
+
+Output directories (:func:`check_dir`, :func:`prepare_dir`, :func:`target`)
+    An output directory must exist (or be creatable in an existing parent) and be writable; a
+    directory without any write permission bit counts as read-only also for root.
+
+Writing (:func:`atomic_write`, :func:`write_text`, :func:`write_figure`)
+    A file is built under a temporary name ``.<name>.arvcas-tmp-<pid>-<random>`` in its
+    directory, fsync'ed and renamed over the final name (``os.replace``): an interrupted or failed
+    write leaves the previous file untouched and no partial file under the final name. The temporary
+    file is removed on any exception, including the :class:`Terminated` that
+    :func:`install_signal_handlers` raises on SIGTERM and SIGHUP (as Python does on SIGINT);
+    temporaries of killed processes (their pid no longer runs) are removed by
+    :func:`remove_stale_temps` before a command writes into a directory.
+
+What arvcas wrote (:func:`written_by_arvcas`)
+    An existing file is replaced only if arvcas wrote it, unless the caller allowed it
+    (:func:`permit_replace`; the command line's ``--force``). arvcas's HDF5 files are recognised by
+    their own ``format`` attribute (``arvcas-result``, ``arvcas.tuning.front``, ``arvcas-montecarlo``,
+    ...). Every other file arvcas writes (CSV, JSON, Markdown, PNG) is recorded, after its rename, in
+    the manifest ``.arvcas-manifest.json`` of its directory (name -> size and sha256 of the bytes
+    written; updated under an ``flock`` of the directory): such a file counts as arvcas's only while
+    its bytes are still those arvcas wrote; a file edited since is the user's.
+
+Output policy (:func:`check_outputs`)
+    Before any work: no output may be one of the command's inputs (same resolved path, or same
+    ``st_dev``/``st_ino``: symlinks and hard links), no two outputs may be the same file, an output
+    may not be a directory or a special file, and an existing output arvcas did not write is refused
+    unless ``force``.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import hashlib
+import json
+import os
+import signal
+import stat
+import tempfile
+import threading
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+__all__ = [
+    "FileError", "Terminated", "MAX_TEXT_BYTES", "TMP_MARK", "MANIFEST", "check_input", "read_bytes", "read_text",
+    "check_dir", "prepare_dir", "target", "atomic_write", "write_text", "write_figure", "remove_stale_temps",
+    "install_signal_handlers", "written_by_arvcas", "hdf5_format", "permit_replace", "check_outputs", "same_file",
+]
+
+MAX_TEXT_BYTES = 16 * 1024 * 1024  # parameter, scenario and study files are a few KiB
+TMP_MARK = ".arvcas-tmp-"
+MANIFEST = ".arvcas-manifest.json"
+_MANIFEST_FORMAT = "arvcas-manifest"
+_HDF5_SIG = b"\x89HDF\r\n\x1a\n"
+
+
+class FileError(ValueError):
+    """One-line error about a file or directory, naming it."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised in the main thread so that temporary files are removed as on Ctrl-C."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+# ---- reading --------------------------------------------------------------------------------------
+
+_KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a directory"))
+
+
+def _kind(mode: int) -> str | None:
+    """None for a regular file, else what it is."""
+    if stat.S_ISREG(mode):
+        return None
+    for test, name in _KINDS:
+        if test(mode):
+            return name
+    return "not a regular file"  # pragma: no cover
+
+
+def _stat(p, error: type[ValueError], missing: str, failed: str) -> os.stat_result:
+    """``os.stat(p)``; a missing path raises ``error(missing)``, another OSError ``error(failed (why))``."""
+    try:
+        return os.stat(p)
+    except FileNotFoundError:
+        raise error(missing) from None
+    except OSError as e:
+        raise error(f"{failed} ({e.strerror})") from None
+
+
+def check_input(path, what: str = "file", error: type[ValueError] = FileError, allow_dir: bool = False) -> Path:
+    """``path`` after checking (``os.stat``, nothing opened) that it exists and is a regular file
+    (or a directory, with ``allow_dir``). Raises ``error`` naming ``path`` and what it is instead."""
+    p = Path(path)
+    st = _stat(p, error, f"{p}: {what} not found", f"{p}: cannot access {what}")
+    kind = _kind(st.st_mode)
+    if kind is not None and not (allow_dir and stat.S_ISDIR(st.st_mode)):
+        expected = "a regular file or a directory" if allow_dir else f"a regular {what}"
+        raise error(f"{p}: is {kind}, expected {expected}")
+    return p
+
+
+def read_bytes(path, what: str = "file", error: type[ValueError] = FileError, max_bytes: int = MAX_TEXT_BYTES) -> bytes:
+    """The bytes of the regular file ``path`` (at most ``max_bytes``), without ever blocking."""
+    p = check_input(path, what, error)
+    try:
+        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError as e:
+        raise error(f"{p}: cannot read {what} ({e.strerror})") from None
+    try:
+        st = os.fstat(fd)
+        kind = _kind(st.st_mode)
+        if kind is not None:  # replaced between stat and open
+            raise error(f"{p}: is {kind}, expected a regular {what}")
+        if st.st_size > max_bytes:
+            raise error(f"{p}: {what} is {st.st_size} bytes, more than the {max_bytes}-byte limit")
+        chunks, n = [], 0
+        while True:
+            b = os.read(fd, 1 << 20)
+            if not b:
+                break
+            n += len(b)
+            if n > max_bytes:  # grew while being read
+                raise error(f"{p}: {what} is more than the {max_bytes}-byte limit")
+            chunks.append(b)
+        return b"".join(chunks)
+    except OSError as e:
+        raise error(f"{p}: cannot read {what} ({e.strerror})") from None
+    finally:
+        os.close(fd)
+
+
+_BOMS = ((b"\x00\x00\xfe\xff", "UTF-32 (big-endian)"), (b"\xff\xfe\x00\x00", "UTF-32 (little-endian)"),
+         (b"\xef\xbb\xbf", "UTF-8 with a BOM"), (b"\xfe\xff", "UTF-16 (big-endian)"),
+         (b"\xff\xfe", "UTF-16 (little-endian)"))
+
+
+def read_text(path, what: str = "file", error: type[ValueError] = FileError, max_bytes: int = MAX_TEXT_BYTES) -> str:
+    """The UTF-8 text of the regular file ``path``; a byte-order mark or invalid UTF-8 raises ``error``."""
+    raw = read_bytes(path, what, error, max_bytes)
+    for bom, enc in _BOMS:
+        if raw.startswith(bom):
+            raise error(f"{path}: starts with a byte-order mark ({enc}); save the {what} as UTF-8 without BOM")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = raw[: e.start].count(b"\n") + 1
+        raise error(f"{path}: not UTF-8 text (line {line}, byte {e.start})") from None
+
+
+# ---- output directories ---------------------------------------------------------------------------------
+
+
+def check_dir(d, what: str | None = None, error: type[ValueError] = FileError) -> Path:
+    """``d`` as a Path after checking that it is an existing, writable directory."""
+    d = Path(d) if str(d) else Path(".")
+    who = what if what is not None else str(d)
+    st = _stat(d, error, f"{who}: directory {d} does not exist", f"{who}: cannot access directory {d}")
+    if not stat.S_ISDIR(st.st_mode):
+        raise error(f"{who}: {d} exists and is not a directory")
+    # root bypasses access(): a directory without any write bit counts as read-only for everyone
+    if not os.access(d, os.W_OK | os.X_OK) or not st.st_mode & 0o222:
+        raise error(f"{who}: directory {d} is not writable (mode {stat.S_IMODE(st.st_mode):o})")
+    return d
+
+
+def prepare_dir(d, what: str | None = None, error: type[ValueError] = FileError) -> Path:
+    """Create the directory ``d`` if missing (its parent must exist and be writable) and check it."""
+    d = Path(d)
+    who = what if what is not None else str(d)
+    if not os.path.lexists(d):
+        parent = d.parent if str(d.parent) else Path(".")
+        if not parent.is_dir():
+            raise error(f"{who}: parent directory {parent} does not exist")
+        check_dir(parent, who, error)
+        try:
+            d.mkdir()
+        except FileExistsError:
+            pass
+        except OSError as e:
+            raise error(f"{who}: cannot create directory {d} ({e.strerror})") from None
+    return check_dir(d, who, error)
+
+
+def target(path, what: str | None = None, error: type[ValueError] = FileError) -> Path:
+    """An output file path whose directory exists and is writable and which is not a directory."""
+    path = Path(path)
+    who = what if what is not None else str(path)
+    check_dir(path.parent, who, error)
+    if path.is_dir():
+        raise error(f"{who}: {path} is a directory")
+    return path
+
+
+# ---- what arvcas wrote ----------------------------------------------------------------------------------
+
+_PERMITTED: set[str] = set()
+
+
+def _key(path) -> str:
+    return os.path.realpath(path)
+
+
+def permit_replace(paths: Iterable) -> None:
+    """Allow :func:`atomic_write` to replace these existing files even if arvcas did not write them (--force)."""
+    _PERMITTED.update(_key(p) for p in paths)
+
+
+def hdf5_format(path) -> str | None:
+    """The ``format`` attribute of the HDF5 file ``path``; None if it is not a regular HDF5 file or has none
+    (a FIFO or device is never opened)."""
+    try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return None
+        with open(path, "rb") as fh:
+            if fh.read(8) != _HDF5_SIG:
+                return None
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            v = f.attrs.get("format")
+        return v.decode() if isinstance(v, bytes) else (str(v) if v is not None else None)
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+
+
+def _sha256(path: Path) -> str:
+    with open(path, "rb") as fh:
+        return hashlib.file_digest(fh, "sha256").hexdigest()
+
+
+def _read_manifest(d: Path) -> dict:
+    m = d / MANIFEST
+    try:
+        st = os.lstat(m)
+    except FileNotFoundError:
+        return {}
+    if not stat.S_ISREG(st.st_mode):
+        raise FileError(f"{m}: is not a regular file (arvcas's record of the files it wrote here)")
+    try:
+        doc = json.loads(read_text(m, "manifest"))
+        files = doc["files"] if doc.get("format") == _MANIFEST_FORMAT else None
+    except (ValueError, KeyError, TypeError, AttributeError):
+        files = None
+    if not isinstance(files, dict):
+        raise FileError(f"{m}: not an arvcas manifest (expected JSON with format '{_MANIFEST_FORMAT}'); "
+                        f"move it away")
+    return files
+
+
+def written_by_arvcas(path) -> bool:
+    """Whether the existing file ``path`` is one arvcas wrote (see the module docstring)."""
+    p = Path(path)
+    fmt = hdf5_format(p)
+    if fmt is not None:
+        return fmt.startswith("arvcas")
+    try:
+        entry = _read_manifest(p.parent).get(p.name)
+    except FileError:
+        return False
+    if not isinstance(entry, dict):
+        return False
+    try:
+        return os.path.getsize(p) == entry.get("size") and _sha256(p) == entry.get("sha256")
+    except OSError:
+        return False
+
+
+def _record(path: Path) -> None:
+    """Add ``path`` (just renamed into place) to its directory's manifest, under a lock of the directory."""
+    d = path.parent
+    dfd = os.open(d, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(dfd, fcntl.LOCK_EX)
+        files = _read_manifest(d)
+        files[path.name] = {"size": os.path.getsize(path), "sha256": _sha256(path)}
+        doc = {"format": _MANIFEST_FORMAT, "format_version": 1,
+               "note": "files arvcas wrote in this directory (name: size, sha256); arvcas replaces only these",
+               "files": dict(sorted(files.items()))}
+        _replace_with(d / MANIFEST, lambda t: t.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8"))
+    finally:
+        os.close(dfd)
+
+
+# ---- the writer -------------------------------------------------------------------------------------------
+
+_LIVE: set[str] = set()  # temporaries of this process being written
+_LIVE_LOCK = threading.Lock()
+
+
+def _fsync_path(path: Path, directory: bool = False) -> None:
+    fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _replace_with(path: Path, write: Callable[[Path], None]) -> None:
+    """Temporary file next to ``path``, ``write(tmp)``, fsync, chmod by umask, rename; tmp removed on any error."""
+    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}{TMP_MARK}{os.getpid()}-")
+    os.close(fd)
+    with _LIVE_LOCK:
+        _LIVE.add(tmp_name)
+    tmp = Path(tmp_name)
+    try:
+        write(tmp)
+        _fsync_path(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    finally:
+        with _LIVE_LOCK:
+            _LIVE.discard(tmp_name)
+
+
+def atomic_write(path, write: Callable[[Path], None], error: type[ValueError] = FileError) -> Path:
+    """Call ``write(tmp)`` on a temporary file next to ``path``, fsync it, then ``os.replace`` it.
+
+    Refuses (``error``, one line) to replace an existing file arvcas did not write unless
+    :func:`permit_replace` allowed it; an OSError (a full disk) becomes ``error`` naming ``path``.
+    Files other than arvcas HDF5 are recorded in the directory's manifest.
+    """
+    path = Path(path)
+    try:
+        _read_manifest(path.parent)  # a damaged manifest is refused before writing, not after
+    except FileError as e:
+        raise error(str(e)) from None
+    if os.path.lexists(path):
+        st = os.stat(path) if path.exists() else None
+        if st is not None and not stat.S_ISREG(st.st_mode):
+            raise error(f"{path}: is {_kind(st.st_mode)}; arvcas replaces only regular files")
+        if _key(path) not in _PERMITTED and not written_by_arvcas(path):
+            raise error(f"{path}: exists and was not written by arvcas; refusing to replace it (use --force)")
+    try:
+        _replace_with(path, write)
+    except OSError as e:
+        raise error(f"{path}: write failed ({e.strerror or ' '.join(str(e).split())})") from None
+    try:
+        _fsync_path(path.parent, directory=True)
+    except OSError:  # pragma: no cover - some filesystems refuse fsync on directories
+        pass
+    fmt = hdf5_format(path)
+    if fmt is None or not fmt.startswith("arvcas"):
+        try:
+            _record(path)
+        except OSError as e:
+            raise error(f"{path}: written, but recording it in {path.parent / MANIFEST} failed ({e.strerror})") from None
+    return path
+
+
+def write_text(path, text: str, error: type[ValueError] = FileError) -> Path:
+    """UTF-8 text, written atomically."""
+    return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"), error)
+
+
+def write_figure(path, fig, dpi: int = 150, error: type[ValueError] = FileError) -> Path:
+    """A matplotlib figure as PNG, written atomically."""
+    from arvcas import __version__
+
+    return atomic_write(path, lambda p: fig.savefig(p, format="png", dpi=dpi,
+                                                    metadata={"Software": f"arvcas {__version__}"}), error)
+
+
+def remove_stale_temps(d) -> list[Path]:
+    """Remove temporaries of :func:`atomic_write` in ``d`` whose process no longer runs; returns them."""
+    removed = []
+    try:
+        names = os.listdir(d)
+    except OSError:
+        return removed
+    for name in names:
+        if TMP_MARK not in name or not name.startswith("."):
+            continue
+        pid_txt = name.split(TMP_MARK, 1)[1].split("-", 1)[0]
+        if not pid_txt.isdigit():
+            continue
+        pid = int(pid_txt)
+        p = Path(d) / name
+        if pid == os.getpid():
+            with _LIVE_LOCK:
+                if str(p) in _LIVE:
+                    continue
+        elif _alive(pid):
+            continue
+        try:
+            p.unlink()
+            removed.append(p)
+        except OSError:
+            pass
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated(signum)
+
+
+def install_signal_handlers() -> None:
+    """SIGTERM and SIGHUP raise :class:`Terminated` in the main thread (a no-op elsewhere)."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for s in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(s) in (signal.SIG_DFL, None):
+            signal.signal(s, _raise_terminated)
+
+
+# ---- the output policy ------------------------------------------------------------------------------------
+
+
+def same_file(a, b) -> bool:
+    """Same resolved path, or (both existing) the same inode: symlinks and hard links."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        sa, sb = os.stat(a), os.stat(b)
+    except OSError:
+        return False
+    return (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino)
+
+
+def check_outputs(outputs: Iterable[tuple[str, Path]], inputs: Iterable[tuple[str, Path]] = (),
+                  force: bool = False, error: type[ValueError] = FileError) -> None:
+    """The output policy (module docstring) for ``(label, path)`` pairs; raises ``error`` (one line).
+
+    With ``force``, existing files arvcas did not write may be replaced (:func:`permit_replace`);
+    an output that is an input, or two outputs that are one file, are refused even then.
+    """
+    outputs, inputs = list(outputs), list(inputs)
+    for i, (lab, p) in enumerate(outputs):
+        for ilab, q in inputs:
+            if same_file(p, q):
+                raise error(f"{lab}: {p} is the input {ilab} ({q}); writing it would destroy the input")
+        for lab2, p2 in outputs[:i]:
+            if same_file(p, p2):
+                raise error(f"{lab}: {p} is also the output {lab2}; the two would overwrite each other")
+    for lab, p in outputs:
+        parent = Path(p).parent
+        if parent.is_dir():
+            try:
+                _read_manifest(parent)
+            except FileError as e:
+                raise error(f"{lab}: {e}") from None
+        if not os.path.lexists(p):
+            continue
+        try:
+            st = os.stat(p)
+        except OSError as e:
+            if e.errno == errno.ENOENT:  # a dangling symlink
+                raise error(f"{lab}: {p} is a dangling symbolic link") from None
+            raise error(f"{lab}: cannot access {p} ({e.strerror})") from None
+        if not stat.S_ISREG(st.st_mode):
+            raise error(f"{lab}: {p} is {_kind(st.st_mode)}; arvcas writes only regular files")
+        if not written_by_arvcas(p):
+            if not force:
+                raise error(f"{lab}: {p} exists and was not written by arvcas; refusing to replace it "
+                            f"(use --force)")
+            permit_replace([p])

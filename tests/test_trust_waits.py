@@ -1,0 +1,58 @@
+"""Every wait is bounded: a Dask cluster that loses all its workers mid-study ends with a one-line
+error within the timeout, and the last checkpoint is intact."""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+
+import pytest
+
+from arvcas.tuning import checkpoint as ck
+from arvcas.tuning import load_study, run_study
+from arvcas.tuning.engines import DaskEngine, EngineError
+
+from test_tuning_study import write_tiny
+
+distributed = pytest.importorskip("distributed")
+
+
+def test_losing_every_worker_ends_the_study_with_the_checkpoint_kept(tmp_path):
+    study = load_study(write_tiny(tmp_path / "tiny.toml", controller="agsta", generations=3))
+    out = tmp_path / "out"
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        eng = dataclasses.replace(study.engine, name="dask", scheduler=cluster.scheduler_address, timeout_s=3.0)
+        saved = {}
+
+        def say(msg):
+            if " gen 1/" in msg:  # generation 1 is checkpointed: now every worker goes away
+                saved["bytes"] = (out / "front.h5").read_bytes()
+                cluster.scale(0)
+
+        box = {}
+
+        def target():
+            try:
+                run_study(study.with_engine(eng), out, say=say)
+            except BaseException as e:  # noqa: BLE001
+                box["exc"] = e
+
+        t = threading.Thread(target=target, daemon=True)
+        t.start()
+        t.join(300)
+        assert not t.is_alive(), "the study waited forever for a worker"
+    e = box.get("exc")
+    assert isinstance(e, EngineError), e
+    msg = str(e)
+    assert "every worker was lost and none came back within 3 s" in msg and "\n" not in msg
+    assert "checkpoint of generation 1 is kept" in msg and "resume with: arvcas tune" in msg
+    assert (out / "front.h5").read_bytes() == saved["bytes"]
+    assert ck.read_checkpoint(out / "front.h5").n_gen == 1
+    assert not (out / ck.StudyLock.NAME).exists()
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -1.0, 0.0])
+def test_invalid_engine_timeouts_are_refused(bad):
+    with pytest.raises(EngineError, match="timeout must be a finite number of seconds > 0"):
+        DaskEngine(scheduler="tcp://127.0.0.1:1", timeout_s=bad)
