@@ -152,6 +152,23 @@ def _run_export_c(a: argparse.Namespace) -> int:
     return 0
 
 
+# ---- export-fmu --------------------------------------------------------------------------------
+
+
+def _add_export_fmu(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE.fmu", type=Path, help="output file (name ending in .fmu)")
+    p.add_argument("--inputs", choices=("wrench", "thrusters"), default="wrench",
+                   help="first six inputs: the body wrench tau at the COB in {b} (default) or the six thruster commands u")
+    _add_model_args(p)
+
+
+def _run_export_fmu(a: argparse.Namespace) -> int:
+    from arvcas.build.fmu import export_fmu
+
+    print(export_fmu(a.file, params=a.params, opts=_model_options(a.n_quad), force=a.force, inputs=a.inputs))
+    return 0
+
+
 # ---- cache -------------------------------------------------------------------------------------
 
 
@@ -241,8 +258,9 @@ def _run_demo(a: argparse.Namespace) -> int:
 
 def _add_simulate(p: argparse.ArgumentParser) -> None:
     p.add_argument("--controller", default=None,
-                   help="proposed, agsta, traditional or implicit (required unless --from-front)")
-    p.add_argument("--out", type=Path, default=None, metavar="FILE.h5", help="write the result here (HDF5)")
+                   help="a registered controller: proposed, agsta, traditional, implicit, pid (required unless --from-front)")
+    p.add_argument("--out", type=Path, default=None, metavar="FILE.h5",
+                   help="write the result here: HDF5 (.h5), or a MATLAB file if the name ends in .mat")
     p.add_argument("--seed", type=seed_arg, default=None, help="sensor-noise seed (default 0; 0 <= seed < 2**63)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="scenario file (default: the packaged scenario.toml)")
@@ -295,7 +313,7 @@ def _run_simulate(a: argparse.Namespace) -> int:
         if a.config is None and cfg_text:
             cfg = scenario.loads_scenario(cfg_text, f"{a.from_front} (study scenario)")
     if controller is None:
-        raise ValueError("--controller: required (proposed, agsta, traditional, implicit)")
+        raise ValueError("--controller: required (proposed, agsta, traditional, implicit, pid)")
     r = simulate(controller, gains=gains, seed=0 if seed is None else seed, params=params, cfg=cfg,
                  opts=_model_options(a.n_quad))
     if a.from_front is not None and changed:
@@ -304,7 +322,11 @@ def _run_simulate(a: argparse.Namespace) -> int:
     status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s"
     print(f"{controller}: seed {r.seed}, {r.t[-1]:g} s, {status}")
     print(_metrics_table(r.chat, r.rmse))
-    if a.out is not None:
+    if a.out is not None and a.out.suffix == ".mat":
+        from arvcas.io.matfile import write_result_mat
+
+        print(f"wrote {write_result_mat(r, a.out)}")
+    elif a.out is not None:
         print(f"wrote {results.write_result(r, a.out)}")
     return 0 if r.ok else 1
 
@@ -399,6 +421,8 @@ def _table() -> tuple[Command, ...]:
     return (
         Command("export-c", "write the plant functions as a C library with Makefile, example and README",
                 _add_export_c, _run_export_c, inputs=(("params", "file"),)),
+        Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
+                _add_export_fmu, _run_export_fmu, inputs=(("params", "file"),), outputs=_out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
         Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
                 _add_demo, _run_demo, inputs=(("params", "file"),)),
@@ -411,8 +435,9 @@ def _table() -> tuple[Command, ...]:
                 _add_bench, _run_bench, outputs=_bench_outputs),
         Command("tune", "NSGA-II on the CHAT/RMSE front from a study file (resumable, local or Dask)",
                 t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune),
-        Command("front export", "the front as CSV or JSON (stdout, or --out FILE)", t.add_front_export,
-                t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out")),
+        Command("front export", "the front as CSV or JSON (stdout, or --out FILE), or a MATLAB .mat file",
+                t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out"),
+                check=t.check_front_export),
         Command("front plot", "plot the front, Table 2 on the same draws and the knee point (PNG)", t.add_front_plot,
                 t.run_front_plot, inputs=(("file", "front"),), outputs=t.front_plot_outputs),
         Command("front robust", "re-evaluate every front member under Monte Carlo; mark the robust non-dominated "

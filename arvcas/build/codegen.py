@@ -329,7 +329,7 @@ def _verify(plan, so: Path, man: Path) -> tuple[dict | None, str]:
     return m, ""
 
 
-def _run_compiler(cmd: list[str], work: Path, name: str) -> subprocess.CompletedProcess:
+def run_compiler(cmd: list[str], work: Path, name: str) -> subprocess.CompletedProcess:
     """Run the compiler in its own process group; on any interruption (an exception, KeyboardInterrupt,
     the SystemExit a SIGTERM handler raises, a timeout) the whole group (cc, cc1, as, ld) is killed
     and reaped before the exception goes on, so no compiler outlives the build."""
@@ -358,7 +358,7 @@ def _compile(plan: _Plan, work: Path) -> tuple[Path, float]:
     cmd = [CC, *compile_flags, "-o", str(out), str(src), *LIBS]
     log.info("compiling %s (%d instructions) with %s %s ...", plan.name, plan.n_instructions, CC, " ".join(compile_flags))
     t0 = time.perf_counter()
-    r = _run_compiler(cmd, work, plan.name)
+    r = run_compiler(cmd, work, plan.name)
     dt = time.perf_counter() - t0
     if r.returncode != 0:
         first = next((ln for ln in r.stderr.splitlines() if "error" in ln), r.stderr.strip()[:200])

@@ -20,7 +20,6 @@ import hashlib
 import math
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -29,6 +28,8 @@ import zipfile
 from importlib import resources
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
+
+from arvcas.io import files
 
 import casadi as ca
 
@@ -63,14 +64,14 @@ _DISPLAY = {"m": ("mm", 1000.0), "rad": ("deg", 180.0 / math.pi)}
 _DIM_UNIT = {
     "density": "kg/m3",
     "acceleration": "m/s2",
-    "dimensionless": "1",
+    "1": "1",
     "mass": "kg",
     "inertia": "kg.m2",
     "length": "m",
     "volume": "m3",
     "angle": "rad",
     "force": "N",
-    "hydro": None,
+    "per_rho": None,
 }
 _STATE_DESCRIPTIONS = (
     "x: north position of the COB in {n} (NED)",
@@ -149,7 +150,7 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
         dim = SCHEMA[name][0]
         unit = _DIM_UNIT[dim]
         src = P.source(name)
-        desc = src if dim != "hydro" else f"per unit density (SI coefficient = env.rho * value); {src}"
+        desc = src if dim != "per_rho" else f"per unit density (SI coefficient = env.rho * value); {src}"
         file_unit = P.unit(name)
         display = None
         if unit in _DISPLAY and file_unit == _DISPLAY[unit][0]:
@@ -315,12 +316,7 @@ def _compile(src_dir: Path, out: Path) -> None:
 
     flags = [*codegen.BASE_FLAGS, codegen.DEFAULT_OPT_LEVEL, *codegen.FIXED_FLAGS, "-fvisibility=hidden"]
     cmd = [codegen.CC, *flags, f"-I{src_dir}", "-o", str(out), str(src_dir / _WRAPPER_C), *codegen.LIBS]
-    try:
-        r = subprocess.run(cmd, capture_output=True, text=True, timeout=codegen.COMPILE_TIMEOUT_S, cwd=src_dir)
-    except FileNotFoundError:
-        raise codegen.CompileError(f"C compiler '{codegen.CC}' not found on PATH; install gcc or clang") from None
-    except subprocess.TimeoutExpired:
-        raise codegen.CompileError(f"compiling the FMU took longer than {codegen.COMPILE_TIMEOUT_S:.0f} s") from None
+    r = codegen.run_compiler(cmd, src_dir, "the FMU")  # killed with its process group if interrupted
     if r.returncode != 0:
         first = next((ln for ln in r.stderr.splitlines() if "error" in ln), r.stderr.strip()[:200])
         raise codegen.CompileError(f"{codegen.CC} failed compiling the FMU (exit {r.returncode}): {first.strip()}")
@@ -417,16 +413,18 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
             shutil.copyfile(_templates() / "fmi2" / hdr, src / hdr)
         binary = work / f"{MODEL_IDENTIFIER}{suffix}"
         _compile(src, binary)
-        tmp = work / "out.fmu"
-        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-            zf.writestr("modelDescription.xml", md)
-            zf.write(binary, f"binaries/{platform}/{MODEL_IDENTIFIER}{suffix}")
-            for f in sorted(src.iterdir()):
-                zf.write(f, f"sources/{f.name}")
-        os.chmod(tmp, 0o644)
+        def fill(tmp: Path) -> None:
+            with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+                zf.writestr("modelDescription.xml", md)
+                zf.write(binary, f"binaries/{platform}/{MODEL_IDENTIFIER}{suffix}")
+                for f in sorted(src.iterdir()):
+                    zf.write(f, f"sources/{f.name}")
+
         if out.exists() and not force and not _written_by_arvcas(out):  # appeared meanwhile
             raise FMUError(f"path: {out} exists and is not an FMU written by arvcas; pass force=True (--force) to replace it")
-        os.replace(tmp, out)
+        if os.path.lexists(out):  # checked above: an FMU arvcas wrote, or force
+            files.permit_replace([out])
+        files.atomic_write(out, fill, FMUError)  # the one writer: recorded in the directory's manifest
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return out

@@ -102,7 +102,8 @@ def run_tune(a: argparse.Namespace) -> int:
 
 def add_front_export(e: argparse.ArgumentParser) -> None:
     e.add_argument("file", type=Path, help="front.h5 (or a study output directory)")
-    e.add_argument("--format", required=True, choices=("csv", "json"))
+    e.add_argument("--format", required=True, choices=("csv", "json", "mat"),
+                   help="csv, json (text), or mat (a MATLAB file: needs --out FILE.mat)")
     e.add_argument("--out", type=Path, default=None, metavar="FILE", help="default: standard output")
 
 
@@ -112,6 +113,11 @@ def add_front_plot(pl: argparse.ArgumentParser) -> None:
     pl.add_argument("--paper", action="store_true", help="also mark the paper's Table 3 points (their simulator)")
 
 
+def check_front_export(a: argparse.Namespace) -> None:
+    if a.format == "mat" and (a.out is None or a.out.suffix != ".mat"):
+        raise ValueError("front export --format mat: needs --out FILE.mat (a binary file, not standard output)")
+
+
 def run_front_export(a: argparse.Namespace) -> int:
     from arvcas.io import files
     from arvcas.tuning.checkpoint import CheckpointError
@@ -119,6 +125,12 @@ def run_front_export(a: argparse.Namespace) -> int:
 
     if a.out is not None:
         files.target(a.out, f"--out {a.out}", CheckpointError)
+    if a.format == "mat":
+        from arvcas.io.matfile import write_front_mat
+        from arvcas.tuning.front import read_front
+
+        print(f"wrote {write_front_mat(read_front(a.file), a.out)}")
+        return 0
     text = export_front(a.file, a.format)
     if a.out is None:
         sys.stdout.write(text)
