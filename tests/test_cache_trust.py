@@ -68,6 +68,8 @@ def test_sigterm_during_a_cold_compile_kills_the_compiler_and_cleans_up(tmp_path
 def test_cache_without_writable_lock_files_serves_verified_artifacts(tmp_path, monkeypatch, caplog):
     cache = tmp_path / "cache"
     monkeypatch.setenv("ARVCAS_CACHE", str(cache))
+    monkeypatch.setattr(codegen, "_DESCRIBED", {})
+    monkeypatch.setattr(codegen, "_COMPILED", {})
     f = codegen.compiled("thrust")
     path = codegen.artifact_of(f)["path"]
     real_open = os.open

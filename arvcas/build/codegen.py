@@ -597,8 +597,9 @@ def compiled(name: str, opts=None) -> ca.Function:
     if not isinstance(opts, ModelOptions):
         raise ValueError(f"opts: expected arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
     tag = opts.tag()
+    mkey = (name, tag, str(_cache_path()))
     with _LOCK:
-        f = _COMPILED.get((name, tag))
+        f = _COMPILED.get(mkey)
         if f is None:
             def make():
                 if tag not in _PLANT:
@@ -606,7 +607,7 @@ def compiled(name: str, opts=None) -> ca.Function:
                 return _PLANT[tag][name]
 
             f = build_described(name, f"plant {name} {opts!r}", make)
-            _COMPILED[(name, tag)] = f
+            _COMPILED[mkey] = f
         return f
 
 
