@@ -40,6 +40,7 @@ import shutil
 import signal
 import stat
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -52,6 +53,9 @@ import casadi as ca
 
 __all__ = [
     "build_described",
+    "bundle",
+    "preload",
+    "platform_id",
     "CacheError",
     "CompileError",
     "Artifact",
@@ -547,6 +551,12 @@ def build_described(
     cmd_flags = _check_flags(opt_level, flags)
     if not name.isidentifier() or not name.isascii():
         raise ValueError(f"function name {name!r} is not a C identifier")
+    ident = _ident(name, description, cmd_flags)
+    with _LOCK:
+        f = _PRELOADED.get(ident)  # shipped by a client (a Dask worker): no compiler needed
+        if f is not None:
+            _STATS["memo_hit"] += 1
+            return f
     compiler = _compiler_id()
     key = _key("described:" + name + "\0" + description + "\0" + model_hash(), compiler, cmd_flags)
     mkey = (name, key, str(_cache_path()))
@@ -564,8 +574,112 @@ def build_described(
             return _Plan(p.name, p.n_instructions, p.c_text, p.codegen_s, p.compiler, p.cmd_flags, key)
 
         f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout)
+        _MANIFESTS[f.__hash__()]["ident"] = ident
         _DESCRIBED[mkey] = f
         return f
+
+
+# ---------------------------------------------------------------------------------------------
+# shipping compiled libraries to processes without a compiler (Dask workers)
+
+_PRELOADED: dict[str, ca.Function] = {}  # ident -> a shipped library, loaded
+
+
+def _ident(name: str, description: str, cmd_flags) -> str:
+    """What a described build is, without the toolchain: a process that got the library shipped knows
+    it by this (it may have no compiler to ask for its version)."""
+    from arvcas.build.provenance import model_hash
+
+    h = hashlib.sha256()
+    for part in ("arvcas-ident-1", name, description, model_hash(), "\0".join(cmd_flags), ca.__version__):
+        b = part.encode()
+        h.update(len(b).to_bytes(8, "little"))
+        h.update(b)
+    return h.hexdigest()
+
+
+def platform_id() -> dict:
+    """What a compiled library needs of the machine that loads it."""
+    import platform as _pf
+
+    return {"system": sys.platform, "machine": _pf.machine(), "libc": " ".join(_pf.libc_ver()).strip(),
+            "casadi": ca.__version__}
+
+
+def bundle(fns) -> dict:
+    """The compiled libraries behind ``fns`` (Functions returned by :func:`build_described`) as bytes
+    with their verified sha256, for :func:`preload` in another process."""
+    from arvcas.build.provenance import model_hash
+
+    items = []
+    for f in fns:
+        m = artifact_of(f)
+        if m is None or "ident" not in m:
+            raise CacheError(f"bundle: {f.name()} was not built by build_described; nothing to ship")
+        data = Path(m["path"]).read_bytes()
+        if hashlib.sha256(data).hexdigest() != m["so_sha256"]:
+            raise CacheError(f"bundle: {m['path']} no longer matches its manifest; rebuild it")
+        items.append({"name": m["name"], "ident": m["ident"], "so": data,
+                      "manifest": {k: v for k, v in m.items() if k != "path"}})
+    return {"format": "arvcas-bundle", "platform": platform_id(), "model_hash": model_hash(), "items": items}
+
+
+def process_name() -> str:
+    """This process, for messages: the Dask worker's name and address, else host and pid."""
+    try:
+        from distributed import get_worker
+
+        w = get_worker()
+        return f"worker {w.name} ({w.address})"
+    except (ImportError, ValueError):
+        import socket
+
+        return f"process {os.getpid()} on {socket.gethostname()}"
+
+
+def preload(b: dict) -> int:
+    """Load the libraries of a :func:`bundle` in this process (no compiler, no cache needed); later
+    :func:`build_described` calls of the same description get them. Returns how many were new.
+
+    Refuses, one line naming this process (a Dask worker by name), libraries built for another
+    platform or CasADi, or by other arvcas model code; each library's bytes are checked against its
+    sha256 before loading.
+    """
+    from arvcas.build.provenance import model_hash
+
+    here = process_name()
+    if not isinstance(b, dict) or b.get("format") != "arvcas-bundle":
+        raise CacheError(f"{here}: not an arvcas bundle of compiled libraries")
+    mine, theirs = platform_id(), b.get("platform", {})
+    if mine != theirs:
+        diff = ", ".join(f"{k} {theirs.get(k)!r} here {mine.get(k)!r}" for k in mine if mine.get(k) != theirs.get(k))
+        raise CacheError(f"{here}: the client's compiled libraries do not fit this machine ({diff}); "
+                         f"run the worker on the client's platform or give it a compiler and arvcas's cache")
+    if b.get("model_hash") != model_hash():
+        raise CacheError(f"{here}: arvcas's model code or data differs from the client's (model hash "
+                         f"{model_hash()[:12]} here, {str(b.get('model_hash'))[:12]} there); install the same arvcas")
+    n = 0
+    with _LOCK:
+        todo = [it for it in b["items"] if it["ident"] not in _PRELOADED]
+        if not todo:
+            return 0
+        d = Path(tempfile.mkdtemp(prefix="arvcas-shipped-"))
+        if not _PRIVATE_DIRS:
+            atexit.register(_remove_private_dirs)
+        _PRIVATE_DIRS.append(d)
+        for it in todo:
+            data = it["so"]
+            if hashlib.sha256(data).hexdigest() != it["manifest"].get("so_sha256"):
+                raise CacheError(f"{here}: shipped library {it['name']} does not match its sha256; refusing to load it")
+            so = d / f"{it['name']}-{it['ident'][:20]}.so"
+            so.write_bytes(data)
+            os.chmod(so, 0o500)
+            f = ca.external(it["name"], str(so))
+            _KEEP.append(f)
+            _MANIFESTS[f.__hash__()] = dict(it["manifest"], path=str(so), shipped=True)
+            _PRELOADED[it["ident"]] = f
+            n += 1
+    return n
 
 
 def artifact_of(f: ca.Function) -> dict | None:

@@ -120,6 +120,11 @@ class CompiledRun:
             self._fns[trace] = fn
         return fn
 
+    def compiled_functions(self, trace: bool = False) -> list[ca.Function]:
+        """Every compiled function a run calls: the run itself and the two that build its time table
+        (what a process without a compiler needs: :func:`arvcas.build.codegen.bundle`)."""
+        return [self.function(trace), *schedule.functions(self.cfg, self.opts)]
+
     def artifact(self, trace: bool = False) -> dict:
         return codegen.artifact_of(self.function(trace)) or {}
 

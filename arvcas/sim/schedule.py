@@ -40,7 +40,7 @@ from arvcas.model.uvms import ModelOptions
 
 __all__ = [
     "RECORD_FIELDS", "RECORD_SIZE", "ARM_FIELDS", "ARM_SIZE", "TIME_FIELDS", "TIME_SIZE", "Table",
-    "record_slices", "unpack", "stage_times", "n_stages", "record_expr", "table", "clear_cache",
+    "record_slices", "unpack", "stage_times", "n_stages", "record_expr", "table", "functions", "clear_cache",
 ]
 
 NP = len(SCHEMA)
@@ -190,6 +190,12 @@ class Table(NamedTuple):
     arm: np.ndarray
 
 
+def functions(cfg: ScenarioConfig, opts: ModelOptions = ModelOptions()) -> tuple[ca.Function, ca.Function]:
+    """The two compiled functions that build the table: its time part and its arm part."""
+    return (_compiled("time", cfg.graph_key(), lambda: _time_function(cfg)),
+            _compiled("arm", opts, lambda: _arm_function(opts)))
+
+
 def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions()) -> Table:
     """The run's time table for (scenario, parameter vector ``p``), kept for the last few in this process.
 
@@ -202,8 +208,7 @@ def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions(
         if tab is not None:
             _TABLES.move_to_end(key)
             return tab
-    f_time = _compiled("time", cfg.graph_key(), lambda: _time_function(cfg))
-    f_arm = _compiled("arm", opts, lambda: _arm_function(opts))
+    f_time, f_arm = functions(cfg, opts)
     times = stage_times(cfg)
     n, ns = times.shape
     rec_t = calls.call(f_time, times.reshape(1, -1), p)[0]  # (TIME_SIZE, n * ns), F-ordered

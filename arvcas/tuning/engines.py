@@ -5,10 +5,12 @@ Both call the same top-level function, :func:`evaluate_rows`, which runs
 per-DOF metrics with the build key of the compiled run it used. The ``dask`` engine splits the
 population into contiguous chunks, ``client.map`` s them to the workers and concatenates the results
 in order; every run is independent of the others in its batch, so the generation's numbers, and
-therefore the front, are the same bit for bit as with the ``local`` engine, provided the workers run
-the same compiled code. Each worker builds the run function or loads it from its compile cache by
-content hash (:mod:`arvcas.build.codegen`); the engine checks that every chunk reports the client's key
-and refuses to mix results from different compiled code.
+therefore the front, are the same bit for bit as with the ``local`` engine: the workers run the
+client's own compiled code. The client ships it: the libraries of the run and of its time table, as
+bytes with their sha256 (:func:`ship_bundle`, scattered once to every worker), which a worker loads
+without a C compiler or a compile cache (:func:`arvcas.build.codegen.preload`; a worker on another
+platform, or with other arvcas model code, refuses with a one-line error naming it). The engine still
+checks that every chunk reports the client's key. An error raised on a worker says which worker.
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ import numpy as np
 from arvcas.params import Params
 from arvcas.sim.scenario import ScenarioConfig
 
-__all__ = ["EngineError", "EvalTask", "evaluate_rows", "run_key", "LocalEngine", "DaskEngine", "make_engine"]
+__all__ = ["EngineError", "EvalTask", "evaluate_rows", "run_key", "ship_bundle", "LocalEngine", "DaskEngine",
+           "make_engine"]
 
 
 class EngineError(ValueError):
@@ -47,6 +50,13 @@ def run_key(controller: str, cfg: ScenarioConfig) -> str:
 
     m = codegen.artifact_of(run_function(controller, cfg, trace=False))
     return "" if m is None else str(m["key"])
+
+
+def ship_bundle(run) -> dict:
+    """The compiled libraries a :class:`~arvcas.sim.run.CompiledRun` of metrics-only runs needs, as bytes."""
+    from arvcas.build import codegen
+
+    return codegen.bundle(run.compiled_functions(trace=False))
 
 
 def evaluate_rows(task: EvalTask, gains: np.ndarray, n_threads: int | None = None):
@@ -100,9 +110,18 @@ def _cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _chunk(task: EvalTask, gains: np.ndarray, n_threads: int):
-    """Dask task: one contiguous block of the population."""
-    return evaluate_rows(task, gains, n_threads=n_threads)
+def _chunk(task: EvalTask, gains: np.ndarray, n_threads: int, bundle: dict | None = None):
+    """Dask task: one contiguous block of the population, on the client's shipped libraries."""
+    from arvcas.build import codegen
+
+    try:
+        if bundle is not None:
+            codegen.preload(bundle)
+        return evaluate_rows(task, gains, n_threads=n_threads)
+    except Exception as e:  # noqa: BLE001 - say where it happened, in one line
+        here = codegen.process_name()
+        msg = " ".join(str(e).split()) or type(e).__name__
+        raise EngineError(msg if msg.startswith(here) else f"{here}: {type(e).__name__}: {msg}") from None
 
 
 class DaskEngine:
@@ -131,6 +150,7 @@ class DaskEngine:
         self.timeout_s = float(timeout_s)
         self._cluster = None
         self._keys: dict = {}
+        self._bundles: dict = {}
         try:
             if scheduler is None:
                 n = workers or _cores()
@@ -163,21 +183,29 @@ class DaskEngine:
         return f"dask ({where}), {len(th)} worker(s), {sum(th)} thread(s)"
 
     def prepare(self, task: EvalTask) -> str:
+        """The run's key; compiles it here (once) and scatters its libraries to every worker."""
+        from arvcas.sim.simulation import compiled_run
+
         k = (task.controller, task.cfg.graph_key())
         if k not in self._keys:
             self._keys[k] = run_key(task.controller, task.cfg)
+            b = ship_bundle(compiled_run(task.controller, None, task.cfg))
+            self._bundles[k] = self.client.scatter([b], broadcast=True, hash=False)[0]  # a list: one future
         return self._keys[k]
 
     def evaluate(self, task: EvalTask, gains: np.ndarray):
         key = self.prepare(task)
+        bundle = self._bundles[(task.controller, task.cfg.graph_key())]
         n = gains.shape[0]
         n_chunks = max(1, min(n, sum(self.threads())))
         blocks = [b for b in np.array_split(np.arange(n), n_chunks) if b.size]
         try:
             futures = self.client.map(_chunk, [task] * len(blocks), [gains[b] for b in blocks],
-                                      [1] * len(blocks), pure=False)
+                                      [1] * len(blocks), [bundle] * len(blocks), pure=False)
             self._wait(futures)
             parts = self.client.gather(futures)
+        except EngineError:
+            raise
         except (ValueError, KeyboardInterrupt):
             raise
         except Exception as e:  # noqa: BLE001 - a lost worker or connection: one line, not a traceback
