@@ -124,6 +124,8 @@ def test_traditional_law_zigzags_proposed_does_not(cfg):
         ({"gains": np.ones(5)}, "takes 66 gains"),
         ({"gains": -gains.default_gains("proposed")}, "must be > 0"),
         ({"gains": np.full(66, np.nan)}, "not finite"),
+        ({"seed": 2**63}, r"0 <= seed < 2\*\*63"),  # checked before the run, not when storing it
+        ({"seed": -1}, r"0 <= seed < 2\*\*63"),
     ],
 )
 def test_bad_input_one_line_errors(kwargs, match):

@@ -317,8 +317,9 @@ def disturbance_tabulated(cfg: ScenarioConfig, dist_sin, dist_cos, phase_cs):
 
 def noise_sequence(cfg: ScenarioConfig, seed: int, n: int | None = None) -> np.ndarray:
     """Sensor noise for samples k = 0..N, shape (12, N+1): seeded ``numpy.random.default_rng(seed)``."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ScenarioError(f"seed: must be a non-negative integer, got {seed!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**63:
+        raise ScenarioError(f"seed: must be an integer with 0 <= seed < 2**63 (result files store it as int64), "
+                            f"got {seed!r}")
     n = n_samples(cfg) if n is None else n
     rng = np.random.default_rng(int(seed))
     std = np.sqrt(cfg.sensor_variances)
