@@ -1,4 +1,4 @@
-"""Performance indices on stored series: CHAT (eq. 42), RMSE (eq. 43), and the SPEC 7 objectives.
+"""Performance indices on stored series: CHAT (eq. 42), RMSE (eq. 43), and the docs/model.md §7 objectives.
 
 NumPy only; inputs are the series a run stores at the controller samples ``t_k = k h``
 (``h = 0.1 s``), whole run. With a run of length ``t_f`` there are ``N = t_f / h`` sampling
@@ -109,7 +109,7 @@ def table3() -> Table3:
 
 
 def normalised_objectives(chat_values, rmse_values):
-    """The two tuning objectives of SPEC 7: ``(f_chat, f_rmse)``.
+    """The two tuning objectives of docs/model.md §7: ``(f_chat, f_rmse)``.
 
     ``f_chat = mean_i chat_i / CHAT_AGSTA,i`` and ``f_rmse = mean_i rmse_i / RMSE_AGSTA,i`` over
     the 6 DOF, normalised by the paper's Table 3 AGSTA values so that linear and angular DOFs

@@ -1,4 +1,4 @@
-"""arm_wrench (RNEA on a moving base, SPEC 3) against Pinocchio's RNEA on a free-flying base.
+"""arm_wrench (RNEA on a moving base, docs/model.md §3) against Pinocchio's RNEA on a free-flying base.
 
 Reference: ``pinocchio_model`` builds the same arm (modified DH, cylinder links, point payload) on a
 free flyer; the wrench the arm exerts on the vehicle is minus the spatial force transmitted through
@@ -102,7 +102,7 @@ def test_static_weight_dry(plant, dry):
 
 
 def test_static_weight_in_water(plant, params):
-    """In water: weight in water 36.6 g N (SPEC 3; the link table meets it to 4.5e-6 relative),
+    """In water: weight in water 36.6 g N (docs/model.md §3; the link table meets it to 4.5e-6 relative),
     and the payload adds 2 g N (3 kg in air, 2 kg weight in water)."""
     z = np.zeros(6)
     g = params["env.g"]

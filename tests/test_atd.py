@@ -1,4 +1,4 @@
-"""ATD (eq. 12-13, SPEC 5): fhan against hand-worked values, step and ramp responses."""
+"""ATD (eq. 12-13, docs/model.md §5): fhan against hand-worked values, step and ramp responses."""
 
 import math
 
@@ -68,7 +68,7 @@ def _run(y1, y2, x_of_k, r0, h0, h, n):
 
 def test_atd_step_reaches_target_within_T_without_overshoot():
     h, T, A_min = 0.1, 5.0, 1e-3
-    y1_0 = np.array([0.02, 0.02, 0.03, math.pi / 90, math.pi / 90, math.pi / 90])  # SPEC 4 eta0
+    y1_0 = np.array([0.02, 0.02, 0.03, math.pi / 90, math.pi / 90, math.pi / 90])  # docs/model.md §4 eta0
     x = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.5])  # eta_d = 0, plus one large step
     r0, h0 = atd_params(x - y1_0, T, h, A_min)
     r0 = np.array(r0).ravel()

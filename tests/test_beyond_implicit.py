@@ -1,4 +1,4 @@
-"""The implicit-GSTA controller in the closed loop (SPEC 5b), against the explicit proposed one at
+"""The implicit-GSTA controller in the closed loop (docs/model.md §5b), against the explicit proposed one at
 Table 2 gains, seed 0. The block-level tests (closed form vs root solve; no chattering on a scalar
 perturbed plant) are in test_gsta.py.
 

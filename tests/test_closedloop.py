@@ -26,7 +26,7 @@ def run_proposed(cfg):
 
 
 def test_compiled_run_equals_vm(cfg):
-    """The generated C of the whole run reproduces CasADi's VM on the same graph (SPEC 4)."""
+    """The generated C of the whole run reproduces CasADi's VM on the same graph (docs/model.md §4)."""
     P = load_params()
     F = closedloop.build_run(closedloop.RunSpec("proposed", cfg), trace=False)
     args = (gains.default_gains("proposed"), scenario.noise_sequence(cfg, 1), cfg.uncertainty,
@@ -82,7 +82,7 @@ def test_station_keeping_and_references(run_proposed):
     assert np.all(r.rmse < 1e-2)
     assert np.abs(r.eta_ref[-1]).max() < 1e-6  # ATD y1 -> eta_d = 0 well within T
     assert np.abs(r.eta[-100:]).max() < 0.02
-    # the arm moves and the payload ramps as SPEC 4 says
+    # the arm moves and the payload ramps as docs/model.md §4 says
     assert r.payload[0] == 0 and r.payload[-1] == 1
     i = np.searchsorted(r.t, 20.0)
     np.testing.assert_allclose(np.degrees(r.q[i]), [60, 60, -60, 0, 60, 0], atol=1e-9)

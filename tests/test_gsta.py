@@ -1,4 +1,4 @@
-"""GSTA (eq. 18-21), adaptive gain laws (eq. 19, AGSTA, Fig. 10) and the implicit step (SPEC 5b)."""
+"""GSTA (eq. 18-21), adaptive gain laws (eq. 19, AGSTA, Fig. 10) and the implicit step (docs/model.md §5b)."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Link fluid loads (SPEC 3): the Gauss-Legendre rule, the drag integral and its convergence, and the
+"""Link fluid loads (docs/model.md §3): the Gauss-Legendre rule, the drag integral and its convergence, and the
 sign of the drag's power.
 
 Measured (recorded here so a change shows): over 30 random moving states (nu, qd != 0), the drag part

@@ -1,8 +1,8 @@
-"""RK4 at the scenario step against CasADi's CVODES on the 100 s scenario of SPEC 4, open loop.
+"""RK4 at the scenario step against CasADi's CVODES on the 100 s scenario of docs/model.md §4, open loop.
 
-Plant: ``uvms_rhs`` (default parameters, water, n_quad = 5) with the SPEC 4 arm motion: hold q0 to 5 s,
+Plant: ``uvms_rhs`` (default parameters, water, n_quad = 5) with the docs/model.md §4 arm motion: hold q0 to 5 s,
 quintic to qg over 5-20 s, hold, payload ramp 0 -> 1 over 22.0-22.5 s, quintic back to q0 over
-25-40 s, hold to 100 s; eta0, nu0 of SPEC 4. Thrust: a FIXED body-wrench profile (no feedback) that
+25-40 s, hold to 100 s; eta0, nu0 of docs/model.md §4. Thrust: a FIXED body-wrench profile (no feedback) that
 cancels the net buoyancy (B - W = 2 g N) until the payload, whose 2 g N weight in water then does it,
 plus small sinusoids in every DOF. The state stays bounded (|x|, |y|, |z| < 0.2 m, angles < 0.1 rad).
 
@@ -11,7 +11,7 @@ restarted at every kink of the inputs (5, 20, 22, 22.5, 25, 40 s). The plant is 
 mode the 4.3 t vehicle, fastest the roll oscillation near 1.2 rad/s), and functional iteration needs
 no Newton Jacobian: the AD Jacobian of the drag term sqrt(v_n.v_n) v_n is NaN wherever v_n = 0 exactly.
 Measured: CVODES at 1e-14 vs 1e-15 differs by 1.2e-12 over 10 s; RK4 (h = 0.01) vs CVODES over the
-100 s run: max 2.1e-11 m in position, 6.1e-11 rad in roll, 8.1e-11 rad/s in roll rate (SPEC 4
+100 s run: max 2.1e-11 m in position, 6.1e-11 rad in roll, 8.1e-11 rad/s in roll rate (docs/model.md §4
 asks < 1e-6 m).
 """
 
@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-H = 0.01  # scenario RK4 step (SPEC 4)
+H = 0.01  # scenario RK4 step (docs/model.md §4)
 T_END = 100.0
 BREAKS = (0.0, 5.0, 20.0, 22.0, 22.5, 25.0, 40.0, T_END)
 ETA0 = [0.02, 0.02, 0.03, np.pi / 90, np.pi / 90, np.pi / 90]
@@ -122,7 +122,7 @@ def test_rk4_matches_cvodes_over_scenario(ode, rk4_step, x0):
     assert np.abs(X_cv[0:3]).max() < 0.2 and np.abs(X_cv[3:6]).max() < 0.1
     err = np.abs(X_rk - X_cv).max(axis=1)
     print("max |RK4 - CVODES| per state:", err)
-    assert err[0:3].max() < 1e-6  # SPEC 4, metres
+    assert err[0:3].max() < 1e-6  # docs/model.md §4, metres
     assert err.max() < 1e-9  # every state; measured 8.1e-11 (roll rate p)
     # the comparison is not trivially small: the run does move
     assert np.abs(X_cv[:, -1] - x0).max() > 1e-2

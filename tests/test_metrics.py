@@ -1,11 +1,11 @@
-"""CHAT (eq. 42), RMSE (eq. 43), Table 3 data and the SPEC 7 objectives, against hand-worked values."""
+"""CHAT (eq. 42), RMSE (eq. 43), Table 3 data and the docs/model.md §7 objectives, against hand-worked values."""
 
 import numpy as np
 import pytest
 
 from arvcas.metrics import DOFS, chat, normalised_objectives, rmse, table3
 
-# SPEC 6 / paper Table 3, typed here independently of data/table3.toml
+# docs/model.md §6 / paper Table 3, typed here independently of data/table3.toml
 SPEC_CHAT_AGSTA = [0.0363, 0.0749, 0.1045, 0.0903, 0.1173, 0.1006]
 SPEC_CHAT_PROPOSED = [0.0285, 0.0462, 0.0672, 0.0538, 0.0887, 0.0662]
 SPEC_RMSE_AGSTA = [6.1005e-4, 6.0119e-4, 7.5175e-4, 7.5865e-4, 7.7607e-4, 5.6136e-4]

@@ -1,4 +1,4 @@
-"""RESO (eq. 14-16, SPEC 5): discrete poles, disturbance estimation on a double integrator, checks."""
+"""RESO (eq. 14-16, docs/model.md §5): discrete poles, disturbance estimation on a double integrator, checks."""
 
 import casadi as ca
 import numpy as np

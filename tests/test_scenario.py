@@ -1,4 +1,4 @@
-"""Scenario data (SPEC 4): strict loading, the effective-config round trip, trajectory, disturbance, noise."""
+"""Scenario data (docs/model.md §4): strict loading, the effective-config round trip, trajectory, disturbance, noise."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def _write(tmp_path, text, name="s.toml", binary=False):
     [
         (lambda t: t.replace("[time]", "[time"), "malformed TOML"),
         (lambda t: t.replace("duration =", "durration ="), "unknown key 'time.durration' (did you mean 'time.duration'?)"),
-        (lambda t: t.replace('h_plant = { value = 0.01, unit = "s", source = "SPEC 4: plant RK4 step" }\n', ""), "missing key 'time.h_plant'"),
+        (lambda t: t.replace('h_plant = { value = 0.01, unit = "s", source = "docs/model.md §4: plant RK4 step" }\n', ""), "missing key 'time.h_plant'"),
         (lambda t: t.replace("duration = { value = 100.0,", 'duration = { value = "long",'), "time.duration: value must be a number"),
         (lambda t: t.replace("duration = { value = 100.0,", "duration = { value = nan,"), "time.duration: value must be finite"),
         (lambda t: t.replace("duration = { value = 100.0,", "duration = { value = inf,"), "time.duration: value must be finite"),

@@ -169,7 +169,7 @@ def test_call_equals_casadi_call_and_checks_shapes():
 
 
 def test_vehicle_mass_matrix_is_what_the_table_factors(params):
-    """The LU in the table factors M + M_arm (SPEC 3), not M alone: solve against numpy at one time."""
+    """The LU in the table factors M + M_arm (docs/model.md §3), not M alone: solve against numpy at one time."""
     cfg = scenario.load_scenario()
     pv = params.vector()
     n, ns = schedule.stage_times(cfg).shape

@@ -1,9 +1,9 @@
-"""uvms_rhs (exactly coupled vehicle + arm, SPEC 2-3) against Pinocchio forward dynamics, rho = 0.
+"""uvms_rhs (exactly coupled vehicle + arm, docs/model.md §2-3) against Pinocchio forward dynamics, rho = 0.
 
 With ``env.rho = 0`` the vehicle has no added mass and no damping; what remains is rigid-body
 dynamics of the vehicle + arm tree under gravity plus three external wrenches on the vehicle body:
 its buoyancy B = (m + buoyancy_excess) g (world-up at the COB; B does not depend on rho in this model),
-the SPEC 3 trim (computed here from Pinocchio's own static arm wrench at q0), and the body wrench tau.
+the docs/model.md §3 trim (computed here from Pinocchio's own static arm wrench at q0), and the body wrench tau.
 The joints' accelerations are prescribed, so only the base acceleration is solved for:
 ``M[0:6,0:6] nu_dot = f_ext - (nle + M[0:6,6:12] qdd)[0:6]``, where the bracket is Pinocchio's RNEA
 with base acceleration 0 and joint accelerations qdd (free-flyer rows: no actuation on the base).
@@ -99,7 +99,7 @@ def test_uvms_rhs_matches_pinocchio(plant, dry, pin_models, trim_static, payload
 @pytest.mark.parametrize("medium", ["dry", "water"])
 def test_trim_cancels_arm_at_q0(plant, params, dry, medium):
     """At q0, level, at rest, no payload, tau cancelling the net buoyancy: the coupled vehicle does not
-    accelerate (the trim exactly balances the arm's static wrench, SPEC 3), in air and in water."""
+    accelerate (the trim exactly balances the arm's static wrench, docs/model.md §3), in air and in water."""
     pr = params if medium == "water" else dry
     p = pr.vector()
     q0 = np.array([pr[f"arm.stow.q{i}"] for i in range(1, 7)])

@@ -1,4 +1,4 @@
-"""Vehicle alone (SPEC 2): structural properties of M, C, D, g, J and the thrusters.
+"""Vehicle alone (docs/model.md §2): structural properties of M, C, D, g, J and the thrusters.
 
 Tolerances: identities that hold exactly in exact arithmetic are checked to 1e-9 relative (or a few
 ulps of the terms' magnitude); physical properties are checked where they hold for the printed
@@ -77,7 +77,7 @@ def test_mass_matrix(P, params):
     m = params["vehicle.m"]
     np.testing.assert_array_equal(MRB[:3, :3], m * np.eye(3))
     assert MRB[3, 4] == MRB[4, 3] == 0.0 and MRB[3, 5] == -params["vehicle.Ixz"]
-    # added mass entry (3,1) = -rho Z'udot (the print's sign typo fixed, SPEC 2)
+    # added mass entry (3,1) = -rho Z'udot (the print's sign typo fixed, docs/model.md §2)
     MA = _np(vehicle.M_A(P))
     assert MA[2, 0] == pytest.approx(-params["env.rho"] * params["hydro.Z_udot"], rel=1e-15)
     assert MA[2, 0] > 0
@@ -210,7 +210,7 @@ def test_thrust_saturation(plant, params, P):
 
 
 def test_mass_matrix_as_printed(P, params):
-    """M entry by entry as App. A prints it (dotted coefficients restored, M(3,1) sign fixed: SPEC 2)."""
+    """M entry by entry as App. A prints it (dotted coefficients restored, M(3,1) sign fixed: docs/model.md §2)."""
     c = {k[len("hydro."):]: params[k] for k in params.names() if k.startswith("hydro.")}
     r = params["env.rho"]
     m = params["vehicle.m"]
@@ -228,7 +228,7 @@ def test_mass_matrix_as_printed(P, params):
 
 
 def test_damping_as_printed(P, params):
-    """D(nu) entry by entry as App. A prints it, with SPEC 2's readings: X'v|w| |w| in (1,2), the fixed
+    """D(nu) entry by entry as App. A prints it, with docs/model.md §2 readings: X'v|w| |w| in (1,2), the fixed
     stern angle delta_s = (-72 - 55)/2 = -63.5 deg, so (delta_s - pi/2 sgn delta_s) = +26.5 deg."""
     c = {k[len("hydro."):]: params[k] for k in params.names() if k.startswith("hydro.")}
     r = params["env.rho"]
@@ -248,7 +248,7 @@ def test_damping_as_printed(P, params):
             [c["N_u"], c["N_v"] + c["N_v_absv"] * av, 0, 0, 0, c["N_r"]],
         ])
         np.testing.assert_allclose(_np(vehicle.D(P, ca.DM(nu))), ref, rtol=1e-13, atol=1e-10)
-    assert params["hydro.K_p"] == -0.179  # SPEC 2: printed +0.179 is a sign typo
+    assert params["hydro.K_p"] == -0.179  # docs/model.md §2: printed +0.179 is a sign typo
 
 
 def test_thruster_matrix_as_printed(P, params):

@@ -1,10 +1,10 @@
 """Generalised super-twisting algorithm (GSTA) and its adaptive gains, paper eq. (18)-(21),
-SPEC 5 and 5b.
+docs/model.md §5 and 5b.
 
 Per DOF, with sliding variable ``s = e_dot + c e`` (m/s or rad/s), the GSTA output is
 ``v = -k1 phi1(s) - int k2 phi2(s)`` (eq. 21, m/s^2 or rad/s^2); ``w = -int k2 phi2(s)`` is its
 integral state. Everything is sampled with the controller period ``h`` and discretised by
-explicit Euler (SPEC 4), except :func:`gsta_implicit` (SPEC 5b).
+explicit Euler (docs/model.md §4), except :func:`gsta_implicit` (docs/model.md §5b).
 
 Every function is a pure expression over any CasADi type (SX, MX, DM) and also accepts Python
 floats and NumPy arrays (numbers come back as ``DM``). Vectors are handled elementwise, one DOF
@@ -60,7 +60,7 @@ def k1_next_proposed(k1, s, sigma, l, r, k1min, h):
     - ``|s| <= sigma``, ``k1 > k1min``:   ``k1+ = max(k1 - h r k1, k1min)``
     - ``|s| <= sigma``, ``k1 <= k1min``:  ``k1+ = k1``
 
-    Why the decrease stops at ``k1min`` instead of undershooting it (SPEC is silent): in
+    Why the decrease stops at ``k1min`` instead of undershooting it (the paper is silent): in
     continuous time the decreasing branch is a discontinuous right-hand side that vanishes at
     ``k1 = k1min``, so the solution decays until it reaches ``k1min`` and stays there: it never
     goes below. Plain Euler would instead overshoot by up to ``h r k1min`` on the last step and
@@ -87,7 +87,7 @@ def k1_next_proposed(k1, s, sigma, l, r, k1min, h):
 
 
 def k1_next_agsta(k1, s, sigma, l, h):
-    """Original AGSTA law (Guerrero et al. 2019, SPEC 5): ``k1_dot = l`` if ``|s| > sigma`` else 0.
+    """Original AGSTA law (Guerrero et al. 2019, docs/model.md §5): ``k1_dot = l`` if ``|s| > sigma`` else 0.
 
     Explicit Euler: ``k1+ = k1 + h l`` outside the neighbourhood, ``k1`` inside; never decreases.
     """
@@ -95,7 +95,7 @@ def k1_next_agsta(k1, s, sigma, l, h):
 
 
 def k1_next_traditional(k1, s, sigma, l, k1min, h):
-    """The "traditional" decreasing law of Fig. 10 (SPEC 5), explicit Euler, deliberately unclamped.
+    """The "traditional" decreasing law of Fig. 10 (docs/model.md §5), explicit Euler, deliberately unclamped.
 
     ``k1_dot = l`` if ``|s| > sigma`` or ``k1 <= k1min``, else ``-l``. Sampled, the gain steps
     by ``+-h l`` and so zigzags around ``k1min`` with amplitude ``h l`` once ``|s| <= sigma``: the
@@ -117,7 +117,7 @@ def gsta_explicit(s, w, k1, k2, mu1, mu2, h):
 
 
 def gsta_implicit(s, w, k1, k2, mu1, mu2, h):
-    """Implicit (backward-Euler) GSTA sample in closed form, SPEC 5b: returns ``(v, w_next)``.
+    """Implicit (backward-Euler) GSTA sample in closed form, docs/model.md §5b: returns ``(v, w_next)``.
 
     Backward Euler on the nominal sliding dynamics ``s_dot = v``::
 
@@ -135,9 +135,9 @@ def gsta_implicit(s, w, k1, k2, mu1, mu2, h):
       ``w_next = w - h k2 phi2(s~)``, ``v = -k1 phi1(s~) + w_next``.
 
     The root is evaluated as ``rho = -2 c0 / (b + sqrt(b^2 - 4 a c0))``, algebraically equal to
-    SPEC 5b's ``(-b + sqrt(b^2 - 4 a c0)) / (2 a)`` but free of cancellation when ``|c0| << b^2``.
+    docs/model.md §5b ``(-b + sqrt(b^2 - 4 a c0)) / (2 a)`` but free of cancellation when ``|c0| << b^2``.
     The branch not taken is kept finite (no NaN/inf in either branch of the graph). Gains are
-    those of the current sample; the adaptive laws keep their explicit update (SPEC 5b).
+    those of the current sample; the adaptive laws keep their explicit update (docs/model.md §5b).
     Requires ``h > 0``, ``k1, k2, mu1, mu2 >= 0``.
     """
     z = s + h * w

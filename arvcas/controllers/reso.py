@@ -1,4 +1,4 @@
-"""Reduced-order extended state observer (RESO), paper eq. (14)-(16), SPEC 5.
+"""Reduced-order extended state observer (RESO), paper eq. (14)-(16), docs/model.md §5.
 
 Per DOF of eta (in {n}) the observer estimates ``chi1 = eta_dot`` (``z1``, m/s or rad/s) and the
 total disturbance ``chi2 = Mhat^-1 f(eta, nu)`` (``z2 = chi2_hat``, m/s^2 or rad/s^2) of
@@ -25,14 +25,14 @@ def reso_gains(omega, rule="spec"):
     parametrisation). ``rule="paper"``: ``(2 omega, omega)`` as printed in eq. (16).
     """
     if rule == "spec":
-        return 2 * omega, omega**2  # eq. 16 erratum (SPEC 5): beta2 = omega^2 (print: omega)
+        return 2 * omega, omega**2  # eq. 16 erratum (docs/model.md §5): beta2 = omega^2 (print: omega)
     if rule == "paper":
-        return 2 * omega, omega  # eq. 16 as printed (SPEC 5 option beta2_rule = "paper")
+        return 2 * omega, omega  # eq. 16 as printed (docs/model.md §5 option beta2_rule = "paper")
     raise ValueError(f"unknown RESO beta2 rule {rule!r}; expected one of {_RULES}")
 
 
 def reso_step(z1, z2, eta_dot, tau_eta, Mhat_inv, beta1, beta2, h):
-    """One RESO sample, eq. (15) by explicit Euler (SPEC 5): ``(z1(k+1), z2(k+1))``.
+    """One RESO sample, eq. (15) by explicit Euler (docs/model.md §5): ``(z1(k+1), z2(k+1))``.
 
     ``err = eta_dot - z1``; ``z1+ = z1 + h (z2 + Mhat^-1 tau_eta + beta1 err)``;
     ``z2+ = z2 + h beta2 err``.
@@ -42,7 +42,7 @@ def reso_step(z1, z2, eta_dot, tau_eta, Mhat_inv, beta1, beta2, h):
         z2: estimate of the total disturbance ``chi2`` at sample k (m/s^2 or rad/s^2).
         eta_dot: measured (estimated) ``eta_dot`` at sample k.
         tau_eta: generalised force in {n} (N or N m) held over the interval this step
-            integrates; SPEC 5 passes the command of the previous sample (the RESO runs before
+            integrates; docs/model.md §5 passes the command of the previous sample (the RESO runs before
             the new command exists). The step is exactly eq. (15) by explicit Euler when this is
             the force the plant receives until the next sample; any other choice adds
             ``h Mhat^-1 (tau_applied - tau_eta)`` to the ``z1`` prediction error.
@@ -88,5 +88,5 @@ def check_reso_stability(omega, h, rule="spec"):
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(
             f"RESO unstable ({rule} rule) for DOF {i}: h*omega = {h:g}*{omega[i]:g} = "
-            f"{h * omega[i]:g}; the spec rule needs 0 < h*omega < 2 (SPEC 5)"
+            f"{h * omega[i]:g}; the spec rule needs 0 < h*omega < 2 (docs/model.md §5)"
         )

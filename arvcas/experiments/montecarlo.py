@@ -4,7 +4,7 @@ The paper compares its controllers on one sensor-noise draw and one model-uncert
 master seed draws, for each run ``i`` independently,
 
 - a sensor-noise seed (the run's noise sequence is ``scenario.noise_sequence(cfg, seed_i)``);
-- the four nominal-model factors ``[C, D, g, arm]`` (SPEC 4), each uniform in ``[1 - spread, 1 + spread]``
+- the four nominal-model factors ``[C, D, g, arm]`` (docs/model.md §4), each uniform in ``[1 - spread, 1 + spread]``
   (default ``spread = 0.3``: the nominal model is wrong by up to 30 % either way, each term
   independently; the scenario file's fixed factors 1.4, 0.6, 0.7, 0.6 are one point partly outside
   this box). Only the AGSTA baseline uses the nominal model; the RESO-based controllers (proposed,
@@ -151,7 +151,7 @@ class MonteCarlo:
         return self.draws.runs
 
     def objectives(self) -> np.ndarray:
-        """SPEC 7's normalised (f_chat, f_rmse) per run, shape (runs, 2) (NaN for diverged runs)."""
+        """docs/model.md §7 normalised (f_chat, f_rmse) per run, shape (runs, 2) (NaN for diverged runs)."""
         out = np.full((self.runs, 2), np.nan)
         for i in np.flatnonzero(self.ok):
             out[i] = metrics.normalised_objectives(self.chat[i], self.rmse[i])
@@ -212,7 +212,7 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
         "dofs": np.array(DOFS, dtype=object),
         "chat_units": "N (x, y, z), N m (phi, theta, psi) per controller sample; eq. 42",
         "rmse_units": "m (x, y, z), rad (phi, theta, psi); eq. 43",
-        "factors_columns": "C, D, g, arm (nominal-model factors of SPEC 4; used by agsta only)",
+        "factors_columns": "C, D, g, arm (nominal-model factors of docs/model.md §4; used by agsta only)",
         "artifact_key": str(mc.meta.get("artifact_key", "")), "scenario_file": str(mc.meta.get("scenario_file", "")),
         "front_path": str(mc.meta.get("front_path", "")),
         **_io.provenance(),
@@ -310,7 +310,7 @@ def _percentiles(x, q=(5, 50, 95)) -> tuple[float, ...]:
 
 def summary(mc: MonteCarlo) -> dict:
     """Per DOF mean with 95 % t-interval and 5/50/95 percentiles of CHAT and RMSE over the runs that
-    completed; the same for SPEC 7's normalised objectives; the failure rate with its Wilson interval."""
+    completed; the same for docs/model.md §7 normalised objectives; the failure rate with its Wilson interval."""
     out: dict = {"chat": {}, "rmse": {}, "objectives": {}}
     for key in ("chat", "rmse"):
         arr = getattr(mc, key)
@@ -349,7 +349,7 @@ def summary_markdown(mc: MonteCarlo, title: str | None = None) -> str:
         c, r = s["chat"][d], s["rmse"][d]
         L.append(f"| {_DOF_MD[i]} | {_ci(c['mean'])} | {' / '.join(f'{v:.4g}' for v in c['pct'])} "
                  f"| {_ci(r['mean'])} | {' / '.join(f'{v:.4g}' for v in r['pct'])} |")
-    L += ["", "SPEC 7 objectives (per-DOF value / paper's AGSTA value, averaged over the 6 DOF):", ""]
+    L += ["", "docs/model.md §7 objectives (per-DOF value / paper's AGSTA value, averaged over the 6 DOF):", ""]
     for name, v in s["objectives"].items():
         L.append(f"- {name}: mean {_ci(v['mean'])}; median {_ci(v['median'])} (sign-test 95 % interval); "
                  f"p5 / p50 / p95 {' / '.join(f'{x:.4g}' for x in v['pct'])}")
@@ -365,7 +365,7 @@ def _duration(mc: MonteCarlo) -> str:
 
 
 def compare(a: MonteCarlo, b: MonteCarlo) -> dict:
-    """Per DOF ``a - b`` of CHAT and RMSE, and of the two SPEC 7 objectives.
+    """Per DOF ``a - b`` of CHAT and RMSE, and of the two docs/model.md §7 objectives.
 
     Paired over the runs both completed when the two studies share their draws (same master seed,
     spread and a common prefix of runs: the first min(n_a, n_b) runs); otherwise Welch's unpaired
@@ -432,7 +432,7 @@ def compare_markdown(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, na
                  f"| {_ci(er['diff'])} | {er['ratio']:.3f} | {sign(er)} |")
     L += [""]
     for name, e in c["objectives"].items():
-        L.append(f"- {name} (SPEC 7): A - B = {_ci(e['diff'])}, ratio {e['ratio']:.3f}, {sign(e)}")
+        L.append(f"- {name} (docs/model.md §7): A - B = {_ci(e['diff'])}, ratio {e['ratio']:.3f}, {sign(e)}")
     if c["paired"]:
         def msign(e):
             if not e["median_certain"]:
@@ -448,7 +448,7 @@ def compare_markdown(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, na
             L.append(f"| {_DOF_MD[i]} | {_ci(ec['median'])} | {msign(ec)} | {_ci(er['median'])} | {msign(er)} |")
         L.append("")
         for name, e in c["objectives"].items():
-            L.append(f"- {name} (SPEC 7): median A - B = {_ci(e['median'])}, {msign(e)}")
+            L.append(f"- {name} (docs/model.md §7): median A - B = {_ci(e['median'])}, {msign(e)}")
     L += ["", "Where the sign is certain (95 %):", ""]
     for stat, iv_key, ok_key in (("means", "diff", "certain"), ("medians", "median", "median_certain")):
         if stat == "medians" and not c["paired"]:

@@ -5,7 +5,7 @@ with the traditional decreasing law (Fig. 10), each with its Table 2 gains, one 
 random numbers), and writes into ``out_dir``::
 
     proposed.h5  agsta.h5  traditional.h5     result files (arvcas.io.results layout)
-    table3.md                                 paper's Table 3 and ours, ratios, the SPEC 6 checks
+    table3.md                                 paper's Table 3 and ours, ratios, the docs/model.md §6 checks
     fig05.png ... fig11.png                   the paper's Figures 5-11 (arvcas.io.plots)
 
 Every file is written atomically by :mod:`arvcas.io.files` (temporary name in ``out_dir``, then ``os.replace``).
@@ -36,7 +36,7 @@ __all__ = [
 
 CONTROLLERS = ("proposed", "agsta", "traditional")
 FIGURE_FILES = ("fig05", "fig06", "fig07", "fig08", "fig09", "fig10", "fig11")
-RMSE_TOLERANCE = 1.1  # proposed RMSE may exceed AGSTA's by at most 10 % (SPEC 6: "not above it")
+RMSE_TOLERANCE = 1.1  # proposed RMSE may exceed AGSTA's by at most 10 % (docs/model.md §6: "not above it")
 # A second reading of eq. 42's N, reported beside ours in table3.md, never used as an objective: the
 # paper simulates in MATLAB/Simscape (section 4), and if its CHAT divided by the samples of a signal
 # log at this step rather than by the controller samples, N is t_f / LOG_STEP_HYPOTHESIS (a hypothesis:
@@ -51,7 +51,7 @@ def _silent(_msg: str) -> None:
 
 
 def compare(proposed: Result, agsta: Result) -> dict[str, dict[str, object]]:
-    """SPEC 6's comparison per DOF: ``chat_lower`` (proposed CHAT < AGSTA CHAT), ``rmse_ok``
+    """docs/model.md §6 comparison per DOF: ``chat_lower`` (proposed CHAT < AGSTA CHAT), ``rmse_ok``
     (proposed RMSE <= 1.1 x AGSTA RMSE), the ratios proposed/AGSTA, and ``valid`` (both runs ok)."""
     valid = bool(proposed.ok and agsta.ok)
     out = {}
@@ -257,7 +257,7 @@ def ekf_effect_markdown(cfg: ScenarioConfig, seed: int) -> str:
         "# Effect of the EKF's process noise on CHAT and RMSE",
         "",
         f"Seed {seed}, Table 2 gains, sensor variances of section 4.1. Means over the 6 DOF; per-DOF",
-        "ratios proposed/AGSTA in the last two columns (how many DOF satisfy SPEC 6's two conditions).",
+        "ratios proposed/AGSTA in the last two columns (how many DOF satisfy docs/model.md §6 two conditions).",
         "",
         "| EKF setting | CHAT proposed | CHAT AGSTA | RMSE proposed | RMSE AGSTA | DOF with CHAT_p < CHAT_a | DOF with RMSE_p <= 1.1 RMSE_a |",
         "|---|---|---|---|---|---|---|",
@@ -294,7 +294,7 @@ def run_paper(out_dir, seed: int = 0, progress: Callable[[str], None] | None = p
         ``{"results": {controller: Result}, "files": {name: Path}, "checks": compare(...),
         "passed": bool}``: ``files`` has keys ``proposed``, ``agsta``, ``traditional``, ``table3``
         and ``fig05`` .. ``fig11``; ``passed`` is True when both runs are ok and every DOF meets
-        both SPEC 6 conditions.
+        both docs/model.md §6 conditions.
     """
     say = progress or _silent
     out = _prepare_out_dir(out_dir)
@@ -326,11 +326,11 @@ def run_paper(out_dir, seed: int = 0, progress: Callable[[str], None] | None = p
         files[name] = _files.write_figure(out / f"{name}.png", fig, 150, ResultsError)
         say(f"  figure -> {files[name]}")
     if ekf_study:
-        say("EKF process-noise study (SPEC 4: its effect on CHAT and RMSE) ...")
+        say("EKF process-noise study (docs/model.md §4: its effect on CHAT and RMSE) ...")
         text = ekf_effect_markdown(cfg, seed)
         files["ekf"] = _files.write_text(out / "ekf.md", text, ResultsError)
         say(f"  table -> {files['ekf']}")
     checks = compare(p, a)
     passed = all(c["chat_lower"] and c["rmse_ok"] for c in checks.values())
-    say(f"SPEC 6 comparison: {'all 6 DOF pass' if passed else 'NOT all DOF pass'} (see {files['table3']})")
+    say(f"docs/model.md §6 comparison: {'all 6 DOF pass' if passed else 'NOT all DOF pass'} (see {files['table3']})")
     return {"results": runs, "files": files, "checks": checks, "passed": passed}

@@ -5,7 +5,7 @@ one set of nominal-model factors, one set of disturbance phases. :func:`robust_f
 front member, and the Table 2 gains for reference, on ``runs`` draws of :mod:`.montecarlo`
 (the same draws for every member: the comparison between members is paired) and reports per member
 
-- ``F_mean``: SPEC 7's objectives (f_chat, f_rmse) averaged over the draws that completed, with
+- ``F_mean``: docs/model.md §7 objectives (f_chat, f_rmse) averaged over the draws that completed, with
   their 95 % t-intervals; the failure count (diverged draws) with its Wilson interval;
 - ``robust_nd``: the member has no failed draw and no other such member is at least as good in both
   mean objectives and better in one (non-dominated on the Monte Carlo means);
@@ -103,7 +103,7 @@ class RobustFront:
         return int(self.gains.shape[0])
 
     def per_run_objectives(self) -> np.ndarray:
-        """(f + 1, runs, 2): SPEC 7 objectives per member and draw (last row: Table 2); NaN if diverged."""
+        """(f + 1, runs, 2): docs/model.md §7 objectives per member and draw (last row: Table 2); NaN if diverged."""
         C = np.concatenate([self.chat, self.table2_chat[None]], axis=0)
         R = np.concatenate([self.rmse, self.table2_rmse[None]], axis=0)
         t3 = metrics.table3()
@@ -214,7 +214,7 @@ def write_robust(rf: RobustFront, path) -> Path:
             a["gain_names"] = np.array(gains_mod.gain_names(rf.controller), dtype=object)
             if rf.model_change:
                 a["model_change_allowed"] = rf.model_change
-            a["objectives"] = "f_chat, f_rmse (SPEC 7: per-DOF value / paper's AGSTA value, mean over 6 DOF)"
+            a["objectives"] = "f_chat, f_rmse (docs/model.md §7: per-DOF value / paper's AGSTA value, mean over 6 DOF)"
             for k, v in _io.provenance().items():
                 a[k] = v
             for k in _ARRAYS:

@@ -101,7 +101,7 @@ class Sweep:
     meta: dict = field(default_factory=dict)
 
     def objectives(self) -> np.ndarray:
-        """SPEC 7 (f_chat, f_rmse), shape [controller, h, seed, 2]; NaN for diverged runs."""
+        """docs/model.md §7 (f_chat, f_rmse), shape [controller, h, seed, 2]; NaN for diverged runs."""
         out = np.full(self.ok.shape + (2,), np.nan)
         for idx in zip(*np.nonzero(self.ok)):
             out[idx] = metrics.normalised_objectives(self.chat[idx], self.rmse[idx])
@@ -285,7 +285,7 @@ def sweep_markdown(sw: Sweep) -> str:
          f"{', '.join(f'{h:g}' for h in sw.hs)} s (controller, sensors, EKF, ATD, RESO, GSTA; the plant's RK4 step "
          f"stays {cfg.time_h_plant if cfg else 0.01:g} s), {noise}, noise seeds {', '.join(map(str, sw.seeds))}; "
          "the scenario's disturbance phases and nominal-model factors. Values are means over the seeds "
-         f"({ns} run(s) per cell) of the completed runs. f_chat, f_rmse: SPEC 7's objectives (per-DOF value / "
+         f"({ns} run(s) per cell) of the completed runs. f_chat, f_rmse: docs/model.md §7 objectives (per-DOF value / "
          "paper's AGSTA value, averaged over the 6 DOF); CHAT is per controller sample, CHAT/h per second.", "",
          "Zigzag of k1 (arvcas/beyond/sweep.py): *reversals* = samples where k1 changes direction within one "
          "adaptation step l h of k1min, summed over the 6 DOF; *time* = reversals x h / run length, mean over "

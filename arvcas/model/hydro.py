@@ -1,9 +1,9 @@
 """Fluid loads on the manipulator's links: buoyancy and cross-flow drag by Gauss-Legendre quadrature.
 
-Drag (paper eq. 9, generalised by SPEC 3): along the link axis ``u`` (unit vector of ``s_i``),
+Drag (paper eq. 9, generalised by docs/model.md §3): along the link axis ``u`` (unit vector of ``s_i``),
 ``f = -1/2 rho C_d D int_0^L |v_n(x)| v_n(x) dx`` and its moment about the frame origin
 ``n = -1/2 rho C_d D int_0^L (x u) x (|v_n(x)| v_n(x)) dx``, with ``v(x) = v_i + w_i x (x u)`` and
-``v_n = v - (v.u) u``. ``D`` is the diameter (the paper's "cross-sectional area" is a slip, SPEC 3).
+``v_n = v - (v.u) u``. ``D`` is the diameter (the paper's "cross-sectional area" is a slip, docs/model.md §3).
 """
 
 from __future__ import annotations

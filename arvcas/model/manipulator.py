@@ -1,6 +1,6 @@
 """The 6-DOF deep-sea manipulator: modified DH kinematics and recursive Newton-Euler on a moving base.
 
-Paper eq. 7-11 with SPEC 3: Craig's modified DH (Table 1), link i spans origin {i} -> origin {i+1}
+Paper eq. 7-11 with docs/model.md §3: Craig's modified DH (Table 1), link i spans origin {i} -> origin {i+1}
 (link 6: ``[0, 0, L_tool]`` along z6), centre of mass and of buoyancy at the middle of each link,
 solid-cylinder inertia, per-link buoyancy and quadrature drag, a point payload at the tool point.
 The base is the vehicle: frame {0} sits at ``P^b_0`` in {b} with ``R^b_0 = I``.
@@ -38,7 +38,7 @@ def dh(P, i: int, q_i):
 
 
 def link_vectors(P):
-    """s_i = P^i_{i+1} for links 1..6 (SPEC 3); s_6 reaches the tool point along z6."""
+    """s_i = P^i_{i+1} for links 1..6 (docs/model.md §3); s_6 reaches the tool point along z6."""
     s = []
     for i in range(1, N_JOINTS):
         a, al, d = P[f"arm.joint{i + 1}.a"], P[f"arm.joint{i + 1}.alpha"], P[f"arm.joint{i + 1}.d"]
@@ -103,7 +103,7 @@ def rnea(P, q, qd, qdd, w0, wd0, v0, a0, g0, payload, n_quad: int = 5, drag: boo
         m_i = P[f"arm.link{i}.mass"]
         V_i = P[f"arm.link{i}.volume"]
         D_i = P[f"arm.link{i}.diameter"]
-        c = 0.5 * s  # COM = COB at the middle of the link (SPEC 3)
+        c = 0.5 * s  # COM = COB at the middle of the link (docs/model.md §3)
         a_c = a + ca.cross(wd, c) + ca.cross(w, ca.cross(w, c))
         F = m_i * a_c  # eq. 8
         Ic = link_inertia(m_i, D_i, s)
@@ -115,7 +115,7 @@ def rnea(P, q, qd, qdd, w0, wd0, v0, a0, g0, payload, n_quad: int = 5, drag: boo
             f_child = ca.mtimes(R_next, f_next)
             n_child = ca.mtimes(R_next, n_next) + ca.cross(p_next, f_child)
         else:
-            # payload: point mass at the tool point, scaled by payload in [0, 1] (SPEC 3)
+            # payload: point mass at the tool point, scaled by payload in [0, 1] (docs/model.md §3)
             t = s
             a_t = a + ca.cross(wd, t) + ca.cross(w, ca.cross(w, t))
             mp, Vp = P["payload.mass"], P["payload.volume"]
@@ -129,11 +129,11 @@ def rnea(P, q, qd, qdd, w0, wd0, v0, a0, g0, payload, n_quad: int = 5, drag: boo
 
 
 def arm_wrench(P, eta, nu, nud, q, qd, qdd, payload, n_quad: int = 5):
-    """tau_m of eq. 11: the arm's wrench on the vehicle in {b} about the COB (SPEC 3 sign).
+    """tau_m of eq. 11: the arm's wrench on the vehicle in {b} about the COB (docs/model.md §3 sign).
 
     ``nud`` is Fossen's nu_dot (time derivative of the body-frame velocity components).
     """
-    pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])  # R^b_0 = I (SPEC 3)
+    pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])  # R^b_0 = I (docs/model.md §3)
     v_b, w_b = nu[0:3], nu[3:6]
     a_b = nud[0:3] + ca.cross(w_b, v_b)  # absolute acceleration of the COB, in {b}
     wd_b = nud[3:6]
@@ -188,7 +188,7 @@ def base_inertia(P, q, payload):
 
     The arm's wrench on the vehicle is affine in the vehicle acceleration,
     ``tau_m = tau_m(nu_dot = 0) - M_arm(q) nu_dot`` (exact), and the coupled vehicle solves
-    ``(M + M_arm) nu_dot = ...`` (SPEC 3). Each body with mass m, centre c (in {b}) and inertia I_c
+    ``(M + M_arm) nu_dot = ...`` (docs/model.md §3). Each body with mass m, centre c (in {b}) and inertia I_c
     about c contributes ``[[m I, -m S(c)], [m S(c), I_c - m S(c) S(c)]]``; summed through the first
     moment ``sum m c`` and ``-sum m S(c)^2 = sum m (|c|^2 I - c c')``. A link's cylinder inertia is
     ``I_c = I_tr I + (I_ax - I_tr) w w'`` with ``w`` its unit axis in {b}.
@@ -217,7 +217,7 @@ _DRAG_FRAME = 15
 
 
 def arm_schedule(P, q, qd, qdd, payload) -> dict:
-    """The vehicle-state-independent terms of the arm's wrench on the vehicle (SPEC 3, exact).
+    """The vehicle-state-independent terms of the arm's wrench on the vehicle (docs/model.md §3, exact).
 
     With the arm's spatial momentum about the COB in {b}, ``h = M_arm(q) nu + h_q(q, qd)``, Newton-Euler
     for the arm in the moving body frame gives, at ``nu_dot = 0``,
@@ -292,7 +292,7 @@ def arm_schedule(P, q, qd, qdd, payload) -> dict:
 
 
 def _to_cob(P, f1, n1, R1, p1):
-    """A wrench at origin {1} in frame {1} moved to the COB in {b} (R^b_0 = I, SPEC 3)."""
+    """A wrench at origin {1} in frame {1} moved to the COB in {b} (R^b_0 = I, docs/model.md §3)."""
     pb0 = ca.vertcat(P["arm.mount.x"], P["arm.mount.y"], P["arm.mount.z"])
     f0 = ca.mtimes(R1, f1)
     n0 = ca.mtimes(R1, n1) + ca.cross(p1, f0)
@@ -300,7 +300,7 @@ def _to_cob(P, f1, n1, R1, p1):
 
 
 def drag_wrench(P, nu, frames, n_quad: int = 5):
-    """The water's drag on the whole arm as a wrench at the COB in {b} (eq. 9 by quadrature, SPEC 3).
+    """The water's drag on the whole arm as a wrench at the COB in {b} (eq. 9 by quadrature, docs/model.md §3).
 
     Everything in {b}: link i turns at ``w_i = w + Omega_i`` and its origin moves at
     ``v + w x r_i + V_i`` (the vehicle's ``nu = [v; w]`` plus the joint motion); the normal velocity
@@ -345,19 +345,19 @@ def arm_wrench_scheduled(P, sched: dict, eta, nu, n_quad: int = 5):
 
 
 def stow_pose(P):
-    """q0 of section 4.2, the pose at which the vehicle is trimmed (SPEC 3)."""
+    """q0 of section 4.2, the pose at which the vehicle is trimmed (docs/model.md §3)."""
     return ca.vertcat(*[P[f"arm.stow.q{i}"] for i in range(1, N_JOINTS + 1)])
 
 
 def trim_static(P, n_quad: int = 5):
-    """(F_z, M_x, M_y) of tau_m at q0, level, at rest, without payload (SPEC 3 trim)."""
+    """(F_z, M_x, M_y) of tau_m at q0, level, at rest, without payload (docs/model.md §3 trim)."""
     z6 = ca.DM.zeros(6)
     tm = arm_wrench(P, z6, z6, z6, stow_pose(P), z6, z6, 0, n_quad)
     return tm[2], tm[3], tm[4]
 
 
 def trim_from_static(Fz, Mx, My, eta):
-    """The fixed trim buoyancy of SPEC 3 in {b}, from the static wrench at q0.
+    """The fixed trim buoyancy of docs/model.md §3 in {b}, from the static wrench at q0.
 
     A world-vertical upward force F_z at r_t = [-M_y/F_z, M_x/F_z, 0]:
     ``f_t = R' [0, 0, -F_z]``, ``m_t = r_t x f_t``.
@@ -369,5 +369,5 @@ def trim_from_static(Fz, Mx, My, eta):
 
 
 def trim_wrench(P, eta, n_quad: int = 5):
-    """The trim of SPEC 3 at attitude ``eta``, computed from the same parameters (follows rho, links)."""
+    """The trim of docs/model.md §3 at attitude ``eta``, computed from the same parameters (follows rho, links)."""
     return trim_from_static(*trim_static(P, n_quad), eta)

@@ -39,5 +39,5 @@ def saturate(P, u):
 
 
 def thrust(P, u):
-    """Realised body wrench B_T sat(u) (SPEC 2)."""
+    """Realised body wrench B_T sat(u) (docs/model.md §2)."""
     return ca.mtimes(B_T(P), saturate(P, u))

@@ -1,7 +1,7 @@
 """The coupled vehicle + manipulator and the public plant functions as named CasADi SX Functions.
 
 Inputs are dense columns with the parameter vector ``p`` (``Params.vector()``) last, so every model
-number is a runtime input. The coupling is exact (SPEC 3): the arm's wrench is affine in the vehicle
+number is a runtime input. The coupling is exact (docs/model.md §3): the arm's wrench is affine in the vehicle
 acceleration, ``tau_m = tau_m0 - M_arm(q) nu_dot``, so the coupled vehicle solves
 ``(M + M_arm(q)) nu_dot = tau + tau_m0 + tau_trim - C nu - D nu - g`` with no lagged acceleration.
 """
@@ -28,7 +28,7 @@ PUBLIC_FUNCTIONS = ("vehicle_rhs", "arm_wrench", "uvms_rhs", "allocate", "thrust
 class ModelOptions:
     """Build options: they change the graph's structure, so they are part of the compile-cache key."""
 
-    n_quad: int = 5  # Gauss-Legendre points per link for the drag integral (SPEC 3)
+    n_quad: int = 5  # Gauss-Legendre points per link for the drag integral (docs/model.md §3)
 
     def __post_init__(self):
         if not isinstance(self.n_quad, int) or isinstance(self.n_quad, bool) or not 1 <= self.n_quad <= 64:
@@ -39,10 +39,10 @@ class ModelOptions:
 
 
 def coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions):
-    """(nu_dot, tau_m) of the exactly coupled vehicle + arm (paper eq. 1 with eq. 11, SPEC 3).
+    """(nu_dot, tau_m) of the exactly coupled vehicle + arm (paper eq. 1 with eq. 11, docs/model.md §3).
 
     ``tau``: body wrench at the COB (thrust + disturbance); ``tau_extra``: further body wrench (the
-    trim buoyancy of SPEC 3). ``tau_m`` is the arm's wrench on the vehicle at this acceleration.
+    trim buoyancy of docs/model.md §3). ``tau_m`` is the arm's wrench on the vehicle at this acceleration.
     """
     tm0 = manipulator.arm_wrench(P, eta, nu, ca.DM.zeros(6), q, qd, qdd, payload, opts.n_quad)
     Mb = manipulator.base_inertia(P, q, payload)  # tau_m = tm0 - M_arm nu_dot, exact
@@ -70,7 +70,7 @@ def coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOp
 
 
 def uvms_xdot(P, x, tau, q, qd, qdd, payload, opts: ModelOptions, trim=None):
-    """xdot = [J(eta) nu; nu_dot] of the coupled system; ``trim`` defaults to SPEC 3's trim at q0."""
+    """xdot = [J(eta) nu; nu_dot] of the coupled system; ``trim`` defaults to docs/model.md §3 trim at q0."""
     eta, nu = x[0:6], x[6:12]
     if trim is None:
         trim = manipulator.trim_wrench(P, eta, opts.n_quad)

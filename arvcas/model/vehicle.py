@@ -1,4 +1,4 @@
-"""The Haidou-1 vehicle in Fossen form (paper eq. 1, Appendix A, Table A1; SPEC 2).
+"""The Haidou-1 vehicle in Fossen form (paper eq. 1, Appendix A, Table A1; docs/model.md §2).
 
 ``M nu_dot + C(nu) nu + D(nu) nu + g(eta) = tau``, body frame {b} at the COB, SNAME notation.
 Every function takes ``P`` (a :func:`arvcas.params.view` of the parameter vector) and works on any
@@ -24,7 +24,7 @@ def r_G(P):
 
 
 def I_b(P):
-    """Inertia tensor about the COB's axes (SPEC 2; Fossen eq. 3.24 sign convention)."""
+    """Inertia tensor about the COB's axes (docs/model.md §2; Fossen eq. 3.24 sign convention)."""
     Ixx, Iyy, Izz = P["vehicle.Ixx"], P["vehicle.Iyy"], P["vehicle.Izz"]
     Ixy, Iyz, Ixz = P["vehicle.Ixy"], P["vehicle.Iyz"], P["vehicle.Ixz"]
     return ca.vertcat(
@@ -45,7 +45,7 @@ def M_RB(P):
 
 
 # (row, col, dotted coefficient) of the added mass printed in App. A: M_A[i,j] = -rho * coef.
-# App. A prints M(3,1) as +rho Z'udot: a sign typo (SPEC 2), here -rho Z'udot like every other entry.
+# App. A prints M(3,1) as +rho Z'udot: a sign typo (docs/model.md §2), here -rho Z'udot like every other entry.
 _MA_ENTRIES = (
     (0, 0, "X_udot"), (0, 1, "X_vdot"), (0, 2, "X_wdot"), (0, 4, "X_qdot"), (0, 5, "X_rdot"),
     (1, 0, "Y_udot"), (1, 1, "Y_vdot"), (1, 5, "Y_rdot"),
@@ -57,7 +57,7 @@ _MA_ENTRIES = (
 
 
 def M_A(P):
-    """Added mass, App. A: M_A[i,j] = -rho * (dotted coefficient). Not symmetric (SPEC 2)."""
+    """Added mass, App. A: M_A[i,j] = -rho * (dotted coefficient). Not symmetric (docs/model.md §2)."""
     rho = P["env.rho"]
     rows = [[0] * 6 for _ in range(6)]
     for i, j, name in _MA_ENTRIES:
@@ -71,7 +71,7 @@ def M(P):
 
 
 def C_RB(P, nu):
-    """Rigid-body Coriolis-centripetal matrix, Fossen's linear-velocity-independent form (SPEC 2).
+    """Rigid-body Coriolis-centripetal matrix, Fossen's linear-velocity-independent form (docs/model.md §2).
 
     Replaces App. A's printed C(nu), whose rows 4-6 have duplicated and missing entries.
     """
@@ -86,13 +86,13 @@ def C_RB(P, nu):
 
 
 def delta_s_term(P):
-    """(delta_s - pi/2 sgn(delta_s)) with the fixed stern angle delta_s = (delta_sL + delta_sR)/2 (SPEC 2)."""
+    """(delta_s - pi/2 sgn(delta_s)) with the fixed stern angle delta_s = (delta_sL + delta_sR)/2 (docs/model.md §2)."""
     ds = 0.5 * (P["thrusters.delta_sL"] + P["thrusters.delta_sR"])
     return ds - 0.5 * math.pi * ca.sign(ds)
 
 
 def D(P, nu):
-    """Hydrodynamic damping, App. A, multiplied by -rho (SPEC 2).
+    """Hydrodynamic damping, App. A, multiplied by -rho (docs/model.md §2).
 
     D(1,2) uses X'v|w| |w| (the print labels it X'v|v|); every delta_s term uses the constant stern angle.
     """

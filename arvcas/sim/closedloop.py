@@ -303,12 +303,12 @@ def _ekf_update(xh, Pc, y, r):
 
 
 def _ekf_f(xh, h):
-    """Kinematic (constant-velocity) transition of SPEC 4: eta+ = eta + h J(eta) nu, nu+ = nu."""
+    """Kinematic (constant-velocity) transition of docs/model.md §4: eta+ = eta + h J(eta) nu, nu+ = nu."""
     return ca.vertcat(xh[0:6] + h * ca.mtimes(J(xh[0:6]), xh[6:12]), xh[6:12])
 
 
 def _ekf_cov(xh, Pc, h, q_eta, q_nu):
-    """P+ = F P F' + Q with F the AD Jacobian of the transition (SPEC 4), Q = diag(q_eta I6, q_nu I6)."""
+    """P+ = F P F' + Q with F the AD Jacobian of the transition (docs/model.md §4), Q = diag(q_eta I6, q_nu I6)."""
     xs = ca.SX.sym("xs", 12)
     F = ca.substitute(ca.jacobian(_ekf_f(xs, h), xs), xs, xh)
     Q = ca.diag(ca.vertcat(ca.repmat(q_eta, 6, 1), ca.repmat(q_nu, 6, 1)))

@@ -1,4 +1,4 @@
-"""The station-keeping experiment of section 4 (SPEC 4): configuration, arm trajectory, payload,
+"""The station-keeping experiment of section 4 (docs/model.md §4): configuration, arm trajectory, payload,
 disturbance (eq. 41) and sensor noise.
 
 The configuration is data (``data/scenario.toml``), loaded strictly into a frozen
@@ -170,7 +170,7 @@ class ScenarioConfig:
 
     @property
     def uncertainty(self) -> np.ndarray:
-        """[C, D, g, arm] factors of the nominal model (SPEC 4)."""
+        """[C, D, g, arm] factors of the nominal model (docs/model.md §4)."""
         return np.array([self.uncertainty_C_factor, self.uncertainty_D_factor,
                          self.uncertainty_g_factor, self.uncertainty_arm_factor])
 
@@ -283,7 +283,7 @@ def quintic(t, t0: float, t1: float):
 
 
 def joint_trajectory(cfg: ScenarioConfig, q0, t):
-    """q, qd, qdd of SPEC 4: hold q0, quintic to qg, hold, quintic back to q0, hold."""
+    """q, qd, qdd of docs/model.md §4: hold q0, quintic to qg, hold, quintic back to q0, hold."""
     qg = ca.DM(cfg.arm_qg)
     s1, sd1, sdd1 = quintic(t, cfg.arm_hold_until, cfg.arm_reach_end)
     s2, sd2, sdd2 = quintic(t, cfg.arm_return_start, cfg.arm_return_end)

@@ -109,7 +109,7 @@ def _time_expr(cfg: ScenarioConfig, t, P):
 
 def _arm_expr(P, q, qd, qdd, payload):
     sc = manipulator.arm_schedule(P, q, qd, qdd, payload)
-    lu = lu_pack(*lu_nopivot(vehicle.M(P) + sc["M_arm"]))  # coupled inertia, SPEC 3
+    lu = lu_pack(*lu_nopivot(vehicle.M(P) + sc["M_arm"]))  # coupled inertia, docs/model.md §3
     parts = dict(sc, lu=lu, M_arm=_sym_pack(sc["M_arm"]), M_arm_dot=_sym_pack(sc["M_arm_dot"]))
     return ca.densify(ca.vertcat(*[parts[name] for name, _ in ARM_FIELDS]))
 

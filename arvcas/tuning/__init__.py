@@ -1,4 +1,4 @@
-"""Controller tuning on the CHAT/RMSE Pareto front (SPEC 7) with pymoo's NSGA-II. No physics here.
+"""Controller tuning on the CHAT/RMSE Pareto front (docs/model.md §7) with pymoo's NSGA-II. No physics here.
 
 * :mod:`.study`: strict TOML study files -> :class:`Study`;
 * :mod:`.problem`: the vectorised pymoo Problem (log10 gains -> objectives, one constraint);

@@ -226,18 +226,20 @@ class DaskEngine:
         connection) for ``timeout_s``."""
         since = None
         while True:
-            if all(f.done() for f in futures):
+            if all(f.status == "finished" for f in futures):
                 return
             time.sleep(min(self.POLL_S, self.timeout_s))
-            if all(f.done() for f in futures):
-                return
             if self.client.status != "running":
                 problem = f"lost the connection to the scheduler ({self.client.status})"
             else:
                 problem = "" if self.client.nthreads() else "every worker was lost"
             if not problem:
                 since = None
+                if all(f.done() for f in futures):  # finished, or failed: gather says how
+                    return
                 continue
+            # no worker (or no scheduler): futures cancelled with the shipped libraries they needed count
+            # as not done; the wait goes on until a worker comes back or the timeout
             now = time.monotonic()
             since = now if since is None else since
             if now - since >= self.timeout_s:

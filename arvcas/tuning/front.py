@@ -48,7 +48,7 @@ def resolve_front_path(p: str | Path) -> Path:
 class Front:
     """A study's front and its provenance. Arrays over the f front members, sorted by f_chat.
 
-    ``F`` (f, 2) = (f_chat, f_rmse), SPEC 7 (paper's AGSTA = (1, 1)); ``gains`` (f, m) with
+    ``F`` (f, 2) = (f_chat, f_rmse), docs/model.md §7 (paper's AGSTA = (1, 1)); ``gains`` (f, m) with
     ``names``; ``index`` (f,) rows in the stored population; ``chat``/``rmse`` (K, f, 6) per draw
     and DOF; ``table2_F`` (2,) Table 2 on the same draws (NaN if it diverged).
     """

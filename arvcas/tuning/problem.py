@@ -1,4 +1,4 @@
-"""The tuning problem as a vectorised pymoo :class:`~pymoo.core.problem.Problem` (SPEC 7).
+"""The tuning problem as a vectorised pymoo :class:`~pymoo.core.problem.Problem` (docs/model.md §7).
 
 Decision vector ``x`` (n_var,): ``log10`` of the controller's flat gain vector (Table 2 order,
 :func:`arvcas.controllers.gains.gain_names`), within the study's bounds. Each call evaluates the whole
