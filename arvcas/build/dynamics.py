@@ -155,6 +155,7 @@ class Dynamics:
         self.name = name
         self.opts = opts
         self._f = f
+        self.function = f  # the compiled casadi.Function (codegen.artifact_of(d.function)["path"]: its library)
         self.input_names = tuple(f.name_in())
         self.output_names = tuple(f.name_out())
         if self.input_names[-1] != "p":
