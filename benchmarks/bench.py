@@ -11,11 +11,16 @@ graph, one thread for the batch, the current default optimisation level for the 
 
 What is measured:
 
-1. Plant functions, each of the five public SX Functions: (a) single calls from C, by a small
-   driver generated here, compiled with codegen's flags, that ``dlopen``\\ s the very library
-   :func:`arvcas.compiled` loads and loops over 256 varying input sets; (b) ``f.map(N)`` of the
-   compiled external called from Python, per evaluation; (c) the same SX Function in CasADi's VM,
-   single calls from Python and ``map(N)``. Instructions per second = ``f.n_instructions()`` / time.
+1. Plant functions, each of the five public SX Functions and the two Jacobians
+   (:data:`arvcas.build.dynamics.NAMES`): (a) single calls from C, by a small driver generated here,
+   compiled with codegen's flags, that ``dlopen``\\ s the very library :func:`arvcas.compiled` loads
+   and loops over 256 varying input sets; (b) ``f.map(N)`` of the compiled external called from
+   Python, per evaluation; (c) the same SX Function in CasADi's VM, single calls from Python and
+   ``map(N)``; (d) :func:`arvcas.dynamics` on NumPy arrays, single calls and one batch of N rows (1
+   thread, all cores), and the compiled Function called on NumPy arrays; (e) the same C driver on the
+   library ``arvcas export-c`` writes, built by its Makefile; (f) for vehicle_rhs, a hand-written
+   NumPy implementation (the yardstick; arvcas has none), single and vectorised over N rows.
+   Instructions per second = ``f.n_instructions()`` / time.
 2. Closed loop: the compiled 100 s run (metrics only, with trace, and :func:`simulate`), the same
    MX run in the VM, :func:`simulate_batch` with 1 and 2 threads; instructions per controller
    sample = the sum over the sub-functions the step calls (controller, ``h/h_plant`` RK4 substeps,
@@ -83,11 +88,12 @@ REQUIRED_KEYS = (
     "plant.uvms_rhs.map_compiled_ns_per_eval", "plant.uvms_rhs.map_vm_ns_per_eval",
     "plant.uvms_rhs.single_compiled_us", "plant.uvms_rhs.single_vm_us",
     "plant.uvms_rhs.ratio_vm_over_compiled_map", "plant.uvms_rhs.ratio_vm_map_over_c",
-    "plant.uvms_rhs.dyn_single_us", "plant.uvms_rhs.dyn_batch_ns_per_eval", "plant.uvms_rhs.dyn_batch_threads_ns_per_eval",
-    "plant.uvms_rhs.ratio_dyn_batch_over_c", "plant.uvms_rhs.export_c_ns_per_eval", "plant.uvms_rhs.ratio_export_c_over_c",
-    "plant.uvms_rhs_jac.c_ns_per_eval", "plant.uvms_rhs_jac.dyn_single_us", "plant.uvms_rhs_jac.dyn_batch_ns_per_eval",
-    "plant.vehicle_rhs_jac.dyn_batch_ns_per_eval", "plant.vehicle_rhs.numpy_single_us",
-    "plant.vehicle_rhs.numpy_batch_ns_per_eval", "plant.vehicle_rhs.dyn_single_us",
+    "plant.uvms_rhs.dyn_single_us", "plant.uvms_rhs.casadi_numpy_single_us",
+    "plant.uvms_rhs.dyn_batch_ns_per_eval", "plant.uvms_rhs.dyn_batch_threads_ns_per_eval",
+    "plant.uvms_rhs.ratio_dyn_batch_over_c", "plant.uvms_rhs.export_c_ns_per_eval",
+    "plant.uvms_rhs.ratio_export_c_over_c", "plant.uvms_rhs_jac.c_ns_per_eval", "plant.uvms_rhs_jac.dyn_single_us",
+    "plant.uvms_rhs_jac.dyn_batch_ns_per_eval", "plant.vehicle_rhs_jac.dyn_batch_ns_per_eval",
+    "plant.vehicle_rhs.numpy_single_us", "plant.vehicle_rhs.numpy_batch_ns_per_eval", "plant.vehicle_rhs.dyn_single_us",
     "closed_loop.run_metrics_s", "closed_loop.run_trace_s", "closed_loop.simulate_s", "closed_loop.vm_run_s",
     "closed_loop.rtf_metrics", "closed_loop.rtf_vm", "closed_loop.ratio_vm_over_compiled",
     "closed_loop.run_cold_s", "closed_loop.table_s", "closed_loop.rtf_cold",
@@ -551,6 +557,13 @@ def _bench_dynamics(name: str, d, f_vm: ca.Function, sets: list, c: dict, s: Set
 
     log(f"plant {name}: arvcas.dynamics single and batched ...")
     ds = _scaled(_time(singles, s.reps), 1e6 / s.single_calls)
+    full_sets = [[np.asarray(a, dtype=float) for a in st] for st in sets[: min(len(sets), s.single_calls)]]
+
+    def casadi_numpy():  # what calling the compiled Function on NumPy arrays costs (conversion to DM and back)
+        for i in range(s.single_calls):
+            [np.asarray(o) for o in d.function.call(full_sets[i % len(full_sets)])]
+
+    cn = _scaled(_time(casadi_numpy, s.reps), 1e6 / s.single_calls)
     N = s.map_n
     idx = np.arange(N) % len(sets)
     bargs = [np.stack([np.ravel(sets[j][i]) for j in idx]) for i in range(f_vm.n_in() - 1)]  # (N, m); p default
@@ -564,7 +577,8 @@ def _bench_dynamics(name: str, d, f_vm: ca.Function, sets: list, c: dict, s: Set
     b1 = _scaled(_time(lambda: d(*bargs, n_threads=1), s.reps), 1e9 / N)
     nt = os.cpu_count() or 1
     bt = _scaled(_time(lambda: d(*bargs, n_threads=nt), s.reps), 1e9 / N)
-    return {"dyn_single_us": ds, "dyn_batch_ns_per_eval": b1, "dyn_batch_threads_ns_per_eval": bt,
+    return {"dyn_single_us": ds, "casadi_numpy_single_us": cn,
+            "ratio_casadi_numpy_over_dyn_single": cn["median"] / ds["median"], "dyn_batch_ns_per_eval": b1, "dyn_batch_threads_ns_per_eval": bt,
             "dyn_batch_threads": nt, "ratio_dyn_batch_over_c": b1["median"] / c["median"],
             "ratio_dyn_batch_threads_over_c": bt["median"] / c["median"]}
 
@@ -1080,19 +1094,20 @@ def render_markdown(res: dict) -> str:
         "",
         f"Per evaluation, beside the C driver above (same run). exported C: the same driver on the library "
         f"`arvcas export-c` writes, built by its Makefile. dynamics single: `arvcas.dynamics(name)(x, ...)` on "
-        f"NumPy arrays, one evaluation per call; CasADi call: `arvcas.compiled(name)` called on DM (the single "
-        f"column above). dynamics batch: one call on {s['map_n']:,} rows (arrays of shape (n, size)), on 1 "
+        f"NumPy arrays, one evaluation per call; CasADi call: `arvcas.compiled(name)` called on NumPy arrays "
+        f"(converted to DM and back) and on DM built beforehand (the single column above). dynamics batch: one call on {s['map_n']:,} rows (arrays of shape (n, size)), on 1 "
         f"thread and on {pl['uvms_rhs']['dyn_batch_threads']} threads.",
         "",
-        "| function | C ns | exported C ns | dynamics single µs | CasADi call µs | CasADi / dynamics (single) | "
-        "dynamics batch ns, 1 thread | / C | batch ns, threads | / C |",
-        "|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
+        "| function | C ns | exported C ns | dynamics single µs | CasADi call, NumPy in/out µs | CasADi call, DM µs | "
+        "CasADi NumPy / dynamics | dynamics batch ns, 1 thread | / C | batch ns, threads | / C |",
+        "|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
     ]
     for name, r in pl.items():
         L.append(
             f"| {name} | {_g(_m(r['c_ns_per_eval']))} | {_g(_m(r['export_c_ns_per_eval']))} | "
-            f"{_g(_m(r['dyn_single_us']))} ({_spread(r['dyn_single_us'])}) | {_g(_m(r['single_compiled_us']))} | "
-            f"{r['ratio_casadi_single_over_dyn_single']:.1f}x | {_g(_m(r['dyn_batch_ns_per_eval']))} "
+            f"{_g(_m(r['dyn_single_us']))} ({_spread(r['dyn_single_us'])}) | {_g(_m(r['casadi_numpy_single_us']))} | "
+            f"{_g(_m(r['single_compiled_us']))} | "
+            f"{r['ratio_casadi_numpy_over_dyn_single']:.1f}x | {_g(_m(r['dyn_batch_ns_per_eval']))} "
             f"({_spread(r['dyn_batch_ns_per_eval'])}) | {r['ratio_dyn_batch_over_c']:.2f}x | "
             f"{_g(_m(r['dyn_batch_threads_ns_per_eval']))} | {r['ratio_dyn_batch_threads_over_c']:.2f}x |")
     v = pl["vehicle_rhs"]
