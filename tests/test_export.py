@@ -190,6 +190,10 @@ def test_symbols_carry_the_prefix_and_header_declares_them(made):
     for s in sorted(api):  # every function of the API declared exactly once
         decls = re.findall(rf"^\w[^\n]*\b{s}\([^\n]*\);$", header, flags=re.M)  # declarations, not calls
         assert len(decls) == 1, (s, decls)
+    # the header's "F returns 0": no other return in the generated evaluation functions
+    bodies = re.findall(r"^static int casadi_f\d+\(.*?^}$", c_text, flags=re.M | re.S)
+    assert len(bodies) >= len(NAMES)
+    assert {r for b in bodies for r in re.findall(r"return [^;]*;", b)} == {"return 0;"}
     # the header agrees with the generated code (conflicting declarations are errors) in C and C++
     _run([codegen.CC, "-std=c99", "-Wall", "-Werror", "-fsyntax-only", "-include", str(made / f"{lib}.h"),
           str(made / f"{lib}.c")])
