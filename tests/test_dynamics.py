@@ -130,6 +130,25 @@ def test_p_per_row_and_params():
     assert not np.array_equal(r0, d(x[0], tau, p=pv))
 
 
+def test_one_row_broadcasts_and_any_layout():
+    """An input of one row is shared like one without the batch axis; any dtype, order or stride is read."""
+    rng = np.random.default_rng(4)
+    d = arvcas.dynamics("vehicle_rhs")
+    f = uvms.plant_functions()["vehicle_rhs"]
+    X = np.array([_inputs(f, rng)[0] for _ in range(300)])
+    tau = _inputs(f, rng)[1]
+    ref = d(X, tau)
+    np.testing.assert_array_equal(d(X, tau[None, :]), ref)
+    np.testing.assert_array_equal(d(X, tau, p=load().vector()[None, :]), ref)
+    np.testing.assert_array_equal(d(np.asfortranarray(X), tau), ref)
+    wide = np.zeros((300, 24))
+    wide[:, ::2] = X
+    np.testing.assert_array_equal(d(wide[:, ::2], tau), ref)
+    np.testing.assert_array_equal(d(X[:1], tau[None, :]), ref[:1])
+    assert d(X[:1], tau).shape == (1, 12)
+    np.testing.assert_array_equal(d(np.zeros(12, dtype=int), [0, 0, 0, 0, 0, 0]), d(np.zeros(12), np.zeros(6)))
+
+
 def test_scalar_payload_shapes():
     d = arvcas.dynamics("uvms_rhs")
     e = example_inputs()
@@ -148,7 +167,7 @@ def test_errors_are_one_line():
     cases = [
         (lambda: d(x[:11], tau), r"vehicle_rhs: x: expected shape \(12,\) or \(n, 12\), got \(11,\)"),
         (lambda: d(x.reshape(3, 4), tau), r"x: expected shape \(12,\) or \(n, 12\), got \(3, 4\)"),
-        (lambda: d(np.zeros((4, 12)), np.zeros((5, 6))), r"batch sizes differ: x has 4 rows, tau has 5"),
+        (lambda: d(np.zeros((4, 12)), np.zeros((5, 6))), r"batch sizes differ: tau has 5 rows, x has 4"),
         (lambda: d(x), r"expected 2 inputs \(x, tau\) and optionally p, got 1"),
         (lambda: d(x, tau, np.zeros(3)), r"p: expected shape \(140,\)"),
         (lambda: d(np.where(np.arange(12) == 4, np.nan, x), tau), r"x has a non-finite value nan at index \[4\]"),

@@ -4,8 +4,8 @@
 arrays; the parameter vector defaults to the packaged parameters (``p=`` a vector, or ``params=`` a
 :class:`arvcas.params.Params`, overrides it). Every input takes one evaluation's shape (``x``:
 ``(12,)``, a size-1 input also a scalar) or a batch of n with a leading axis (``x``: ``(n, 12)``).
-Inputs without the batch axis are shared by all n evaluations; outputs have the batch axis if any
-input has it.
+Inputs without the batch axis (or with one row) are shared by all n evaluations; outputs have the
+batch axis if any input has it.
 
 How a call runs (costs in ``docs/calling-dynamics.md``, measured by ``arvcas bench``):
 
@@ -260,12 +260,18 @@ class Dynamics:
             raise ValueError(f"{self.name}: n_threads: expected a positive integer or None, got {n_threads!r}")
         if not ns:
             return self._single(arrs, parr, p is not None)
-        n = ns[0][0]
-        for m, i in ns[1:]:
-            if m != n:
-                raise ValueError(f"{self.name}: batch sizes differ: {self.input_names[ns[0][1]]} has {n} rows, "
+        n = max(m for m, _ in ns)
+        for m, i in ns:
+            if m not in (1, n):
+                first = next(j for mm, j in ns if mm == n)
+                raise ValueError(f"{self.name}: batch sizes differ: {self.input_names[first]} has {n} rows, "
                                  f"{self.input_names[i]} has {m}")
-        return self._batch(n, arrs, parr, pn is not None, p is not None, n_threads)
+        if n > 1:  # an input of one row is shared by all rows, as NumPy broadcasts
+            arrs = [a.reshape(-1) if a.ndim == 2 and a.shape[0] == 1 else a for a in arrs]
+        p_batched = pn is not None and pn == n and n > 1
+        if pn is not None and not p_batched:
+            parr = parr.reshape(-1)
+        return self._batch(n, arrs, parr, p_batched, p is not None, n_threads)
 
     def _state(self):
         """This thread's scratch input/output arrays, bound once to a buffer of the compiled function."""
