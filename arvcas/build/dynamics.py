@@ -59,6 +59,7 @@ _COMPILED: dict[tuple[str, str], ca.Function] = {}
 _MAPS: dict[tuple[str, str, int, bool], ca.Function] = {}
 _DEFAULT_P: list[np.ndarray] = []
 _POOLS: dict[int, ThreadPoolExecutor] = {}
+_F64 = np.dtype(np.float64)
 _ret = getattr(getattr(ca, "_casadi", None), "FunctionBuffer_ret", None) or ca.FunctionBuffer.ret  # skips a wrapper
 
 
@@ -185,6 +186,7 @@ class Dynamics:
         self._local = threading.local()
         self.n_params = self.input_sizes[-1]
         self._p_default = _default_p()
+        self._shapes = tuple((m,) for m in self.input_sizes)  # one evaluation's shape of each input
 
     def __repr__(self) -> str:
         ins = ", ".join(f"{n}[{s}]" for n, s in zip(self.input_names, self.input_sizes))
@@ -241,7 +243,11 @@ class Dynamics:
         """Evaluate; see the module docstring. Returns an array, or a tuple of arrays for a Jacobian."""
         args, p = self._args(args, p, params)
         arrs, ns = [], []
+        shapes = self._shapes
         for i, a in enumerate(args):
+            if type(a) is np.ndarray and a.shape == shapes[i] and a.dtype == _F64:  # the common case, fast
+                arrs.append(a)
+                continue
             arr, n = self._array(i, a)
             arrs.append(arr)
             if n is not None:
@@ -294,9 +300,12 @@ class Dynamics:
 
     def _single(self, arrs, parr, p_given):
         buf, evaluate, xin, tiny, pin, outs, last_p = self._state()
-        offs, sizes = self._offsets, self.input_sizes
-        for i, a in enumerate(arrs):
-            xin[offs[i]:offs[i] + sizes[i]] = a.reshape(-1)
+        if len(arrs) > 1 and all(a.ndim == 1 for a in arrs):
+            np.concatenate(arrs, out=xin)  # one copy of all inputs
+        else:
+            offs, sizes = self._offsets, self.input_sizes
+            for i, a in enumerate(arrs):
+                xin[offs[i]:offs[i] + sizes[i]] = a.reshape(-1)
         if not math.isfinite(xin @ tiny):  # finite unless an entry is (no FP warning but for +inf with -inf)
             self._raise_nonfinite(arrs)
         if last_p[0] is not parr:
