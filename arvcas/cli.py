@@ -138,6 +138,10 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
 
 def _add_export_c(p: argparse.ArgumentParser) -> None:
     p.add_argument("dir", type=Path, help="output directory (created if its parent exists)")
+    p.add_argument("--prefix", default="arvcas_haidou1_",
+                   help="prefix of every C symbol; the library is lib<prefix without its last _>.so (default: arvcas_haidou1_)")
+    p.add_argument("--force", action="store_true",
+                   help="replace files in DIR that export-c did not write, or that were changed since")
     _add_model_args(p)
 
 
@@ -145,7 +149,7 @@ def _run_export_c(a: argparse.Namespace) -> int:
     from arvcas.build.export import export_c
     from arvcas.params import load
 
-    paths = export_c(a.dir, opts=_model_options(a.n_quad), params=load(a.params))
+    paths = export_c(a.dir, opts=_model_options(a.n_quad), params=load(a.params), prefix=a.prefix, force=a.force)
     for path in paths:
         print(path)
     print(f"build with: make -C {a.dir}")

@@ -11,11 +11,16 @@ graph, one thread for the batch, the current default optimisation level for the 
 
 What is measured:
 
-1. Plant functions, each of the five public SX Functions: (a) single calls from C, by a small
-   driver generated here, compiled with codegen's flags, that ``dlopen``\\ s the very library
-   :func:`arvcas.compiled` loads and loops over 256 varying input sets; (b) ``f.map(N)`` of the
-   compiled external called from Python, per evaluation; (c) the same SX Function in CasADi's VM,
-   single calls from Python and ``map(N)``. Instructions per second = ``f.n_instructions()`` / time.
+1. Plant functions, each of the five public SX Functions and the two Jacobians
+   (:data:`arvcas.build.dynamics.NAMES`): (a) single calls from C, by a small driver generated here,
+   compiled with codegen's flags, that ``dlopen``\\ s the very library :func:`arvcas.compiled` loads
+   and loops over 256 varying input sets; (b) ``f.map(N)`` of the compiled external called from
+   Python, per evaluation; (c) the same SX Function in CasADi's VM, single calls from Python and
+   ``map(N)``; (d) :func:`arvcas.dynamics` on NumPy arrays, single calls and one batch of N rows (1
+   thread, all cores), and the compiled Function called on NumPy arrays; (e) the same C driver on the
+   library ``arvcas export-c`` writes, built by its Makefile; (f) for vehicle_rhs, a hand-written
+   NumPy implementation (the yardstick; arvcas has none), single and vectorised over N rows.
+   Instructions per second = ``f.n_instructions()`` / time.
 2. Closed loop: the compiled 100 s run (metrics only, with trace, and :func:`simulate`), the same
    MX run in the VM, :func:`simulate_batch` with 1 and 2 threads; instructions per controller
    sample = the sum over the sub-functions the step calls (controller, ``h/h_plant`` RK4 substeps,
@@ -58,6 +63,7 @@ import numpy as np
 
 from arvcas import __version__
 from arvcas.build import calls, codegen, export
+from arvcas.build import dynamics as dynamics_mod
 from arvcas.sim import closedloop, scenario, schedule, simulation
 from arvcas.controllers import gains as gains_mod
 from arvcas.model import uvms
@@ -82,6 +88,12 @@ REQUIRED_KEYS = (
     "plant.uvms_rhs.map_compiled_ns_per_eval", "plant.uvms_rhs.map_vm_ns_per_eval",
     "plant.uvms_rhs.single_compiled_us", "plant.uvms_rhs.single_vm_us",
     "plant.uvms_rhs.ratio_vm_over_compiled_map", "plant.uvms_rhs.ratio_vm_map_over_c",
+    "plant.uvms_rhs.dyn_single_us", "plant.uvms_rhs.casadi_numpy_single_us",
+    "plant.uvms_rhs.dyn_batch_ns_per_eval", "plant.uvms_rhs.dyn_batch_threads_ns_per_eval",
+    "plant.uvms_rhs.ratio_dyn_batch_over_c", "plant.uvms_rhs.export_c_ns_per_eval",
+    "plant.uvms_rhs.ratio_export_c_over_c", "plant.uvms_rhs_jac.c_ns_per_eval", "plant.uvms_rhs_jac.dyn_single_us",
+    "plant.uvms_rhs_jac.dyn_batch_ns_per_eval", "plant.vehicle_rhs_jac.dyn_batch_ns_per_eval",
+    "plant.vehicle_rhs.numpy_single_us", "plant.vehicle_rhs.numpy_batch_ns_per_eval", "plant.vehicle_rhs.dyn_single_us",
     "closed_loop.run_metrics_s", "closed_loop.run_trace_s", "closed_loop.simulate_s", "closed_loop.vm_run_s",
     "closed_loop.rtf_metrics", "closed_loop.rtf_vm", "closed_loop.ratio_vm_over_compiled",
     "closed_loop.run_cold_s", "closed_loop.table_s", "closed_loop.rtf_cold",
@@ -447,9 +459,12 @@ def _write_data(path: Path, f: ca.Function, sets: list[list[np.ndarray]]) -> Non
         fh.write(np.ascontiguousarray(body, dtype="<f8").tobytes())
 
 
-def _c_time(driver: _Driver, lib: str, f_vm: ca.Function, data: Path, set0: list, s: Settings) -> dict:
-    """C driver: ns per evaluation (median over repetitions), checked against the VM on input set 0."""
-    name = f_vm.name()
+def _c_time(driver: _Driver, lib: str, f_vm: ca.Function, data: Path, set0: list, s: Settings,
+            symbol: str | None = None) -> dict:
+    """C driver: ns per evaluation (median over repetitions), checked against the VM on input set 0.
+
+    ``symbol``: the function's name in ``lib`` (default: ``f_vm.name()``)."""
+    name = symbol or f_vm.name()
     ns, _ = driver.run(lib, name, data, s.c_min_evals, 1)  # calibration
     n = int(min(max(s.c_target_s / (ns[0] * 1e-9), s.c_min_evals), s.c_max_evals))
     ns, out0 = driver.run(lib, name, data, n, s.reps)
@@ -461,12 +476,147 @@ def _c_time(driver: _Driver, lib: str, f_vm: ca.Function, data: Path, set0: list
     return st
 
 
-def _bench_plant(s: Settings, driver: _Driver, work: Path, p: np.ndarray, log) -> dict:
-    fns = uvms.plant_functions()
+def _numpy_vehicle_rhs(P):
+    """vehicle_rhs written by hand in NumPy, the yardstick of :func:`arvcas.dynamics` (arvcas has no
+    NumPy model). The constant matrices (M^-1, I_b) and coefficients are computed once with the model
+    code on numbers; the state-dependent terms (J(eta) nu, C_RB(nu) nu, D(nu) nu, g(eta)) are NumPy on
+    every call. Takes x (12,) and tau (6,), or (n, 12) and (n, 6)."""
+    from arvcas.model import vehicle
+    from arvcas.params import view
+
+    Pv = view(ca.DM(P.vector()))
+    Minv_T = np.linalg.inv(np.array(vehicle.M(Pv))).T
+    m = P["vehicle.m"]
+    rG = np.array([P["vehicle.xG"], P["vehicle.yG"], P["vehicle.zG"]])
+    Ib_T = np.array(vehicle.I_b(Pv)).T
+    rho = P["env.rho"]
+    h = {k.removeprefix("hydro."): P[k] for k in P.names() if k.startswith("hydro.")}
+    dsv = float(vehicle.delta_s_term(Pv))
+    W, B = (float(v) for v in vehicle.weight_buoyancy(Pv))
+    xG, yG, zG = rG
+    xB, yB, zB = P["vehicle.xB"], P["vehicle.yB"], P["vehicle.zB"]
+
+    def f(x, tau):
+        x, tau = np.asarray(x, dtype=float), np.asarray(tau, dtype=float)
+        nu1, nu2 = x[..., 6:9], x[..., 9:12]
+        u, v, w, pp, q, r = (x[..., 6 + k] for k in range(6))
+        cf, sf = np.cos(x[..., 3]), np.sin(x[..., 3])
+        ct, st = np.cos(x[..., 4]), np.sin(x[..., 4])
+        cp, sp = np.cos(x[..., 5]), np.sin(x[..., 5])
+        tt = st / ct
+        eta_dot = np.stack([
+            cp * ct * u + (-sp * cf + cp * st * sf) * v + (sp * sf + cp * cf * st) * w,
+            sp * ct * u + (cp * cf + sf * st * sp) * v + (-cp * sf + st * sp * cf) * w,
+            -st * u + ct * sf * v + ct * cf * w,
+            pp + sf * tt * q + cf * tt * r,
+            cf * q - sf * r,
+            sf / ct * q + cf / ct * r], axis=-1)
+        c_nu = np.concatenate([m * np.cross(nu2, nu1) - m * np.cross(nu2, np.cross(rG, nu2)),
+                               m * np.cross(rG, np.cross(nu2, nu1)) - np.cross(nu2 @ Ib_T, nu2)], axis=-1)
+        aw, av = np.abs(w), np.abs(v)
+        d_nu = -rho * np.stack([
+            (h["X_u"] + h["X_u_absw"] * aw) * u + (h["X_v"] + h["X_v_absw"] * aw) * v
+            + (h["X_w"] + h["X_ds"] * aw * dsv) * w + h["X_q"] * q + h["X_r"] * r,
+            h["Y_u"] * u + (h["Y_v"] + h["Y_v_absv"] * av) * v + h["Y_r"] * r,
+            h["Z_u"] * u + (h["Z_w"] + h["Z_w_absw"] * aw + h["Z_dsds"] * aw * dsv**2) * w + h["Z_q"] * q,
+            h["K_u_absw"] * aw * u + h["K_v"] * v + h["K_w"] * w + h["K_p"] * pp,
+            (h["M_u"] + h["M_uw"] * w) * u
+            + (h["M_w"] + h["M_w_absw"] * aw + h["M_ds"] * dsv * w + h["M_dsds"] * dsv**2 * aw) * w + h["M_q"] * q,
+            h["N_u"] * u + (h["N_v"] + h["N_v_absv"] * av) * v + h["N_r"] * r], axis=-1)
+        g = np.stack([
+            (W - B) * st, -(W - B) * ct * sf, -(W - B) * ct * cf,
+            -(yG * W - yB * B) * ct * cf + (zG * W - zB * B) * ct * sf,
+            (zG * W - zB * B) * st + (xG * W - xB * B) * ct * cf,
+            -(xG * W - xB * B) * ct * sf - (yG * W - yB * B) * st], axis=-1)
+        nud = (tau - c_nu - d_nu - g) @ Minv_T
+        return np.concatenate([eta_dot, nud], axis=-1)
+
+    return f
+
+
+def _export_lib(work: Path, s: Settings, log) -> Path:
+    """``arvcas export-c`` into ``work``, its library built by its own Makefile (quick mode: at -O0)."""
+    out = work / "export"
+    export.export_c(out)
+    lib = export.DEFAULT_PREFIX.rstrip("_")
+    cmd = ["make", "-C", str(out), f"CC={codegen.CC}", f"lib{lib}.so"]
+    if s.mode == "quick":  # figures not for the record: compile fast
+        cmd.append("ARVCAS_CFLAGS=" + " ".join(["-O0", *codegen.FIXED_FLAGS]))
+    log("plant: building the exported C library ...")
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=3600)
+    if r.returncode != 0:
+        raise BenchError(f"building the exported library failed: {r.stderr.strip()[:300]}")
+    return out / f"lib{lib}.so"
+
+
+def _bench_dynamics(name: str, d, f_vm: ca.Function, sets: list, c: dict, s: Settings, log) -> dict:
+    """arvcas.dynamics: single calls on the same input sets, and one batch of ``s.map_n`` rows."""
+    np_sets = [[np.asarray(a, dtype=float) for a in st[:-1]] for st in sets[: min(len(sets), s.single_calls)]]
+
+    def singles():
+        for i in range(s.single_calls):
+            d(*np_sets[i % len(np_sets)])
+
+    log(f"plant {name}: arvcas.dynamics single and batched ...")
+    ds = _scaled(_time(singles, s.reps), 1e6 / s.single_calls)
+    full_sets = [[np.asarray(a, dtype=float) for a in st] for st in sets[: min(len(sets), s.single_calls)]]
+
+    def casadi_numpy():  # what calling the compiled Function on NumPy arrays costs (conversion to DM and back)
+        for i in range(s.single_calls):
+            [np.asarray(o) for o in d.function.call(full_sets[i % len(full_sets)])]
+
+    cn = _scaled(_time(casadi_numpy, s.reps), 1e6 / s.single_calls)
+    N = s.map_n
+    idx = np.arange(N) % len(sets)
+    bargs = [np.stack([np.ravel(sets[j][i]) for j in idx]) for i in range(f_vm.n_in() - 1)]  # (N, m); p default
+    got = d(*bargs, n_threads=1)
+    got = got if isinstance(got, tuple) else (got,)
+    ref = f_vm.call(sets[0])
+    for g, r_ in zip(got, ref):
+        r_ = np.asarray(r_)
+        if not np.allclose(g[0].reshape(r_.shape), r_, rtol=1e-12, atol=1e-12 * max(1.0, np.max(np.abs(r_)))):
+            raise BenchError(f"arvcas.dynamics({name!r}) differs from CasADi's VM on input set 0")
+    b1 = _scaled(_time(lambda: d(*bargs, n_threads=1), s.reps), 1e9 / N)
+    nt = os.cpu_count() or 1
+    bt = _scaled(_time(lambda: d(*bargs, n_threads=nt), s.reps), 1e9 / N)
+    return {"dyn_single_us": ds, "casadi_numpy_single_us": cn,
+            "ratio_casadi_numpy_over_dyn_single": cn["median"] / ds["median"], "dyn_batch_ns_per_eval": b1, "dyn_batch_threads_ns_per_eval": bt,
+            "dyn_batch_threads": nt, "ratio_dyn_batch_over_c": b1["median"] / c["median"],
+            "ratio_dyn_batch_threads_over_c": bt["median"] / c["median"]}
+
+
+def _bench_numpy(P, f_vm: ca.Function, sets: list, s: Settings, log) -> dict:
+    """The NumPy yardstick (vehicle_rhs only): single calls and one vectorised batch of ``s.map_n`` rows."""
+    f = _numpy_vehicle_rhs(P)
+    for st in sets[:8]:
+        ref = np.asarray(f_vm.call(st)[0]).ravel()
+        if not np.allclose(f(st[0], st[1]), ref, rtol=1e-10, atol=1e-12 * np.max(np.abs(ref))):
+            raise BenchError("the NumPy vehicle_rhs of the benchmark differs from the model")
+    np_sets = [(np.asarray(st[0], dtype=float), np.asarray(st[1], dtype=float)) for st in sets[: s.single_calls]]
+
+    def singles():
+        for i in range(s.single_calls):
+            f(*np_sets[i % len(np_sets)])
+
+    log("plant vehicle_rhs: the NumPy yardstick ...")
+    ss = _scaled(_time(singles, s.reps), 1e6 / s.single_calls)
+    idx = np.arange(s.map_n) % len(sets)
+    X = np.stack([sets[j][0] for j in idx])
+    T = np.stack([sets[j][1] for j in idx])
+    sb = _scaled(_time(lambda: f(X, T), s.reps), 1e9 / s.map_n)
+    return {"numpy_single_us": ss, "numpy_batch_ns_per_eval": sb}
+
+
+def _bench_plant(s: Settings, driver: _Driver, work: Path, P, log) -> dict:
+    p = P.vector()
+    fns = dict(uvms.plant_functions())
+    fns.update(dynamics_mod.jacobian_functions(fns))
+    exported = _export_lib(work, s, log)
     out = {}
-    for name in uvms.PUBLIC_FUNCTIONS:
+    for name in dynamics_mod.NAMES:
         f_vm = fns[name]
-        f_c = codegen.compiled(name)
+        d = dynamics_mod.dynamics(name)
+        f_c = d.function  # for the five plant functions, the Function arvcas.compiled(name) returns
         lib = codegen.artifact_of(f_c)["path"]
         sets = _input_sets(f_vm, p, N_INPUT_SETS)
         data = work / f"{name}.bin"
@@ -474,6 +624,7 @@ def _bench_plant(s: Settings, driver: _Driver, work: Path, p: np.ndarray, log) -
         n_ins = int(f_vm.n_instructions())
         log(f"plant {name}: C driver ...")
         c = _c_time(driver, lib, f_vm, data, sets[0], s)
+        ec = _c_time(driver, str(exported), f_vm, data, sets[0], s, symbol=export.DEFAULT_PREFIX + name)
 
         # single calls from Python (same harness for both: the Python/CasADi call overhead is included)
         dm_sets = [[ca.DM(a) for a in st] for st in sets[: min(len(sets), s.single_calls)]]
@@ -516,7 +667,13 @@ def _bench_plant(s: Settings, driver: _Driver, work: Path, p: np.ndarray, log) -
             "ratio_vm_map_over_c": bv["median"] / c["median"],
             "ratio_vm_over_compiled_single": sv["median"] / sc["median"],
             "library": Path(lib).name,
+            "export_c_ns_per_eval": ec,
+            "ratio_export_c_over_c": ec["median"] / c["median"],
         }
+        out[name].update(_bench_dynamics(name, d, f_vm, sets, c, s, log))
+        out[name]["ratio_casadi_single_over_dyn_single"] = sc["median"] / out[name]["dyn_single_us"]["median"]
+        if name == "vehicle_rhs":
+            out[name].update(_bench_numpy(P, f_vm, sets, s, log))
     return out
 
 
@@ -879,7 +1036,7 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
         machine["codegen_flags"] = " ".join([*codegen.BASE_FLAGS, _default_opt_level(), *codegen.FIXED_FLAGS])
         res: dict = {"schema": 1, "mode": s.mode, "machine": machine, "settings": s.__dict__ | {"opt_levels": list(s.opt_levels)}}
         for key, fn in (
-            ("plant", lambda: _bench_plant(s, driver, work, P.vector(), log)),
+            ("plant", lambda: _bench_plant(s, driver, work, P, log)),
             ("closed_loop", lambda: _bench_closed_loop(s, cfg, P, log)),
             ("compile", lambda: _bench_compile(s, cfg, P, driver, work, log)),
             ("startup", lambda: _bench_startup(s, log)),
@@ -984,6 +1141,36 @@ def render_markdown(res: dict) -> str:
         f"evaluation, i.e. {_g(u['c_instr_per_s'])} instructions/s (VM: {_g(u['vm_instr_per_s'])}/s). "
         f"Compiled vs VM (target >= 5x): {u['ratio_vm_over_compiled_map']:.1f}x batched through map, "
         f"{u['ratio_vm_map_over_c']:.1f}x for the C driver against the VM's batched time.",
+        "",
+        "### Calling the dynamics from other code: `arvcas.dynamics` and `arvcas export-c`",
+        "",
+        f"Per evaluation, beside the C driver above (same run). exported C: the same driver on the library "
+        f"`arvcas export-c` writes, built by its Makefile. dynamics single: `arvcas.dynamics(name)(x, ...)` on "
+        f"NumPy arrays, one evaluation per call; CasADi call: `arvcas.compiled(name)` called on NumPy arrays "
+        f"(converted to DM and back) and on DM built beforehand (the single column above). dynamics batch: one call on {s['map_n']:,} rows (arrays of shape (n, size)), on 1 "
+        f"thread and on {pl['uvms_rhs']['dyn_batch_threads']} threads.",
+        "",
+        "| function | C ns | exported C ns | dynamics single µs | CasADi call, NumPy in/out µs | CasADi call, DM µs | "
+        "CasADi NumPy / dynamics | dynamics batch ns, 1 thread | / C | batch ns, threads | / C |",
+        "|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
+    ]
+    for name, r in pl.items():
+        L.append(
+            f"| {name} | {_g(_m(r['c_ns_per_eval']))} | {_g(_m(r['export_c_ns_per_eval']))} | "
+            f"{_g(_m(r['dyn_single_us']))} ({_spread(r['dyn_single_us'])}) | {_g(_m(r['casadi_numpy_single_us']))} | "
+            f"{_g(_m(r['single_compiled_us']))} | "
+            f"{r['ratio_casadi_numpy_over_dyn_single']:.1f}x | {_g(_m(r['dyn_batch_ns_per_eval']))} "
+            f"({_spread(r['dyn_batch_ns_per_eval'])}) | {r['ratio_dyn_batch_over_c']:.2f}x | "
+            f"{_g(_m(r['dyn_batch_threads_ns_per_eval']))} | {r['ratio_dyn_batch_threads_over_c']:.2f}x |")
+    v = pl["vehicle_rhs"]
+    L += [
+        "",
+        f"Yardstick, vehicle_rhs written by hand in NumPy (benchmarks/bench.py): "
+        f"{_g(_m(v['numpy_single_us']))} µs per single call, {_g(_m(v['numpy_batch_ns_per_eval']))} ns per "
+        f"evaluation vectorised over {s['map_n']:,} rows; arvcas.dynamics: {_g(_m(v['dyn_single_us']))} µs "
+        f"and {_g(_m(v['dyn_batch_ns_per_eval']))} ns (NumPy time / dynamics time: "
+        f"{_m(v['numpy_single_us']) / _m(v['dyn_single_us']):.0f}x single, "
+        f"{_m(v['numpy_batch_ns_per_eval']) / _m(v['dyn_batch_ns_per_eval']):.1f}x batched).",
         "",
         "## 2. Closed loop (issue 3)",
         "",

@@ -39,7 +39,8 @@ def test_bench_quick_writes_complete_finite_figures(tmp_path, capsys):
         for k in path.split("."):
             assert isinstance(node, dict) and k in node, f"bench.json lacks {path}"
             node = node[k]
-    assert set(res["plant"]) == {"vehicle_rhs", "arm_wrench", "uvms_rhs", "allocate", "thrust"}
+    assert set(res["plant"]) == {"vehicle_rhs", "arm_wrench", "uvms_rhs", "allocate", "thrust",
+                                 "vehicle_rhs_jac", "uvms_rhs_jac"}
     assert res["compile"]["opt_sweep"]["run"] and res["compile"]["opt_sweep"]["uvms_rhs"]
     for section in ("plant", "closed_loop", "compile"):
         nums = list(_numbers(res[section], section))
@@ -51,7 +52,8 @@ def test_bench_quick_writes_complete_finite_figures(tmp_path, capsys):
     md = (tmp_path / "bench.md").read_text()
     for heading in ("## 1. Plant functions", "## 2. Closed loop", "## 3. Compiling", "## Recommendation"):
         assert heading in md
-    assert "| uvms_rhs |" in md and "QUICK MODE" in md
+    assert "| uvms_rhs |" in md and "| uvms_rhs_jac |" in md and "QUICK MODE" in md
+    assert "### Calling the dynamics from other code" in md and "written by hand in NumPy" in md
 
 
 def _sweep(rows):

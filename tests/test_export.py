@@ -1,20 +1,30 @@
-"""``arvcas export-c`` end to end (export, make, run the example, compare with CasADi's VM to 1e-12
-relative) and the ``arvcas`` command line: one-line errors with exit code 2, ``cache``, ``demo``.
+"""``arvcas export-c`` end to end and the ``arvcas`` command line.
+
+export-c: build the exported library with make and with CMake (and a project using its installed
+package config), run the C, C++ and Python ctypes examples and compare every output with CasADi's VM
+to 1e-12 relative; symbols, header, flags, and the refusal to replace files arvcas did not write.
+Command line: one-line errors with exit code 2, ``cache``, ``demo``.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import re
 import shutil
 import subprocess
+import sys
 
 import numpy as np
 import pytest
 
+import arvcas
 from arvcas import cli
+from arvcas.build import codegen
+from arvcas.build.dynamics import NAMES, jacobian_functions
+from arvcas.build.export import DEFAULT_PREFIX, MANIFEST, ExportError, _check_reentrant, example_inputs, export_c, files
 from arvcas.model import uvms
-from arvcas.build.export import FILES, example_inputs, export_c
 from arvcas.params import load
 
 RTOL = 1e-12
@@ -31,7 +41,9 @@ def cache(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def plant():
-    return uvms.plant_functions(uvms.ModelOptions())
+    fns = dict(uvms.plant_functions(uvms.ModelOptions()))
+    fns.update(jacobian_functions(fns))
+    return fns
 
 
 @pytest.fixture(scope="module")
@@ -41,19 +53,41 @@ def exported(tmp_path_factory):
     return out
 
 
-@pytest.fixture(scope="module")
-def example_output(exported):
-    if shutil.which("make") is None:
-        pytest.skip("make is not installed")
-    r = subprocess.run(["make", "-C", str(exported)], capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stdout + r.stderr
-    r = subprocess.run([str(exported / "example")], capture_output=True, text=True, timeout=60, cwd="/")
-    assert r.returncode == 0, r.stderr
+def _run(cmd, **kw):
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600, **kw)
+    assert r.returncode == 0, f"{cmd}: {r.stdout[-2000:]} {r.stderr[-2000:]}"
     return r.stdout
 
 
+@pytest.fixture(scope="module")
+def made(exported):
+    if shutil.which("make") is None or shutil.which("c++") is None:
+        pytest.skip("make or c++ is not installed")
+    _run(["make", "-C", str(exported)])
+    return exported
+
+
+@pytest.fixture(scope="module")
+def cmake_outputs(exported, tmp_path_factory):
+    """Build with CMake, install, build consumer/ against the installed package; run both C++ examples."""
+    if shutil.which("cmake") is None or shutil.which("c++") is None:
+        pytest.skip("cmake or c++ is not installed")
+    w = tmp_path_factory.mktemp("cmake")
+    _run(["cmake", "-S", str(exported), "-B", str(w / "build")])
+    _run(["cmake", "--build", str(w / "build")])
+    _run(["cmake", "--install", str(w / "build"), "--prefix", str(w / "prefix")])
+    _run(["cmake", "-S", str(exported / "consumer"), "-B", str(w / "consumer"), f"-DCMAKE_PREFIX_PATH={w / 'prefix'}"])
+    _run(["cmake", "--build", str(w / "consumer")])
+    return {
+        "cmake example": _run([str(w / "build" / "example")], cwd="/"),
+        "cmake example_cpp": _run([str(w / "build" / "example_cpp")], cwd="/"),
+        "installed consumer example_cpp": _run([str(w / "consumer" / "example_cpp")], cwd="/"),
+        "prefix": w / "prefix",
+    }
+
+
 def parse_example(text: str) -> dict[str, dict[str, dict[str, np.ndarray]]]:
-    """{function: {"in": {name: values}, "out": {name: values}}} from example's output lines."""
+    """{function: {"in": {name: values}, "out": {name: values}}} from an example's output lines."""
     res: dict = {}
     for line in text.splitlines():
         m = re.fullmatch(r"(in|out) (\w+) (\w+) :((?: \S+)+)", line)
@@ -63,14 +97,9 @@ def parse_example(text: str) -> dict[str, dict[str, dict[str, np.ndarray]]]:
     return res
 
 
-def test_export_writes_all_files(exported):
-    for name in FILES:
-        assert (exported / name).is_file() and (exported / name).stat().st_size > 0, name
-
-
-def test_example_matches_python(example_output, plant):
-    got = parse_example(example_output)
-    assert list(got) == list(uvms.PUBLIC_FUNCTIONS)
+def _check_against_vm(text: str, plant, where: str):
+    got = parse_example(text)
+    assert list(got) == list(NAMES), where
     p = load().vector()
     ref_inputs = example_inputs()
     for fn_name, io in got.items():
@@ -81,20 +110,120 @@ def test_example_matches_python(example_output, plant):
             if n == "p":
                 args.append(p)
             else:
-                assert io["in"][n].size == f.numel_in(f.index_in(n))
                 np.testing.assert_array_equal(io["in"][n], ref_inputs[n])  # %.17g reads back exactly
                 args.append(io["in"][n])
-        ref = np.asarray(f(*args)).ravel()
-        out = io["out"][f.name_out(0)]
-        assert out.size == ref.size and np.all(np.isfinite(ref)) and np.max(np.abs(ref)) > 0
-        np.testing.assert_allclose(out, ref, rtol=RTOL, atol=RTOL * np.max(np.abs(ref)), err_msg=fn_name)
+        refs = f.call(args)
+        assert list(io["out"]) == list(f.name_out())
+        for k, r in zip(f.name_out(), refs):
+            ref = np.ravel(np.asarray(r), order="F")  # column-major, as the C library stores matrices
+            out = io["out"][k]
+            assert out.size == ref.size and np.all(np.isfinite(ref)) and np.max(np.abs(ref)) > 0
+            np.testing.assert_allclose(out, ref, rtol=RTOL, atol=RTOL * np.max(np.abs(ref)),
+                                       err_msg=f"{where}: {fn_name}.{k}")
+
+
+def test_export_writes_all_files_and_manifest(exported):
+    names = files()
+    for name in names:
+        assert (exported / name).is_file() and (exported / name).stat().st_size > 0, name
+    m = json.loads((exported / MANIFEST).read_text())
+    assert set(m["files"]) == set(names) - {MANIFEST}
+    for name, sha in m["files"].items():
+        assert hashlib.sha256((exported / name).read_bytes()).hexdigest() == sha, name
+
+
+def test_make_examples_match_python(made, plant):
+    c = _run([str(made / "example")], cwd="/")
+    cpp = _run([str(made / "example_cpp")], cwd="/")
+    py = _run([sys.executable, str(made / "example.py")], cwd="/")
+    _check_against_vm(c, plant, "make example (C)")
+    assert cpp == c  # C++ through the _eval wrappers: the same library, the same bits
+    assert py == c  # ctypes
+    # and the compiled library gives the bits arvcas.dynamics gives (same flags, same compiler)
+    got = parse_example(c)
+    e = example_inputs()
+    np.testing.assert_array_equal(got["uvms_rhs"]["out"]["xdot"],
+                                  arvcas.dynamics("uvms_rhs")(e["x"], e["tau"], e["q"], e["qd"], e["qdd"], e["payload"]))
+
+
+def test_cmake_package_builds_and_matches(cmake_outputs, made, plant):
+    c = _run([str(made / "example")], cwd="/")
+    for key in ("cmake example", "cmake example_cpp", "installed consumer example_cpp"):
+        _check_against_vm(cmake_outputs[key], plant, key)
+        assert cmake_outputs[key] == c, key
+    pre = cmake_outputs["prefix"]
+    lib = DEFAULT_PREFIX.rstrip("_")
+    assert list(pre.glob(f"lib*/cmake/{lib}/{lib}Config.cmake"))
+    assert (pre / "include" / f"{lib}.h").is_file() and (pre / "include" / f"{lib}_params.h").is_file()
+
+
+def test_build_files_use_the_cache_flags(exported, made, monkeypatch, tmp_path):
+    cflags = [codegen.DEFAULT_OPT_LEVEL, *codegen.FIXED_FLAGS]
+    lib = DEFAULT_PREFIX.rstrip("_")
+    dry = _run(["make", "-B", "-n", "-C", str(made)])
+    lib_cmd = next(ln for ln in dry.splitlines() if f"-o lib{lib}.so" in ln)
+    assert all(f in lib_cmd.split() for f in [*cflags, *codegen.BASE_FLAGS, *codegen.LIBS]), lib_cmd
+    cm = (exported / "CMakeLists.txt").read_text()
+    assert f"target_compile_options({lib} PRIVATE {' '.join(cflags)})" in cm
+    # read from codegen at export time, not copied: a changed FIXED_FLAGS shows up in both files
+    monkeypatch.setattr(codegen, "FIXED_FLAGS", (*codegen.FIXED_FLAGS, "-fno-trapping-math"))
+    export_c(tmp_path / "other")
+    assert "-fno-trapping-math" in (tmp_path / "other" / "Makefile").read_text()
+    assert "-fno-trapping-math" in (tmp_path / "other" / "CMakeLists.txt").read_text()
+
+
+def test_symbols_carry_the_prefix_and_header_declares_them(made):
+    if shutil.which("nm") is None:
+        pytest.skip("nm is not installed")
+    lib = DEFAULT_PREFIX.rstrip("_")
+    out = _run(["nm", "-D", "--defined-only", str(made / f"lib{lib}.so")])
+    syms = [ln.split()[-1] for ln in out.splitlines() if ln.split() and ln.split()[-2] in "TDBR"]
+    assert len(syms) > 7 * 10
+    assert [s for s in syms if not s.startswith(DEFAULT_PREFIX)] == []
+    for name in NAMES:
+        assert DEFAULT_PREFIX + name in syms
+    header = (made / f"{lib}.h").read_text()
+    c_text = (made / f"{lib}.c").read_text()
+    helpers = {DEFAULT_PREFIX + h for h in re.findall(r"^#define casadi_\w+ CASADI_PREFIX\((\w+)\)$", c_text, flags=re.M)}
+    api = set(re.findall(r"^CASADI_SYMBOL_EXPORT [^(]*?\b(\w+)\(", c_text, flags=re.M))
+    assert set(syms) <= api | helpers and api <= set(syms)  # CasADi's helpers are global too, prefixed
+    for s in sorted(api):  # every function of the API declared exactly once
+        decls = re.findall(rf"^\w[^\n]*\b{s}\([^\n]*\);$", header, flags=re.M)  # declarations, not calls
+        assert len(decls) == 1, (s, decls)
+    # the header's "F returns 0": no other return in the generated evaluation functions
+    bodies = re.findall(r"^static int casadi_f\d+\(.*?^}$", c_text, flags=re.M | re.S)
+    assert len(bodies) >= len(NAMES)
+    assert {r for b in bodies for r in re.findall(r"return [^;]*;", b)} == {"return 0;"}
+    # the header agrees with the generated code (conflicting declarations are errors) in C and C++
+    _run([codegen.CC, "-std=c99", "-Wall", "-Werror", "-fsyntax-only", "-include", str(made / f"{lib}.h"),
+          str(made / f"{lib}.c")])
+    _run(["c++", "-Wall", "-Werror", "-fsyntax-only", "-x", "c++", str(made / f"{lib}.h")])
+
+
+def test_header_documents_every_argument(exported, plant):
+    lib = DEFAULT_PREFIX.rstrip("_")
+    text = (exported / f"{lib}.h").read_text()
+    assert "THREAD SAFETY" in text and "reentrant" in text and "own arg, res, iw and w" in text
+    for name in NAMES:
+        f = plant[name]
+        full = DEFAULT_PREFIX + name
+        block = text.split(f" * {full}: ", 1)[1].split("*/", 1)[0]
+        rows = re.findall(r"^ \*   (arg|res)\[(\d+)\]\s+(\w+)\s+(\S+)  (.+)$", block, flags=re.M)
+        expect = [("arg", str(i), f.name_in(i), str(f.numel_in(i))) for i in range(f.n_in())]
+        expect += [("res", str(i), f.name_out(i), f"{f.size1_out(i)}x{f.size2_out(i)}" if f.size2_out(i) > 1
+                    else str(f.size1_out(i))) for i in range(f.n_out())]
+        assert [r[:4] for r in rows] == expect, name
+        assert all(len(r[4]) > 10 for r in rows), name  # every argument has a meaning with units
+        sz = {k: int(re.search(rf"#define {full.upper()}_{k} (\d+)", text).group(1)) for k in ("SZ_ARG", "SZ_RES")}
+        assert sz["SZ_ARG"] >= f.n_in() and sz["SZ_RES"] >= f.n_out(), name
 
 
 def test_params_header_is_the_default_vector(exported):
-    text = (exported / "params_default.h").read_text()
+    lib = DEFAULT_PREFIX.rstrip("_")
+    text = (exported / f"{lib}_params.h").read_text()
     P = load()
     names, v = P.names(), P.vector()
-    assert f"#define ARVCAS_NP {len(names)}" in text
+    assert f"#define ARVCAS_HAIDOU1_NP {len(names)}" in text
     rows = re.findall(r"^\s+(\S+),\s+/\* \[\s*(\d+)\] (\S+)\s+(.*?) \*/$", text, flags=re.M)
     assert [int(i) for _, i, _, _ in rows] == list(range(len(names)))
     assert [n for _, _, n, _ in rows] == names
@@ -102,18 +231,68 @@ def test_params_header_is_the_default_vector(exported):
     units = {n: u for _, _, n, u in rows}
     assert units["env.rho"] == "kg/m^3"
     assert units["arm.joint1.alpha"] == "rad (file: deg)"
-    assert f"#define ARVCAS_P_ENV_G {names.index('env.g')}" in text
+    assert f"#define ARVCAS_HAIDOU1_P_ENV_G {names.index('env.g')}" in text
 
 
 def test_readme_lists_io_from_the_functions(exported, plant):
     text = (exported / "README.md").read_text()
-    for name in uvms.PUBLIC_FUNCTIONS:
+    for name in NAMES:
         f = plant[name]
-        section = text.split(f"### `{name}`", 1)[1].split("###", 1)[0]
+        section = text.split(f"### `{DEFAULT_PREFIX}{name}`\n", 1)[1].split("###", 1)[0]
         rows = re.findall(r"^\| (in|out) \| (\d+) \| `(\w+)` \| (\d+)x(\d+)", section, flags=re.M)
         expect = [("in", str(i), f.name_in(i), *map(str, f.size_in(i))) for i in range(f.n_in())]
         expect += [("out", str(i), f.name_out(i), *map(str, f.size_out(i))) for i in range(f.n_out())]
         assert rows == expect, name
+
+
+def test_export_replaces_only_its_own_unchanged_files(tmp_path, capsys):
+    out = tmp_path / "lib"
+    export_c(out)
+    before = (out / "Makefile").read_text()
+    (out / "notes.txt").write_text("mine")
+    export_c(out)  # again: every file is arvcas's and unchanged
+    assert (out / "Makefile").read_text() == before and (out / "notes.txt").read_text() == "mine"
+    (out / "example.c").write_text("/* edited */")
+    with pytest.raises(ExportError, match=r"example.c was changed since arvcas export-c wrote it"):
+        export_c(out)
+    assert (out / "example.c").read_text() == "/* edited */"
+    assert cli.main(["export-c", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("arvcas: error: export-c: ") and "--force" in err and err.count("\n") == 1
+    assert cli.main(["export-c", str(out), "--force"]) == 0
+    assert (out / "example.c").read_text() != "/* edited */"
+    capsys.readouterr()
+    # a directory with files of someone else's under the names export-c writes
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "Makefile").write_text("all:\n")
+    with pytest.raises(ExportError, match=r"Makefile exists and was not written by arvcas export-c"):
+        export_c(other)
+    assert (other / "Makefile").read_text() == "all:\n" and not (other / "example.c").exists()
+    (other / MANIFEST).write_text("{not json")
+    with pytest.raises(ExportError, match=r"is not a manifest arvcas wrote"):
+        export_c(other)
+    (other / "Makefile").unlink()
+    (other / MANIFEST).unlink()
+    (other / "example.py").symlink_to(tmp_path / "lib" / "example.py")
+    with pytest.raises(ExportError, match=r"example.py exists and was not written"):
+        export_c(other)
+    export_c(other, force=True)
+    assert not (other / "example.py").is_symlink()
+
+
+def test_prefix_and_reentrancy_checks(tmp_path):
+    with pytest.raises(ExportError, match=r"prefix: expected a C identifier ending in one '_'"):
+        export_c(tmp_path / "x", prefix="1abc_")
+    with pytest.raises(ExportError, match=r"prefix"):
+        export_c(tmp_path / "x", prefix="abc")
+    paths = export_c(tmp_path / "x", prefix="mine_")
+    assert paths[0].name == "mine.c"
+    assert "int mine_uvms_rhs(" in paths[0].read_text()
+    with pytest.raises(ExportError, match=r"writable global data"):
+        _check_reentrant("static double cache[3];\n", [])
+    with pytest.raises(ExportError, match=r"manage memory"):
+        _check_reentrant("int f_checkout(void) {\n  return counter++;\n}\n", ["f"])
 
 
 def test_export_refuses_bad_dirs(tmp_path, capsys):

@@ -1,31 +1,54 @@
-"""Export the public plant functions as a standalone C library with a Makefile, an example and a README.
+"""``arvcas export-c DIR``: the plant functions and their Jacobians as a C library to link into other programs.
 
-Nothing here runs a compiler (that is :mod:`arvcas.build.codegen`'s job): the output directory holds
-sources only, and ``make`` there builds ``libarvcas_plant.so`` and ``example``.
+DIR receives sources only (nothing here runs a compiler; :mod:`arvcas.build.codegen` does that for
+arvcas itself):
+
+* ``<lib>.c``: CasADi's generated code of the seven functions (:data:`arvcas.build.dynamics.NAMES`),
+  renamed ``<prefix><name>`` (default prefix ``arvcas_haidou1_``); CasADi's helpers are prefixed too,
+  so every global symbol of the library starts with the prefix and two exports link into one program.
+* ``<lib>.h``: the documented header: per function the order, size, unit and frame of every argument,
+  the work array sizes, every prototype, and an ``<prefix><name>_eval`` wrapper with named arguments
+  and work arrays on the stack; the calling convention and thread safety at the top.
+* ``<lib>_params.h``: the default parameter vector ``p`` with name, index and unit of each entry.
+* ``Makefile`` and ``CMakeLists.txt`` (with an installable CMake package config), both compiling
+  with the flags of the build cache (:data:`arvcas.build.codegen.BASE_FLAGS`, ``DEFAULT_OPT_LEVEL``,
+  ``FIXED_FLAGS``, ``LIBS``), so the library gives the numbers arvcas gives.
+* examples in C (``example.c``), C++ (``example.cpp``, also built by ``consumer/CMakeLists.txt``
+  through ``find_package``) and Python ctypes (``example.py``), printing the same lines.
+* ``README.md`` and ``arvcas-export.json``, the manifest: every file written with its sha256.
+
+A file in DIR is only replaced if the manifest lists it with its current sha256 (arvcas wrote it and
+nobody changed it since); anything else is refused with a one-line :class:`ExportError` unless
+``force``.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import os
+import re
+import tempfile
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-__all__ = ["ExportError", "export_c", "example_inputs", "FILES"]
+__all__ = ["ExportError", "export_c", "example_inputs", "files", "MANIFEST", "DEFAULT_PREFIX"]
 
-LIB = "arvcas_plant"
-FILES = (f"{LIB}.c", f"{LIB}.h", "params_default.h", "example.c", "Makefile", "README.md")
+DEFAULT_PREFIX = "arvcas_haidou1_"
+MANIFEST = "arvcas-export.json"
+MANIFEST_FORMAT = 1
 
 _DEG = math.pi / 180.0
 
-# What each input/output name means (units SI, frames as in the model docstrings). The structure
-# (order, sizes) of the README is read from the Function objects; this only annotates names.
+# What each input/output name means (units SI, frames as in the model docstrings). Order and sizes
+# come from the Function objects; this only annotates names.
 _GLOSSARY = {
-    "x": "state [eta; nu]: eta = [x, y, z, phi, theta, psi] (m, rad; NED position and ZYX Euler angles), "
-    "nu = [u, v, w, p, q, r] (m/s, rad/s; body velocity in {b})",
-    "xdot": "d/dt of x: [J(eta) nu; nu_dot]",
+    "x": "state [eta; nu]: eta = [x, y, z, phi, theta, psi] (m, rad; NED position of the COB and ZYX Euler "
+    "angles), nu = [u, v, w, p, q, r] (m/s, rad/s; body velocity in {b})",
+    "xdot": "d/dt of x: [J(eta) nu; nu_dot] (m/s, rad/s; m/s^2, rad/s^2)",
     "tau": "body wrench at the COB in {b}: [X, Y, Z (N); K, M, N (N m)]",
     "eta": "pose [x, y, z, phi, theta, psi] (m, rad; NED, ZYX Euler angles)",
     "nu": "body velocity [u, v, w, p, q, r] in {b} (m/s, rad/s)",
@@ -34,18 +57,35 @@ _GLOSSARY = {
     "qd": "joint rates (rad/s)",
     "qdd": "joint accelerations (rad/s^2)",
     "payload": "payload fraction in [0, 1]: scales payload.mass and payload.volume at the tool point",
-    "p": "parameter vector in SI units, order and defaults in params_default.h",
+    "p": "parameter vector, SI units; order, names and defaults in the _params.h header",
     "tau_m": "wrench of the arm on the vehicle in {b} about the COB: [Fx, Fy, Fz (N); Mx, My, Mz (N m)]",
     "u": "thrust per thruster (N): stern-left, stern-right, two side, two vertical",
+    "dxdot_dx": "d xdot / d x, 12 x 12, column-major: d xdot_i / d x_j at [i + 12 j]",
+    "dxdot_dtau": "d xdot / d tau, 12 x 6, column-major: d xdot_i / d tau_j at [i + 12 j]",
+    "dxdot_dq": "d xdot / d q, 12 x 6, column-major: d xdot_i / d q_j at [i + 12 j]",
+}
+
+# one line per function, from the docstrings of arvcas.model (vehicle.rhs, manipulator.arm_wrench,
+# uvms.uvms_xdot, thrusters.allocate, thrusters.thrust)
+_SUMMARY = {
+    "vehicle_rhs": "The vehicle alone (paper eq. 1): x = [eta; nu], tau the total body wrench at the COB -> xdot.",
+    "arm_wrench": "tau_m of paper eq. 11: the arm's wrench on the vehicle in {b} about the COB, given the vehicle's "
+    "pose, velocity and acceleration and the joints' motion.",
+    "uvms_rhs": "The exactly coupled vehicle + arm: xdot = [J(eta) nu; nu_dot], with the trim buoyancy at the "
+    "initial arm configuration.",
+    "allocate": "u = B_T^-1 tau (paper eq. 2): thrust per thruster for the body wrench tau, before saturation.",
+    "thrust": "The realised body wrench B_T sat(u) of the thrusts u (saturated at the thrusters' limits).",
+    "vehicle_rhs_jac": "vehicle_rhs and its exact Jacobians (algorithmic differentiation) with respect to x and tau.",
+    "uvms_rhs_jac": "uvms_rhs and its exact Jacobians (algorithmic differentiation) with respect to x, tau and q.",
 }
 
 
 class ExportError(ValueError):
-    """The output directory cannot be used (one line)."""
+    """The output directory cannot be used, or a file there is not arvcas's to replace (one line)."""
 
 
 def example_inputs() -> dict[str, np.ndarray]:
-    """The fixed state of ``example.c``, by input name (SI units; ``p`` is the default vector)."""
+    """The fixed state of the examples, by input name (SI units; ``p`` is the default vector)."""
     eta = [1.0, -0.5, 2.0, 0.05, -0.03, 0.2]
     nu = [0.3, 0.05, -0.02, 0.01, 0.02, -0.03]
     return {
@@ -61,6 +101,17 @@ def example_inputs() -> dict[str, np.ndarray]:
         # 250 > u_max and -200 < u_min: thrust() shows the saturation
         "u": np.array([100.0, -50.0, 20.0, -30.0, 250.0, -200.0]),
     }
+
+
+def files(prefix: str = DEFAULT_PREFIX) -> tuple[str, ...]:
+    """The files :func:`export_c` writes (relative to DIR), the manifest last."""
+    lib = prefix.rstrip("_")
+    return (f"{lib}.c", f"{lib}.h", f"{lib}_params.h", "example.c", "example.cpp", "example.py", "Makefile",
+            "CMakeLists.txt", "consumer/CMakeLists.txt", "README.md", MANIFEST)
+
+
+# ---------------------------------------------------------------------------------------------
+# directory and manifest
 
 
 def _check_out_dir(out_dir) -> Path:
@@ -79,6 +130,62 @@ def _check_out_dir(out_dir) -> Path:
     return out
 
 
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _read_manifest(out: Path, force: bool) -> dict[str, str]:
+    """{relative path: sha256} of the files a previous export wrote ({} if none)."""
+    path = out / MANIFEST
+    if not os.path.lexists(path):
+        return {}
+    try:
+        if path.is_symlink() or not path.is_file():
+            raise ValueError("not a regular file")
+        m = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(m, dict) or m.get("format") != MANIFEST_FORMAT or not isinstance(m.get("files"), dict):
+            raise ValueError("not an arvcas export manifest")
+        return {str(k): str(v) for k, v in m["files"].items()}
+    except (OSError, ValueError) as e:
+        if force:
+            return {}
+        raise ExportError(f"export-c: {path} is not a manifest arvcas wrote ({e}); move it away or pass --force") from None
+
+
+def _check_overwrite(out: Path, names, manifest: dict[str, str], force: bool) -> None:
+    """Refuse to replace a file arvcas did not write, or one changed since it wrote it."""
+    if force:
+        return
+    for name in names:
+        path = out / name
+        if name == MANIFEST or not os.path.lexists(path):
+            continue
+        if name not in manifest:
+            raise ExportError(f"export-c: {path} exists and was not written by arvcas export-c (not in {MANIFEST});"
+                              f" move it away or pass --force")
+        if path.is_symlink() or not path.is_file() or _sha256(path.read_bytes()) != manifest[name]:
+            raise ExportError(f"export-c: {path} was changed since arvcas export-c wrote it (sha256 differs from"
+                              f" {MANIFEST}); move it away or pass --force")
+
+
+def _write(out: Path, name: str, data: bytes) -> None:
+    path = out / name
+    path.parent.mkdir(exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
+# ---------------------------------------------------------------------------------------------
+# C helpers
+
+
 def _c_double(v: float) -> str:
     v = float(v)
     if not math.isfinite(v):
@@ -93,95 +200,259 @@ def _si_unit(dimension: str) -> str:
     return next(u for u, (dim, factor) in UNITS.items() if dim == dimension and factor == 1.0)
 
 
-def _macro(name: str) -> str:
-    return "ARVCAS_P_" + "".join(c if c.isalnum() else "_" for c in name).upper()
+def _ident(name: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in name).upper()
 
 
-def _params_header(P, opts) -> str:
+def _params_header(P, opts, prefix: str) -> str:
     from arvcas import __version__
     from arvcas.params import SCHEMA
 
+    up = prefix.upper()
     names = P.names()
     values = P.vector()
-    macros = [_macro(n) for n in names]
+    macros = [f"{up}P_{_ident(n)}" for n in names]
     if len(set(macros)) != len(macros):  # e.g. two names differing only in case
         dup = next(m for m in macros if macros.count(m) > 1)
         raise ExportError(f"export-c: parameter names collide as C macro {dup}")
     width = max(len(n) for n in names)
+    guard = f"{up}PARAMS_H"
     lines = [
-        f"/* Default parameter vector p of the arvcas plant functions, SI units.",
+        "/* Default parameter vector p of the arvcas plant functions, SI units.",
         f" * Generated by arvcas {__version__} (CasADi {ca.__version__}) from {P.path}",
         f" * Model options: {opts!r} (tag {opts.tag()}).",
-        f" * Every function takes p as its last input; change an entry to change the model, no rebuild.",
-        f" */",
-        f"#ifndef ARVCAS_PARAMS_DEFAULT_H",
-        f"#define ARVCAS_PARAMS_DEFAULT_H",
-        f"",
-        f"#define ARVCAS_NP {len(names)}",
-        f"",
-        f"/* index of each parameter in p */",
+        " * Every function takes p as its last input; change an entry to change the model, no rebuild.",
+        " */",
+        f"#ifndef {guard}",
+        f"#define {guard}",
+        "",
+        f"#define {up}NP {len(names)}",
+        "",
+        "/* index of each parameter in p */",
     ]
-    for i, (n, m) in enumerate(zip(names, macros)):
+    for i, m in enumerate(macros):
         lines.append(f"#define {m} {i}")
-    lines += ["", f"static const double arvcas_p_default[ARVCAS_NP] = {{"]
+    lines += ["", f"static const double {prefix}p_default[{up}NP] = {{"]
     lines.append("  /* value, then [index] name, SI unit (and the unit the parameter file uses, if another) */")
     for i, n in enumerate(names):
         si = _si_unit(SCHEMA[n][0])
         file_unit = P.unit(n)
         unit = si if file_unit == si else f"{si} (file: {file_unit})"
         lines.append(f"  {_c_double(values[i]) + ',':<24} /* [{i:3d}] {n:<{width}}  {unit} */")
-    lines += ["};", "", "#endif /* ARVCAS_PARAMS_DEFAULT_H */", ""]
+    lines += ["};", "", f"#endif /* {guard} */", ""]
     return "\n".join(lines)
 
 
-def _example_c(fns: dict[str, ca.Function], inputs: dict[str, np.ndarray]) -> str:
-    out = [
-        "/* example.c: call the arvcas plant functions at a fixed state and print the results.",
+_EXPORT_RE = re.compile(r"^CASADI_SYMBOL_EXPORT ([^{]+?)\s*\{", re.M)
+
+
+def _exported(c_text: str) -> list[tuple[str, str]]:
+    """(symbol, declaration) of every exported function of CasADi's generated C, in order."""
+    return [(re.search(r"(\w+)\(", sig).group(1), " ".join(sig.split()) + ";") for sig in _EXPORT_RE.findall(c_text)]
+
+
+def _owner(symbol: str, full_names) -> str | None:
+    """The function a symbol belongs to: the longest name it equals or extends by a CasADi suffix."""
+    cands = [f for f in full_names if symbol == f or (symbol.startswith(f + "_") and symbol[len(f) + 1:] in _SUFFIXES)]
+    return max(cands, key=len) if cands else None
+
+
+_SUFFIXES = {"checkout", "release", "incref", "decref", "n_in", "n_out", "default_in", "name_in", "name_out",
+             "sparsity_in", "sparsity_out", "work", "work_bytes", "alloc_mem", "init_mem", "free_mem"}
+
+
+def _prototypes(c_text: str, fname: str, full_names) -> list[str]:
+    """The exported prototypes of function ``fname`` in CasADi's generated C, as declarations."""
+    return [decl for sym, decl in _exported(c_text) if _owner(sym, full_names) == fname]
+
+
+def _work_sizes(c_text: str, fname: str) -> dict[str, int]:
+    m = re.search(rf"int {fname}_work\(casadi_int \*sz_arg.*?\{{(.*?)return 0;", c_text, flags=re.S)
+    if not m:
+        raise ExportError(f"export-c: {fname}_work not found in CasADi's generated code")
+    sizes = dict(re.findall(r"if \((sz_\w+)\) \*\1 = (\d+);", m.group(1)))
+    if set(sizes) != {"sz_arg", "sz_res", "sz_iw", "sz_w"}:
+        raise ExportError(f"export-c: unexpected {fname}_work in CasADi's generated code")
+    return {k: int(v) for k, v in sizes.items()}
+
+
+def _check_reentrant(c_text: str, full_names: list[str]) -> None:
+    """The header promises reentrancy: no writable static or global data, no-op memory management."""
+    for line in c_text.splitlines():
+        if re.match(r"^(static\s+)?(casadi_real|casadi_int|int|double|char)\b[^()]*(=|;)\s*", line) and \
+                not line.startswith("static const"):
+            raise ExportError(f"export-c: CasADi's generated code has writable global data ({line.strip()[:60]})")
+    for f in full_names:
+        m = re.search(rf"int {f}_checkout\(void\) \{{\s*return 0;\s*\}}", c_text)
+        r = re.search(rf"void {f}_release\(int mem\) \{{\s*\}}", c_text)
+        if not (m and r):
+            raise ExportError(f"export-c: {f}_checkout/_release manage memory: the header's thread-safety note would be wrong")
+
+
+# ---------------------------------------------------------------------------------------------
+# the header
+
+
+def _arg_rows(f: ca.Function) -> list[tuple[str, int, str, str, str]]:
+    """(kind, index, name, size text, meaning) of every input and output."""
+    rows = []
+    for i in range(f.n_in()):
+        rows.append(("in", i, f.name_in(i), _size(f.size_in(i)), _GLOSSARY.get(f.name_in(i), "")))
+    for i in range(f.n_out()):
+        rows.append(("out", i, f.name_out(i), _size(f.size_out(i)), _GLOSSARY.get(f.name_out(i), "")))
+    return rows
+
+
+def _size(sh) -> str:
+    return str(sh[0]) if sh[1] == 1 else f"{sh[0]}x{sh[1]}"
+
+
+def _header(fns: dict[str, ca.Function], c_text: str, prefix: str, opts, P) -> str:
+    from arvcas import __version__
+
+    lib = prefix.rstrip("_")
+    up = prefix.upper()
+    guard = f"{lib.upper()}_H"
+    L = [
+        f"/* {lib}.h: the arvcas plant functions of the Haidou-1 ARV and its manipulator, in C.",
         " *",
-        " * Build and run:  make && ./example",
-        " * Output lines:   in <function> <input> : values        (every input except p)",
-        " *                 out <function> <output> : values",
-        " * Values are printed with %.17g, so they read back exactly.",
+        f" * Generated by arvcas {__version__} with CasADi {ca.__version__}; model options {opts!r}; default",
+        f" * parameters from {P.path} (in {lib}_params.h). Link with -l{lib} -lm.",
         " *",
-        " * The fixed state (SI units; p = arvcas_p_default of params_default.h):",
+        " * UNITS AND FRAMES: SI units throughout; {b} is the body frame at the centre of buoyancy (COB),",
+        " * x forward, y starboard, z down; eta is the NED position of the COB and the ZYX Euler angles.",
+        " * All inputs and outputs are dense arrays of double; a matrix output is stored column-major.",
+        " * Every number of the model is in p, the last input of every function (no rebuild to change one).",
+        " *",
+        " * CALLING CONVENTION (CasADi's): for each function F below,",
+        " *   int F(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem)",
+        " * evaluates F; arg[i] points to input i and res[i] to output i, in the order listed with F (a NULL",
+        " * arg[i] reads as zeros, a NULL res[i] is not written); iw and w are work arrays of at least",
+        " * F_SZ_IW and F_SZ_W elements, arg and res arrays of at least F_SZ_ARG and F_SZ_RES pointers",
+        " * (the same numbers as F_work() returns). F returns 0: the generated code has no failure path and",
+        " * does not check its inputs (NaN and inf go through the IEEE arithmetic). mem is ignored: pass 0.",
+        " * F_eval(named inputs..., outputs...) is a static inline wrapper that does the above with work",
+        " * arrays on the stack (F_SZ_W doubles: see each function).",
+        " *",
+        " * THREAD SAFETY: every function is reentrant. It reads only its inputs and constant tables and",
+        " * writes only its outputs and the work arrays given to it; the library has no writable global or",
+        " * static data (export-c checks this in the generated code). So any number of threads may call any",
+        " * functions at the same time, provided each concurrent call has its own arg, res, iw and w arrays",
+        " * (F_eval's are on the caller's stack, so F_eval is always safe). F_checkout() returns 0 and",
+        " * F_release(), F_incref() and F_decref() do nothing in this library: they exist for CasADi's API",
+        " * and need not be called.",
+        " *",
+        f" * SYMBOLS: every global symbol of the library starts with {prefix}: the functions declared here",
+        f" * and CasADi's small helpers ({prefix}fmax, {prefix}sq, ...), which are not part of the API.",
+        " */",
+        f"#ifndef {guard}",
+        f"#define {guard}",
+        "",
+        "#ifndef casadi_real",
+        "#define casadi_real double",
+        "#endif",
+        "#ifndef casadi_int",
+        "#define casadi_int long long int",
+        "#endif",
+        "",
+        "#ifdef __cplusplus",
+        'extern "C" {',
+        "#endif",
+        "",
+        f"/* CasADi version, and the sizes of casadi_int and casadi_real, the library was generated with */",
     ]
-    for k, v in inputs.items():
-        out.append(f" *   {k:<8}= [{', '.join(f'{x:.6g}' for x in v)}]")
-    out += [
-        f" * (q in degrees: [{', '.join(f'{x:.6g}' for x in np.degrees(inputs['q']))}].)",
+    full_names = [prefix + n for n in fns]
+    for sym, decl in _exported(c_text):
+        if _owner(sym, full_names) is None:
+            if not sym.startswith(prefix):
+                raise ExportError(f"export-c: CasADi's generated code exports {sym}, without the prefix {prefix}")
+            L.append(decl)
+    for short, f in fns.items():
+        full = prefix + short
+        F = full.upper()
+        ws = _work_sizes(c_text, full)
+        rows = _arg_rows(f)
+        width = max(len(r[2]) for r in rows)
+        L += ["", "/* " + "-" * 96, f" * {full}: {_SUMMARY[short]}", " *"]
+        for kind, i, name, size, meaning in rows:
+            slot = f"arg[{i}]" if kind == "in" else f"res[{i}]"
+            L.append(f" *   {slot:<7} {name:<{width}} {size:>5}  {meaning}")
+        L += [
+            " *",
+            f" * work: arg {ws['sz_arg']} pointers, res {ws['sz_res']} pointers, iw {ws['sz_iw']} integers,"
+            f" w {ws['sz_w']} doubles ({8 * ws['sz_w']:,} bytes)",
+            " */",
+        ]
+        for k in ("sz_arg", "sz_res", "sz_iw", "sz_w"):
+            L.append(f"#define {F}_{k.upper()} {ws[k]}")
+        L += _prototypes(c_text, full, [prefix + n for n in fns])
+        ins = [f"const casadi_real* {f.name_in(i)}" for i in range(f.n_in())]
+        outs = [f"casadi_real* {f.name_out(i)}" for i in range(f.n_out())]
+        L += [
+            f"/* {full} with named arguments (sizes above); work arrays on the stack. Returns 0. */",
+            f"static inline int {full}_eval({', '.join(ins + outs)}) {{",
+            f"  const casadi_real* arg[{F}_SZ_ARG];",
+            f"  casadi_real* res[{F}_SZ_RES];",
+            f"  casadi_int iw[{F}_SZ_IW + 1];",
+            f"  casadi_real w[{F}_SZ_W + 1];",
+        ]
+        L += [f"  arg[{i}] = {f.name_in(i)};" for i in range(f.n_in())]
+        L += [f"  res[{i}] = {f.name_out(i)};" for i in range(f.n_out())]
+        L += [f"  return {full}(arg, res, iw, w, 0);", "}"]
+    L += ["", "#ifdef __cplusplus", "}", "#endif", "", f"#endif /* {guard} */", ""]
+    return "\n".join(L)
+
+
+# ---------------------------------------------------------------------------------------------
+# examples (all three print the same lines: "in|out <function> <name> : values", %.17g)
+
+
+def _example_values(fns: dict[str, ca.Function], inputs: dict[str, np.ndarray]) -> None:
+    for short, f in fns.items():
+        for i, k in enumerate(f.name_in()):
+            if k == "p":
+                if i != f.n_in() - 1:
+                    raise ExportError(f"export-c: {short}: p must be the last input")
+            elif k not in inputs or inputs[k].size != f.numel_in(i):
+                raise ExportError(f"export-c: {short}: no example value of size {f.numel_in(i)} for input {k}")
+
+
+def _example_c(fns, inputs, prefix: str) -> str:
+    lib = prefix.rstrip("_")
+    out = [
+        f"/* example.c: call every function of lib{lib} at a fixed state, through CasADi's calling convention",
+        " * with work arrays from F_work() (the pattern for threads: one set of arrays per thread), and print",
+        " * inputs and outputs as lines 'in|out <function> <name> : values' with %.17g (they read back exactly).",
+        " *",
+        " * Build and run: make && ./example   (or with CMake: see CMakeLists.txt)",
         " */",
         "#include <stdio.h>",
         "#include <stdlib.h>",
-        f'#include "{LIB}.h"',
-        '#include "params_default.h"',
+        f'#include "{lib}.h"',
+        f'#include "{lib}_params.h"',
         "",
-        "typedef int (*eval_t)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int);",
-        "typedef int (*work_t)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);",
+        "typedef int (*eval_t)(const casadi_real**, casadi_real**, casadi_int*, casadi_real*, int);",
+        "typedef int (*work_t)(casadi_int*, casadi_int*, casadi_int*, casadi_int*);",
         "",
-        "/* The CasADi calling convention: ask for work sizes, check out a memory slot, evaluate. */",
-        "static int call(eval_t f, work_t work, int (*checkout)(void), void (*release)(int),",
-        "                void (*incref)(void), void (*decref)(void),",
-        "                const casadi_real **in, int n_in, casadi_real *out)",
+        "static int call(eval_t f, work_t work, const casadi_real** in, int n_in, casadi_real** out, int n_out)",
         "{",
         "  casadi_int sz_arg, sz_res, sz_iw, sz_w;",
         "  if (work(&sz_arg, &sz_res, &sz_iw, &sz_w)) return 1;",
-        "  const casadi_real **arg = calloc(sz_arg > n_in ? sz_arg : n_in, sizeof *arg);",
-        "  casadi_real **res = calloc(sz_res > 1 ? sz_res : 1, sizeof *res);",
-        "  casadi_int *iw = calloc(sz_iw > 0 ? sz_iw : 1, sizeof *iw);",
-        "  casadi_real *w = calloc(sz_w > 0 ? sz_w : 1, sizeof *w);",
-        "  if (!arg || !res || !iw || !w) return 1;",
-        "  for (int i = 0; i < n_in; ++i) arg[i] = in[i];",
-        "  res[0] = out;",
-        "  incref();",
-        "  int mem = checkout();",
-        "  int flag = f(arg, res, iw, w, mem);",
-        "  release(mem);",
-        "  decref();",
+        "  const casadi_real** arg = calloc(sz_arg > n_in ? sz_arg : n_in, sizeof *arg);",
+        "  casadi_real** res = calloc(sz_res > n_out ? sz_res : n_out, sizeof *res);",
+        "  casadi_int* iw = calloc(sz_iw + 1, sizeof *iw);",
+        "  casadi_real* w = calloc(sz_w + 1, sizeof *w);",
+        "  int flag = 1;",
+        "  if (arg && res && iw && w) {",
+        "    for (int i = 0; i < n_in; ++i) arg[i] = in[i];",
+        "    for (int i = 0; i < n_out; ++i) res[i] = out[i];",
+        "    flag = f(arg, res, iw, w, 0);",
+        "  }",
         "  free(arg); free(res); free(iw); free(w);",
         "  return flag;",
         "}",
         "",
-        "static void print_vec(const char *kind, const char *fn, const char *name, const casadi_real *v, int n)",
+        "static void print_vec(const char* kind, const char* fn, const char* name, const casadi_real* v, int n)",
         "{",
         '  printf("%s %s %s :", kind, fn, name);',
         '  for (int i = 0; i < n; ++i) printf(" %.17g", v[i]);',
@@ -189,166 +460,400 @@ def _example_c(fns: dict[str, ca.Function], inputs: dict[str, np.ndarray]) -> st
         "}",
         "",
     ]
-    # one static array per distinct input name
     for k, v in inputs.items():
         out.append(f"static const casadi_real in_{k}[{v.size}] = {{{', '.join(_c_double(x) for x in v)}}};")
     out += ["", "int main(void)", "{", "  int failed = 0;"]
-    for name, f in fns.items():
-        n_out = f.size1_out(0)
-        names_in = f.name_in()
-        args = []
-        for i, k in enumerate(names_in):
-            if k == "p":
-                if i != len(names_in) - 1:
-                    raise ExportError(f"export-c: {name}: p must be the last input")
-                args.append("arvcas_p_default")
-            else:
-                if k not in inputs or inputs[k].size != f.numel_in(i):
-                    raise ExportError(f"export-c: {name}: no example value of size {f.numel_in(i)} for input {k}")
-                args.append(f"in_{k}")
+    for short, f in fns.items():
+        full = prefix + short
+        args = [f"{prefix}p_default" if k == "p" else f"in_{k}" for k in f.name_in()]
+        outs = [f"out{i}" for i in range(f.n_out())]
+        out += ["  {", f"    const casadi_real* in[{len(args)}] = {{{', '.join(args)}}};"]
+        for i in range(f.n_out()):
+            out.append(f"    static casadi_real out{i}[{f.numel_out(i)}];")
         out += [
-            "  {",
-            f"    const casadi_real *in[{len(args)}] = {{{', '.join(args)}}};",
-            f"    casadi_real out[{n_out}];",
-            f"    if ({name}_n_in() != {len(args)}) {{ fprintf(stderr, \"{name}: wrong library\\n\"); return 1; }}",
-            f"    if (call({name}, {name}_work, {name}_checkout, {name}_release, {name}_incref, {name}_decref,",
-            f"             in, {len(args)}, out)) {{",
-            f'      fprintf(stderr, "{name} failed\\n");',
+            f"    casadi_real* out[{f.n_out()}] = {{{', '.join(outs)}}};",
+            f"    if ({full}_n_in() != {len(args)} || {full}_n_out() != {f.n_out()}) {{",
+            f'      fprintf(stderr, "{full}: wrong library\\n");',
+            "      return 1;",
+            "    }",
+            f"    if (call({full}, {full}_work, in, {len(args)}, out, {f.n_out()})) {{",
+            f'      fprintf(stderr, "{full} failed\\n");',
             "      failed = 1;",
             "    } else {",
         ]
-        for i, k in enumerate(names_in):
+        for k in f.name_in():
             if k != "p":
-                out.append(f'      print_vec("in", "{name}", "{k}", in_{k}, {inputs[k].size});')
-        out += [
-            f'      print_vec("out", "{name}", "{f.name_out(0)}", out, {n_out});',
-            "    }",
-            "  }",
-        ]
+                out.append(f'      print_vec("in", "{short}", "{k}", in_{k}, {inputs[k].size});')
+        for i in range(f.n_out()):
+            out.append(f'      print_vec("out", "{short}", "{f.name_out(i)}", out{i}, {f.numel_out(i)});')
+        out += ["    }", "  }"]
     out += ["  return failed;", "}", ""]
     return "\n".join(out)
 
 
-_MAKEFILE = f"""\
-# Builds lib{LIB}.so and example from the generated sources (no Python needed).
-#   make          build both
-#   make run      build and run the example
-# Keep IEEE semantics: no -Ofast or -ffast-math (they change the numbers).
+def _example_cpp(fns, inputs, prefix: str) -> str:
+    lib = prefix.rstrip("_")
+    out = [
+        f"// example.cpp: the same as example.c from C++, through the F_eval wrappers of {lib}.h",
+        "// (named arguments, work arrays on the stack). Prints the same lines as example.c.",
+        "//",
+        "// Build: with CMake (CMakeLists.txt builds it as example_cpp; consumer/CMakeLists.txt builds it",
+        f"// against an installed package through find_package({lib})), or by hand:",
+        f"//   c++ -I. example.cpp -L. -l{lib} -Wl,-rpath,. -lm -o example_cpp",
+        "#include <array>",
+        "#include <cstdio>",
+        "#include <vector>",
+        f'#include "{lib}.h"',
+        f'#include "{lib}_params.h"',
+        "",
+        "namespace {",
+        "void print_vec(const char* kind, const char* fn, const char* name, const double* v, std::size_t n) {",
+        '  std::printf("%s %s %s :", kind, fn, name);',
+        '  for (std::size_t i = 0; i < n; ++i) std::printf(" %.17g", v[i]);',
+        '  std::printf("\\n");',
+        "}",
+        "}  // namespace",
+        "",
+        "int main() {",
+    ]
+    for k, v in inputs.items():
+        out.append(f"  const std::array<double, {v.size}> {k}{{{', '.join(_c_double(x) for x in v)}}};")
+    out.append("  int failed = 0;")
+    for short, f in fns.items():
+        full = prefix + short
+        args = [f"{prefix}p_default" if k == "p" else f"{k}.data()" for k in f.name_in()]
+        out.append("  {")
+        for i in range(f.n_out()):
+            out.append(f"    std::vector<double> {f.name_out(i)}({f.numel_out(i)});")
+        args += [f"{f.name_out(i)}.data()" for i in range(f.n_out())]
+        out += [f"    if ({full}_eval({', '.join(args)}) != 0) {{",
+                f'      std::fprintf(stderr, "{full} failed\\n");',
+                "      failed = 1;",
+                "    } else {"]
+        for k in f.name_in():
+            if k != "p":
+                out.append(f'      print_vec("in", "{short}", "{k}", {k}.data(), {k}.size());')
+        for i in range(f.n_out()):
+            o = f.name_out(i)
+            out.append(f'      print_vec("out", "{short}", "{o}", {o}.data(), {o}.size());')
+        out += ["    }", "  }"]
+    out += ["  return failed;", "}", ""]
+    return "\n".join(out)
+
+
+def _example_py(fns, inputs, prefix: str, P) -> str:
+    lib = prefix.rstrip("_")
+    sig = {short: ([f.name_in(i) for i in range(f.n_in())], [(f.name_out(i), f.numel_out(i)) for i in range(f.n_out())])
+           for short, f in fns.items()}
+    vals = {k: [float(x) for x in v] for k, v in inputs.items()}
+    return f'''"""example.py: call lib{lib}.so from Python with ctypes (no arvcas, no CasADi, no NumPy needed).
+
+Prints the same lines as example.c. Run after `make` (or give the library's path):
+    python3 example.py [path/to/lib{lib}.so]
+"""
+
+import ctypes
+import os
+import sys
+
+PREFIX = {prefix!r}
+# the fixed state of the examples, and the default parameter vector p ({lib}_params.h)
+INPUTS = {vals!r}
+P_DEFAULT = {[float(x) for x in P.vector()]!r}
+# function -> (input names in order, [(output name, size)])
+FUNCTIONS = {sig!r}
+
+real, integer = ctypes.c_double, ctypes.c_longlong  # casadi_real, casadi_int
+
+
+def load(path):
+    lib = ctypes.CDLL(path)
+    fns = {{}}
+    for short, (ins, outs) in FUNCTIONS.items():
+        name = PREFIX + short
+        work = getattr(lib, name + "_work")
+        work.argtypes = [ctypes.POINTER(integer)] * 4
+        work.restype = ctypes.c_int
+        sizes = [integer() for _ in range(4)]
+        if work(*[ctypes.byref(s) for s in sizes]) != 0:
+            raise RuntimeError(name + "_work failed")
+        sz_arg, sz_res, sz_iw, sz_w = (max(int(s.value), 1) for s in sizes)
+        f = getattr(lib, name)
+        f.argtypes = [ctypes.POINTER(ctypes.POINTER(real)), ctypes.POINTER(ctypes.POINTER(real)),
+                      ctypes.POINTER(integer), ctypes.POINTER(real), ctypes.c_int]
+        f.restype = ctypes.c_int
+        # one set of work arrays per function: reuse them in one thread, make new ones per thread
+        fns[short] = (f, (ctypes.POINTER(real) * max(sz_arg, len(ins)))(), (ctypes.POINTER(real) * max(sz_res, len(outs)))(),
+                      (integer * sz_iw)(), (real * sz_w)())
+    return fns
+
+
+def call(fns, short, inputs):
+    f, arg, res, iw, w = fns[short]
+    ins, outs = FUNCTIONS[short]
+    keep = [(real * len(inputs[k]))(*inputs[k]) for k in ins]
+    for i, a in enumerate(keep):
+        arg[i] = ctypes.cast(a, ctypes.POINTER(real))
+    bufs = [(real * n)() for _, n in outs]
+    for i, b in enumerate(bufs):
+        res[i] = ctypes.cast(b, ctypes.POINTER(real))
+    if f(arg, res, iw, w, 0) != 0:
+        raise RuntimeError(PREFIX + short + " failed")
+    return [list(b) for b in bufs]
+
+
+def main(argv):
+    path = argv[1] if len(argv) > 1 else os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib{lib}.so")
+    fns = load(path)
+    values = dict(INPUTS, p=P_DEFAULT)
+    for short, (ins, outs) in FUNCTIONS.items():
+        results = call(fns, short, values)
+        for k in ins:
+            if k != "p":
+                print("in", short, k, ":", " ".join("%.17g" % v for v in values[k]))
+        for (name, _), r in zip(outs, results):
+            print("out", short, name, ":", " ".join("%.17g" % v for v in r))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
+'''
+
+
+# ---------------------------------------------------------------------------------------------
+# build files
+
+
+def _flags():
+    """(library flags, compile flags, libraries) of the build cache, read from arvcas.build.codegen."""
+    from arvcas.build import codegen
+
+    return list(codegen.BASE_FLAGS), [codegen.DEFAULT_OPT_LEVEL, *codegen.FIXED_FLAGS], list(codegen.LIBS)
+
+
+def _makefile(prefix: str) -> str:
+    lib = prefix.rstrip("_")
+    base, cflags, libs = _flags()
+    pic = [f for f in base if f != "-shared"]
+    return f"""\
+# Builds lib{lib}.so, example (C) and example_cpp (C++) with the compiler flags of arvcas's build
+# cache (arvcas.build.codegen: BASE_FLAGS, DEFAULT_OPT_LEVEL, FIXED_FLAGS, LIBS), so the library
+# gives the numbers arvcas gives. Keep IEEE semantics: no -Ofast, -ffast-math or FMA contraction.
+#   make          build all three
+#   make run      build and run the C example;  python3 example.py  runs the ctypes example
 CC ?= cc
-CFLAGS ?= -O2
-ARVCAS_CFLAGS = -fPIC -ffp-contract=off
-LDLIBS = -lm
+CXX ?= c++
+ARVCAS_CFLAGS = {' '.join(cflags)}
+ARVCAS_LIBFLAGS = {' '.join(base)}
+ARVCAS_PIC = {' '.join(pic)}
+LDLIBS = {' '.join(libs)}
 
-all: lib{LIB}.so example
+all: lib{lib}.so example example_cpp
 
-lib{LIB}.so: {LIB}.c {LIB}.h
-\t$(CC) $(CFLAGS) $(ARVCAS_CFLAGS) -shared -o $@ {LIB}.c $(LDLIBS)
+lib{lib}.so: {lib}.c
+\t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_LIBFLAGS) $(CFLAGS) -o $@ {lib}.c $(LDLIBS)
 
-example: example.c lib{LIB}.so {LIB}.h params_default.h
-\t$(CC) $(CFLAGS) $(ARVCAS_CFLAGS) -o $@ example.c -L. -l{LIB} -Wl,-rpath,'$$ORIGIN' $(LDLIBS)
+example: example.c {lib}.h {lib}_params.h lib{lib}.so
+\t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_PIC) $(CFLAGS) -o $@ example.c -L. -l{lib} -Wl,-rpath,'$$ORIGIN' $(LDLIBS)
+
+example_cpp: example.cpp {lib}.h {lib}_params.h lib{lib}.so
+\t$(CXX) $(ARVCAS_CFLAGS) $(ARVCAS_PIC) $(CXXFLAGS) -o $@ example.cpp -L. -l{lib} -Wl,-rpath,'$$ORIGIN' $(LDLIBS)
 
 run: example
 \t./example
 
 clean:
-\trm -f lib{LIB}.so example
+\trm -f lib{lib}.so example example_cpp
 
 .PHONY: all run clean
 """
 
 
-def _shape(f: ca.Function, i: int, out: bool) -> str:
-    sp = f.sparsity_out(i) if out else f.sparsity_in(i)
-    dense = "dense" if sp.is_dense() else f"{sp.nnz()} nonzeros"
-    return f"{sp.size1()}x{sp.size2()} ({dense})"
+def _cmake(prefix: str) -> str:
+    lib = prefix.rstrip("_")
+    base, cflags, libs = _flags()
+    unknown = [f for f in base if f not in ("-shared", "-fPIC")]
+    options = " ".join(cflags + unknown)
+    link = " ".join(lib_.removeprefix("-l") for lib_ in libs)
+    return f"""\
+# lib{lib} with CMake: builds the shared library with the flags of arvcas's build cache
+# (arvcas.build.codegen: -shared -fPIC = a SHARED library with POSITION_INDEPENDENT_CODE, then
+# DEFAULT_OPT_LEVEL and FIXED_FLAGS as compile options, LIBS linked), and the examples.
+#
+#   cmake -S . -B build && cmake --build build && cmake --install build --prefix /your/prefix
+#
+# installs lib/lib{lib}.so, include/{lib}.h, include/{lib}_params.h and the package config
+# lib/cmake/{lib}/{lib}Config.cmake. In another project:
+#   find_package({lib} CONFIG REQUIRED)           # with -DCMAKE_PREFIX_PATH=/your/prefix
+#   target_link_libraries(your_target PRIVATE arvcas::{lib})
+# (consumer/CMakeLists.txt does exactly this for example.cpp). Without installing, the build tree
+# works too: -D{lib}_DIR=<this build directory>.
+cmake_minimum_required(VERSION 3.16)
+project({lib} LANGUAGES C CXX)
+
+option({lib.upper()}_EXAMPLES "build example (C) and example_cpp (C++)" ON)
+include(GNUInstallDirs)
+
+add_library({lib} SHARED {lib}.c)
+set_target_properties({lib} PROPERTIES POSITION_INDEPENDENT_CODE ON PUBLIC_HEADER "{lib}.h;{lib}_params.h")
+# after CMAKE_C_FLAGS and the build type's flags, so these decide (last -O wins)
+target_compile_options({lib} PRIVATE {options})
+target_link_libraries({lib} PRIVATE {link})
+target_include_directories({lib} PUBLIC
+  $<BUILD_INTERFACE:${{CMAKE_CURRENT_SOURCE_DIR}}>
+  $<INSTALL_INTERFACE:${{CMAKE_INSTALL_INCLUDEDIR}}>)
+add_library(arvcas::{lib} ALIAS {lib})
+
+install(TARGETS {lib} EXPORT {lib}Targets
+  LIBRARY DESTINATION ${{CMAKE_INSTALL_LIBDIR}}
+  PUBLIC_HEADER DESTINATION ${{CMAKE_INSTALL_INCLUDEDIR}})
+install(EXPORT {lib}Targets NAMESPACE arvcas:: FILE {lib}Config.cmake
+  DESTINATION ${{CMAKE_INSTALL_LIBDIR}}/cmake/{lib})
+export(EXPORT {lib}Targets NAMESPACE arvcas:: FILE ${{CMAKE_CURRENT_BINARY_DIR}}/{lib}Config.cmake)
+
+if({lib.upper()}_EXAMPLES)
+  add_executable(example example.c)
+  target_compile_options(example PRIVATE {options})
+  target_link_libraries(example PRIVATE {lib} {link})
+  add_executable(example_cpp example.cpp)
+  target_compile_options(example_cpp PRIVATE {options})
+  target_link_libraries(example_cpp PRIVATE {lib} {link})
+endif()
+"""
 
 
-def _readme(fns: dict[str, ca.Function], opts, P, inputs: dict[str, np.ndarray]) -> str:
+def _cmake_consumer(prefix: str) -> str:
+    lib = prefix.rstrip("_")
+    _, cflags, libs = _flags()
+    return f"""\
+# A project using the installed lib{lib} through its CMake package config:
+#   cmake -S consumer -B build-consumer -DCMAKE_PREFIX_PATH=/your/prefix && cmake --build build-consumer
+cmake_minimum_required(VERSION 3.16)
+project({lib}_consumer LANGUAGES CXX)
+find_package({lib} CONFIG REQUIRED)
+add_executable(example_cpp ../example.cpp)
+target_compile_options(example_cpp PRIVATE {' '.join(cflags)})
+target_link_libraries(example_cpp PRIVATE arvcas::{lib})
+"""
+
+
+def _readme(fns, opts, P, inputs, prefix: str) -> str:
     from arvcas import __version__
 
-    lines = [
-        "# arvcas plant functions in C",
+    lib = prefix.rstrip("_")
+    L = [
+        f"# lib{lib}: the arvcas plant functions in C",
         "",
         f"Generated by arvcas {__version__} with CasADi {ca.__version__}; model options `{opts!r}`"
         f" (tag `{opts.tag()}`); default parameters from `{P.path}`.",
         "",
         "## Files",
         "",
-        f"- `{LIB}.c`, `{LIB}.h`: the {len(fns)} functions below (CasADi's C API, `casadi_real` = double)",
-        "- `params_default.h`: `arvcas_p_default[ARVCAS_NP]`, the default `p`, with the name, SI unit and"
-        " index of every entry, and an index macro `ARVCAS_P_<NAME>` per entry",
-        "- `example.c`: calls every function at a fixed state and prints inputs and outputs with `%.17g`",
-        f"- `Makefile`: `make` builds `lib{LIB}.so` and `example`; `make run` runs it",
+        f"- `{lib}.c`: the {len(fns)} functions below (CasADi's generated C; every global symbol starts with `{prefix}`)",
+        f"- `{lib}.h`: the header: calling convention, thread safety, every argument (order, size, unit, frame),"
+        " work sizes, prototypes and `<function>_eval` wrappers with named arguments",
+        f"- `{lib}_params.h`: `{prefix}p_default[{prefix.upper()}NP]`, the default `p`, with the name, SI unit and"
+        f" index of every entry, and an index macro `{prefix.upper()}P_<NAME>` per entry",
+        "- `example.c` (CasADi's calling convention), `example.cpp` (the `_eval` wrappers), `example.py` (ctypes):"
+        " each calls every function at a fixed state and prints inputs and outputs with `%.17g`",
+        f"- `Makefile`: `make` builds `lib{lib}.so`, `example` and `example_cpp`; `make run` runs `example`",
+        f"- `CMakeLists.txt`: the same with CMake, plus `cmake --install` of the library, headers and the package"
+        f" config `{lib}Config.cmake`; `consumer/CMakeLists.txt` builds `example.cpp` against it with"
+        f" `find_package({lib})`",
+        f"- `{MANIFEST}`: what `arvcas export-c` wrote, with sha256; it replaces only those files, unchanged",
         "",
-        "## Calling convention",
-        "",
-        "Each function `F` is `int F(const casadi_real** arg, casadi_real** res, casadi_int* iw,"
-        " casadi_real* w, int mem)`, returning 0 on success. Get the sizes of `arg`, `res`, `iw`, `w` from"
-        " `F_work(&sz_arg, &sz_res, &sz_iw, &sz_w)`, take `mem = F_checkout()` and give it back with"
-        " `F_release(mem)` (see `call()` in `example.c`). All inputs and outputs are dense column vectors,"
-        " stored contiguously; `arg[i]` points to input i in the order listed below, `res[0]` to the output."
-        " Every number of the model is in `p` (last input), so changing a parameter never needs a rebuild.",
+        "Both build files use the compiler flags of arvcas's build cache, so the library gives the numbers arvcas"
+        " gives (to the last bits on the same compiler). Do not add `-Ofast` or `-ffast-math`.",
         "",
         "## Functions",
         "",
     ]
-    for name, f in fns.items():
-        lines += [f"### `{name}`", "", f"{f.n_in()} inputs, {f.n_out()} output(s).", ""]
-        lines += ["| | index | name | size | meaning |", "|---|---|---|---|---|"]
+    for short, f in fns.items():
+        L += [f"### `{prefix}{short}`", "", _SUMMARY[short], "",
+              "| | index | name | size | meaning |", "|---|---|---|---|---|"]
         for i in range(f.n_in()):
             k = f.name_in(i)
-            lines.append(f"| in | {i} | `{k}` | {_shape(f, i, False)} | {_GLOSSARY.get(k, '')} |")
+            L.append(f"| in | {i} | `{k}` | {f.size1_in(i)}x{f.size2_in(i)} | {_GLOSSARY.get(k, '')} |")
         for i in range(f.n_out()):
             k = f.name_out(i)
-            lines.append(f"| out | {i} | `{k}` | {_shape(f, i, True)} | {_GLOSSARY.get(k, '')} |")
-        lines.append("")
-    lines += ["## The example's fixed state", "", "SI units; `p` is `arvcas_p_default`.", ""]
+            L.append(f"| out | {i} | `{k}` | {f.size1_out(i)}x{f.size2_out(i)} | {_GLOSSARY.get(k, '')} |")
+        L.append("")
+    L += ["## The examples' fixed state", "", f"SI units; `p` is `{prefix}p_default`.", ""]
     for k, v in inputs.items():
-        lines.append(f"- `{k}` = [{', '.join(f'{x:.17g}' for x in v)}]")
-    lines.append("")
-    return "\n".join(lines)
+        L.append(f"- `{k}` = [{', '.join(f'{x:.17g}' for x in v)}]")
+    L.append("")
+    return "\n".join(L)
 
 
-def export_c(out_dir, opts=None, params=None) -> list[Path]:
-    """Write the C library sources, default parameters, Makefile, example and README into ``out_dir``.
+# ---------------------------------------------------------------------------------------------
+
+
+def export_c(out_dir, opts=None, params=None, *, prefix: str = DEFAULT_PREFIX, force: bool = False) -> list[Path]:
+    """Write the C library, headers, build files, examples and README into ``out_dir``.
 
     ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``params``: a
-    :class:`arvcas.params.Params` for the defaults in ``params_default.h`` (default: the packaged
-    file). ``out_dir`` is created if its parent exists. Returns the written paths, in :data:`FILES`
-    order. Raises :class:`ExportError` (a ValueError) for an unusable ``out_dir``.
+    :class:`arvcas.params.Params` for the defaults in ``<lib>_params.h`` (default: the packaged
+    file); ``prefix``: of every symbol (a C identifier ending in ``_``; the library is
+    ``lib<prefix without the last _>.so``). ``out_dir`` is created if its parent exists. A file there
+    that the manifest does not list with its current sha256 is refused unless ``force``. Returns the
+    written paths, in :func:`files` order. Raises :class:`ExportError` (a ValueError).
     """
-    from arvcas.params import Params, load
+    from arvcas.build.dynamics import jacobian_functions
     from arvcas.model.uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
+    from arvcas.params import Params, load
 
+    if not isinstance(prefix, str) or not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*_", prefix) or "__" in prefix:
+        raise ExportError(f"export-c: prefix: expected a C identifier ending in one '_' (like {DEFAULT_PREFIX}), got {prefix!r}")
+    if not isinstance(force, bool):
+        raise ExportError(f"export-c: force: expected True or False, got {force!r}")
     out = _check_out_dir(out_dir)
     opts = ModelOptions() if opts is None else opts
     if not isinstance(opts, ModelOptions):
-        raise ValueError(f"export-c: opts must be arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
+        raise ExportError(f"export-c: opts must be arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
     P = load() if params is None else params
     if not isinstance(P, Params):
-        raise ValueError(f"export-c: params must be arvcas.params.Params, got {type(P).__name__}")
-    all_fns = plant_functions(opts)
-    fns = {n: all_fns[n] for n in PUBLIC_FUNCTIONS}
-    inputs = example_inputs()
+        raise ExportError(f"export-c: params must be arvcas.params.Params, got {type(P).__name__}")
+    names = files(prefix)
+    manifest = _read_manifest(out, force) if out.exists() else {}
+    if out.exists():
+        _check_overwrite(out, names, manifest, force)
 
-    out.mkdir(exist_ok=True)
-    cg = ca.CodeGenerator(LIB, {"with_header": True, "casadi_real": "double", "casadi_int": "long long int"})
-    for f in fns.values():
-        cg.add(f)
-    cg.generate(str(out) + os.sep)
+    plant = plant_functions(opts)
+    fns = {n: plant[n] for n in PUBLIC_FUNCTIONS}
+    fns.update(jacobian_functions(plant))
+    inputs = example_inputs()
+    _example_values(fns, inputs)
+    lib = prefix.rstrip("_")
+    cg = ca.CodeGenerator(lib, {"with_header": False, "casadi_real": "double", "casadi_int": "long long int"})
+    for short, f in fns.items():  # renamed: the symbols carry the prefix
+        sym = f.sx_in()
+        cg.add(ca.Function(prefix + short, sym, f.call(sym), f.name_in(), f.name_out()))
+    c_text = cg.dump()
+    _check_reentrant(c_text, [prefix + s for s in fns])
 
     texts = {
-        "params_default.h": _params_header(P, opts),
-        "example.c": _example_c(fns, inputs),
-        "Makefile": _MAKEFILE,
-        "README.md": _readme(fns, opts, P, inputs),
+        f"{lib}.c": c_text,
+        f"{lib}.h": _header(fns, c_text, prefix, opts, P),
+        f"{lib}_params.h": _params_header(P, opts, prefix),
+        "example.c": _example_c(fns, inputs, prefix),
+        "example.cpp": _example_cpp(fns, inputs, prefix),
+        "example.py": _example_py(fns, inputs, prefix, P),
+        "Makefile": _makefile(prefix),
+        "CMakeLists.txt": _cmake(prefix),
+        "consumer/CMakeLists.txt": _cmake_consumer(prefix),
+        "README.md": _readme(fns, opts, P, inputs, prefix),
     }
-    for fname, text in texts.items():
-        tmp = out / f".{fname}.tmp"
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, out / fname)
-    paths = [out / n for n in FILES]
-    missing = [p.name for p in paths if not p.is_file()]
-    if missing:
-        raise ExportError(f"export-c: CasADi did not write {', '.join(missing)} into {out}")
-    return paths
+    assert tuple(texts) + (MANIFEST,) == names
+    out.mkdir(exist_ok=True)
+    from arvcas import __version__
+
+    written = {}
+    for name, text in texts.items():
+        data = text.encode("utf-8")
+        _write(out, name, data)
+        written[name] = _sha256(data)
+    m = {"format": MANIFEST_FORMAT, "written_by": f"arvcas {__version__} export-c", "prefix": prefix,
+         "files": written}
+    _write(out, MANIFEST, (json.dumps(m, indent=1) + "\n").encode("utf-8"))  # last: lists only finished files
+    return [out / n for n in names]

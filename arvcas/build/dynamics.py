@@ -1,0 +1,465 @@
+"""The plant functions and their Jacobians as NumPy functions: NumPy in, NumPy out, batches looped in C.
+
+``dynamics("vehicle_rhs")(x, tau)`` evaluates the compiled C of :func:`arvcas.compiled` on NumPy
+arrays; the parameter vector defaults to the packaged parameters (``p=`` a vector, or ``params=`` a
+:class:`arvcas.params.Params`, overrides it). Every input takes one evaluation's shape (``x``:
+``(12,)``, a size-1 input also a scalar) or a batch of n with a leading axis (``x``: ``(n, 12)``).
+Inputs without the batch axis (or with one row) are shared by all n evaluations; outputs have the
+batch axis if any input has it.
+
+How a call runs (costs in ``docs/calling-dynamics.md``, measured by ``arvcas bench``):
+
+* **one evaluation**: the inputs are copied into buffers bound once per thread to the compiled
+  function (``Function.buffer``), so a call is a few NumPy slice copies, one finite check and one C
+  evaluation, without CasADi's conversion to ``DM`` and back.
+* **a batch**: the loop over the batch is C. 256 calls of the SX function on consecutive columns,
+  a shared ``p`` passed to each by pointer (:func:`_unrolled`), are compiled through the build cache
+  (:func:`arvcas.build.codegen.build`) and called on consecutive blocks of 256 rows of the caller's
+  arrays in place (a C-ordered ``(n, 12)`` array is exactly the column-major ``12 x n`` block it
+  reads). The last ``n mod 256`` rows go
+  through uncompiled maps of the compiled function of sizes 128, 64, ..., 1 (no compiling, but
+  a few tenths of a microsecond per evaluation more). Each block's evaluation releases the GIL;
+  batches of at least :data:`THREAD_MIN_BATCH` rows run the blocks on as many threads as the process
+  may use cores (``n_threads=`` overrides), each thread with its own work memory. Results do not
+  depend on the thread count, to the bit.
+
+Checks (one-line ``ValueError`` naming the function and the argument): the number of inputs, every
+shape, batch sizes that disagree, and non-finite values (NaN or inf) anywhere in the inputs.
+
+Jacobians: ``vehicle_rhs_jac(x, tau, p) -> (xdot, dxdot_dx, dxdot_dtau)`` and
+``uvms_rhs_jac(x, tau, q, qd, qdd, payload, p) -> (xdot, dxdot_dx, dxdot_dtau, dxdot_dq)``, exact
+(CasADi's algorithmic differentiation of the same graph), dense, ``dxdot_dx[i, j] = d xdot_i / d x_j``;
+batched they are ``(n, 12, 12)`` etc.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import casadi as ca
+import numpy as np
+
+from arvcas.model.uvms import PUBLIC_FUNCTIONS
+
+__all__ = ["dynamics", "jacobian_functions", "Dynamics", "NAMES", "JACOBIANS", "CHUNK", "THREAD_MIN_BATCH"]
+
+# name -> (plant function, inputs differentiated); outputs: xdot, then d xdot / d input per input
+JACOBIANS = {
+    "vehicle_rhs_jac": ("vehicle_rhs", ("x", "tau")),
+    "uvms_rhs_jac": ("uvms_rhs", ("x", "tau", "q")),
+}
+CHUNK = 256  # rows per call of the compiled map
+THREAD_MIN_BATCH = 4 * CHUNK  # smaller batches run on the calling thread
+
+_LOCK = threading.RLock()
+_SX: dict[str, dict[str, ca.Function]] = {}
+_COMPILED: dict[tuple[str, str], ca.Function] = {}
+_MAPS: dict[tuple[str, str, int, bool], ca.Function] = {}
+_DEFAULT_P: list[np.ndarray] = []
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+_F64 = np.dtype(np.float64)
+_ret = getattr(getattr(ca, "_casadi", None), "FunctionBuffer_ret", None) or ca.FunctionBuffer.ret  # skips a wrapper
+
+
+NAMES = (*PUBLIC_FUNCTIONS, *JACOBIANS)  # every name dynamics() takes
+
+
+def jacobian_functions(plant: dict[str, ca.Function]) -> dict[str, ca.Function]:
+    """The Jacobian SX Functions of :data:`JACOBIANS`, built from the plant SX Functions ``plant``."""
+    out = {}
+    for jname, (base, wrt) in JACOBIANS.items():
+        f = plant[base]
+        sym = f.sx_in()
+        xdot = f.call(sym)[0]
+        idx = [f.index_in(w) for w in wrt]
+        outs = [xdot] + [ca.densify(ca.jacobian(xdot, sym[i])) for i in idx]
+        out[jname] = ca.Function(jname, sym, outs, f.name_in(), ["xdot"] + [f"dxdot_d{w}" for w in wrt])
+    return out
+
+
+def _sx(opts) -> dict[str, ca.Function]:
+    from arvcas.model.uvms import plant_functions
+
+    tag = opts.tag()
+    with _LOCK:
+        if tag not in _SX:
+            fns = dict(plant_functions(opts))
+            fns.update(jacobian_functions(fns))
+            _SX[tag] = fns
+        return _SX[tag]
+
+
+def _compiled(name: str, opts) -> ca.Function:
+    from arvcas.build import codegen
+
+    with _LOCK:
+        key = (name, opts.tag())
+        if key not in _COMPILED:
+            if name in JACOBIANS:
+                _COMPILED[key] = codegen.build(_sx(opts)[name])
+            else:
+                _COMPILED[key] = codegen.compiled(name, opts)  # the same Function arvcas.compiled returns
+        return _COMPILED[key]
+
+
+def _unrolled(base: ca.Function, size: int, p_batched: bool) -> ca.Function:
+    """``size`` calls of ``base`` on consecutive columns, as one MX Function (``base``'s body once in C).
+
+    Like ``base.map(size)``, but a shared ``p`` is passed to every call by pointer: CasADi's map with
+    ``reduce_in`` copies it ``size`` times into its work memory first, and each evaluation then reads
+    its own copy (measured: vehicle_rhs 335 -> 247 ns per evaluation, thrust 85 -> 45 ns).
+    """
+    ip = base.n_in() - 1
+    ins = [ca.MX.sym(base.name_in(i), base.size1_in(i), size) for i in range(ip)]
+    p = ca.MX.sym("p", base.size1_in(ip), size if p_batched else 1)
+    calls = [base.call([a[:, j] for a in ins] + [p[:, j] if p_batched else p]) for j in range(size)]
+    outs = [ca.horzcat(*[c[k] for c in calls]) for k in range(base.n_out())]
+    name = f"{base.name()}_loop{size}{'_p' if p_batched else ''}"
+    return ca.Function(name, ins + [p], outs, list(base.name_in()), list(base.name_out()))
+
+
+def _map(name: str, opts, size: int, p_batched: bool) -> ca.Function:
+    """map(size) of ``name``: compiled from the SX graph for :data:`CHUNK`, else over the compiled function."""
+    from arvcas.build import codegen
+
+    key = (name, opts.tag(), size, p_batched)
+    with _LOCK:
+        f = _MAPS.get(key)
+        if f is None:
+            if size == CHUNK:
+                f = codegen.build(_unrolled(_sx(opts)[name], size, p_batched))
+            else:
+                base = _compiled(name, opts)
+                reduce_in = [] if p_batched else [base.n_in() - 1]
+                f = base.map(f"{name}_map{size}", "serial", size, reduce_in, [])
+            _MAPS[key] = f
+        return f
+
+
+def _default_p() -> np.ndarray:
+    with _LOCK:
+        if not _DEFAULT_P:
+            from arvcas.params import load
+
+            v = np.ascontiguousarray(load().vector(), dtype=float)
+            v.setflags(write=False)
+            _DEFAULT_P.append(v)
+        return _DEFAULT_P[0]
+
+
+def _pool(n: int) -> ThreadPoolExecutor:
+    with _LOCK:
+        if n not in _POOLS:
+            _POOLS[n] = ThreadPoolExecutor(n, thread_name_prefix=f"arvcas-dyn{n}")
+        return _POOLS[n]
+
+
+def _usable_cpus() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def _first_bad(a: np.ndarray) -> str:
+    i = np.flatnonzero(~np.isfinite(a.reshape(-1)))[0]
+    at = np.unravel_index(i, a.shape) if a.ndim else ()
+    return f"{a.reshape(-1)[i]} at index {list(map(int, at))}"
+
+
+class Dynamics:
+    """A plant function (or Jacobian) as a NumPy function; made by :func:`dynamics`."""
+
+    def __init__(self, name: str, opts):
+        f = _compiled(name, opts)
+        self.name = name
+        self.opts = opts
+        self._f = f
+        self.function = f  # the compiled casadi.Function (codegen.artifact_of(d.function)["path"]: its library)
+        self.input_names = tuple(f.name_in())
+        self.output_names = tuple(f.name_out())
+        if self.input_names[-1] != "p":
+            raise RuntimeError(f"{name}: the last input is {self.input_names[-1]!r}, expected 'p'")
+        self.input_sizes = tuple(int(f.nnz_in(i)) for i in range(f.n_in()))
+        for i in range(f.n_in()):
+            if not f.sparsity_in(i).is_dense() or f.size2_in(i) != 1:
+                raise RuntimeError(f"{name}: input {self.input_names[i]} is not a dense column")
+        # output shapes of one evaluation: (rows,) for a column, (rows, cols) for a matrix
+        self.output_shapes = tuple(
+            (int(f.size1_out(i)),) if f.size2_out(i) == 1 else (int(f.size1_out(i)), int(f.size2_out(i)))
+            for i in range(f.n_out())
+        )
+        for i in range(f.n_out()):
+            if not f.sparsity_out(i).is_dense():
+                raise RuntimeError(f"{name}: output {self.output_names[i]} is sparse")
+        self._offsets = np.cumsum((0,) + self.input_sizes[:-2]).tolist()  # of the non-p inputs in the scratch
+        self._n_x = int(sum(self.input_sizes[:-1]))
+        self._local = threading.local()
+        self.n_params = self.input_sizes[-1]
+        self._p_default = _default_p()
+        self._shapes = tuple((m,) for m in self.input_sizes)  # one evaluation's shape of each input
+
+    def __repr__(self) -> str:
+        ins = ", ".join(f"{n}[{s}]" for n, s in zip(self.input_names, self.input_sizes))
+        outs = ", ".join(f"{n}{list(s)}" for n, s in zip(self.output_names, self.output_shapes))
+        return f"<arvcas.dynamics {self.name}({ins}) -> {outs}>"
+
+    # -- argument handling ----------------------------------------------------------------------
+
+    def _where(self, i: int) -> str:
+        return f"{self.name}: {self.input_names[i]}"
+
+    def _array(self, i: int, a) -> tuple[np.ndarray, int | None]:
+        """(array, batch size or None) of input i, shape-checked and finite-checked."""
+        m = self.input_sizes[i]
+        try:
+            arr = np.asarray(a, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{self._where(i)}: expected an array of numbers, got {type(a).__name__}") from None
+        sh = arr.shape
+        if sh == (m,) or (m == 1 and sh == ()):
+            n = None
+        elif arr.ndim == 2 and sh[1] == m and sh[0] >= 1:
+            n = sh[0]
+        elif m == 1 and arr.ndim == 1 and sh[0] > 1:
+            n = sh[0]
+        else:
+            extra = " or a scalar, or (n,)" if m == 1 else ""
+            raise ValueError(f"{self._where(i)}: expected shape ({m},) or (n, {m}){extra}, got {sh}")
+        return arr, n
+
+    def _args(self, args, p, params):
+        k = len(self.input_names)
+        if len(args) == k:
+            if p is not None or params is not None:
+                raise ValueError(f"{self.name}: p given twice (as the last argument and as p=/params=)")
+            p = args[-1]
+            args = args[:-1]
+        elif len(args) != k - 1:
+            names = ", ".join(self.input_names[:-1])
+            raise ValueError(f"{self.name}: expected {k - 1} inputs ({names}) and optionally p, got {len(args)}")
+        if params is not None:
+            if p is not None:
+                raise ValueError(f"{self.name}: give p= or params=, not both")
+            from arvcas.params import Params
+
+            if not isinstance(params, Params):
+                raise ValueError(f"{self.name}: params: expected arvcas.params.Params, got {type(params).__name__}")
+            p = params.vector()
+        return args, p
+
+    # -- evaluation ------------------------------------------------------------------------------
+
+    def __call__(self, *args, p=None, params=None, n_threads: int | None = None):
+        """Evaluate; see the module docstring. Returns an array, or a tuple of arrays for a Jacobian."""
+        args, p = self._args(args, p, params)
+        arrs, ns = [], []
+        shapes = self._shapes
+        for i, a in enumerate(args):
+            if type(a) is np.ndarray and a.shape == shapes[i] and a.dtype == _F64:  # the common case, fast
+                arrs.append(a)
+                continue
+            arr, n = self._array(i, a)
+            arrs.append(arr)
+            if n is not None:
+                ns.append((n, i))
+        ip = len(self.input_names) - 1
+        if p is None:
+            parr, pn = self._p_default, None
+            if parr.shape != (self.n_params,):
+                raise ValueError(f"{self.name}: p: the default parameter vector has {parr.size} entries, "
+                                 f"the function takes {self.n_params}")
+        else:
+            parr, pn = self._array(ip, p)
+            if pn is not None:
+                ns.append((pn, ip))
+        if n_threads is not None and (isinstance(n_threads, bool) or not isinstance(n_threads, int) or n_threads < 1):
+            raise ValueError(f"{self.name}: n_threads: expected a positive integer or None, got {n_threads!r}")
+        if not ns:
+            return self._single(arrs, parr, p is not None)
+        n = max(m for m, _ in ns)
+        for m, i in ns:
+            if m not in (1, n):
+                first = next(j for mm, j in ns if mm == n)
+                raise ValueError(f"{self.name}: batch sizes differ: {self.input_names[first]} has {n} rows, "
+                                 f"{self.input_names[i]} has {m}")
+        if n > 1:  # an input of one row is shared by all rows, as NumPy broadcasts
+            arrs = [a.reshape(-1) if a.ndim == 2 and a.shape[0] == 1 else a for a in arrs]
+        p_batched = pn is not None and pn == n and n > 1
+        if pn is not None and not p_batched:
+            parr = parr.reshape(-1)
+        return self._batch(n, arrs, parr, p_batched, p is not None, n_threads)
+
+    def _state(self):
+        """This thread's scratch input/output arrays, bound once to a buffer of the compiled function."""
+        st = getattr(self._local, "st", None)
+        if st is None:
+            f = self._f
+            buf, evaluate = f.buffer()
+            xin = np.zeros(self._n_x)
+            pin = np.array(_default_p() if _default_p().size == self.n_params else np.zeros(self.n_params))
+            outs = [np.zeros(int(np.prod(s))) for s in self.output_shapes]
+            xv = memoryview(xin)
+            for i, off in enumerate(self._offsets):
+                buf.set_arg(i, xv[off:off + self.input_sizes[i]])
+            buf.set_arg(len(self._offsets), memoryview(pin))
+            for i, o in enumerate(outs):
+                buf.set_res(i, memoryview(o))
+            st = self._local.st = (buf, evaluate, xin, np.full(self._n_x, 1e-300), pin, outs, [None])
+            # 1e-300s: for the finite check (x * 1e-300 never overflows); last: the p array pin holds
+        return st
+
+    def _single(self, arrs, parr, p_given):
+        buf, evaluate, xin, tiny, pin, outs, last_p = self._state()
+        if len(arrs) > 1 and all(a.ndim == 1 for a in arrs):
+            np.concatenate(arrs, out=xin)  # one copy of all inputs
+        else:
+            offs, sizes = self._offsets, self.input_sizes
+            for i, a in enumerate(arrs):
+                xin[offs[i]:offs[i] + sizes[i]] = a.reshape(-1)
+        if not math.isfinite(xin @ tiny):  # finite unless an entry is (no FP warning but for +inf with -inf)
+            self._raise_nonfinite(arrs)
+        if last_p[0] is not parr:
+            if p_given and not np.isfinite(parr).all():
+                raise ValueError(f"{self.name}: p has a non-finite value {_first_bad(parr)}")
+            pin[:] = parr
+            last_p[0] = parr if not p_given else None  # a caller's array may change between calls
+        evaluate()
+        if _ret(buf) != 0:
+            raise RuntimeError(f"{self.name}: evaluation failed (return code {_ret(buf)})")
+        res = [o.reshape(s[::-1]).T.copy() if len(s) == 2 else o.copy() for o, s in zip(outs, self.output_shapes)]
+        return res[0] if len(res) == 1 else tuple(res)
+
+    def _raise_nonfinite(self, arrs):
+        for i, a in enumerate(arrs):
+            if not np.isfinite(a).all():
+                raise ValueError(f"{self._where(i)} has a non-finite value {_first_bad(a)}")
+        raise ValueError(f"{self.name}: an input has a non-finite value")
+
+    def _batch(self, n, arrs, parr, p_batched, p_given, n_threads):
+        if p_given and not np.isfinite(parr).all():
+            raise ValueError(f"{self.name}: p has a non-finite value {_first_bad(parr)}")
+        allin = list(arrs) + [parr]
+        for i, a in enumerate(arrs):
+            if not np.isfinite(a).all():
+                raise ValueError(f"{self._where(i)} has a non-finite value {_first_bad(a)}")
+        ip = len(allin) - 1
+        width = min(CHUNK, n)
+        # per input: a C-ordered (n, m) array (read in place) or a shared row repeated `width` times
+        per_row, flat = {}, []
+        for i, a in enumerate(allin):
+            m = self.input_sizes[i]
+            if i == ip and not p_batched:
+                flat.append(memoryview(np.ascontiguousarray(a.reshape(-1))))
+                continue
+            if a.ndim == 2 or (m == 1 and a.ndim == 1 and a.shape[0] == n and n > 1):
+                c = np.ascontiguousarray(a.reshape(n, m))
+                per_row[i] = c.reshape(-1)
+                flat.append(None)
+            else:
+                rep = np.ascontiguousarray(np.broadcast_to(a.reshape(1, m), (width, m))).reshape(-1)
+                flat.append(rep)
+        outs = [np.empty(n * int(np.prod(s))) for s in self.output_shapes]
+        out_sizes = [int(np.prod(s)) for s in self.output_shapes]
+        # segments: full compiled chunks, then the remainder by powers of two
+        segs, start = [], 0
+        n_full = n // CHUNK
+        for _ in range(n_full):
+            segs.append((start, CHUNK))
+            start += CHUNK
+        r = n - start
+        size = CHUNK // 2
+        while r:
+            if r >= size:
+                segs.append((start, size))
+                start += size
+                r -= size
+            size //= 2
+        fns = {s: _map(self.name, self.opts, s, p_batched) for s in {sz for _, sz in segs}}
+        sizes = self.input_sizes
+        todo = iter(range(len(segs)))
+        lock = threading.Lock()
+        errors: list[str] = []
+
+        def work():
+            from arvcas.build.calls import _buffer
+
+            bound: dict[int, object] = {}
+            while True:
+                with lock:
+                    j = next(todo, None)
+                if j is None or errors:
+                    return
+                s0, sz = segs[j]
+                f = fns[sz]
+                buf, evaluate = _buffer(f)
+                if bound.get(sz) is not buf:  # bind the shared inputs once per buffer and call
+                    for i, v in enumerate(flat):
+                        if v is None:
+                            continue
+                        if isinstance(v, memoryview):
+                            buf.set_arg(i, v)
+                        else:
+                            buf.set_arg(i, memoryview(v[: sz * sizes[i]]))
+                    bound[sz] = buf
+                for i, c in per_row.items():
+                    m = sizes[i]
+                    buf.set_arg(i, memoryview(c[s0 * m:(s0 + sz) * m]))
+                for k, o in enumerate(outs):
+                    w = out_sizes[k]
+                    buf.set_res(k, memoryview(o[s0 * w:(s0 + sz) * w]))
+                evaluate()
+                if buf.ret() != 0:
+                    errors.append(f"{self.name}: evaluation of rows {s0}..{s0 + sz - 1} failed (return code {buf.ret()})")
+
+        if n_threads is None:
+            n_threads = _usable_cpus() if n >= THREAD_MIN_BATCH else 1
+        nt = max(1, min(n_threads, len(segs)))
+        if nt == 1:
+            work()
+        else:
+            futs = [_pool(nt).submit(work) for _ in range(nt)]
+            for fu in futs:
+                fu.result()
+        if errors:
+            raise RuntimeError(errors[0])
+        res = []
+        for o, s in zip(outs, self.output_shapes):
+            if len(s) == 2:  # each evaluation's matrix is column-major
+                res.append(o.reshape(n, s[1], s[0]).transpose(0, 2, 1))
+            else:
+                res.append(o.reshape(n, *s))
+        return res[0] if len(res) == 1 else tuple(res)
+
+
+_DYN: dict[tuple[str, str], Dynamics] = {}
+
+
+def dynamics(name: str, system=None, *, opts=None) -> Dynamics:
+    """The plant function or Jacobian ``name`` as a NumPy function (see the module docstring).
+
+    ``name``: one of ``vehicle_rhs``, ``arm_wrench``, ``uvms_rhs``, ``allocate``, ``thrust``,
+    ``vehicle_rhs_jac``, ``uvms_rhs_jac``. ``system``: only ``None`` (the Haidou-1 ARV of the packaged
+    parameters) for now. ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``).
+    The first call of a name compiles it (or loads it from the build cache); the first batch of a
+    name compiles its map. Memoized per process.
+    """
+    from arvcas.model.uvms import ModelOptions
+
+    if not isinstance(name, str) or name not in NAMES:
+        raise ValueError(f"dynamics: unknown function {name!r}; allowed: {', '.join(NAMES)}")
+    if system is not None:
+        raise ValueError(f"dynamics: system: only None (the packaged Haidou-1 ARV) is available, got {system!r}")
+    if opts is None:
+        opts = ModelOptions()
+    if not isinstance(opts, ModelOptions):
+        raise ValueError(f"dynamics: opts: expected arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
+    key = (name, opts.tag())
+    with _LOCK:
+        d = _DYN.get(key)
+        if d is None:
+            d = _DYN[key] = Dynamics(name, opts)
+        return d
