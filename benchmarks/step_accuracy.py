@@ -18,6 +18,9 @@ For each plant step ``h_plant`` that divides the controller period (0.01, 0.02, 
     of every controller, every member of the committed fronts (``.batch``, on the study's own draw),
     and a Monte Carlo sample of draws for proposed and agsta (``.many``). The worst case is reported.
 
+Base check: the metrics-only runs at ``BASE / 2`` = 0.005 s against 0.01 s, an estimate of the base's own
+step error in the metrics.
+
 Traced runs: the default gains of every controller, every fourth member of each front and its knee and last member
 and the first Monte Carlo draws of proposed and agsta. Speed: the front members' batch (one thread),
 timed at every step in this same run, as a ratio against 0.01 s.
@@ -166,6 +169,32 @@ def _load_avg() -> float:
         return float("nan")
 
 
+def _compare_metrics(metrics: dict, groups, hp, base) -> dict:
+    """Relative per-DOF CHAT and RMSE changes of every group at step ``hp`` against ``base``, worst cases."""
+    out = {"rel_chat": 0.0, "rel_rmse": 0.0, "worst_group": None, "status_changed": 0, "runs": 0, "by_group": {}}
+    for g in groups:
+        ch, rm, ok = metrics[(g, hp)]
+        chb, rmb, okb = metrics[(g, base)]
+        out["status_changed"] += int(np.sum(ok != okb))
+        both = ok & okb
+        out["runs"] += int(both.sum())
+        rc = _rel(ch[both], chb[both]) if both.any() else np.zeros((0, 6))
+        rr = _rel(rm[both], rmb[both]) if both.any() else np.zeros((0, 6))
+        bg = {"runs": int(ok.size), "ok_both": int(both.sum()),
+              "rel_chat": float(rc.max()) if rc.size else 0.0, "rel_rmse": float(rr.max()) if rr.size else 0.0}
+        for name, rel, m, mb in (("chat", rc, ch[both], chb[both]), ("rmse", rr, rm[both], rmb[both])):
+            if rel.size:
+                i, d = np.unravel_index(np.argmax(rel), rel.shape)
+                bg[f"worst_{name}"] = {"run": int(np.flatnonzero(both)[i]), "dof": int(d),
+                                       "base": float(mb[i, d]), "value": float(m[i, d])}
+        if rc.size and max(bg["rel_chat"], bg["rel_rmse"]) > max(out["rel_chat"], out["rel_rmse"]):
+            out["worst_group"] = g
+        out["rel_chat"] = max(out["rel_chat"], bg["rel_chat"])
+        out["rel_rmse"] = max(out["rel_rmse"], bg["rel_rmse"])
+        out["by_group"][g] = bg
+    return out
+
+
 def _front_args(fr) -> dict:
     """A front's study draw (its noise seed, model factors, phases) for ``CompiledRun.batch``, one thread."""
     return dict(seed=int(fr.draw_seeds[0]), uncertainty=fr.draw_uncertainty[0], phase=fr.draw_phase[0],
@@ -263,6 +292,30 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
             f"{c} {min(times[(hp, c)]):.3f} s" for c in fronts) + f" (min of {rounds} rounds)")
     load_timing = _load_avg()
 
+    # the base's own convergence: the metrics-only runs (default gains of every controller, the fronts, the
+    # Monte Carlo draws) at BASE / 2 against BASE
+    if True:  # also in --quick (proposed only)
+        hf = BASE / 2
+        cfg_f = dataclasses.replace(cfg0, time_h_plant=hf)
+        log(f"base check: h_plant = {hf}")
+        runs_f = {c: arvcas.Run(controller=c, scenario=cfg_f).compile() for c in ctrls}
+        bgroups = []
+        for c in ctrls:
+            for hp_, rr_ in ((hf, runs_f[c]), (BASE, compiled[BASE][c])):
+                chat, rmse, ok, _tf = rr_.batch(rr_.default_gains(), seed=0, n_threads=1, return_status=True)
+                metrics[(f"{c} default (batch)", hp_)] = (chat, rmse, ok)
+            bgroups.append(f"{c} default (batch)")
+        for c, fr in fronts.items():
+            metrics[(f"{c} front", hf)] = runs_f[c].batch(fr.gains, **_front_args(fr))[0:3]
+            bgroups.append(f"{c} front")
+        for c in mc_ctrls:
+            metrics[(f"{c} mc", hf)] = runs_f[c].many(runs_f[c].default_gains(), draws.noise_seed,
+                                                      uncertainty=draws.factors, phase=draws.phase, n_threads=1)[0:3]
+            bgroups.append(f"{c} mc")
+        base_check = dict(h_plant=hf, **_compare_metrics(metrics, bgroups, hf, BASE))
+        log(f"base check: CHAT {base_check['rel_chat']:.2e}, RMSE {base_check['rel_rmse']:.2e} "
+            f"(worst {base_check['worst_group']})")
+
     # reference self-check: the first traced run at the base step, CVODES at tol and tol / 10
     label0 = traced[0][0]
     cfg_b = dataclasses.replace(cfg0, time_h_plant=BASE)
@@ -295,7 +348,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
 
     # the table
     table = []
-    groups = sorted({g for g, _ in metrics})
+    groups = sorted({g for g, h_ in metrics if h_ in steps and "(batch)" not in g})
     for hp in steps:
         rec = per_step[hp]
         ol = [v["vs_cvodes"] for v in rec["traced"].values()]
@@ -311,31 +364,9 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
                 worst_cl_run = label
             for k in cl:
                 cl[k] = max(cl[k], e[k])
-        rel_chat = rel_rmse = 0.0
-        where = None
-        status_changed = 0
-        n_runs = 0
-        by_group = {}
-        for g in groups:
-            ch, rm, ok = metrics[(g, hp)]
-            chb, rmb, okb = metrics[(g, BASE)]
-            status_changed += int(np.sum(ok != okb))
-            both = ok & okb
-            n_runs += int(both.sum())
-            rc = _rel(ch[both], chb[both]) if both.any() else np.zeros((0, 6))
-            rr = _rel(rm[both], rmb[both]) if both.any() else np.zeros((0, 6))
-            by_group[g] = {"runs": int(ok.size), "ok_both": int(both.sum()),
-                           "rel_chat": float(rc.max()) if rc.size else 0.0,
-                           "rel_rmse": float(rr.max()) if rr.size else 0.0}
-            for name, rel, m, mb in (("chat", rc, ch[both], chb[both]), ("rmse", rr, rm[both], rmb[both])):
-                if rel.size:
-                    i, d = np.unravel_index(np.argmax(rel), rel.shape)
-                    by_group[g][f"worst_{name}"] = {"run": int(np.flatnonzero(both)[i]), "dof": int(d),
-                                                    "base": float(mb[i, d]), "value": float(m[i, d])}
-            if rc.size and max(rc.max(), rr.max()) > max(rel_chat, rel_rmse):
-                where = g
-            rel_chat = max(rel_chat, by_group[g]["rel_chat"])
-            rel_rmse = max(rel_rmse, by_group[g]["rel_rmse"])
+        cmp = _compare_metrics(metrics, groups, hp, BASE)
+        rel_chat, rel_rmse, where = cmp["rel_chat"], cmp["rel_rmse"], cmp["worst_group"]
+        status_changed, n_runs, by_group = cmp["status_changed"], cmp["runs"], cmp["by_group"]
         tb = sum(v["s_min"] for v in rec["timing"].values())
         tb0 = sum(v["s_min"] for v in per_step[BASE]["timing"].values()) if per_step[BASE]["timing"] else float("nan")
         passes = (worst_ol["position_m"] <= STATE_TOL and worst_ol["angle_rad"] <= STATE_TOL
@@ -361,6 +392,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
         "cvodes": {"tol": tol, "method": "adams", "iteration": "functional", "restart": "every controller sample"},
         "reference_check": ref_check,
         "convergence": conv,
+        "base_check": base_check,
         "timing_rounds": rounds, "load_avg_1min_after_timing": load_timing,
         "traced_runs": [t[0] for t in traced], "front_members_traced": member_sets,
         "monte_carlo": {"runs": mc_runs, "master_seed": 0, "spread": 0.3, "controllers": list(mc_ctrls)},
@@ -432,6 +464,11 @@ def markdown(res: dict) -> str:
             f"{row['h_plant']:g} s: (a) {row['open_loop_worst_run']}, (b) state {row['closed_loop_worst_run']}, "
             f"metrics {row['metric_worst_group']}" for row in res["table"] if row["h_plant"] != res["base"]) + ".",
         "",
+        *([f"Base check: the same metrics-only runs ({res['base_check']['runs']}: default gains of every "
+           f"controller, the fronts, the Monte Carlo draws) at h_plant = {res['base_check']['h_plant']:g} s change "
+           f"against {res['base']:g} s by at most {f(res['base_check']['rel_chat'])} (CHAT) and "
+           f"{f(res['base_check']['rel_rmse'])} (RMSE) relative; worst: {_worst_metric(res['base_check'])}.", ""]
+          if res.get("base_check") else []),
         "Worst metric change per step (group, run index in the group, DOF, base value -> value): " + "; ".join(
             _worst_metric(row) for row in res["table"] if row["h_plant"] != res["base"]) + ".",
         "",
