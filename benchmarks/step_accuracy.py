@@ -66,7 +66,7 @@ def _plant_ode(cfg, opts=None):
     """(x, s, par, xdot): the plant over one sample, local time ``s`` in [0, h], ``par = [tau (6); t_k; phase (6); p]``.
 
     ``tau`` is the held body wrench of the thrusters; ``t = t_k + s``. The right-hand side is the SX
-    plant function ``uvms_rhs`` (direct Newton-Euler arm wrench, trim of SPEC 3 at q0) with the scenario's
+    plant function ``uvms_rhs`` (direct Newton-Euler arm wrench, the trim of docs/model.md §3 at q0) with the scenario's
     joint trajectory, payload ramp and eq. 41's disturbance as functions of ``t``.
     """
     from arvcas.model import manipulator
@@ -480,8 +480,9 @@ def markdown(res: dict) -> str:
         "Notes. (a) is the plant integration error for a given input sequence, what h_plant controls; (b) also "
         "carries the feedback (a different trajectory gives different thrust), and is reported, not part of the "
         "rule. RK4's observed order is irregular here and often below 4, and the error need not fall monotonically "
-        "with the step; a likely cause (not isolated in this study): the vehicle's damping has |v| and |w| factors, "
-        "kinks at zero velocity that a station-keeping vehicle crosses often, and a step across a kink loses order.",
+        "with the step; a likely cause (not isolated in this study): the vehicle's damping (docs/model.md §2, Damping) "
+        "has |v| and |w| factors, kinks at zero velocity that a station-keeping vehicle crosses often, and a step "
+        "across a kink loses order.",
         "",
         f"**Rule**: {res['rule']}.",
         "",
