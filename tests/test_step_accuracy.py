@@ -1,0 +1,76 @@
+"""The reference machinery of benchmarks/step_accuracy.py on short horizons (independent of the study).
+
+The study compares the closed loop's RK4 trajectory with CVODES driven by the run's own held thrust
+(``cvodes_states``). Checked here: (1) an independent textbook RK4 of the same ODE (``rk4_states``)
+agrees with CVODES to 1e-9 at h_plant = 0.01 s, and its error falls ~16x per halving of the step (order
+4 +- 0.5), on a 3 s window of a compressed scenario whose arm reaches, takes the payload and returns
+(every kink on the sample grid, as in the packaged scenario); (2) the compiled closed loop at the
+packaged step, driven by its own controller, matches CVODES on its first 2 s to 1e-9. Accuracy only:
+no timing is asserted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from arvcas.sim.scenario import load_scenario
+
+_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "step_accuracy.py"
+_spec = importlib.util.spec_from_file_location("step_accuracy", _PATH)
+sa = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(sa)
+
+N = 30  # samples of 0.1 s: a 3 s window
+
+
+@pytest.fixture(scope="module")
+def case(params):
+    # the arm reaches over 0.5-1.5 s, the payload ramps in over 1.6-1.8 s, the arm returns over 2.0-3.0 s
+    cfg = dataclasses.replace(load_scenario(), arm_hold_until=0.5, arm_reach_end=1.5, arm_payload_on=1.6,
+                              arm_payload_ramp=0.2, arm_return_start=2.0, arm_return_end=3.0)
+    t = np.arange(N + 1) * cfg.time_h
+    # a held body wrench that varies from sample to sample (a zero-order hold like the closed loop's)
+    taus = np.stack([5 * np.sin(3 * t), 5 * np.cos(2 * t), 20 + 3 * np.sin(2.5 * t),
+                     2 * np.sin(4 * t), 3 * np.sin(3.5 * t), 3 * np.sin(1.5 * t)], axis=1)
+    x0 = np.array(cfg.initial_eta0 + cfg.initial_nu0)
+    pv, ph = params.vector(), np.array(cfg.disturbance_phase)
+    ref = sa.cvodes_states(cfg, pv, x0, taus, ph, tol=1e-14, n_samples=N)
+    return cfg, pv, x0, taus, ph, ref
+
+
+def test_reference_converged(case):
+    cfg, pv, x0, taus, ph, ref = case
+    fine = sa.cvodes_states(cfg, pv, x0, taus, ph, tol=1e-15, n_samples=N)
+    assert ref.shape == (N + 1, 12) and np.isfinite(ref).all()
+    assert np.abs(ref - x0).max() > 1e-3  # the state does move
+    assert np.abs(fine - ref).max() < 1e-11
+
+
+def test_rk4_matches_cvodes_and_order_four(case):
+    cfg, pv, x0, taus, ph, ref = case
+    err = {hp: np.abs(sa.rk4_states(cfg, pv, x0, taus, ph, hp, n_samples=N) - ref).max() for hp in (0.01, 0.025, 0.05)}
+    print("RK4 error vs CVODES:", err)
+    assert err[0.01] < 1e-9
+    order = np.log2(err[0.05] / err[0.025])
+    assert 3.5 < order < 4.5, (err, order)
+    assert err[0.01] < err[0.025] < err[0.05]
+
+
+def test_closed_loop_matches_cvodes_on_its_own_thrust(params):
+    import arvcas
+
+    cfg = load_scenario()
+    r = arvcas.Run(controller="proposed", scenario=cfg).compile().simulate()
+    X = np.hstack([r.eta, r.nu])
+    n = 20
+    ref = sa.cvodes_states(cfg, params.vector(), X[0], sa.held_wrench(params.vector(), r.thrust), r.phase,
+                           tol=1e-14, n_samples=n)
+    err = np.abs(X[: n + 1] - ref).max()
+    print("closed loop vs CVODES over 2 s:", err)
+    assert err < 1e-9
+    assert np.abs(np.diff(r.thrust[: n + 1], axis=0)).max() > 0  # the thrust does change from sample to sample
