@@ -140,9 +140,13 @@ def _add_export_c(p: argparse.ArgumentParser) -> None:
     p.add_argument("dir", type=Path, help="output directory (created if its parent exists)")
     p.add_argument("--prefix", default="arvcas_haidou1_",
                    help="prefix of every C symbol; the library is lib<prefix without its last _>.so (default: arvcas_haidou1_)")
-    p.add_argument("--force", action="store_true",
-                   help="replace files in DIR that export-c did not write, or that were changed since")
     _add_model_args(p)
+
+
+def _export_c_outputs(a: argparse.Namespace) -> list:
+    from arvcas.build.export import files
+
+    return [(f"DIR {a.dir}", a.dir / n) for n in files(a.prefix)]
 
 
 def _run_export_c(a: argparse.Namespace) -> int:
@@ -424,7 +428,7 @@ def _table() -> tuple[Command, ...]:
 
     return (
         Command("export-c", "write the plant functions as a C library with Makefile, example and README",
-                _add_export_c, _run_export_c, inputs=(("params", "file"),)),
+                _add_export_c, _run_export_c, inputs=(("params", "file"),), outputs=_export_c_outputs),
         Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
                 _add_export_fmu, _run_export_fmu, inputs=(("params", "file"),), outputs=_out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),

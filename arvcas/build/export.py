@@ -169,17 +169,14 @@ def _check_overwrite(out: Path, names, manifest: dict[str, str], force: bool) ->
 
 
 def _write(out: Path, name: str, data: bytes) -> None:
+    """Through the one atomic writer (:mod:`arvcas.io.files`); the export's own manifest check
+    (:func:`_check_overwrite`) has already decided that this file may be replaced."""
+    from arvcas.io import files
+
     path = out / name
     path.parent.mkdir(exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    files.permit_replace([path])
+    files.atomic_write(path, lambda tmp: tmp.write_bytes(data), ExportError)
 
 
 # ---------------------------------------------------------------------------------------------
