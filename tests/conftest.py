@@ -1,11 +1,23 @@
-"""Shared fixtures: the packaged parameters and the SX plant functions, built once per session."""
+"""Shared fixtures: the packaged parameters and the SX plant functions, built once per session; a build cache per module."""
 
 from __future__ import annotations
+
+import os
 
 import pytest
 
 from arvcas import params as _params
 from arvcas.model import uvms as _uvms
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    """A private build cache (``ARVCAS_CACHE``, mode 0700) for the tests of one module."""
+    d = tmp_path_factory.mktemp("arvcas-cache")
+    os.chmod(d, 0o700)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("ARVCAS_CACHE", str(d))
+        yield d
 
 
 @pytest.fixture(scope="session")

@@ -74,15 +74,6 @@ def manifest_of(so: Path) -> dict:
     return json.loads(so.with_suffix(".json").read_text())
 
 
-@pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    d = tmp_path_factory.mktemp("arvcas-cache")
-    os.chmod(d, 0o700)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("ARVCAS_CACHE", str(d))
-        yield d
-
-
 @pytest.fixture
 def fresh_cache(tmp_path, monkeypatch):
     d = tmp_path / "cache"

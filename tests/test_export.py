@@ -31,15 +31,6 @@ RTOL = 1e-12
 
 
 @pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    d = tmp_path_factory.mktemp("arvcas-cache")
-    os.chmod(d, 0o700)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("ARVCAS_CACHE", str(d))
-        yield d
-
-
-@pytest.fixture(scope="module")
 def plant():
     fns = dict(uvms.plant_functions(uvms.ModelOptions()))
     fns.update(jacobian_functions(fns))

@@ -30,31 +30,52 @@ def _write(tmp_path, text, name="s.toml", binary=False):
     return p
 
 
-@pytest.mark.parametrize(
-    "mutate, match",
-    [
-        (lambda t: t.replace("[time]", "[time"), "malformed TOML"),
-        (lambda t: t.replace("duration =", "durration ="), "unknown key 'time.durration' (did you mean 'time.duration'?)"),
-        (lambda t: t.replace('h_plant = { value = 0.01, unit = "s", source = "docs/model.md §4: plant RK4 step" }\n', ""), "missing key 'time.h_plant'"),
-        (lambda t: t.replace("duration = { value = 100.0,", 'duration = { value = "long",'), "time.duration: value must be a number"),
-        (lambda t: t.replace("duration = { value = 100.0,", "duration = { value = nan,"), "time.duration: value must be finite"),
-        (lambda t: t.replace("duration = { value = 100.0,", "duration = { value = inf,"), "time.duration: value must be finite"),
-        (lambda t: t.replace("duration = { value = 100.0,", "duration = { value = -1.0,"), "time.duration: value must be > 0"),
-        (lambda t: t.replace("h = { value = 0.1,", "h = { value = 0.015,"), "must be a whole multiple of time.h_plant"),
-        (lambda t: t.replace("q_nu = { value = 1e-7,", "q_nu = { value = 0.0,"), "ekf.q_nu: value must be > 0"),
-        (lambda t: t.replace("qg = { value = [60.0, 60.0, -60.0, 0.0, 60.0, 0.0],", "qg = { value = [60.0, 60.0],"), "arm.qg: value must be a list of 6 numbers"),
-        (lambda t: t.replace("reach_end = { value = 20.0,", "reach_end = { value = 30.0,"), "arm times must satisfy"),
-        (lambda t: t.replace('duration = { value = 100.0, unit = "s", source', 'duration = { value = 100.0, unit = "s", sauce'), "expected a table { value, unit, source }"),
-    ],
-)
-def test_bad_scenario_files_one_line(tmp_path, mutate, match):
-    bad = mutate(TEXT)
-    assert bad != TEXT
-    p = _write(tmp_path, bad)
-    with pytest.raises(ScenarioError, match=__import__("re").escape(match)) as ei:
+# (old, new, fragment): the packaged file with its one occurrence of ``old`` replaced by ``new`` is refused
+# with a one-line ScenarioError that starts with the path and contains ``fragment``
+BAD_EDITS = [
+    ("[time]", "[time", "malformed TOML"),
+    ("duration =", "durration =", "unknown key 'time.durration' (did you mean 'time.duration'?)"),
+    ('h_plant = { value = 0.01, unit = "s", source = "docs/model.md §4: plant RK4 step" }\n', "", "missing key 'time.h_plant'"),
+    ("duration = { value = 100.0,", 'duration = { value = "long",', "time.duration: value must be a number"),
+    ("duration = { value = 100.0,", "duration = { value = nan,", "time.duration: value must be finite"),
+    ("duration = { value = 100.0,", "duration = { value = inf,", "time.duration: value must be finite"),
+    ("duration = { value = 100.0,", "duration = { value = -1.0,", "time.duration: value must be > 0"),
+    ("h = { value = 0.1,", "h = { value = 0.015,", "must be a whole multiple of time.h_plant"),
+    ("q_nu = { value = 1e-7,", "q_nu = { value = 0.0,", "ekf.q_nu: value must be > 0"),
+    ("qg = { value = [60.0, 60.0, -60.0, 0.0, 60.0, 0.0],", "qg = { value = [60.0, 60.0],", "arm.qg: value must be a list of 6 numbers"),
+    ("reach_end = { value = 20.0,", "reach_end = { value = 30.0,", "arm times must satisfy"),
+    ('duration = { value = 100.0, unit = "s", source', 'duration = { value = 100.0, unit = "s", sauce', "expected a table { value, unit, source }"),
+    # units, element by element
+    # the example: "degrees" used to be read silently as radians
+    ('0.0, 60.0, 0.0], unit = "deg"', '0.0, 60.0, 0.0], unit = "degrees"',
+     "arm.qg: unknown unit 'degrees' (allowed for an angle: rad, deg)"),
+    ('unit = "m,m,m,deg,deg,deg"', 'unit = "m,m,m,degrees,deg,deg"', "initial.eta0: unknown unit 'degrees' of element 4"),
+    ('unit = "m,m,m,deg,deg,deg"', 'unit = "deg,m,m,deg,deg,deg"',
+     "initial.eta0: unit 'deg' of element 1 is not a length (allowed: m, mm)"),
+    ('unit = "m,m,m,deg,deg,deg"', 'unit = "deg"', "initial.eta0: one unit 'deg' for elements of length and angle"),
+    ('unit = "m/s,rad/s"', 'unit = "rad/s,m/s"', "initial.nu0: unit 'rad/s' of element 1 is not a velocity"),
+    ('unit = "m/s,rad/s"', 'unit = "m/s,rad/s,m/s"', "initial.nu0: unit list 'm/s,rad/s,m/s' does not match 6 values"),
+    ('unit = "N,N,N,N*m,N*m,N*m", source = "eq. 41" }\namplitude', 'unit = "N,N,N,N,N*m,N*m", source = "eq. 41" }\namplitude',
+     "disturbance.offset: unit 'N' of element 4 is not a torque (allowed: N*m)"),
+    ('duration = { value = 100.0, unit = "s"', 'duration = { value = 100.0, unit = "min"',
+     "time.duration: unknown unit 'min' (allowed for a time: s, ms)"),
+    ('unit = "m or rad"', 'unit = "m or deg"', "atd.A_min: unit 'm or deg': one number for length and angle needs units of one scale"),
+    ('unit = "m or rad"', 'unit = "m"', "atd.A_min: unit 'm' is not a length or angle (allowed: m or rad)"),
+    ('unit = "rad", source = "arvcas choice" }', 'unit = "m", source = "arvcas choice" }',
+     "limits.e_attitude: unit 'm' is not an angle (allowed: rad, deg)"),
+    ('var_position = { value = 1e-4, unit = "m^2"', 'var_position = { value = 1e-4, unit = "m"',
+     "sensors.var_position: unit 'm' is not a length^2 (allowed: m^2)"),
+]
+
+
+@pytest.mark.parametrize("old,new,fragment", BAD_EDITS, ids=[f[2].split(":")[0] + ":" + f[1][:24] for f in BAD_EDITS])
+def test_bad_scenario_files_one_line(tmp_path, old, new, fragment):
+    assert TEXT.count(old) == 1, old
+    p = _write(tmp_path, TEXT.replace(old, new))
+    with pytest.raises(ScenarioError) as ei:
         load_scenario(p)
     msg = str(ei.value)
-    assert "\n" not in msg and str(p) in msg
+    assert "\n" not in msg and msg.startswith(f"{p}: ") and fragment in msg, msg
 
 
 def test_unreadable_inputs(tmp_path):

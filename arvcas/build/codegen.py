@@ -706,10 +706,7 @@ def compiled(name: str, opts=None) -> ca.Function:
 
     if name not in PUBLIC_FUNCTIONS:
         raise ValueError(f"unknown plant function {name!r}; allowed: {', '.join(PUBLIC_FUNCTIONS)}")
-    if opts is None:
-        opts = ModelOptions()
-    if not isinstance(opts, ModelOptions):
-        raise ValueError(f"opts: expected arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
+    opts = ModelOptions.checked(opts)
     tag = opts.tag()
     mkey = (name, tag, str(_cache_path()))
     with _LOCK:

@@ -453,10 +453,7 @@ def dynamics(name: str, system=None, *, opts=None) -> Dynamics:
         raise ValueError(f"dynamics: unknown function {name!r}; allowed: {', '.join(NAMES)}")
     if system is not None:
         raise ValueError(f"dynamics: system: only None (the packaged Haidou-1 ARV) is available, got {system!r}")
-    if opts is None:
-        opts = ModelOptions()
-    if not isinstance(opts, ModelOptions):
-        raise ValueError(f"dynamics: opts: expected arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
+    opts = ModelOptions.checked(opts, "dynamics: opts")
     key = (name, opts.tag())
     with _LOCK:
         d = _DYN.get(key)

@@ -30,6 +30,7 @@ import math
 import os
 import re
 import tempfile
+from importlib import resources
 from pathlib import Path
 
 import casadi as ca
@@ -414,49 +415,15 @@ def _example_values(fns: dict[str, ca.Function], inputs: dict[str, np.ndarray]) 
                 raise ExportError(f"export-c: {short}: no example value of size {f.numel_in(i)} for input {k}")
 
 
+def _preamble(template: str, lib: str) -> list[str]:
+    """The fixed opening lines of an example: ``templates/<template>`` with ``@LIB@`` replaced by ``lib``."""
+    text = (resources.files("arvcas") / "build" / "templates" / template).read_text(encoding="utf-8")
+    return text.replace("@LIB@", lib).removesuffix("\n").split("\n")
+
+
 def _example_c(fns, inputs, prefix: str) -> str:
     lib = prefix.rstrip("_")
-    out = [
-        f"/* example.c: call every function of lib{lib} at a fixed state, through CasADi's calling convention",
-        " * with work arrays from F_work() (the pattern for threads: one set of arrays per thread), and print",
-        " * inputs and outputs as lines 'in|out <function> <name> : values' with %.17g (they read back exactly).",
-        " *",
-        " * Build and run: make && ./example   (or with CMake: see CMakeLists.txt)",
-        " */",
-        "#include <stdio.h>",
-        "#include <stdlib.h>",
-        f'#include "{lib}.h"',
-        f'#include "{lib}_params.h"',
-        "",
-        "typedef int (*eval_t)(const casadi_real**, casadi_real**, casadi_int*, casadi_real*, int);",
-        "typedef int (*work_t)(casadi_int*, casadi_int*, casadi_int*, casadi_int*);",
-        "",
-        "static int call(eval_t f, work_t work, const casadi_real** in, int n_in, casadi_real** out, int n_out)",
-        "{",
-        "  casadi_int sz_arg, sz_res, sz_iw, sz_w;",
-        "  if (work(&sz_arg, &sz_res, &sz_iw, &sz_w)) return 1;",
-        "  const casadi_real** arg = calloc(sz_arg > n_in ? sz_arg : n_in, sizeof *arg);",
-        "  casadi_real** res = calloc(sz_res > n_out ? sz_res : n_out, sizeof *res);",
-        "  casadi_int* iw = calloc(sz_iw + 1, sizeof *iw);",
-        "  casadi_real* w = calloc(sz_w + 1, sizeof *w);",
-        "  int flag = 1;",
-        "  if (arg && res && iw && w) {",
-        "    for (int i = 0; i < n_in; ++i) arg[i] = in[i];",
-        "    for (int i = 0; i < n_out; ++i) res[i] = out[i];",
-        "    flag = f(arg, res, iw, w, 0);",
-        "  }",
-        "  free(arg); free(res); free(iw); free(w);",
-        "  return flag;",
-        "}",
-        "",
-        "static void print_vec(const char* kind, const char* fn, const char* name, const casadi_real* v, int n)",
-        "{",
-        '  printf("%s %s %s :", kind, fn, name);',
-        '  for (int i = 0; i < n; ++i) printf(" %.17g", v[i]);',
-        '  printf("\\n");',
-        "}",
-        "",
-    ]
+    out = _preamble("example_preamble.c", lib)
     for k, v in inputs.items():
         out.append(f"static const casadi_real in_{k}[{v.size}] = {{{', '.join(_c_double(x) for x in v)}}};")
     out += ["", "int main(void)", "{", "  int failed = 0;"]
@@ -490,29 +457,7 @@ def _example_c(fns, inputs, prefix: str) -> str:
 
 def _example_cpp(fns, inputs, prefix: str) -> str:
     lib = prefix.rstrip("_")
-    out = [
-        f"// example.cpp: the same as example.c from C++, through the F_eval wrappers of {lib}.h",
-        "// (named arguments, work arrays on the stack). Prints the same lines as example.c.",
-        "//",
-        "// Build: with CMake (CMakeLists.txt builds it as example_cpp; consumer/CMakeLists.txt builds it",
-        f"// against an installed package through find_package({lib})), or by hand:",
-        f"//   c++ -I. example.cpp -L. -l{lib} -Wl,-rpath,. -lm -o example_cpp",
-        "#include <array>",
-        "#include <cstdio>",
-        "#include <vector>",
-        f'#include "{lib}.h"',
-        f'#include "{lib}_params.h"',
-        "",
-        "namespace {",
-        "void print_vec(const char* kind, const char* fn, const char* name, const double* v, std::size_t n) {",
-        '  std::printf("%s %s %s :", kind, fn, name);',
-        '  for (std::size_t i = 0; i < n; ++i) std::printf(" %.17g", v[i]);',
-        '  std::printf("\\n");',
-        "}",
-        "}  // namespace",
-        "",
-        "int main() {",
-    ]
+    out = _preamble("example_preamble.cpp", lib)
     for k, v in inputs.items():
         out.append(f"  const std::array<double, {v.size}> {k}{{{', '.join(_c_double(x) for x in v)}}};")
     out.append("  int failed = 0;")

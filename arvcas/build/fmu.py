@@ -375,10 +375,7 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
     if not isinstance(force, bool):
         raise FMUError(f"force: expected True or False, got {force!r}")
     _check_inputs(inputs)
-    if opts is None:
-        opts = ModelOptions()
-    if not isinstance(opts, ModelOptions):
-        raise FMUError(f"opts: expected arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
+    opts = ModelOptions.checked(opts, error=FMUError)
     P = _check_params(params)
     out = _check_path(path, force)
     platform, suffix = _platform()

@@ -16,7 +16,8 @@ from arvcas import __version__
 from arvcas.io import files
 from arvcas.io.results import ResultsError, atomic_write
 
-__all__ = ["atomic_write", "write_text", "write_figure", "provenance", "prepare_dir", "target", "str_attr", "check_format"]
+__all__ = ["atomic_write", "write_text", "write_figure", "write_result_dir", "stored_inputs", "provenance",
+           "prepare_dir", "target", "str_attr", "check_format"]
 
 
 def write_text(path: Path, text: str) -> Path:
@@ -25,6 +26,33 @@ def write_text(path: Path, text: str) -> Path:
 
 def write_figure(path: Path, fig, dpi: int) -> Path:
     return files.write_figure(path, fig, dpi, ResultsError)
+
+
+def write_result_dir(out_dir, stem: str, result, write_h5, markdown, plot, dpi: int) -> dict[str, Path]:
+    """``out_dir/<stem>.h5`` (``write_h5(result, path)``), ``<stem>.md`` (``markdown(result)``) and
+    ``<stem>.png`` (``plot(result)`` at ``dpi``), each written atomically; ``out_dir`` is created if missing."""
+    out = prepare_dir(out_dir, f"--out {out_dir}")
+    written = {"h5": write_h5(result, out / f"{stem}.h5"), "md": write_text(out / f"{stem}.md", markdown(result))}
+    fig = plot(result)
+    written["png"] = write_figure(out / f"{stem}.png", fig, dpi)
+    return written
+
+
+def stored_inputs(path, config_text: str, params_vector, error: type[ValueError] = ResultsError):
+    """The scenario and parameters a result file at ``path`` stores, for re-running it.
+
+    ``config_text``: the stored scenario file; ``params_vector``: the parameter values in schema order
+    (``error`` is raised when they do not fit this version's schema). Returns ``(cfg, params)``.
+    """
+    from arvcas.params import SCHEMA as PARAM_SCHEMA, load as load_params
+    from arvcas.sim import scenario
+
+    cfg = scenario.loads_scenario(config_text, f"{path} (stored scenario)")
+    names = list(PARAM_SCHEMA)
+    if params_vector.shape != (len(names),):
+        raise error(f"{path}: stored params do not match this arvcas version's parameter schema")
+    params = load_params().replace(dict(zip(names, params_vector.tolist())))
+    return cfg, params
 
 
 def provenance() -> dict[str, str]:

@@ -117,6 +117,15 @@ def sweep_outputs(a: argparse.Namespace) -> list:
     return [] if a.out is None else [(f"--out {a.out}", a.out / f"sweep.{e}") for e in ("h5", "md", "png")]
 
 
+def _report_check(path, diff: list[str], compared: str) -> int:
+    """Print the outcome of re-running the study in ``path`` (``diff``: the fields that differ); exit code."""
+    if diff:
+        print(f"{path}: NOT reproduced: {', '.join(diff)} differ")
+        return 1
+    print(f"{path}: reproduced bit for bit ({compared})")
+    return 0
+
+
 def run_sweep(a: argparse.Namespace) -> int:
     from arvcas.sim import scenario
     from arvcas.params import load
@@ -126,11 +135,7 @@ def run_sweep(a: argparse.Namespace) -> int:
     if a.check is not None:
         _say(f"re-running {a.check} ...")
         _new, diff = reproduce_sweep(a.check)
-        if diff:
-            print(f"{a.check}: NOT reproduced: {', '.join(diff)} differ")
-            return 1
-        print(f"{a.check}: reproduced bit for bit (chat, rmse, ok, t_fail, zigzag measures, k1 series)")
-        return 0
+        return _report_check(a.check, diff, "chat, rmse, ok, t_fail, zigzag measures, k1 series")
     _io.prepare_dir(a.out, f"--out {a.out}")
     params, cfg = load(a.params), scenario.load_scenario(a.config)
     sw = run_sweep(a.h, a.controllers or CONTROLLERS, a.seeds or [0], cfg=cfg, params=params,
@@ -212,11 +217,7 @@ def run_montecarlo(a: argparse.Namespace) -> int:
         old = read_montecarlo(a.check)
         _say(f"re-running {old.runs} runs of {old.controller} (master seed {old.draws.master_seed}) ...")
         _new, diff = reproduce(a.check)
-        if diff:
-            print(f"{a.check}: NOT reproduced: {', '.join(diff)} differ")
-            return 1
-        print(f"{a.check}: reproduced bit for bit ({old.runs} runs: draws, chat, rmse, ok, t_fail)")
-        return 0
+        return _report_check(a.check, diff, f"{old.runs} runs: draws, chat, rmse, ok, t_fail")
     if a.draws_toml:
         from arvcas.experiments.montecarlo import draw, draws_toml
 

@@ -281,11 +281,7 @@ def reproduce(path, n_threads: int | None = None) -> tuple[MonteCarlo, list[str]
     Returns the new study and the list of fields that differ from the file (empty: bit for bit).
     """
     old = read_montecarlo(path)
-    cfg = scenario.loads_scenario(old.config_text, f"{path} (stored scenario)")
-    names = list(PARAM_SCHEMA)
-    if old.params_vector.shape != (len(names),):
-        raise ResultsError(f"{path}: stored params do not match this arvcas version's parameter schema")
-    params = load_params().replace(dict(zip(names, old.params_vector.tolist())))
+    cfg, params = _io.stored_inputs(path, old.config_text, old.params_vector, ResultsError)
     new = run_montecarlo(old.controller, old.runs, old.draws.master_seed, gains=old.gains, spread=old.draws.spread,
                          cfg=cfg, params=params, n_quad=old.n_quad, n_threads=n_threads, gains_source=old.gains_source)
     diff = []

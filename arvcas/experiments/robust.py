@@ -341,11 +341,7 @@ def plot_robust(rf: RobustFront, fig: Figure | None = None) -> Figure:
 
 def write_robust_dir(rf: RobustFront, out_dir) -> dict[str, Path]:
     """``out_dir/robust.h5``, ``robust.md``, ``robust.png`` (atomic)."""
-    out = _io.prepare_dir(out_dir, f"--out {out_dir}")
-    files = {"h5": write_robust(rf, out / "robust.h5"), "md": _io.write_text(out / "robust.md", robust_markdown(rf))}
-    fig = plot_robust(rf)
-    files["png"] = _io.write_figure(out / "robust.png", fig, 140)
-    return files
+    return _io.write_result_dir(out_dir, "robust", rf, write_robust, robust_markdown, plot_robust, 140)
 
 
 # ---------------------------------------------------------------------------------------------

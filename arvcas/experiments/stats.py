@@ -159,22 +159,23 @@ def median_ci(x, level: float = LEVEL) -> Interval:
     return Interval(med, float(v[k - 1]), float(v[n - k]), n, level)
 
 
-def paired_median_ci(a, b, level: float = LEVEL) -> Interval:
-    """Median of ``a_i - b_i`` over the pairs where both are finite, sign-test interval."""
+def _paired_differences(a, b, who: str) -> np.ndarray:
+    """``a_i - b_i`` of two samples of the same shape (flattened); ``who`` names the caller in the error."""
     a = np.asarray(a, dtype=float).ravel()
     b = np.asarray(b, dtype=float).ravel()
     if a.shape != b.shape:
-        raise ValueError(f"paired_median_ci: a and b must pair up, got shapes {a.shape} and {b.shape}")
-    return median_ci(a - b, level)
+        raise ValueError(f"{who}: a and b must pair up, got shapes {a.shape} and {b.shape}")
+    return a - b
+
+
+def paired_median_ci(a, b, level: float = LEVEL) -> Interval:
+    """Median of ``a_i - b_i`` over the pairs where both are finite, sign-test interval."""
+    return median_ci(_paired_differences(a, b, "paired_median_ci"), level)
 
 
 def paired_ci(a, b, level: float = LEVEL) -> Interval:
     """Mean of ``a_i - b_i`` over the pairs where both are finite, t-interval (same draw i)."""
-    a = np.asarray(a, dtype=float).ravel()
-    b = np.asarray(b, dtype=float).ravel()
-    if a.shape != b.shape:
-        raise ValueError(f"paired_ci: a and b must pair up, got shapes {a.shape} and {b.shape}")
-    return mean_ci(a - b, level)
+    return mean_ci(_paired_differences(a, b, "paired_ci"), level)
 
 
 def welch_ci(a, b, level: float = LEVEL) -> Interval:

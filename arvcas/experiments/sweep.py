@@ -248,11 +248,7 @@ def reproduce_sweep(path) -> tuple[Sweep, list[str]]:
     """Re-run the sweep stored in ``path`` from its stored configuration (scenario, parameters, gains,
     periods, seeds, noise scale); returns the new sweep and the fields that differ (empty: bit for bit)."""
     old = read_sweep(path)
-    cfg = scenario.loads_scenario(old.config_text, f"{path} (stored scenario)")
-    names = list(PARAM_SCHEMA)
-    if old.params_vector.shape != (len(names),):
-        raise ValueError(f"{path}: stored params do not match this arvcas version's parameter schema")
-    params = load_params().replace(dict(zip(names, old.params_vector.tolist())))
+    cfg, params = _io.stored_inputs(path, old.config_text, old.params_vector, ValueError)
     new = run_sweep(old.hs, old.controllers, old.seeds, cfg=cfg, params=params, gains=old.gains,
                     noise_scale=old.noise_scale)
     diff = [k for k in _ARRAYS if not np.array_equal(getattr(new, k), getattr(old, k), equal_nan=k != "ok")]
@@ -415,8 +411,4 @@ def plot_sweep(sw: Sweep, fig: Figure | None = None, dof: int = 0,
 
 def write_sweep_dir(sw: Sweep, out_dir) -> dict[str, Path]:
     """``out_dir/sweep.h5``, ``sweep.md`` and ``sweep.png`` (each written atomically)."""
-    out = _io.prepare_dir(out_dir, f"--out {out_dir}")
-    files = {"h5": write_sweep(sw, out / "sweep.h5"), "md": _io.write_text(out / "sweep.md", sweep_markdown(sw))}
-    fig = plot_sweep(sw)
-    files["png"] = _io.write_figure(out / "sweep.png", fig, 130)
-    return files
+    return _io.write_result_dir(out_dir, "sweep", sw, write_sweep, sweep_markdown, plot_sweep, 130)

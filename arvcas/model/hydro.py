@@ -34,17 +34,9 @@ def link_drag(rho, Cd, diameter, s, v, w, n_quad: int):
     """
     L = ca.norm_2(s)
     u = s / L
-    nodes, weights = gauss_legendre(n_quad)
     a = v - ca.dot(v, u) * u
     b = ca.cross(w, u)
-    f = 0
-    m = 0
-    for xi, wi in zip(nodes, weights):
-        x = L * xi
-        vn = a + x * b
-        q = (wi * L) * ca.norm_2(vn) * vn
-        f = f + q
-        m = m + x * q
+    f, m = _drag_quadrature(L, a, b, n_quad)
     k = -0.5 * rho * Cd * diameter
     return k * f, k * ca.cross(u, m)
 
@@ -73,6 +65,12 @@ def planar_drag(k, L, a, b, n_quad: int):
     whose cross product with ``u`` is the moment about the link origin:
     ``f = f1 e1 + f2 e2``, ``n = m1 e2 - m2 e1``.
     """
+    f, m = _drag_quadrature(L, a, b, n_quad)
+    return k * f, k * m
+
+
+def _drag_quadrature(L, a, b, n_quad: int):
+    """Gauss-Legendre sums ``int_0^L |v_n| v_n dx`` and ``int_0^L x |v_n| v_n dx``, ``v_n(x) = a + x b``."""
     nodes, weights = gauss_legendre(n_quad)
     f = 0
     m = 0
@@ -82,7 +80,7 @@ def planar_drag(k, L, a, b, n_quad: int):
         q = (wi * L) * ca.norm_2(vn) * vn
         f = f + q
         m = m + x * q
-    return k * f, k * m
+    return f, m
 
 
 def buoyancy_force(rho, volume, g_i):

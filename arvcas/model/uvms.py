@@ -37,6 +37,15 @@ class ModelOptions:
     def tag(self) -> str:
         return f"nq{self.n_quad}"
 
+    @classmethod
+    def checked(cls, opts, what: str = "opts", error: type[Exception] = ValueError) -> "ModelOptions":
+        """``opts`` itself, or the default options for ``None``; ``error`` (naming ``what``) for anything else."""
+        if opts is None:
+            return cls()
+        if not isinstance(opts, cls):
+            raise error(f"{what}: expected arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
+        return opts
+
 
 def coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions):
     """(nu_dot, tau_m) of the exactly coupled vehicle + arm (paper eq. 1 with eq. 11, docs/model.md §3).

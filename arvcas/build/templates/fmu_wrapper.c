@@ -82,6 +82,9 @@ static fmi2Status fail(Inst *c, const char *fn, const char *why) {
 
 #define CHECK(c, fn) do { if (!(c)) return fmi2Error; \
     if ((c)->mode == S_ERROR) return fail((c), (fn), "the instance is in the error state"); } while (0)
+/* CHECK, then fail with msg unless the instance is in mode m */
+#define CHECK_MODE(c, fn, m, msg) do { CHECK(c, fn); \
+    if ((c)->mode != (m)) return fail((c), (fn), (msg)); } while (0)
 
 /* xdot = f(x, u) with the inputs u (25 numbers) and the instance's parameters */
 static int rhs(Inst *c, const double *x, const double *u, double *xdot) {
@@ -176,8 +179,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     Inst *c = (Inst *)comp;
     (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
-    CHECK(c, "fmi2SetupExperiment");
-    if (c->mode != S_INSTANTIATED) return fail(c, "fmi2SetupExperiment", "allowed only after fmi2Instantiate");
+    CHECK_MODE(c, "fmi2SetupExperiment", S_INSTANTIATED, "allowed only after fmi2Instantiate");
     c->t = startTime;
     c->t_last_ok = startTime;
     return fmi2OK;
@@ -185,16 +187,14 @@ fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined,
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
     Inst *c = (Inst *)comp;
-    CHECK(c, "fmi2EnterInitializationMode");
-    if (c->mode != S_INSTANTIATED) return fail(c, "fmi2EnterInitializationMode", "allowed only after fmi2Instantiate");
+    CHECK_MODE(c, "fmi2EnterInitializationMode", S_INSTANTIATED, "allowed only after fmi2Instantiate");
     c->mode = S_INIT;
     return fmi2OK;
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     Inst *c = (Inst *)comp;
-    CHECK(c, "fmi2ExitInitializationMode");
-    if (c->mode != S_INIT) return fail(c, "fmi2ExitInitializationMode", "not in initialization mode");
+    CHECK_MODE(c, "fmi2ExitInitializationMode", S_INIT, "not in initialization mode");
     if (!(c->r[VR_H] > 0.0) || !isfinite(c->r[VR_H]))
         return fail(c, "fmi2ExitInitializationMode", "h_rk4 must be a finite number > 0");
     c->dirty = 1;
@@ -557,29 +557,23 @@ fmi2Status fmi2CancelStep(fmi2Component comp) {
     return fail((Inst *)comp, "fmi2CancelStep", "fmi2DoStep never returns fmi2Pending");
 }
 
-fmi2Status fmi2GetStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Status *value) {
-    (void)s; (void)value;
-    return fail((Inst *)comp, "fmi2GetStatus", "fmi2DoStep is synchronous: no status to query");
-}
-fmi2Status fmi2GetRealStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Real *value) {
-    Inst *c = (Inst *)comp;
-    CHECK_CS(c, "fmi2GetRealStatus");
-    if (s != fmi2LastSuccessfulTime || !value) return fail(c, "fmi2GetRealStatus", "only fmi2LastSuccessfulTime is available");
-    *value = c->t_last_ok;
-    return fmi2OK;
-}
-fmi2Status fmi2GetIntegerStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Integer *value) {
-    (void)s; (void)value;
-    return fail((Inst *)comp, "fmi2GetIntegerStatus", "no Integer status");
-}
-fmi2Status fmi2GetBooleanStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Boolean *value) {
-    Inst *c = (Inst *)comp;
-    CHECK_CS(c, "fmi2GetBooleanStatus");
-    if (s != fmi2Terminated || !value) return fail(c, "fmi2GetBooleanStatus", "only fmi2Terminated is available");
-    *value = fmi2False;
-    return fmi2OK;
-}
-fmi2Status fmi2GetStringStatus(fmi2Component comp, const fmi2StatusKind s, fmi2String *value) {
-    (void)s; (void)value;
-    return fail((Inst *)comp, "fmi2GetStringStatus", "no String status");
-}
+/* a status getter that has nothing to report */
+#define NO_STATUS(fn, T, msg) \
+    fmi2Status fn(fmi2Component comp, const fmi2StatusKind s, T *value) { \
+        (void)s; (void)value; \
+        return fail((Inst *)comp, #fn, msg); \
+    }
+/* a status getter that reports one kind: *value = expr for s == kind */
+#define ONE_STATUS(fn, T, kind, expr) \
+    fmi2Status fn(fmi2Component comp, const fmi2StatusKind s, T *value) { \
+        Inst *c = (Inst *)comp; \
+        CHECK_CS(c, #fn); \
+        if (s != kind || !value) return fail(c, #fn, "only " #kind " is available"); \
+        *value = (expr); \
+        return fmi2OK; \
+    }
+NO_STATUS(fmi2GetStatus, fmi2Status, "fmi2DoStep is synchronous: no status to query")
+ONE_STATUS(fmi2GetRealStatus, fmi2Real, fmi2LastSuccessfulTime, c->t_last_ok)
+NO_STATUS(fmi2GetIntegerStatus, fmi2Integer, "no Integer status")
+ONE_STATUS(fmi2GetBooleanStatus, fmi2Boolean, fmi2Terminated, fmi2False)
+NO_STATUS(fmi2GetStringStatus, fmi2String, "no String status")
