@@ -29,7 +29,6 @@ import json
 import math
 import os
 import re
-import tempfile
 from importlib import resources
 from pathlib import Path
 
@@ -309,7 +308,6 @@ def _header(fns: dict[str, ca.Function], c_text: str, prefix: str, opts, P) -> s
     from arvcas import __version__
 
     lib = prefix.rstrip("_")
-    up = prefix.upper()
     guard = f"{lib.upper()}_H"
     L = [
         f"/* {lib}.h: the arvcas plant functions of the Haidou-1 ARV and its manipulator, in C.",
@@ -357,7 +355,7 @@ def _header(fns: dict[str, ca.Function], c_text: str, prefix: str, opts, P) -> s
         'extern "C" {',
         "#endif",
         "",
-        f"/* CasADi version, and the sizes of casadi_int and casadi_real, the library was generated with */",
+        "/* CasADi version, and the sizes of casadi_int and casadi_real, the library was generated with */",
     ]
     full_names = [prefix + n for n in fns]
     for sym, decl in _exported(c_text):
