@@ -23,7 +23,7 @@ from arvcas.controllers import gsta, reso
 from arvcas.controllers.base import Controller, Gain
 from arvcas.model import vehicle
 from arvcas.model.spatial import J, J_dot, J_inv
-from arvcas.sim.signals import ACCEL_UNITS, DOFS, RATE_UNITS, WRENCH_UNITS, Signal
+from arvcas.sim.signals import DOFS, RATE_UNITS, WRENCH_UNITS, Signal
 
 __all__ = ["SlidingMode", "RESOCompensation", "NominalCompensation", "SMC_SIGNALS", "G_SURFACE", "G_GSTA",
            "G_ADAPT"]
