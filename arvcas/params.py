@@ -11,6 +11,7 @@ a number never recompiles.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -18,10 +19,10 @@ from typing import Any, Iterator, Mapping
 
 import numpy as np
 
-from arvcas import config
-from arvcas.config import ge, gt, quantity
+from arvcas import config, systemfile, tomlfile
 
-__all__ = ["Params", "ParamsError", "load", "view", "SCHEMA", "UNITS", "default_path", "check_physical"]
+__all__ = ["Params", "ParamsError", "Layout", "load", "view", "layout_for", "default_layout", "SCHEMA", "UNITS",
+           "default_path", "check_physical"]
 
 
 class ParamsError(ValueError):
@@ -29,121 +30,6 @@ class ParamsError(ValueError):
 
 
 UNITS = config.UNITS  # unit string -> (dimension, factor to SI)
-
-# ---- the file's schema (declaration order = the order of Params.vector()) ---------------------------
-
-
-@dataclass(frozen=True)
-class Env:
-    rho: float = quantity("density", ge(0))  # rho = 0 is the no-fluid reference case
-    g: float = quantity("acceleration", gt(0))
-    Cd: float = quantity("1", ge(0))
-
-
-@dataclass(frozen=True)
-class Vehicle:
-    m: float = quantity("mass", gt(0))
-    buoyancy_excess: float = quantity("mass")
-    Ixx: float = quantity("inertia", gt(0))
-    Iyy: float = quantity("inertia", gt(0))
-    Izz: float = quantity("inertia", gt(0))
-    Ixy: float = quantity("inertia")
-    Iyz: float = quantity("inertia")
-    Ixz: float = quantity("inertia")
-    xG: float = quantity("length")
-    yG: float = quantity("length")
-    zG: float = quantity("length")
-    xB: float = quantity("length")
-    yB: float = quantity("length")
-    zB: float = quantity("length")
-
-
-_HYDRO = (
-    "X_u X_v X_w X_q X_r X_udot X_vdot X_wdot X_qdot X_rdot X_v_absw X_u_absw X_ds "
-    "Y_u Y_v Y_r Y_udot Y_vdot Y_rdot Y_v_absv "
-    "Z_u Z_w Z_q Z_udot Z_wdot Z_qdot Z_w_absw Z_dsds "
-    "K_v K_w K_p K_vdot K_wdot K_pdot K_u_absw "
-    "M_u M_w M_q M_udot M_wdot M_qdot M_uw M_w_absw M_dsds M_ds "
-    "N_u N_v N_r N_udot N_vdot N_rdot N_v_absv"
-).split()
-# Table A1's hydrodynamic derivatives, per unit density (the model multiplies by rho)
-Hydro = dataclasses.make_dataclass(
-    "Hydro", [(k, float, quantity("per_rho")) for k in _HYDRO], frozen=True)
-
-
-@dataclass(frozen=True)
-class Thrusters:
-    delta_sL: float = quantity("angle")
-    delta_sR: float = quantity("angle")
-    x_stn: float = quantity("length")
-    y_stn: float = quantity("length")
-    z_stn: float = quantity("length")
-    x_bow: float = quantity("length")
-    y_bow: float = quantity("length")
-    x_hB: float = quantity("length")
-    x_hS: float = quantity("length")
-    u_min: float = quantity("force")
-    u_max: float = quantity("force")
-
-
-@dataclass(frozen=True)
-class Mount:
-    x: float = quantity("length")
-    y: float = quantity("length")
-    z: float = quantity("length")
-
-
-@dataclass(frozen=True)
-class Tool:
-    length: float = quantity("length", ge(0))
-
-
-@dataclass(frozen=True)
-class Joint:
-    """Craig's modified DH row of joint i (a_{i-1}, d_i, alpha_{i-1}) and its limits (Table 1)."""
-
-    a: float = quantity("length")
-    d: float = quantity("length")
-    alpha: float = quantity("angle")
-    qmin: float = quantity("angle")
-    qmax: float = quantity("angle")
-
-
-@dataclass(frozen=True)
-class Link:
-    mass: float = quantity("mass", gt(0))
-    volume: float = quantity("volume", ge(0))
-    diameter: float = quantity("length", gt(0))
-
-
-N_JOINTS = 6
-Stow = dataclasses.make_dataclass(
-    "Stow", [(f"q{i}", float, quantity("angle")) for i in range(1, N_JOINTS + 1)], frozen=True)
-Arm = dataclasses.make_dataclass(
-    "Arm",
-    [("mount", Mount, config.setting()), ("tool", Tool, config.setting())]
-    + [(f"joint{i}", Joint, config.setting()) for i in range(1, N_JOINTS + 1)]
-    + [(f"link{i}", Link, config.setting()) for i in range(1, N_JOINTS + 1)]
-    + [("stow", Stow, config.setting())],
-    frozen=True)
-
-
-@dataclass(frozen=True)
-class Payload:
-    mass: float = quantity("mass", ge(0))
-    volume: float = quantity("volume", ge(0))
-
-
-@dataclass(frozen=True)
-class ParamFile:
-    """The parameter file: every section is required, every entry is { value, unit, source }."""
-
-    env: Env = config.setting()
-    vehicle: Vehicle = config.setting()
-    hydro: Hydro = config.setting()  # type: ignore[valid-type]
-    thrusters: Thrusters = config.setting()
-    arm: Arm = config.setting()  # type: ignore[valid-type]
-    payload: Payload = config.setting()
 
 
 def _rule_name(spec: config.Spec) -> str:
@@ -153,49 +39,112 @@ def _rule_name(spec: config.Spec) -> str:
     return "any"
 
 
-# name -> (dimension, sign rule in {"any", "nonneg", "pos"}), in the order of Params.vector()
-SCHEMA: dict[str, tuple[str, str]] = {
-    leaf.key: (leaf.spec.dim, _rule_name(leaf.spec)) for leaf in config.leaves(ParamFile)}
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """The parameter vector of one system structure: names in order, dimension and sign rule of each.
+
+    ``structure`` (:class:`arvcas.systemfile.Structure`) is what the model code reads to shape its
+    graphs; the numbers are the runtime vector ``p`` in the order of ``names``.
+    """
+
+    structure: systemfile.Structure
+    schema: type  # the strict file schema (arvcas.config dataclasses)
+    names: tuple[str, ...]
+    dims: tuple[str, ...]
+    rules: tuple[str, ...]
+    leaf: tuple[str, ...]  # the file key each parameter comes from (a vector's elements share one)
+    index: dict = dataclasses.field(repr=False)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def schema_dict(self) -> dict[str, tuple[str, str]]:
+        return {n: (d, r) for n, d, r in zip(self.names, self.dims, self.rules)}
+
+    def __reduce__(self):  # pickles (to Dask workers) as its structure
+        return layout_for, (self.structure,)
+
+
+_LAYOUTS: dict[systemfile.Structure, Layout] = {}
+
+
+def layout_for(structure: systemfile.Structure) -> Layout:
+    """The (cached) :class:`Layout` of ``structure``."""
+    lay = _LAYOUTS.get(structure)
+    if lay is not None:
+        return lay
+    cls = systemfile.schema_for(structure)
+    names, dims, rules, leaf = [], [], [], []
+    for lf in config.leaves(cls):
+        keys = ([f"{lf.key}.{e}" for e in systemfile.VECTOR_ELEMENTS[lf.key.rsplit(".", 1)[-1]]]
+                if lf.kind == "floats" else [lf.key])
+        for k in keys:
+            names.append(k)
+            dims.append(lf.spec.dim if isinstance(lf.spec.dim, str) else lf.spec.dim[0])
+            rules.append(_rule_name(lf.spec))
+            leaf.append(lf.key)
+    lay = Layout(structure, cls, tuple(names), tuple(dims), tuple(rules), tuple(leaf),
+                 {n: i for i, n in enumerate(names)})
+    _LAYOUTS[structure] = lay
+    return lay
 
 
 def default_path() -> Path:
     return Path(str(resources.files("arvcas") / "data" / "haidou1.toml"))
 
 
+@functools.lru_cache(maxsize=1)
+def default_layout() -> Layout:
+    """The layout of the packaged default system, Haidou-1 (``data/haidou1.toml``)."""
+    return load().layout
+
+
+def __getattr__(name: str) -> Any:
+    if name == "SCHEMA":  # name -> (dimension, sign rule) of the default system, in vector order
+        return default_layout().schema_dict()
+    raise AttributeError(f"module 'arvcas.params' has no attribute '{name}'")
+
+
 @dataclass(frozen=True)
 class Params:
-    """Immutable, validated model parameters in SI units, ordered as :data:`SCHEMA`."""
+    """Immutable, validated model parameters in SI units, in the order of their :class:`Layout`."""
 
     _values: tuple[float, ...]
     _units: tuple[str, ...]
     _sources: tuple[str, ...]
     path: str
+    layout: Layout = dataclasses.field(repr=False, compare=False)
+    description: str = dataclasses.field(default="", repr=False, compare=False)
+
+    @property
+    def structure(self) -> systemfile.Structure:
+        return self.layout.structure
 
     def names(self) -> list[str]:
-        return list(SCHEMA)
+        return list(self.layout.names)
 
     def vector(self) -> np.ndarray:
         """Flat float vector (SI) in the order of :meth:`names`: the ``p`` input of compiled functions."""
         return np.array(self._values, dtype=float)
 
     def __getitem__(self, name: str) -> float:
-        return self._values[_index(name, self.path)]
+        return self._values[self._index(name, self.path)]
 
     def __iter__(self) -> Iterator[str]:
-        return iter(SCHEMA)
+        return iter(self.layout.names)
 
     def __len__(self) -> int:
-        return len(SCHEMA)
+        return len(self.layout.names)
 
     def unit(self, name: str) -> str:
         """The unit the file gives for ``name`` (the value itself is always SI)."""
-        return self._units[_index(name, self.path)]
+        return self._units[self._index(name, self.path)]
 
     def source(self, name: str) -> str:
-        return self._sources[_index(name, self.path)]
+        return self._sources[self._index(name, self.path)]
 
     def as_dict(self) -> dict[str, float]:
-        return dict(zip(SCHEMA, self._values))
+        return dict(zip(self.layout.names, self._values))
 
     def replace(self, mapping: Mapping[str, float]) -> "Params":
         """A new ``Params`` with the given SI values replaced (unknown names and bad values refused).
@@ -206,38 +155,64 @@ class Params:
         vals = list(self._values)
         srcs = list(self._sources)
         for name, v in mapping.items():
-            i = _index(name, "Params.replace")
-            vals[i] = config.check_value(ParamFile, name, v, "Params.replace", ParamsError)
+            i = self._index(name, "Params.replace")
+            key = self.layout.leaf[i]
+            if key == name:
+                vals[i] = config.check_value(self.layout.schema, name, v, "Params.replace", ParamsError)
+            else:  # an element of a vector entry: a finite number
+                if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
+                        or not np.isfinite(float(v)):
+                    raise ParamsError(f"Params.replace: {name}: expected a finite number, got {v!r}")
+                vals[i] = float(v)
             srcs[i] = "replaced at run time"
-        return Params(tuple(vals), self._units, tuple(srcs), self.path)
+        return Params(tuple(vals), self._units, tuple(srcs), self.path, self.layout, self.description)
+
+    def _index(self, name: str, where: str) -> int:
+        try:
+            return self.layout.index[name]
+        except KeyError:
+            raise ParamsError(f"{where}: unknown parameter '{name}'{config.closest(name, self.layout.names)}") \
+                from None
 
 
-def _index(name: str, where: str) -> int:
-    try:
-        return _INDEX[name]
-    except KeyError:
-        raise ParamsError(f"{where}: unknown parameter '{name}'{config.closest(name, SCHEMA)}") from None
+def read_doc(path: Path) -> tuple[dict, str]:
+    """The parsed system file (a URDF arm converted to the chain form) and its name for messages."""
+    where = str(path)
+    doc = tomlfile.parse(tomlfile.read_text(path, ParamsError), where, ParamsError)
+    arm = doc.get("arm")
+    if isinstance(arm, dict) and "urdf" in arm:
+        from arvcas import urdf
 
-
-_INDEX = {n: i for i, n in enumerate(SCHEMA)}
+        doc = urdf.convert(doc, path, ParamsError)
+    return doc, where
 
 
 def load(path: str | Path | None = None) -> Params:
-    """Load and validate a parameter file (default: the packaged ``data/haidou1.toml``).
+    """Load and validate a system file (default: the packaged ``data/haidou1.toml``).
 
     Raises :class:`ParamsError` with one line naming the file and key for a missing, unreadable,
     non-UTF-8 or malformed file, an unknown or missing key, a wrong unit or type, a non-finite value,
-    a broken rule, or numbers that do not describe a physical vehicle (:func:`check_physical`).
+    a broken rule, or numbers that do not describe a physical system (:func:`check_physical`).
     """
     p = Path(path) if path is not None else default_path()
-    loaded = config.load_file(ParamFile, p, ParamsError, entries=True)
-    flat = config.flatten(loaded.value)
-    assert [k for k, _ in flat] == list(SCHEMA)
-    values = tuple(float(v) for _, v in flat)
-    check_physical(dict(zip(SCHEMA, values)), loaded.where)
-    units = tuple(loaded.entries[k][0] for k in SCHEMA)
-    sources = tuple(loaded.entries[k][1] for k in SCHEMA)
-    return Params(values, units, sources, loaded.where)
+    doc, where = read_doc(p)
+    structure = systemfile.structure_of(doc, where, ParamsError, default_name=_default_name(p))
+    lay = layout_for(structure)
+    loaded = config.load_doc(lay.schema, systemfile.file_doc(doc), where, ParamsError, entries=True)
+    values: list[float] = []
+    for key, v in config.flatten(loaded.value):
+        values += [x for _, x in systemfile.expand(key, v)]
+    assert len(values) == len(lay.names)
+    units = tuple(loaded.entries[k][0] for k in lay.leaf)
+    sources = tuple(loaded.entries[k][1] for k in lay.leaf)
+    check_physical(dict(zip(lay.names, values)), where, lay)
+    desc = doc.get("system", {}).get("description", "")
+    return Params(tuple(values), units, sources, where, lay, desc if isinstance(desc, str) else "")
+
+
+def _default_name(p: Path) -> str:
+    stem = p.stem.lower().replace("-", "_")
+    return stem if systemfile.NAME_RE.match(stem) else "system"
 
 
 # ---- physical validity ------------------------------------------------------------------------------
@@ -251,7 +226,7 @@ def _eig_min(A: np.ndarray) -> float:
     return float(np.linalg.eigvalsh(0.5 * (A + A.T))[0])
 
 
-def check_physical(values: Mapping[str, float], where: str) -> None:
+def check_physical(values: Mapping[str, float], where: str, layout: Layout | None = None) -> None:
     """Refuse SI parameter values that do not describe a physical vehicle-manipulator system.
 
     One-line :class:`ParamsError` naming ``where`` and the keys at fault, for:
@@ -259,28 +234,24 @@ def check_physical(values: Mapping[str, float], where: str) -> None:
     * a vehicle inertia tensor (Ixx..Ixz about the body origin) that is not positive definite, or
       whose principal moments break the triangle inequality (no mass distribution has them);
     * a rigid-body mass matrix M_RB (mass, inertia and centre of gravity) that is not positive definite;
-    * a total inertia M = M_RB + M_A (added mass from the hydro ``*dot`` derivatives times rho) whose
-      symmetric part is not positive definite: then ``M + M_arm`` may be singular, and the run
-      factors it without pivoting (kinetic energy must be positive for every motion);
-    * thrust limits u_min >= u_max, joint limits qmin >= qmax, a stowed pose outside its joint limits;
-    * a thruster layout whose allocation matrix B_T (Appendix B) is not of rank 6;
-    * an arm link of zero length (the cylinder's drag and inertia are along its axis).
+    * a total inertia M = M_RB + M_A whose symmetric part is not positive definite: then
+      ``M + M_arm`` may be singular, and the run factors it without pivoting;
+    * thrust limits u_min >= u_max, a thruster direction that is not a unit vector, a thruster layout
+      whose allocation matrix B has rank < 6;
+    * joint limits qmin >= qmax, a stowed pose outside its joint limits, a joint axis that is not a unit
+      vector, a link inertia that is not positive definite or not physical (triangle inequality);
+    * an arm link of zero length with drag (a DH link's cylinder, a chain link's drag segment).
 
     The matrices are the model's own (:mod:`arvcas.model.vehicle`, :mod:`arvcas.model.thrusters`,
     :mod:`arvcas.model.manipulator`), evaluated on numbers, so the check tests what the run will use.
     """
     from arvcas.model import manipulator, thrusters, vehicle  # the model imports this module
 
-    P = view(np.array([values[k] for k in SCHEMA], dtype=float))
+    lay = layout or default_layout()
+    st = lay.structure
+    P = view(np.array([values[k] for k in lay.names], dtype=float), lay)
     inertia = [f"vehicle.{k}" for k in ("Ixx", "Iyy", "Izz", "Ixy", "Iyz", "Ixz")]
-    I_b = np.array(vehicle.I_b(P), dtype=float)
-    lam = np.linalg.eigvalsh(I_b)
-    if lam[0] <= 0:
-        raise _fail(where, inertia, f"the inertia tensor is not positive definite "
-                                    f"(eigenvalues {', '.join(f'{x:.6g}' for x in lam)} kg*m^2)")
-    if lam[0] + lam[1] < lam[2] * (1 - 1e-12):
-        raise _fail(where, inertia, f"the principal moments {', '.join(f'{x:.6g}' for x in lam)} kg*m^2 "
-                                    f"break the triangle inequality (no mass distribution has them)")
+    _check_tensor(np.array(vehicle.I_b(P), dtype=float), where, inertia, "the inertia tensor")
     rb = ["vehicle.m", *inertia, "vehicle.xG", "vehicle.yG", "vehicle.zG"]
     M_RB = np.array(vehicle.M_RB(P), dtype=float)
     e = _eig_min(M_RB)
@@ -291,15 +262,27 @@ def check_physical(values: Mapping[str, float], where: str) -> None:
     sym = 0.5 * (M + M.T)
     for k in range(1, 7):  # the first leading block that fails names its degree of freedom
         if _eig_min(sym[:k, :k]) <= 0:
-            row = [f"hydro.{name}" for i, j, name in vehicle._MA_ENTRIES if i == k - 1]
-            raise _fail(where, ["env.rho", *row],
-                        f"the inertia M = M_RB + M_A (added mass = -rho * derivative) is not positive "
-                        f"definite in DOF {k} (symmetric part's {k}x{k} leading block has eigenvalue "
-                        f"{_eig_min(sym[:k, :k]):.6g}): M + M_arm could be singular")
-    if not values["thrusters.u_min"] < values["thrusters.u_max"]:
-        raise _fail(where, ["thrusters.u_min", "thrusters.u_max"],
-                    f"u_min ({values['thrusters.u_min']:g} N) must be < u_max ({values['thrusters.u_max']:g} N)")
-    for i in range(1, N_JOINTS + 1):
+            row = [f"hydro.{t.name}" for t in st.hydro if t.dot is not None and t.row == k - 1]
+            raise _fail(where, (["env.rho"] if st.hydro_per_rho else []) + row,
+                        f"the inertia M = M_RB + M_A is not positive definite in DOF {k} (symmetric part's "
+                        f"{k}x{k} leading block has eigenvalue {_eig_min(sym[:k, :k]):.6g}): M + M_arm could "
+                        f"be singular")
+    for pre in thrusters.limit_prefixes(st):
+        lo, hi = values[pre + "u_min"], values[pre + "u_max"]
+        if not lo < hi:
+            raise _fail(where, [pre + "u_min", pre + "u_max"], f"u_min ({lo:g} N) must be < u_max ({hi:g} N)")
+    for name in st.thrusters or ():
+        _check_unit(values, f"thrusters.{name}.direction", where, "thrust direction")
+    B = np.array(thrusters.B_T(P), dtype=float)
+    sv = np.linalg.svd(B, compute_uv=False)
+    rank = int(np.sum(sv > 1e-9 * sv[0]))
+    if rank < 6:
+        keys = ([f"thrusters.{n}.position" for n in st.thrusters] if st.thrusters else
+                [k for k in lay.names if k.startswith("thrusters.") and not k.endswith(("u_min", "u_max"))])
+        raise _fail(where, keys, f"the thruster allocation matrix B has rank {rank}, not 6 (singular values "
+                                 f"{', '.join(f'{x:.3g}' for x in sv)}): the thrusters cannot produce every wrench")
+    n = st.n_joints
+    for i in range(1, n + 1):
         lo, hi = values[f"arm.joint{i}.qmin"], values[f"arm.joint{i}.qmax"]
         if not lo < hi:
             raise _fail(where, [f"arm.joint{i}.qmin", f"arm.joint{i}.qmax"],
@@ -308,45 +291,76 @@ def check_physical(values: Mapping[str, float], where: str) -> None:
         if not lo <= q <= hi:
             raise _fail(where, [f"arm.stow.q{i}"], f"stowed angle {np.degrees(q):g} deg is outside joint {i}'s "
                                                    f"limits [{np.degrees(lo):g}, {np.degrees(hi):g}] deg")
-    B = np.array(thrusters.B_T(P), dtype=float)
-    sv = np.linalg.svd(B, compute_uv=False)
-    rank = int(np.sum(sv > 1e-9 * sv[0]))
-    if rank < 6:
-        keys = [k for k in SCHEMA if k.startswith("thrusters.") and k not in ("thrusters.u_min", "thrusters.u_max")]
-        raise _fail(where, keys, f"the thruster allocation matrix B_T has rank {rank}, not 6 (singular values "
-                                 f"{', '.join(f'{x:.3g}' for x in sv)}): the thrusters cannot produce every wrench")
-    for i, s in enumerate(manipulator.link_vectors(P), start=1):
-        L = float(np.linalg.norm(np.array(s, dtype=float)))
-        if L < 1e-9:
-            keys = [f"arm.joint{i + 1}.a", f"arm.joint{i + 1}.d"] if i < N_JOINTS else ["arm.tool.length"]
-            raise _fail(where, keys, f"link {i} has zero length (diameter {values[f'arm.link{i}.diameter']:g} m, "
-                                     f"drag coefficient env.Cd {values['env.Cd']:g}): its drag and inertia "
-                                     f"are along its axis")
+    if st.arm == "dh":
+        for i, s in enumerate(manipulator.link_vectors(P), start=1):
+            L = float(np.linalg.norm(np.array(s, dtype=float)))
+            if L < 1e-9:
+                keys = [f"arm.joint{i + 1}.a", f"arm.joint{i + 1}.d"] if i < n else ["arm.tool.length"]
+                raise _fail(where, keys, f"link {i} has zero length (diameter {values[f'arm.link{i}.diameter']:g} "
+                                         f"m, drag coefficient env.Cd {values['env.Cd']:g}): its drag and inertia "
+                                         f"are along its axis")
+    elif st.arm == "chain":
+        for i in range(1, n + 1):
+            _check_unit(values, f"arm.joint{i}.axis", where, "joint axis")
+            ks = [f"arm.link{i}.inertia.{e}" for e in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")]
+            ixx, iyy, izz, ixy, ixz, iyz = (values[k] for k in ks)
+            _check_tensor(np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]]), where,
+                          [f"arm.link{i}.inertia"], f"link {i}'s inertia tensor")
+            if st.link_drag[i - 1]:
+                a = np.array([values[f"arm.link{i}.drag_from.{c}"] for c in "xyz"])
+                b = np.array([values[f"arm.link{i}.drag_to.{c}"] for c in "xyz"])
+                if np.linalg.norm(b - a) < 1e-9:
+                    raise _fail(where, [f"arm.link{i}.drag_from", f"arm.link{i}.drag_to"],
+                                f"link {i}'s drag segment has zero length (drag_diameter "
+                                f"{values[f'arm.link{i}.drag_diameter']:g} m): omit the drag entries for a "
+                                f"link without drag")
+
+
+def _check_tensor(I: np.ndarray, where: str, keys: list[str], what: str) -> None:
+    lam = np.linalg.eigvalsh(0.5 * (I + I.T))
+    if lam[0] <= 0:
+        raise _fail(where, keys, f"{what} is not positive definite "
+                                 f"(eigenvalues {', '.join(f'{x:.6g}' for x in lam)} kg*m^2)")
+    if lam[0] + lam[1] < lam[2] * (1 - 1e-12):
+        raise _fail(where, keys, f"the principal moments {', '.join(f'{x:.6g}' for x in lam)} kg*m^2 of {what} "
+                                 f"break the triangle inequality (no mass distribution has them)")
+
+
+def _check_unit(values: Mapping[str, float], key: str, where: str, what: str) -> None:
+    v = np.array([values[f"{key}.{c}"] for c in "xyz"])
+    if abs(np.linalg.norm(v) - 1.0) > 1e-9:
+        raise _fail(where, [key], f"the {what} must be a unit vector, its norm is {np.linalg.norm(v):.12g}")
 
 
 class _View(Mapping[str, Any]):
-    __slots__ = ("_p",)
+    __slots__ = ("_p", "layout", "s")
 
-    def __init__(self, p: Any):
+    def __init__(self, p: Any, layout: Layout):
         self._p = p
+        self.layout = layout
+        self.s = layout.structure  # what the model code reads to shape its graphs
 
     def __getitem__(self, name: str) -> Any:
-        return self._p[_INDEX[name]]
+        return self._p[self.layout.index[name]]
 
     def __iter__(self) -> Iterator[str]:
-        return iter(SCHEMA)
+        return iter(self.layout.names)
 
     def __len__(self) -> int:
-        return len(SCHEMA)
+        return len(self.layout.names)
 
 
-def view(p: Any) -> Mapping[str, Any]:
+def view(p: Any, layout: Layout | None = None) -> Mapping[str, Any]:
     """Name-based access to a parameter vector of any type (CasADi SX/MX/DM, NumPy, Params).
 
-    Model functions take this view, so one implementation builds graphs and evaluates numbers.
+    Model functions take this view, so one implementation builds graphs and evaluates numbers. The
+    view's ``s`` is the system's :class:`arvcas.systemfile.Structure` (default: Haidou-1's).
     """
     if isinstance(p, Params):
+        layout = layout or p.layout
         p = p.vector()
-    if hasattr(p, "shape") and len(p.shape) and p.shape[0] != len(SCHEMA):
-        raise ParamsError(f"parameter vector has {p.shape[0]} entries, expected {len(SCHEMA)}")
-    return _View(p)
+    lay = layout or default_layout()
+    if hasattr(p, "shape") and len(p.shape) and p.shape[0] != len(lay):
+        raise ParamsError(f"parameter vector has {p.shape[0]} entries, expected {len(lay)} "
+                          f"(system {lay.structure.name})")
+    return _View(p, lay)

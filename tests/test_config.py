@@ -49,7 +49,9 @@ def _entries(table: dict, prefix: str = ""):
 
 
 def test_params_vector_is_raw_values_times_factors(params):
-    raw = dict(_entries(tomllib.loads(ap.default_path().read_text(encoding="utf-8"))))
+    doc = tomllib.loads(ap.default_path().read_text(encoding="utf-8"))
+    assert doc.pop("system") == {"name": "haidou1", "description": params.description}  # not numbers
+    raw = dict(_entries(doc))
     assert list(raw) == params.names()
     expect = np.array([float(e["value"]) * _factors(e["unit"], 1)[0] for e in raw.values()])
     np.testing.assert_array_equal(params.vector(), expect)  # exact, not approximate

@@ -696,30 +696,43 @@ def artifact_of(f: ca.Function) -> dict | None:
 # the plant
 
 
-def compiled(name: str, opts=None) -> ca.Function:
+def compiled(name: str, opts=None, system=None) -> ca.Function:
     """The public plant function ``name`` (see :data:`arvcas.model.uvms.PUBLIC_FUNCTIONS`), compiled to C.
 
-    ``opts`` is an :class:`arvcas.model.uvms.ModelOptions` (default: ``ModelOptions()``). Memoized per
-    process by ``(name, opts.tag())``; the library comes from the build cache when it is there.
+    ``opts`` is an :class:`arvcas.model.uvms.ModelOptions` (default: ``ModelOptions()``); ``system`` a
+    name, a system file or an :class:`arvcas.system.System` (default Haidou-1): the inputs are sized by
+    it (``q[n_joints]``, ``u[n_thrusters]``, ``p``: ``system.params.vector()``). Memoized per process by
+    ``(name, opts, structure)``; the library comes from the build cache when it is there.
     """
     from arvcas.model.uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
+    from arvcas.system import resolve
 
     if name not in PUBLIC_FUNCTIONS:
         raise ValueError(f"unknown plant function {name!r}; allowed: {', '.join(PUBLIC_FUNCTIONS)}")
     opts = ModelOptions.checked(opts)
-    tag = opts.tag()
+    lay = resolve(system).layout
+    st = lay.structure
+    tag = (opts.tag(), st)
     mkey = (name, tag, str(_cache_path()))
     with _LOCK:
         f = _COMPILED.get(mkey)
         if f is None:
             def make():
                 if tag not in _PLANT:
-                    _PLANT[tag] = plant_functions(opts)
+                    _PLANT[tag] = plant_functions(opts, lay)
                 return _PLANT[tag][name]
 
-            f = build_described(name, f"plant {name} {opts!r}", make)
+            desc = f"plant {name} {opts!r}" if st.name == "haidou1" and st == _default_structure() else \
+                f"plant {name} {opts!r} {st.key()}"
+            f = build_described(name if st.name == "haidou1" else f"{st.name}_{name}", desc, make)
             _COMPILED[mkey] = f
         return f
+
+
+def _default_structure():
+    from arvcas.params import default_layout
+
+    return default_layout().structure
 
 
 # ---------------------------------------------------------------------------------------------

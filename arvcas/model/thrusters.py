@@ -1,13 +1,30 @@
-"""Thruster allocation and asymmetric saturation (paper eq. 2, Appendix B, section 4.1)."""
+"""Thruster allocation and asymmetric saturation (paper eq. 2, Appendix B, section 4.1; docs/system-file.md).
+
+Two layouts: Haidou-1's parametric one (Appendix B) and a list of thrusters, each with its position,
+unit direction and limits: column ``[d; r x d]`` of B. Allocation is ``B^-1 tau`` for six thrusters and
+the minimum-norm ``B' (B B')^-1 tau`` for more; then each thrust is clipped to its own limits.
+"""
 
 from __future__ import annotations
 
 import casadi as ca
 
-__all__ = ["B_T", "allocate", "saturate", "thrust"]
+__all__ = ["B_T", "allocate", "saturate", "thrust", "limit_prefixes", "limits"]
 
 
 def B_T(P):
+    """Thruster configuration matrix: tau_v = B_T u_T (6 x n_thrusters)."""
+    if P.s.thrusters is not None:
+        cols = []
+        for n in P.s.thrusters:
+            r = ca.vertcat(*[P[f"thrusters.{n}.position.{c}"] for c in "xyz"])
+            d = ca.vertcat(*[P[f"thrusters.{n}.direction.{c}"] for c in "xyz"])
+            cols.append(ca.vertcat(d, ca.cross(r, d)))
+        return ca.horzcat(*cols)
+    return _B_haidou1(P)
+
+
+def _B_haidou1(P):
     """Thruster configuration matrix of Appendix B: tau_v = B_T u_T.
 
     Columns: stern-left, stern-right (rotatable, at delta_sL/delta_sR), two side (sway) thrusters,
@@ -29,13 +46,33 @@ def B_T(P):
 
 
 def allocate(P, tau):
-    """u_T = B_T^-1 tau_v (eq. 2): thrust per thruster, N, before saturation."""
-    return ca.solve(B_T(P), tau)
+    """u_T = B_T^-1 tau_v (eq. 2), or the minimum-norm B' (B B')^-1 tau for more than six thrusters: N,
+    before saturation."""
+    B = B_T(P)
+    if B.shape[1] == 6:
+        return ca.solve(B, tau)
+    return ca.mtimes(B.T, ca.solve(ca.mtimes(B, B.T), tau))
+
+
+def limit_prefixes(structure) -> list[str]:
+    """The key prefixes of the thrust limits: one pair for Haidou-1's layout, one per listed thruster."""
+    if structure.thrusters is None:
+        return ["thrusters."]
+    return [f"thrusters.{n}." for n in structure.thrusters]
+
+
+def limits(P):
+    """(u_min, u_max): per thruster columns, or Haidou-1's common scalars."""
+    pre = limit_prefixes(P.s)
+    if len(pre) == 1:
+        return P[pre[0] + "u_min"], P[pre[0] + "u_max"]
+    return ca.vertcat(*[P[p + "u_min"] for p in pre]), ca.vertcat(*[P[p + "u_max"] for p in pre])
 
 
 def saturate(P, u):
-    """Each thrust clipped to [u_min, u_max] = [-146.9, 231.6] N (section 4.1)."""
-    return ca.fmin(ca.fmax(u, P["thrusters.u_min"]), P["thrusters.u_max"])
+    """Each thrust clipped to its [u_min, u_max] (Haidou-1: [-146.9, 231.6] N, section 4.1)."""
+    lo, hi = limits(P)
+    return ca.fmin(ca.fmax(u, lo), hi)
 
 
 def thrust(P, u):

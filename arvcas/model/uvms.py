@@ -14,12 +14,9 @@ import casadi as ca
 
 from arvcas.model import manipulator, thrusters, vehicle
 from arvcas.model.linalg import lu_solve, solve_nopivot
-from arvcas.params import SCHEMA
 from arvcas.model.spatial import J
 
 __all__ = ["ModelOptions", "coupled_terms", "coupled_terms_scheduled", "coupled_accel", "uvms_xdot", "plant_functions", "PUBLIC_FUNCTIONS"]
-
-NP = len(SCHEMA)
 
 PUBLIC_FUNCTIONS = ("vehicle_rhs", "arm_wrench", "uvms_rhs", "allocate", "thrust")
 
@@ -87,18 +84,24 @@ def uvms_xdot(P, x, tau, q, qd, qdd, payload, opts: ModelOptions, trim=None):
     return ca.vertcat(ca.mtimes(J(eta), nu), nud)
 
 
-def plant_functions(opts: ModelOptions = ModelOptions()) -> dict[str, ca.Function]:
-    """The public plant functions (issue 2), as SX Functions, by their exact names and input orders."""
-    from arvcas.params import view
+def plant_functions(opts: ModelOptions = ModelOptions(), layout=None) -> dict[str, ca.Function]:
+    """The public plant functions (issue 2), as SX Functions, by their exact names and input orders.
 
-    p = ca.SX.sym("p", NP)
-    P = view(p)
+    ``layout``: the system's :class:`arvcas.params.Layout` (default Haidou-1's); inputs are sized by it:
+    ``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``.
+    """
+    from arvcas.params import default_layout, view
+
+    lay = layout or default_layout()
+    p = ca.SX.sym("p", len(lay))
+    P = view(p, lay)
+    nj, nt = lay.structure.n_joints, lay.structure.n_thrusters
     x = ca.SX.sym("x", 12)
     tau = ca.SX.sym("tau", 6)
     eta, nu, nud = ca.SX.sym("eta", 6), ca.SX.sym("nu", 6), ca.SX.sym("nud", 6)
-    q, qd, qdd = ca.SX.sym("q", 6), ca.SX.sym("qd", 6), ca.SX.sym("qdd", 6)
+    q, qd, qdd = ca.SX.sym("q", nj), ca.SX.sym("qd", nj), ca.SX.sym("qdd", nj)
     payload = ca.SX.sym("payload", 1)
-    u = ca.SX.sym("u", 6)
+    u = ca.SX.sym("u", nt)
 
     fns = {
         "vehicle_rhs": ca.Function(

@@ -1,4 +1,4 @@
-"""The Haidou-1 vehicle in Fossen form (paper eq. 1, Appendix A, Table A1; docs/model.md §2).
+"""The vehicle in Fossen form (paper eq. 1, Appendix A, Table A1; docs/model.md §2; docs/system-file.md).
 
 ``M nu_dot + C(nu) nu + D(nu) nu + g(eta) = tau``, body frame {b} at the COB, SNAME notation.
 Every function takes ``P`` (a :func:`arvcas.params.view` of the parameter vector) and works on any
@@ -12,8 +12,9 @@ import math
 import casadi as ca
 
 from arvcas.model.spatial import J, skew
+from arvcas.systemfile import HydroTerm
 
-__all__ = ["r_G", "I_b", "M_RB", "M_A", "M", "C_RB", "D", "g_vec", "delta_s_term", "rhs"]
+__all__ = ["r_G", "I_b", "M_RB", "M_A", "M", "C_RB", "C_A", "D", "g_vec", "delta_s_term", "rhs"]
 
 
 def r_G(P):
@@ -44,24 +45,18 @@ def M_RB(P):
     )
 
 
-# (row, col, dotted coefficient) of the added mass printed in App. A: M_A[i,j] = -rho * coef.
-# App. A prints M(3,1) as +rho Z'udot: a sign typo (docs/model.md §2), here -rho Z'udot like every other entry.
-_MA_ENTRIES = (
-    (0, 0, "X_udot"), (0, 1, "X_vdot"), (0, 2, "X_wdot"), (0, 4, "X_qdot"), (0, 5, "X_rdot"),
-    (1, 0, "Y_udot"), (1, 1, "Y_vdot"), (1, 5, "Y_rdot"),
-    (2, 0, "Z_udot"), (2, 2, "Z_wdot"), (2, 4, "Z_qdot"),
-    (3, 1, "K_vdot"), (3, 2, "K_wdot"), (3, 3, "K_pdot"),
-    (4, 0, "M_udot"), (4, 2, "M_wdot"), (4, 4, "M_qdot"),
-    (5, 0, "N_udot"), (5, 1, "N_vdot"), (5, 5, "N_rdot"),
-)
+def _hydro_scale(P):
+    """The factor of every hydrodynamic derivative: rho for "per_rho" files (Table A1), 1 for "SI" ones."""
+    return P["env.rho"] if P.s.hydro_per_rho else 1
 
 
 def M_A(P):
-    """Added mass, App. A: M_A[i,j] = -rho * (dotted coefficient). Not symmetric (docs/model.md §2)."""
-    rho = P["env.rho"]
+    """Added mass: M_A[F, v] = -scale * (coefficient of the term ``<F>_<v>dot``). Not symmetric (docs/model.md §2)."""
+    rho = _hydro_scale(P)
     rows = [[0] * 6 for _ in range(6)]
-    for i, j, name in _MA_ENTRIES:
-        rows[i][j] = -rho * P["hydro." + name]
+    for t in P.s.hydro:
+        if t.dot is not None:
+            rows[t.row][t.dot] = -rho * P["hydro." + t.name]
     return ca.vertcat(*[ca.horzcat(*r) for r in rows])
 
 
@@ -91,31 +86,58 @@ def delta_s_term(P):
     return ds - 0.5 * math.pi * ca.sign(ds)
 
 
-def D(P, nu):
-    """Hydrodynamic damping, App. A, multiplied by -rho (docs/model.md §2).
+def _factors(P, nu):
+    """The values of the damping terms' factors (docs/system-file.md), each built once."""
+    f = {}
+    for k, c in enumerate("uvwpqr"):
+        f[c] = nu[k]
+        f["abs" + c] = ca.fabs(nu[k])
+    if any(x in ("ds", "ds2") for t in P.s.hydro for x in t.factors):
+        dsv = delta_s_term(P)
+        f["ds"], f["ds2"] = dsv, dsv**2
+    return f
 
-    D(1,2) uses X'v|w| |w| (the print labels it X'v|v|); every delta_s term uses the constant stern angle.
+
+def D(P, nu):
+    """Hydrodynamic damping, -scale * (the entries of the terms named in [hydro]) (docs/model.md §2).
+
+    Each damping term ``coef * v_col * f_1 * ...`` is entry (row, col) of the matrix with coefficient
+    ``coef * f_1 * ...``; the terms of one entry are summed fewest factors first (Table A1's entries
+    as App. A prints them: D(1,2) uses X'v|w| |w|, every delta_s term the constant stern angle).
     """
-    h = lambda k: P["hydro." + k]  # noqa: E731
-    v, w = nu[1], nu[2]
-    aw, av = ca.fabs(w), ca.fabs(v)
-    dsv = delta_s_term(P)
-    z = 0
-    rows = [
-        [h("X_u") + h("X_u_absw") * aw, h("X_v") + h("X_v_absw") * aw, h("X_w") + h("X_ds") * aw * dsv, z, h("X_q"), h("X_r")],
-        [h("Y_u"), h("Y_v") + h("Y_v_absv") * av, z, z, z, h("Y_r")],
-        [h("Z_u"), z, h("Z_w") + h("Z_w_absw") * aw + h("Z_dsds") * aw * dsv**2, z, h("Z_q"), z],
-        [h("K_u_absw") * aw, h("K_v"), h("K_w"), h("K_p"), z, z],
-        [h("M_u") + h("M_uw") * w, z, h("M_w") + h("M_w_absw") * aw + h("M_ds") * dsv * w + h("M_dsds") * dsv**2 * aw, z, h("M_q"), z],
-        [h("N_u"), h("N_v") + h("N_v_absv") * av, z, z, z, h("N_r")],
-    ]
-    return -P["env.rho"] * ca.vertcat(*[ca.horzcat(*r) for r in rows])
+    f = _factors(P, nu)
+    cells: dict = {}
+    for t in P.s.hydro:
+        if t.col is not None:
+            cells.setdefault((t.row, t.col), []).append(t)
+    rows = [[0] * 6 for _ in range(6)]
+    for (i, j), ts in cells.items():
+        acc = None
+        for t in sorted(ts, key=HydroTerm.order):
+            term = P["hydro." + t.name]
+            for x in t.factors:
+                term = term * f[x]
+            acc = term if acc is None else acc + term
+        rows[i][j] = acc
+    return -_hydro_scale(P) * ca.vertcat(*[ca.horzcat(*r) for r in rows])
+
+
+def C_A(P, nu):
+    """Added-mass Coriolis-centripetal matrix (Fossen eq. 6.43) from the symmetric part of M_A."""
+    A = M_A(P)
+    A = 0.5 * (A + A.T)
+    a1 = ca.mtimes(A[0:3, 0:3], nu[0:3]) + ca.mtimes(A[0:3, 3:6], nu[3:6])
+    a2 = ca.mtimes(A[3:6, 0:3], nu[0:3]) + ca.mtimes(A[3:6, 3:6], nu[3:6])
+    Z = ca.DM.zeros(3, 3)
+    return ca.vertcat(ca.horzcat(Z, -skew(a1)), ca.horzcat(-skew(a1), -skew(a2)))
 
 
 def weight_buoyancy(P):
-    """(W, B) in N: W = m g, B = (m + buoyancy_excess) g (Table A1)."""
+    """(W, B) in N: W = m g, B = (m + buoyancy_excess) g (Table A1) or rho g V (a displaced volume)."""
     gacc = P["env.g"]
     m = P["vehicle.m"]
+    if P.s.buoyancy == "volume":
+        return m * gacc, P["env.rho"] * gacc * P["vehicle.volume"]
     return m * gacc, (m + P["vehicle.buoyancy_excess"]) * gacc
 
 
@@ -138,7 +160,8 @@ def g_vec(P, eta):
 
 def forces(P, eta, nu):
     """C(nu) nu + D(nu) nu + g(eta): the vehicle's velocity- and pose-dependent generalised force."""
-    return ca.mtimes(C_RB(P, nu), nu) + ca.mtimes(D(P, nu), nu) + g_vec(P, eta)
+    C = C_RB(P, nu) + C_A(P, nu) if P.s.coriolis_added_mass else C_RB(P, nu)
+    return ca.mtimes(C, nu) + ca.mtimes(D(P, nu), nu) + g_vec(P, eta)
 
 
 def rhs(P, x, tau):

@@ -50,7 +50,7 @@ TIME_FIELDS: tuple[tuple[str, int], ...] = (
     ("q", 6), ("payload", 1), ("qd", 6), ("qdd", 6), ("dist_sin", 6), ("dist_cos", 6),
 )
 # ... and what depends on t only through the arm state (q, qd, qdd, payload)
-ARM_FIELDS: tuple[tuple[str, int], ...] = (*manipulator.SCHEDULE_FIELDS, ("lu", 36))
+ARM_FIELDS: tuple[tuple[str, int], ...] = (*manipulator.schedule_fields(view(np.zeros(NP))), ("lu", 36))
 RECORD_FIELDS = TIME_FIELDS + ARM_FIELDS  # one record = its time part, then its arm part
 TIME_SIZE = sum(n for _, n in TIME_FIELDS)
 ARM_SIZE = sum(n for _, n in ARM_FIELDS)

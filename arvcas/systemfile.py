@@ -1,0 +1,469 @@
+"""The system file's structure: what a file describes, read before its numbers (docs/system-file.md).
+
+A system file describes one vehicle, its thrusters and its arm. Its *structure* (which hydrodynamic
+terms, how many thrusters and joints, which arm form) decides the shape of the compiled code; its
+*numbers* are runtime parameters. :func:`structure_of` reads the structure from the parsed document
+and :func:`schema_for` builds the strict schema (:mod:`arvcas.config` dataclasses) of exactly that
+structure, so the numbers load with the one configuration loader: units, rules, closest-name hints.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from arvcas import config
+from arvcas.config import ge, gt, quantity
+
+__all__ = [
+    "HydroTerm", "Structure", "parse_term", "structure_of", "schema_for", "MAX_JOINTS", "VECTOR_ELEMENTS",
+    "HYDRO_ALIASES", "FORMS",
+]
+
+MAX_JOINTS = 7
+FORCES = "XYZKMN"
+VELOCITIES = "uvwpqr"
+FORMS = ("dh", "chain", "urdf")
+NAME_RE = re.compile(r"^[a-z][a-z0-9_]{0,63}$")
+THRUSTER_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
+
+# Table A1's names for its four stern-angle terms: aliases of their full term names (docs/model.md §2).
+HYDRO_ALIASES = {
+    "X_ds": "X_w_absw_ds",
+    "Z_dsds": "Z_w_absw_ds2",
+    "M_ds": "M_w_ds_w",
+    "M_dsds": "M_w_ds2_absw",
+}
+
+# element labels of the vector entries: parameter ``<key>.<label>``
+VECTOR_ELEMENTS = {
+    "position": ("x", "y", "z"), "direction": ("x", "y", "z"), "axis": ("x", "y", "z"),
+    "com": ("x", "y", "z"), "cob": ("x", "y", "z"), "drag_from": ("x", "y", "z"), "drag_to": ("x", "y", "z"),
+    "inertia": ("ixx", "iyy", "izz", "ixy", "ixz", "iyz"),
+}
+
+
+class _Bad(ValueError):
+    pass
+
+
+@dataclass(frozen=True)
+class HydroTerm:
+    """One hydrodynamic derivative: ``coef * prod(factors)`` added to force ``row``.
+
+    Damping: ``col`` is the velocity the term multiplies (the damping matrix's column) and ``factors``
+    the rest of the product; added mass: ``dot`` is the accelerated velocity, ``col`` is None.
+    """
+
+    name: str
+    row: int
+    col: int | None
+    dot: int | None
+    factors: tuple[str, ...]
+
+    def order(self) -> tuple:
+        """The order of terms within one damping-matrix entry: fewer factors first, then by factor name."""
+        return (len(self.factors), self.factors)
+
+
+def _valid_examples() -> list[str]:
+    out = list(HYDRO_ALIASES)
+    for F in FORCES:
+        for v in VELOCITIES:
+            out += [f"{F}_{v}", f"{F}_{v}_abs{v}", f"{F}_{v}dot"]
+    return out
+
+
+def parse_term(name: str) -> HydroTerm:
+    """The term a derivative's name defines (docs/system-file.md); ValueError (one line) if it defines none."""
+    full = HYDRO_ALIASES.get(name, name)
+    toks = full.split("_")
+    hint = config.closest(name, _valid_examples())
+    if len(toks) < 2 or toks[0] not in FORCES or len(toks[0]) != 1:
+        raise _Bad(f"'{name}' is not a derivative name: it must be <F>_<factor>... with <F> one of "
+                   f"{', '.join(FORCES)}{hint}")
+    row = FORCES.index(toks[0])
+    rest = toks[1:]
+    if len(rest) == 1 and rest[0].endswith("dot") and len(rest[0]) == 4 and rest[0][0] in VELOCITIES:
+        return HydroTerm(name, row, None, VELOCITIES.index(rest[0][0]), ())
+    factors: list[str] = []
+    for t in rest:
+        if t.startswith("abs") and len(t) == 4 and t[3] in VELOCITIES:
+            factors.append(t)
+        elif t in ("ds", "ds2"):
+            factors.append(t)
+        elif t and all(c in VELOCITIES for c in t):
+            factors += list(t)
+        else:
+            raise _Bad(f"'{name}': unknown factor '{t}' (factors: u v w p q r, absu .. absr, udot .. rdot "
+                       f"alone, ds, ds2){hint}")
+    plain = [i for i, f in enumerate(factors) if len(f) == 1]
+    if not plain:
+        raise _Bad(f"'{name}': a damping term needs a velocity factor (u v w p q r){hint}")
+    i0 = plain[0]
+    col = VELOCITIES.index(factors[i0])
+    return HydroTerm(name, row, col, None, tuple(factors[:i0] + factors[i0 + 1:]))
+
+
+@dataclass(frozen=True)
+class Structure:
+    """What a system file describes (everything that shapes the compiled code; numbers excluded)."""
+
+    name: str
+    buoyancy: str  # "excess" (kg above m) | "volume" (displaced m^3)
+    hydro: tuple[HydroTerm, ...]  # in file order
+    hydro_per_rho: bool  # "per_rho" units (SI coefficient rho * value) or "SI"
+    coriolis_added_mass: bool
+    thrusters: tuple[str, ...] | None  # names of a thruster list; None: Haidou-1's parametric layout
+    arm: str  # "none" | "dh" | "chain"
+    n_joints: int
+    mount_rpy: bool
+    link_drag: tuple[bool, ...]  # chain: the link has a drag segment
+    link_cd: tuple[bool, ...]  # chain: the link has its own Cd
+
+    @property
+    def n_thrusters(self) -> int:
+        return 6 if self.thrusters is None else len(self.thrusters)
+
+    def key(self) -> str:
+        """A stable text of the structure, for compile-cache keys."""
+        return repr(self)
+
+
+# ---- reading the structure --------------------------------------------------------------------------
+
+
+def _table(doc: Any, key: str, where: str, required: bool = True) -> dict:
+    v = doc.get(key) if isinstance(doc, dict) else None
+    if v is None:
+        if required:
+            raise _Bad(f"{key}: missing section")
+        return {}
+    if not isinstance(v, dict):
+        raise _Bad(f"{key}: expected a table, got {type(v).__name__}")
+    return v
+
+
+def _numbered(table: dict, prefix: str, path: str) -> int:
+    """The count n of tables ``<prefix>1 .. <prefix>n`` in ``table`` (no gaps)."""
+    idx = sorted(int(k[len(prefix):]) for k in table if re.fullmatch(rf"{prefix}[1-9][0-9]*", k))
+    if idx and idx != list(range(1, len(idx) + 1)):
+        missing = sorted(set(range(1, max(idx) + 1)) - set(idx))
+        raise _Bad(f"{path}.{prefix}{missing[0]}: missing (joints and links are numbered 1 .. n without gaps)")
+    return len(idx)
+
+
+def structure_of(doc: dict, where: str, error: type[Exception], default_name: str = "") -> Structure:
+    """The :class:`Structure` of a parsed system file; ``error`` (one line naming ``where`` and the key)."""
+    try:
+        return _structure(doc, default_name)
+    except _Bad as e:
+        raise error(f"{where}: {e}") from None
+
+
+def _structure(doc: dict, default_name: str) -> Structure:
+    sysd = _table(doc, "system", "", required=False)
+    for k in sysd:
+        if k not in ("name", "description"):
+            raise _Bad(f"system.{k}: unknown key (allowed: name, description){config.closest(k, ['name', 'description'])}")
+    if not isinstance(sysd.get("description", ""), str):
+        raise _Bad("system.description: expected a string")
+    name = sysd.get("name", default_name)
+    if not isinstance(name, str) or not NAME_RE.match(name):
+        raise _Bad(f"system.name: {name!r} must match [a-z][a-z0-9_]* (it names compiled code and files)")
+    veh = _table(doc, "vehicle", "")
+    has_ex, has_vol = "buoyancy_excess" in veh, "volume" in veh
+    if has_ex == has_vol:
+        raise _Bad("vehicle: give exactly one of 'buoyancy_excess' (kg) and 'volume' (m^3)")
+    hyd = _table(doc, "hydro", "")
+    cam = hyd.get("coriolis_added_mass", False)
+    if not isinstance(cam, bool):
+        raise _Bad(f"hydro.coriolis_added_mass: expected true or false, got {cam!r}")
+    terms, units = [], set()
+    for k, v in hyd.items():
+        if k == "coriolis_added_mass":
+            continue
+        try:
+            terms.append(parse_term(k))
+        except _Bad as e:
+            raise _Bad(f"hydro.{k}: {e}") from None
+        if isinstance(v, dict) and isinstance(v.get("unit"), str):
+            units.add(v["unit"])
+    seen: dict[tuple, str] = {}
+    for t in terms:
+        sig = (t.row, t.col, t.dot, t.factors)
+        if sig in seen:
+            raise _Bad(f"hydro.{t.name}: the same term as hydro.{seen[sig]}")
+        seen[sig] = t.name
+    if units - {"per_rho", "SI"} or len(units) > 1:
+        raise _Bad(f"hydro: every derivative's unit must be \"per_rho\" (SI value = rho * value) or every "
+                   f"one \"SI\", got {', '.join(sorted(units))}")
+    per_rho = units == {"per_rho"}
+    if any(f in ("ds", "ds2") for t in terms for f in t.factors):
+        pass  # checked below against the thruster layout
+    thr = _table(doc, "thrusters", "")
+    if "unit" in thr:
+        units_list = thr["unit"]
+        extra = [k for k in thr if k != "unit"]
+        if extra:
+            raise _Bad(f"thrusters.{extra[0]}: a thruster list ([[thrusters.unit]]) takes no other keys")
+        if not isinstance(units_list, list) or not all(isinstance(u, dict) for u in units_list):
+            raise _Bad("thrusters.unit: expected an array of tables [[thrusters.unit]]")
+        names = []
+        for i, u in enumerate(units_list):
+            n = u.get("name")
+            if not isinstance(n, str) or not THRUSTER_RE.match(n):
+                raise _Bad(f"thrusters.unit[{i}].name: expected a name like \"T1\" ([A-Za-z][A-Za-z0-9_]*), got {n!r}")
+            if n in names:
+                raise _Bad(f"thrusters.unit[{i}].name: '{n}' is used twice")
+            names.append(n)
+        if len(names) < 6:
+            raise _Bad(f"thrusters.unit: {len(names)} thrusters cannot produce every wrench (at least 6)")
+        thrusters: tuple[str, ...] | None = tuple(names)
+        if any(f in ("ds", "ds2") for t in terms for f in t.factors):
+            bad = next(t.name for t in terms if any(f in ("ds", "ds2") for f in t.factors))
+            raise _Bad(f"hydro.{bad}: the stern-angle factor ds needs Haidou-1's thruster layout "
+                       f"(thrusters.delta_sL, delta_sR)")
+    else:
+        thrusters = None
+    arm = doc.get("arm")
+    if arm is None:
+        return Structure(name, "excess" if has_ex else "volume", tuple(terms), per_rho, cam, thrusters,
+                         "none", 0, False, (), ())
+    if not isinstance(arm, dict):
+        raise _Bad("arm: expected a table")
+    if "urdf" in arm:
+        raise _Bad("arm.urdf: internal: a URDF arm is converted before its structure is read")
+    nj = _numbered(arm, "joint", "arm")
+    nl = _numbered(arm, "link", "arm")
+    if nj > MAX_JOINTS:
+        raise _Bad(f"arm: {nj} joints, at most {MAX_JOINTS} are supported")
+    if nl != nj:
+        raise _Bad(f"arm: {nj} joints but {nl} links (each joint moves one link: arm.link1 .. arm.link{nj})")
+    mount = _table(arm, "mount", "arm") if nj else arm.get("mount", {})
+    rpy = [k for k in ("roll", "pitch", "yaw") if k in mount]
+    if rpy and len(rpy) != 3:
+        raise _Bad("arm.mount: give all of roll, pitch, yaw or none")
+    if nj == 0:
+        return Structure(name, "excess" if has_ex else "volume", tuple(terms), per_rho, cam, thrusters,
+                         "none", 0, False, (), ())
+    j1 = arm["joint1"]
+    if not isinstance(j1, dict):
+        raise _Bad("arm.joint1: expected a table")
+    form = "dh" if "a" in j1 or "alpha" in j1 else "chain"
+    drag, cd = [], []
+    for i in range(1, nj + 1):
+        lk = arm[f"link{i}"]
+        if not isinstance(lk, dict):
+            raise _Bad(f"arm.link{i}: expected a table")
+        if form == "chain":
+            have = [k for k in ("drag_diameter", "drag_from", "drag_to") if k in lk]
+            if have and len(have) != 3:
+                raise _Bad(f"arm.link{i}: a drag segment needs drag_diameter, drag_from and drag_to (or none)")
+            drag.append(bool(have))
+            cd.append("Cd" in lk)
+    return Structure(name, "excess" if has_ex else "volume", tuple(terms), per_rho, cam, thrusters,
+                     form, nj, bool(rpy), tuple(drag), tuple(cd))
+
+
+# ---- the schema of one structure ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Env:
+    rho: float = quantity("density", ge(0))  # rho = 0 is the no-fluid reference case
+    g: float = quantity("acceleration", gt(0))
+    Cd: float = quantity("1", ge(0))
+
+
+_CG_CB = ("xG", "yG", "zG", "xB", "yB", "zB")
+
+
+def _vehicle_cls(buoyancy: str) -> type:
+    fields = [("m", float, quantity("mass", gt(0))),
+              ("buoyancy_excess", float, quantity("mass")) if buoyancy == "excess"
+              else ("volume", float, quantity("volume", ge(0)))]
+    fields += [(k, float, quantity("inertia", gt(0))) for k in ("Ixx", "Iyy", "Izz")]
+    fields += [(k, float, quantity("inertia")) for k in ("Ixy", "Iyz", "Ixz")]
+    fields += [(k, float, quantity("length")) for k in _CG_CB]
+    return dataclasses.make_dataclass("Vehicle", fields, frozen=True)
+
+
+@dataclass(frozen=True)
+class HaidouThrusters:
+    """Haidou-1's parametric layout (Appendix B): two rotatable stern, two side, two vertical thrusters."""
+
+    delta_sL: float = quantity("angle")
+    delta_sR: float = quantity("angle")
+    x_stn: float = quantity("length")
+    y_stn: float = quantity("length")
+    z_stn: float = quantity("length")
+    x_bow: float = quantity("length")
+    y_bow: float = quantity("length")
+    x_hB: float = quantity("length")
+    x_hS: float = quantity("length")
+    u_min: float = quantity("force")
+    u_max: float = quantity("force")
+
+
+@dataclass(frozen=True)
+class Thruster:
+    position: tuple[float, ...] = quantity("length", n=3)
+    direction: tuple[float, ...] = quantity("1", n=3)
+    u_min: float = quantity("force")
+    u_max: float = quantity("force")
+
+
+@dataclass(frozen=True)
+class Payload:
+    mass: float = quantity("mass", ge(0))
+    volume: float = quantity("volume", ge(0))
+
+
+@dataclass(frozen=True)
+class DHJoint:
+    """Craig's modified DH row of joint i (a_{i-1}, d_i, alpha_{i-1}) and its limits (Table 1)."""
+
+    a: float = quantity("length")
+    d: float = quantity("length")
+    alpha: float = quantity("angle")
+    qmin: float = quantity("angle")
+    qmax: float = quantity("angle")
+
+
+@dataclass(frozen=True)
+class DHLink:
+    mass: float = quantity("mass", gt(0))
+    volume: float = quantity("volume", ge(0))
+    diameter: float = quantity("length", gt(0))
+
+
+@dataclass(frozen=True)
+class DHTool:
+    length: float = quantity("length", ge(0))
+
+
+@dataclass(frozen=True)
+class ChainJoint:
+    """A revolute joint in URDF's terms: origin in the parent's frame (xyz, then fixed-axis rpy), axis, limits."""
+
+    x: float = quantity("length")
+    y: float = quantity("length")
+    z: float = quantity("length")
+    roll: float = quantity("angle")
+    pitch: float = quantity("angle")
+    yaw: float = quantity("angle")
+    axis: tuple[float, ...] = quantity("1", n=3)
+    qmin: float = quantity("angle")
+    qmax: float = quantity("angle")
+
+
+@dataclass(frozen=True)
+class ChainTool:
+    x: float = quantity("length")
+    y: float = quantity("length")
+    z: float = quantity("length")
+
+
+def _chain_link_cls(drag: bool, cd: bool) -> type:
+    fields = [
+        ("mass", float, quantity("mass", gt(0))),
+        ("com", tuple[float, ...], quantity("length", n=3)),
+        ("inertia", tuple[float, ...], quantity("inertia", n=6)),
+        ("volume", float, quantity("volume", ge(0))),
+        ("cob", tuple[float, ...], quantity("length", n=3)),
+    ]
+    if drag:
+        fields += [("drag_diameter", float, quantity("length", gt(0))),
+                   ("drag_from", tuple[float, ...], quantity("length", n=3)),
+                   ("drag_to", tuple[float, ...], quantity("length", n=3))]
+    if cd:
+        fields.append(("Cd", float, quantity("1", ge(0))))
+    return dataclasses.make_dataclass(f"ChainLink{'D' if drag else ''}{'C' if cd else ''}", fields, frozen=True)
+
+
+def _mount_cls(rpy: bool) -> type:
+    fields = [(k, float, quantity("length")) for k in ("x", "y", "z")]
+    if rpy:
+        fields += [(k, float, quantity("angle")) for k in ("roll", "pitch", "yaw")]
+    return dataclasses.make_dataclass("Mount", fields, frozen=True)
+
+
+@dataclass(frozen=True)
+class SystemInfo:
+    name: str = config.setting()
+    description: str = config.setting(default="")
+
+
+_SCHEMAS: dict[Structure, type] = {}
+
+
+def schema_for(s: Structure) -> type:
+    """The strict schema (a frozen dataclass of sections) of files of structure ``s``.
+
+    Leaf order = the order of the parameter vector: env, vehicle, hydro (file order), thrusters, arm
+    (mount, tool, joints, links, stow), payload.
+    """
+    cls = _SCHEMAS.get(s)
+    if cls is not None:
+        return cls
+    hydro = dataclasses.make_dataclass("Hydro", [(t.name, float, quantity("per_rho")) for t in s.hydro], frozen=True)
+    if s.thrusters is None:
+        thr: type = HaidouThrusters
+    else:
+        thr = dataclasses.make_dataclass("Thrusters", [(n, Thruster, config.setting()) for n in s.thrusters],
+                                         frozen=True)
+    fields: list = [("env", Env, config.setting()), ("vehicle", _vehicle_cls(s.buoyancy), config.setting()),
+                    ("hydro", hydro, config.setting()), ("thrusters", thr, config.setting())]
+    if s.n_joints:
+        n = s.n_joints
+        if s.arm == "dh":
+            tool, joint = DHTool, DHJoint
+            links = [DHLink] * n
+        else:
+            tool, joint = ChainTool, ChainJoint
+            links = [_chain_link_cls(s.link_drag[i], s.link_cd[i]) for i in range(n)]
+        stow = dataclasses.make_dataclass("Stow", [(f"q{i}", float, quantity("angle")) for i in range(1, n + 1)],
+                                          frozen=True)
+        arm = dataclasses.make_dataclass(
+            "Arm",
+            [("mount", _mount_cls(s.mount_rpy), config.setting()), ("tool", tool, config.setting())]
+            + [(f"joint{i}", joint, config.setting()) for i in range(1, n + 1)]
+            + [(f"link{i}", links[i - 1], config.setting()) for i in range(1, n + 1)]
+            + [("stow", stow, config.setting())],
+            frozen=True)
+        fields.append(("arm", arm, config.setting()))
+    fields.append(("payload", Payload, config.setting()))
+    cls = dataclasses.make_dataclass("SystemFile", fields, frozen=True)
+    _SCHEMAS[s] = cls
+    return cls
+
+
+def file_doc(doc: dict) -> dict:
+    """The document as the schema reads it: ``[system]`` and ``hydro.coriolis_added_mass`` (structure)
+    removed, a thruster list keyed by name."""
+    out = {k: v for k, v in doc.items() if k != "system"}
+    if isinstance(out.get("hydro"), dict) and "coriolis_added_mass" in out["hydro"]:
+        out["hydro"] = {k: v for k, v in out["hydro"].items() if k != "coriolis_added_mass"}
+    thr = out.get("thrusters")
+    if isinstance(thr, dict) and isinstance(thr.get("unit"), list):
+        out["thrusters"] = {u["name"]: {k: v for k, v in u.items() if k != "name"} for u in thr["unit"]}
+    return out
+
+
+def expand(key: str, value: Any) -> list[tuple[str, float]]:
+    """A leaf's parameters: a scalar as itself, a vector as ``key.<element label>``."""
+    if isinstance(value, tuple):
+        labels = VECTOR_ELEMENTS[key.rsplit(".", 1)[-1]]
+        return [(f"{key}.{lab}", float(x)) for lab, x in zip(labels, value)]
+    return [(key, float(value))]
+
+
+def rel_path(base: str | Path, name: str) -> Path:
+    """A file named by a system file, relative to that file's folder."""
+    p = Path(name)
+    return p if p.is_absolute() else Path(base).parent / p
+
