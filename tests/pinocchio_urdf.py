@@ -26,7 +26,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
-__all__ = ["Ref", "build", "configuration", "velocity", "arm_wrench_on_vehicle", "vehicle_accel",
+__all__ = ["Ref", "build", "build_for", "configuration", "velocity", "arm_wrench_on_vehicle", "vehicle_accel",
            "static_trim", "trim_wrench", "buoyancy_wrench", "R_zyx", "rpy_matrix", "skew", "mass_matrix"]
 
 
@@ -195,3 +195,9 @@ def buoyancy_wrench(B: float, r_B, eta) -> np.ndarray:
     """The vehicle's buoyancy B (N, world-up) at r_B, in {b} about the body origin."""
     f = R_zyx(*eta[3:6]).T @ np.array([0.0, 0.0, -B])
     return np.concatenate([f, np.cross(np.asarray(r_B, float), f)])
+
+
+def build_for(arm, g: float = 9.81) -> Ref:
+    """:func:`build` from a ``urdf_arms.RandomArm`` (its URDF text, mount and vehicle)."""
+    return build(arm.urdf, arm.mount_xyz, arm.mount_rpy, arm.vehicle_mass, arm.vehicle_inertia_origin,
+                 arm.vehicle_com, g=g, base_link=arm.base_link, tool_link=arm.tool_link)

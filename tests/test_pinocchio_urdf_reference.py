@@ -215,19 +215,11 @@ def _by_hand(arm: ua.RandomArm) -> pu.Ref:
                   pin.Inertia(model.inertias[tool_jid]), len(ids))
 
 
-ARMS = [(n, v) for n in range(1, 8) for v in ("plain", "fixed_continuous")]
+ARMS = ua.ARM_CASES
+_arm = ua.case_arm
 
 
-def _arm(n, variant, seed=0):
-    rng = np.random.default_rng(1000 * n + seed + (500 if variant != "plain" else 0))
-    if variant == "plain":
-        return ua.random_arm(rng, n)
-    return ua.random_arm(rng, n, fixed_joint=True, continuous=True, tool_link=(n % 2 == 0))
-
-
-def _urdf_ref(arm: ua.RandomArm, g: float = 9.81) -> pu.Ref:
-    return pu.build(arm.urdf, arm.mount_xyz, arm.mount_rpy, arm.vehicle_mass, arm.vehicle_inertia_origin,
-                    arm.vehicle_com, g=g, base_link=arm.base_link, tool_link=arm.tool_link)
+_urdf_ref = pu.build_for
 
 
 @pytest.mark.parametrize("n,variant", ARMS)

@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation
 
 __all__ = [
     "RandomArm", "JointSpec", "LinkSpec", "random_arm", "realisable_inertia", "haidou1_urdf",
-    "haidou1_hydro_toml", "haidou1_form3_toml", "shipped_haidou1_text", "urdf_inertia_attrs", "bad_urdf",
+    "haidou1_hydro_toml", "haidou1_form3_toml", "shipped_haidou1_text", "ARM_CASES", "case_arm", "urdf_inertia_attrs", "bad_urdf",
 ]
 
 
@@ -323,6 +323,18 @@ def random_arm(rng, n_joints: int, *, fixed_joint: bool = False, continuous: boo
         vehicle_volume=vol, vehicle_cob=rB, payload_mass=rng.uniform(0.3, 2.0), payload_volume=rng.uniform(1e-4, 8e-4),
         hydro_links=hydro_links, thrusters=_thruster_layout(rng), vehicle_hydro=hydro,
         system_name=system_name or f"urdf_arm_{n_joints}", urdf_name=urdf_name)
+
+
+# The random arms of the tests: every size 1..7, each plain and with a fixed flange joint (merged), a
+# continuous last joint and (even sizes) a tool link on a fixed joint. Same (n, variant), same arm.
+ARM_CASES = [(n, v) for n in range(1, 8) for v in ("plain", "fixed_continuous")]
+
+
+def case_arm(n: int, variant: str, seed: int = 0) -> RandomArm:
+    rng = np.random.default_rng(1000 * n + seed + (500 if variant != "plain" else 0))
+    if variant == "plain":
+        return random_arm(rng, n)
+    return random_arm(rng, n, fixed_joint=True, continuous=True, tool_link=(n % 2 == 0))
 
 
 def bad_urdf(arm: RandomArm, fault: str) -> RandomArm:
