@@ -58,12 +58,12 @@ class Ref:
 
 def build(urdf_text: str, mount_xyz, mount_rpy, vehicle_mass: float, vehicle_inertia_about_origin,
           vehicle_com, *, g: float = 9.81, base_link: str = "base_link", tool_link: str = "tool_link") -> Ref:
-    """Vehicle (free flyer) + the URDF arm at the mount.
+    """Vehicle (free flyer) + the URDF arm at the mount (``urdf_text=None``: the vehicle alone).
 
     ``vehicle_inertia_about_origin``: the 3x3 rotational inertia TENSOR about the body origin (its
     off-diagonal elements are Fossen's -Ixy, -Iyz, -Ixz); ``vehicle_com``: r_G in {b}.
     """
-    arm = pin.buildModelFromXML(urdf_text)
+    arm = pin.buildModelFromXML(urdf_text) if urdf_text is not None else None
     model = pin.Model()
     model.gravity.linear = np.array([0.0, 0.0, g])  # NED: z down
     model.gravity.angular = np.zeros(3)
@@ -75,6 +75,8 @@ def build(urdf_text: str, mount_xyz, mount_rpy, vehicle_mass: float, vehicle_ine
     root = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "vehicle")
     model.appendBodyToJoint(root, pin.Inertia(m, rG, I_o + m * S @ S), pin.SE3.Identity())
 
+    if arm is None:  # the vehicle alone
+        return Ref(model, model.createData(), [], [], root, np.zeros(3), pin.Inertia(model.inertias[root]), 0)
     base_fid = arm.getFrameId(base_link)
     if base_fid >= len(arm.frames) or arm.frames[base_fid].parentJoint != 0:
         raise ValueError(f"base_link {base_link!r} is not a link fixed to the URDF's root")
@@ -129,7 +131,7 @@ class _payload:
         self.point = ref.tool_point if tool_point is None else np.asarray(tool_point, float)
 
     def __enter__(self):
-        if self.mass != 0.0:
+        if self.mass != 0.0 and self.ref.n_joints:
             self.ref.model.inertias[self.ref.tool_joint] = (
                 self.ref.tool_body_inertia + pin.Inertia(self.mass, self.point, np.zeros((3, 3))))
         return self.ref
@@ -185,6 +187,8 @@ def static_trim(ref: Ref, q_stow) -> tuple[float, float, float]:
 def trim_wrench(trim, eta) -> np.ndarray:
     """docs/model.md §3 trim: a world-vertical upward force F_z at r_t = [-M_y/F_z, M_x/F_z, 0] in {b}."""
     Fz, Mx, My = trim
+    if Fz == 0.0 and Mx == 0.0 and My == 0.0:  # nothing to trim (no arm)
+        return np.zeros(6)
     R = R_zyx(*eta[3:6])
     r_t = np.array([-My / Fz, Mx / Fz, 0.0])
     f_t = R.T @ np.array([0.0, 0.0, -Fz])
@@ -199,5 +203,5 @@ def buoyancy_wrench(B: float, r_B, eta) -> np.ndarray:
 
 def build_for(arm, g: float = 9.81) -> Ref:
     """:func:`build` from a ``urdf_arms.RandomArm`` (its URDF text, mount and vehicle)."""
-    return build(arm.urdf, arm.mount_xyz, arm.mount_rpy, arm.vehicle_mass, arm.vehicle_inertia_origin,
-                 arm.vehicle_com, g=g, base_link=arm.base_link, tool_link=arm.tool_link)
+    return build(arm.urdf if arm.n_joints else None, arm.mount_xyz, arm.mount_rpy, arm.vehicle_mass,
+                 arm.vehicle_inertia_origin, arm.vehicle_com, g=g, base_link=arm.base_link, tool_link=arm.tool_link)

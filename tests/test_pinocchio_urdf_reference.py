@@ -315,3 +315,31 @@ def test_haidou1_form3_text(dry):
     # a [system] section already there is renamed, not duplicated
     text2 = ua.haidou1_form3_toml('[system]\nname = "haidou1"\ndescription = "x"\n\n' + shipped, dry)
     assert tomllib.loads(text2)["system"] == {"name": "haidou1_urdf", "description": "x"}
+
+
+def test_vehicle_alone_is_fossens_rigid_body(tmp_path):
+    """The free-flyer convention against Fossen's rigid body written out (origin away from the CG):
+    M_RB nu_dot + C_RB(nu) nu = tau + [f_g; r_G x f_g], f_g = R' [0, 0, m g], with
+    M_RB = [[m I, -m S(r_G)], [m S(r_G), I_o]] and
+    C_RB = [[m S(w), -m S(w) S(r_G)], [m S(r_G) S(w), -S(I_o w)]] (Fossen 2011, eq. 3.57-3.60)."""
+    arm = ua.random_arm(np.random.default_rng(3), 0)
+    ref = pu.build_for(arm)
+    assert ref.n_joints == 0 and ref.model.nq == 7
+    m, rG, I_o = arm.vehicle_mass, arm.vehicle_com, arm.vehicle_inertia_origin
+    S = pu.skew
+    M_RB = np.block([[m * np.eye(3), -m * S(rG)], [m * S(rG), I_o]])
+    rng = np.random.default_rng(4)
+    e = np.zeros(0)
+    for _ in range(10):
+        eta = np.concatenate([rng.normal(size=3), rng.uniform(-1, 1, 3)])
+        nu, tau = rng.normal(size=6), 30 * rng.normal(size=6)
+        w = nu[3:]
+        C_RB = np.block([[m * S(w), -m * S(w) @ S(rG)], [m * S(rG) @ S(w), -S(I_o @ w)]])
+        f_g = pu.R_zyx(*eta[3:]).T @ np.array([0.0, 0.0, m * 9.81])
+        nud = np.linalg.solve(M_RB, tau + np.concatenate([f_g, np.cross(rG, f_g)]) - C_RB @ nu)
+        assert _rel(pu.vehicle_accel(ref, eta, nu, e, e, e, tau), nud) < TOL
+        assert not pu.arm_wrench_on_vehicle(ref, eta, nu, nud, e, e, e).any()
+    np.testing.assert_array_equal(pu.trim_wrench(pu.static_trim(ref, e), eta), np.zeros(6))
+    path = arm.write(tmp_path)
+    doc = tomllib.loads(path.read_text())
+    assert "arm" not in doc and "payload" not in doc and not (tmp_path / arm.urdf_name).exists()

@@ -18,6 +18,8 @@ Checks:
    left: ``arm_wrench`` equals Pinocchio's RNEA (tests/pinocchio_urdf.py, the same URDF read by
    Pinocchio) and ``uvms_rhs``'s nu_dot its forward dynamics with prescribed joint accelerations, both to
    1e-9 relative (buoyancy rho g V = 0; the trim from Pinocchio's static wrench at the stow pose).
+   Also: a second file of the same structure is served by the same compiled function, and the vehicle
+   alone (no ``[arm]``, n_joints = 0) is Pinocchio's free flyer.
 2. Haidou-1 two ways: ``load_system("haidou1")`` (DH table) and a form-3 file written from it (its arm
    as URDF by ``urdf_arms.haidou1_urdf``, the same cylinders as ``[arm.hydro.*]``, everything else the
    shipped text): ``arm_wrench`` and ``uvms_rhs`` equal to 1e-12 relative, in water (rho as in the
@@ -126,6 +128,11 @@ def test_random_system_loads(systems, n, variant):
     assert v["env.rho"] == 1025.0 and v["env.g"] == 9.81
     assert v["vehicle.m"] == arm.vehicle_mass
     assert any(k.startswith("hydro.") for k in v), "no hydro.* parameter: _dry() would leave the fluid in"
+    # the URDF's limits and the stow pose, held as form 2 (docs/system-file.md: arm.joint<i>.qmin ...)
+    for i, (lo, hi, q0) in enumerate(zip(arm.qmin, arm.qmax, arm.q_stow), start=1):
+        assert v[f"arm.stow.q{i}"] == q0
+        if np.isfinite(lo):
+            assert (v[f"arm.joint{i}.qmin"], v[f"arm.joint{i}.qmax"]) == (lo, hi)
 
 
 @pytest.mark.parametrize("n,variant", ua.ARM_CASES)
@@ -181,6 +188,51 @@ def test_random_trim_balances_at_stow(systems, n, variant):
     z = np.zeros(n)
     xd = _call(f_rhs, np.zeros(12), tau, arm.q_stow, z, z, 0.0, p)
     assert np.abs(xd).max() < 1e-12 * max(1.0, W / arm.vehicle_mass)
+
+
+def test_same_structure_other_numbers(systems, tmp_path):
+    """Another random arm of the same structure (joint count, link names, sections): the same parameter
+    names, and the function compiled for the first system is right for the second one's numbers."""
+    arm_a, system_a, _ = systems.get(4, "plain")
+    arm_b = ua.case_arm(4, "plain", seed=1)
+    system_b = arvcas.load_system(str(arm_b.write(tmp_path)))
+    assert system_b.params.names() == system_a.params.names()
+    assert not np.array_equal(system_b.params.vector(), system_a.params.vector())
+    f_arm, f_rhs = _fns(system_a)
+    p = _dry(system_b.params).vector()
+    ref = pu.build_for(arm_b)
+    trim = pu.static_trim(ref, arm_b.q_stow)
+    rng = np.random.default_rng(30)
+    for _ in range(N_STATES):
+        eta, nu, nud, q, qd, qdd = _state(rng, arm_b.qmin, arm_b.qmax)
+        want = pu.arm_wrench_on_vehicle(ref, eta, nu, nud, q, qd, qdd, payload_mass=arm_b.payload_mass)
+        assert _rel(_call(f_arm, eta, nu, nud, q, qd, qdd, 1.0, p), want) < RTOL
+        tau = 30 * rng.normal(size=6)
+        xd = _call(f_rhs, np.concatenate([eta, nu]), tau, q, qd, qdd, 1.0, p)
+        nud_ref = pu.vehicle_accel(ref, eta, nu, q, qd, qdd, pu.trim_wrench(trim, eta) + tau,
+                                   payload_mass=arm_b.payload_mass)
+        assert _rel(xd[6:], nud_ref) < RTOL
+
+
+def test_vehicle_alone(tmp_path, cache):
+    """No [arm]: n_joints = 0, q/qd/qdd of size 0; arm_wrench is zero and uvms_rhs is the free-flying
+    vehicle under gravity and tau (no trim to make: the trim rule must not divide by a zero weight)."""
+    arm = ua.random_arm(np.random.default_rng(90), 0)
+    system = arvcas.load_system(str(arm.write(tmp_path)))
+    assert system.n_joints == 0 and system.n_thrusters == 8
+    f_arm, f_rhs = _fns(system)
+    p = _dry(system.params).vector()
+    ref = pu.build_for(arm)
+    rng = np.random.default_rng(91)
+    e = np.zeros(0)
+    for _ in range(N_STATES):
+        eta, nu, nud, _, _, _ = _state(rng, e, e)
+        tau = 30 * rng.normal(size=6)
+        assert not _call(f_arm, eta, nu, nud, e, e, e, 0.0, p).any()
+        xd = _call(f_rhs, np.concatenate([eta, nu]), tau, e, e, e, 0.0, p)
+        assert np.isfinite(xd).all()
+        assert _rel(xd[6:], pu.vehicle_accel(ref, eta, nu, e, e, e, tau)) < RTOL
+        assert _rel(xd[:6], pm.J_eta(eta) @ nu) < RTOL
 
 
 # ---- 2. Haidou-1 two ways ------------------------------------------------------------------------------

@@ -26,7 +26,8 @@ from scipy.spatial.transform import Rotation
 
 __all__ = [
     "RandomArm", "JointSpec", "LinkSpec", "random_arm", "realisable_inertia", "haidou1_urdf",
-    "haidou1_hydro_toml", "haidou1_form3_toml", "shipped_haidou1_text", "ARM_CASES", "case_arm", "urdf_inertia_attrs", "bad_urdf",
+    "haidou1_hydro_toml", "haidou1_form3_toml", "shipped_haidou1_text",
+    "ARM_CASES", "case_arm", "urdf_inertia_attrs", "bad_urdf",
 ]
 
 
@@ -190,6 +191,8 @@ class RandomArm:
         for i, (pos, d, umin, umax) in enumerate(self.thrusters, start=1):
             lines += ["", "[[thrusters.unit]]", f'name = "T{i}"', f"position = {_entry(pos, 'm')}",
                       f"direction = {_entry(d, '1')}", f"u_min = {_entry(umin, 'N')}", f"u_max = {_entry(umax, 'N')}"]
+        if self.n_joints == 0:  # the vehicle alone: no [arm], no [payload] (docs/system-file.md)
+            return "\n".join(lines + [""])
         lines += ["", "[arm]", f'urdf = "{self.urdf_name}"', f'base_link = "{self.base_link}"',
                   f'tool_link = "{self.tool_link}"', "", "[arm.mount]"]
         for k, v in zip(("x", "y", "z"), self.mount_xyz):
@@ -211,7 +214,8 @@ class RandomArm:
         """Write the URDF and the system file into ``directory``; returns the system file's path."""
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
-        (d / self.urdf_name).write_text(self.urdf)
+        if self.n_joints:
+            (d / self.urdf_name).write_text(self.urdf)
         path = d / toml_name
         path.write_text(self.system_toml())
         return path
@@ -254,7 +258,8 @@ def _thruster_layout(rng):
 
 def random_arm(rng, n_joints: int, *, fixed_joint: bool = False, continuous: bool = False,
                tool_link: bool = True, system_name: str | None = None, urdf_name: str = "arm.urdf") -> RandomArm:
-    """A random serial arm of ``n_joints`` revolute joints (0..7 for a valid arm; more for bad-input tests).
+    """A random serial arm of ``n_joints`` revolute joints (0..7 for a valid arm; more for bad-input tests;
+    0: the vehicle alone, its system file without ``[arm]`` and ``[payload]``).
 
     Joint origins: xyz in [-0.3, 0.3] m, random rpy; random unit axes, never a coordinate axis; limits
     [lower, upper] with lower < 0 < upper; moving links with random mass, com offset, inertial frame and
