@@ -405,7 +405,7 @@ def schema_for(s: Structure) -> type:
     """The strict schema (a frozen dataclass of sections) of files of structure ``s``.
 
     Leaf order = the order of the parameter vector: env, vehicle, hydro (file order), thrusters, arm
-    (mount, tool, joints, links, stow), payload.
+    (mount, tool, joints, links, stow), payload (with an arm only).
     """
     cls = _SCHEMAS.get(s)
     if cls is not None:
@@ -436,7 +436,7 @@ def schema_for(s: Structure) -> type:
             + [("stow", stow, config.setting())],
             frozen=True)
         fields.append(("arm", arm, config.setting()))
-    fields.append(("payload", Payload, config.setting()))
+        fields.append(("payload", Payload, config.setting()))  # a point mass at the tool point
     cls = dataclasses.make_dataclass("SystemFile", fields, frozen=True)
     _SCHEMAS[s] = cls
     return cls

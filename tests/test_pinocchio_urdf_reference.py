@@ -15,6 +15,8 @@
 from __future__ import annotations
 
 import tomllib
+import re
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -312,9 +314,11 @@ def test_haidou1_form3_text(dry):
     s = ua.haidou1_link_vectors(dry)
     np.testing.assert_array_equal(h["drag_to"]["value"], s[1])
     np.testing.assert_array_equal(h["cob"]["value"], 0.5 * s[1])
-    # a [system] section already there is renamed, not duplicated
-    text2 = ua.haidou1_form3_toml('[system]\nname = "haidou1"\ndescription = "x"\n\n' + shipped, dry)
-    assert tomllib.loads(text2)["system"] == {"name": "haidou1_urdf", "description": "x"}
+    # the shipped [system] section is renamed, not duplicated; a file without one gets one
+    assert tomllib.loads(text)["system"]["description"] == orig["system"]["description"]
+    bare = re.sub(r"(?ms)^\[system\]\n.*?(?=^\[)", "", shipped)
+    assert "system" not in tomllib.loads(bare)
+    assert tomllib.loads(ua.haidou1_form3_toml(bare, dry))["system"]["name"] == "haidou1_urdf"
 
 
 def test_vehicle_alone_is_fossens_rigid_body(tmp_path):

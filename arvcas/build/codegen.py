@@ -724,7 +724,7 @@ def compiled(name: str, opts=None, system=None) -> ca.Function:
 
             desc = f"plant {name} {opts!r}" if st.name == "haidou1" and st == _default_structure() else \
                 f"plant {name} {opts!r} {st.key()}"
-            f = build_described(name if st.name == "haidou1" else f"{st.name}_{name}", desc, make)
+            f = build_described(name, desc, make)
             _COMPILED[mkey] = f
         return f
 

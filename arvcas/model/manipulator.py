@@ -321,6 +321,8 @@ def base_inertia(P, q, payload):
     moment ``sum m c`` and ``-sum m S(c)^2 = sum m (|c|^2 I - c c')``. A link's cylinder inertia is
     ``I_c = I_tr I + (I_ax - I_tr) w w'`` with ``w`` its unit axis in {b}.
     """
+    if n_joints(P) == 0:
+        return ca.DM.zeros(6, 6)
     mass = 0
     first = 0  # sum m c
     J = 0  # sum of rotational inertia about the COB (3x3 symmetric)
@@ -334,8 +336,6 @@ def base_inertia(P, q, payload):
             J = J + b["k_ax"] * ca.mtimes(b["Rs"], b["Rs"].T)
         if b["Ic"] is not None:
             J = J + b["Ic"]
-    if n_joints(P) == 0:
-        return ca.DM.zeros(6, 6)
     return _spatial_inertia(mass, first, J)
 
 
@@ -508,8 +508,8 @@ def stow_pose(P):
 
 def trim_static(P, n_quad: int = 5):
     """(F_z, M_x, M_y) of tau_m at q0, level, at rest, without payload (docs/model.md §3 trim)."""
-    z6 = ca.DM.zeros(6)
-    tm = arm_wrench(P, z6, z6, z6, stow_pose(P), z6, z6, 0, n_quad)
+    z6, zn = ca.DM.zeros(6), ca.DM.zeros(n_joints(P))
+    tm = arm_wrench(P, z6, z6, z6, stow_pose(P), zn, zn, 0, n_quad)
     return tm[2], tm[3], tm[4]
 
 
