@@ -84,6 +84,7 @@ UNITS: dict[str, tuple[str, float]] = {
 }
 DIMENSIONS: tuple[str, ...] = tuple(dict.fromkeys(d for d, _ in UNITS.values()))
 SI = "SI"  # accepted for every dimension, factor 1
+ANY_LENGTH = -1  # quantity(n=ANY_LENGTH): a vector whose length the caller checks (e.g. one per joint)
 
 # The largest table a scenario or a study may ask a run to hold, 2 GB: a request whose estimate is
 # larger is refused at load, before any work. The scenario's estimate is its time table
@@ -597,6 +598,11 @@ def _leaf(ctx: _Ctx, f: _F, v: Any, key: str, unit: str | None, pre: str) -> Any
         return si
     if f.kind == "floats":
         n = f.n
+        if n == ANY_LENGTH:  # a vector of any length (within the field's Count rule)
+            if not isinstance(v, list):
+                raise ctx.fail(key, f"{pre}must be a list of numbers, got {_got(v)}")
+            n = len(v)
+            _count(ctx, spec, n, key)
         if not isinstance(v, list) or len(v) != n:
             raise ctx.fail(key, f"{pre}must be a list of {n} numbers, got {_got(v)}")
         xs = [_number(ctx, x, key, pre, f" (element {i + 1} of {n})") for i, x in enumerate(v)]

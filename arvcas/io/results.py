@@ -75,7 +75,7 @@ def _check_target(path: Path) -> Path:
 def _series(result: Result, sig: Signal, n: int | None) -> np.ndarray:
     name, width = sig.name, sig.width
     a = np.asarray(result.series[name], dtype=float)
-    if width is None:  # one column per thruster
+    if isinstance(width, str):  # one column per thruster / per joint of the system
         width = a.shape[1] if a.ndim == 2 else 0
     want = (a.shape[0],) if width == 1 else (a.shape[0], width)
     if a.ndim == 0 or a.shape != want or (n is not None and a.shape[0] != n):

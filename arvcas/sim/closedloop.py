@@ -34,14 +34,12 @@ from arvcas.controllers import atd
 from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model import manipulator, thrusters, vehicle
 from arvcas.sim import scenario, schedule, signals as signals_mod
-from arvcas.params import SCHEMA, view
+from arvcas.params import Layout as ParamLayout, default_layout, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.spatial import J, J_dot, J_inv
 from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
 
 __all__ = ["Layout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "INPUTS"]
-
-NP = len(SCHEMA)
 
 # the run's inputs, in the order of the compiled function (everything else binds them by name)
 INPUTS: tuple[str, ...] = ("gains", "noise", "unc", "phase", "ekf", "p", "sched_time", "sched_arm")
@@ -65,7 +63,7 @@ class Layout:
         return ca.vertcat(*[values[name] for name in self.slices])
 
 
-def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int) -> Layout:
+def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int) -> Layout:
     """The loop state: the plant, EKF and reference; the controller's own state; the metrics and
     status; then the run's constants (carried through the loop, never changed)."""
     return Layout([
@@ -76,13 +74,16 @@ def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int) -> Layou
         ("tau_prev", 6), ("u_hold", n_thr),  # previous command (CHAT) and held realised thrust
         ("chat_sum", 6), ("e2_sum", 6), ("ok", 1), ("t_fail", 1),
         # constants of the run carried through the loop
-        ("gains", n_gains), ("unc", 4), ("phase_cs", 12), ("ekf", 5), ("p", NP), ("consts", 9), ("pc", n_pc),
+        ("gains", n_gains), ("unc", 4), ("phase_cs", 12), ("ekf", 5), ("p", n_p), ("consts", 9), ("pc", n_pc),
     ])
 
 
 def derived_constants(P, opts: ModelOptions):
     """Per-run constants computed once from p: trim static wrench (F_z, M_x, M_y) and Mhat = diag(M)."""
-    Fz, Mx, My = manipulator.trim_static(P, opts.n_quad)
+    if manipulator.n_joints(P) == 0:
+        Fz = Mx = My = 0
+    else:
+        Fz, Mx, My = manipulator.trim_static(P, opts.n_quad)
     return ca.vertcat(Fz, Mx, My, ca.diag(vehicle.M(P)))
 
 
@@ -93,10 +94,22 @@ class RunSpec:
     controller: Controller | str
     cfg: ScenarioConfig
     opts: ModelOptions = ModelOptions()
+    layout: ParamLayout | None = None  # the system's parameter layout (default Haidou-1's)
 
     @property
     def law(self) -> Controller:
         return get_controller(self.controller)
+
+    @property
+    def lay(self) -> ParamLayout:
+        return self.layout or default_layout()
+
+
+def _trim(P, Fz, Mx, My, eta):
+    """The trim wrench of docs/model.md §3 from the run's constants (zero without an arm)."""
+    if manipulator.n_joints(P) == 0:
+        return ca.DM.zeros(6)
+    return manipulator.trim_from_static(Fz, Mx, My, eta)
 
 
 class StepContext:
@@ -125,18 +138,19 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     the links' lengths or sin/cos of the DH twists, are taken out by ``casadi.extract_parametric``
     and computed once per run by ``cl_rk4_consts(p, consts, phase_cs) -> pc``.
     """
-    cfg, opts = spec.cfg, spec.opts
+    cfg, opts, lay = spec.cfg, spec.opts, spec.lay
     hp = cfg.time_h_plant
     xs, tr_s = ca.SX.sym("x", 12), ca.SX.sym("tau", 6)
-    p_s, c_s, ph_s = ca.SX.sym("p", NP), ca.SX.sym("consts", 9), ca.SX.sym("phase_cs", 12)
-    TS, AS = schedule.TIME_SIZE, schedule.ARM_SIZE
+    p_s, c_s, ph_s = ca.SX.sym("p", len(lay)), ca.SX.sym("consts", 9), ca.SX.sym("phase_cs", 12)
+    R = schedule.records(lay)
+    TS, AS = R.time_size, R.arm_size
     recs_t, recs_a = ca.SX.sym("recs_time", 3 * TS), ca.SX.sym("recs_arm", 3 * AS)
-    Ps = view(p_s)
+    Ps = view(p_s, lay)
 
     def f_plant(xx, j):
-        rec = schedule.unpack(ca.vertcat(recs_t[j * TS:(j + 1) * TS], recs_a[j * AS:(j + 1) * AS]))
+        rec = schedule.unpack(ca.vertcat(recs_t[j * TS:(j + 1) * TS], recs_a[j * AS:(j + 1) * AS]), lay)
         ee, nn = xx[0:6], xx[6:12]
-        tr = manipulator.trim_from_static(c_s[0], c_s[1], c_s[2], ee)
+        tr = _trim(Ps, c_s[0], c_s[1], c_s[2], ee)
         dist = scenario.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
         nud, _ = coupled_terms_scheduled(Ps, ee, nn, tr_s + dist, rec, tr, opts)
         return ca.vertcat(ca.mtimes(J(ee), nn), nud)
@@ -167,21 +181,22 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     is the run's signals (:func:`arvcas.sim.signals.trace_signals`) stacked in table order; without
     ``trace`` the per-sample outputs that only the trace needs (e.g. ``f_true``) are not computed.
     """
-    law, cfg, opts = spec.law, spec.cfg, spec.opts
+    law, cfg, opts, lay = spec.law, spec.cfg, spec.opts, spec.lay
     cols = law.columns()
     ng = 6 * len(cols)
     rk4, pc_fn = _plant_substep(spec)
-    n_thr = thrusters.B_T(view(ca.SX.sym("p", NP))).shape[1]
-    L = state_layout(law, ng, n_thr, pc_fn.size1_out(0))
+    n_thr = lay.structure.n_thrusters
+    L = state_layout(law, ng, n_thr, pc_fn.size1_out(0), len(lay))
     S = ca.SX.sym("S", L.size)
     tk = ca.SX.sym("t_k")
     noise = ca.SX.sym("noise", 12)
-    rec0_t, rec0_a = ca.SX.sym("rec0_time", schedule.TIME_SIZE), ca.SX.sym("rec0_arm", schedule.ARM_SIZE)
-    R0 = schedule.unpack(ca.vertcat(rec0_t, rec0_a))  # the time table's record at t_k
+    Rec = schedule.records(lay)
+    rec0_t, rec0_a = ca.SX.sym("rec0_time", Rec.time_size), ca.SX.sym("rec0_arm", Rec.arm_size)
+    R0 = schedule.unpack(ca.vertcat(rec0_t, rec0_a), lay)  # the time table's record at t_k
     g = L.get(S, "gains")
     k = len(cols)
     G = {c: ca.vertcat(*[g[d * k + j] for d in range(6)]) for j, c in enumerate(cols)}
-    P = view(L.get(S, "p"))
+    P = view(L.get(S, "p"), lay)
     consts = L.get(S, "consts")
     Fz, Mx, My, Mhat = consts[0], consts[1], consts[2], consts[3:9]
     unc, phase_cs = L.get(S, "unc"), L.get(S, "phase_cs")
@@ -216,7 +231,7 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     eta, nu = x[0:6], x[6:12]
     u_hold = L.get(S, "u_hold")
     tau_real_held = ca.mtimes(thrusters.B_T(P), u_hold)
-    trim = manipulator.trim_from_static(Fz, Mx, My, eta)
+    trim = _trim(P, Fz, Mx, My, eta)
     tau_dist = scenario.disturbance_tabulated(cfg, R0["dist_sin"], R0["dist_cos"], phase_cs)
     nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist, R0, trim, opts)
 
@@ -271,7 +286,7 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     S_fin = ca.vertcat(ca.if_else(ok_n, Cn, Sfail), Ss[i_const:])
     fin = ca.Function("cl_finalize", [Cs, Ss, xn, tks], [S_fin])
 
-    TS, AS, ns = schedule.TIME_SIZE, schedule.ARM_SIZE, schedule.n_stages(cfg)
+    TS, AS, ns = Rec.time_size, Rec.arm_size, schedule.n_stages(cfg)
     Sm, tkm, nm = ca.MX.sym("S", L.size), ca.MX.sym("t"), ca.MX.sym("noise", 12)
     sch_t, sch_a = ca.MX.sym("sched_time", ns * TS), ca.MX.sym("sched_arm", ns * AS)
     res = ctrl(Sm, tkm, nm, sch_t[0:TS], sch_a[0:AS])
@@ -334,10 +349,11 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     unc = ca.MX.sym("unc", 4)
     phase = ca.MX.sym("phase", 6)
     ekf = ca.MX.sym("ekf", 5)
-    p = ca.MX.sym("p", NP)
-    sched_t = ca.MX.sym("sched_time", schedule.n_stages(cfg) * schedule.TIME_SIZE, n)
-    sched_a = ca.MX.sym("sched_arm", schedule.n_stages(cfg) * schedule.ARM_SIZE, n)
-    consts = _consts_fn(spec.opts)(p)
+    p = ca.MX.sym("p", len(spec.lay))
+    Rec = schedule.records(spec.lay)
+    sched_t = ca.MX.sym("sched_time", schedule.n_stages(cfg) * Rec.time_size, n)
+    sched_a = ca.MX.sym("sched_arm", schedule.n_stages(cfg) * Rec.arm_size, n)
+    consts = _consts_fn(spec.opts, spec.lay)(p)
     x0 = ca.DM(list(cfg.initial_eta0) + list(cfg.initial_nu0))
     z = lambda k: ca.MX.zeros(k)  # noqa: E731
     phase_cs = ca.vertcat(ca.cos(phase), ca.sin(phase))
@@ -406,6 +422,7 @@ def _fold(f: ca.Function, n: int) -> ca.Function:
     return ca.Function("fold_" + f.name(), a, out, f.name_in(), f.name_out())
 
 
-def _consts_fn(opts: ModelOptions) -> ca.Function:
-    p = ca.SX.sym("p", NP)
-    return ca.Function("derived_constants", [p], [derived_constants(view(p), opts)])
+def _consts_fn(opts: ModelOptions, layout: ParamLayout | None = None) -> ca.Function:
+    lay = layout or default_layout()
+    p = ca.SX.sym("p", len(lay))
+    return ca.Function("derived_constants", [p], [derived_constants(view(p, lay), opts)])

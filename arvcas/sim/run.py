@@ -32,7 +32,7 @@ from arvcas.build import calls, codegen
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model.uvms import ModelOptions
-from arvcas.params import Params, load as load_params
+from arvcas.params import Params, default_layout, load as load_params
 from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
 from arvcas.sim.scenario import ScenarioConfig
 
@@ -51,7 +51,8 @@ class Run:
 
     ``controller``: a registered name or a :class:`~arvcas.controllers.Controller`; ``scenario``: a
     :class:`~arvcas.sim.scenario.ScenarioConfig`, a scenario file, or None (the packaged one);
-    ``params``: :class:`~arvcas.params.Params`, a parameter file, or None (the packaged one);
+    ``params``: the system: :class:`~arvcas.params.Params`, an :class:`arvcas.system.System`, a shipped
+    system's name (``arvcas systems``), a system file, or None (Haidou-1);
     ``options``: :class:`~arvcas.model.uvms.ModelOptions`.
     """
 
@@ -65,7 +66,9 @@ class Run:
         description, loaded from the compile cache on a warm start, and its time table is kept."""
         with_law = get_controller(self.controller)
         cfg = self.scenario if isinstance(self.scenario, ScenarioConfig) else scenario.load_scenario(self.scenario)
-        params = self.params if isinstance(self.params, Params) else load_params(self.params)
+        from arvcas.system import resolve
+
+        params = self.params if isinstance(self.params, Params) else resolve(self.params).params
         if not isinstance(self.options, ModelOptions):
             raise SimulationError(f"options: expected arvcas.model.uvms.ModelOptions, got {type(self.options).__name__}")
         scenario.check_joint_limits(cfg, params)
@@ -104,14 +107,16 @@ class CompiledRun:
         """What keys the compiled run in the cache (beside the package's model hash and the toolchain)."""
         law = self.controller
         own = [f for f in law.source_files() if not f.startswith(str(Path(codegen.__file__).resolve().parents[1]))]
+        st = self.params.structure
+        system = "" if st == default_layout().structure else f" system={st.key()}"
         return (f"run controller={law.identity()} own_source={_file_digest(own)} trace={trace} "
-                f"scenario={self.cfg.graph_key()!r} options={self.opts!r}")
+                f"scenario={self.cfg.graph_key()!r} options={self.opts!r}{system}")
 
     def function(self, trace: bool) -> ca.Function:
         """The compiled run function (metrics only, or with the trace), loaded from the cache when it is there."""
         fn = self._fns.get(trace)
         if fn is None:
-            spec = closedloop.RunSpec(self.controller, self.cfg.graph_key(), self.opts)
+            spec = closedloop.RunSpec(self.controller, self.cfg.graph_key(), self.opts, self.params.layout)
             name = f"run_{self.controller.name}" + ("_trace" if trace else "")
             fn = _FUNCTIONS.get((name, self.description(trace)))
             if fn is None:
@@ -123,7 +128,7 @@ class CompiledRun:
     def compiled_functions(self, trace: bool = False) -> list[ca.Function]:
         """Every compiled function a run calls: the run itself and the two that build its time table
         (what a process without a compiler needs: :func:`arvcas.build.codegen.bundle`)."""
-        return [self.function(trace), *schedule.functions(self.cfg, self.opts)]
+        return [self.function(trace), *schedule.functions(self.cfg, self.opts, self.params.layout)]
 
     def artifact(self, trace: bool = False) -> dict:
         return codegen.artifact_of(self.function(trace)) or {}
@@ -131,7 +136,7 @@ class CompiledRun:
     @property
     def table(self) -> schedule.Table:
         """The run's time table (computed once per (scenario, p, options) and kept)."""
-        return schedule.table(self.cfg, self._pv, self.opts)
+        return schedule.table(self.cfg, self._pv, self.opts, self.params.layout)
 
     # -- inputs ------------------------------------------------------------------------------------------
     def default_gains(self) -> np.ndarray:
@@ -181,9 +186,9 @@ class CompiledRun:
         out = calls.call_named(fn, {"gains": g, "noise": noise, "unc": unc, "phase": ph, **self._shared()})
         tr = out["trace"]
         series, i = {}, 0
-        n_thr = tr.shape[0] - sum(s.width for s in self.signals if s.width is not None)  # per-thruster widths
+        st = self.params.structure
         for sig in self.signals:
-            w = sig.n(n_thr)
+            w = sig.n(st.n_thrusters, st.n_joints)
             block = tr[i:i + w, :].T
             series[sig.name] = block[:, 0].copy() if w == 1 else block.copy()
             i += w

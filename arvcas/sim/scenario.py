@@ -8,6 +8,7 @@ CasADi types, so the compiled closed loop evaluates them inside its time loop.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, replace
 from importlib import resources
@@ -52,14 +53,43 @@ class _Initial:
 
 
 @dataclass(frozen=True)
+class _Waypoint:
+    """A joint waypoint: the arm reaches ``q`` (or its stow pose) at ``t`` by a rest-to-rest quintic."""
+
+    t: float = quantity("time", ge(0))
+    q: tuple[float, ...] = quantity("angle", n=config.ANY_LENGTH)  # () for q = "stow" in the file
+
+    @property
+    def stow(self) -> bool:
+        return len(self.q) == 0
+
+
+@dataclass(frozen=True)
+class _Event:
+    """A payload event: the payload fraction ramps linearly to ``to`` over ``[t, t + ramp]``."""
+
+    t: float = quantity("time", ge(0))
+    ramp: float = quantity("time", gt(0))
+    to: float = quantity("1", ge(0), le(1))
+
+
+@dataclass(frozen=True)
 class _Arm:
-    qg: tuple[float, ...] = quantity("angle", n=6)
-    hold_until: float = quantity("time", ge(0))
-    reach_end: float = quantity("time", gt(0))
-    payload_on: float = quantity("time", ge(0))
-    payload_ramp: float = quantity("time", gt(0))
-    return_start: float = quantity("time", ge(0))
-    return_end: float = quantity("time", gt(0))
+    """The arm's motion: the paper's reach-and-return (docs/model.md §4) or a list of waypoints."""
+
+    qg: tuple[float, ...] | None = quantity("angle", n=6, default=None)
+    hold_until: float | None = quantity("time", ge(0), default=None)
+    reach_end: float | None = quantity("time", gt(0), default=None)
+    payload_on: float | None = quantity("time", ge(0), default=None)
+    payload_ramp: float | None = quantity("time", gt(0), default=None)
+    return_start: float | None = quantity("time", ge(0), default=None)
+    return_end: float | None = quantity("time", gt(0), default=None)
+    waypoint: tuple[_Waypoint, ...] | None = config.setting(config.Count(2, 1000), default=None)
+
+
+@dataclass(frozen=True)
+class _Payload:
+    event: tuple[_Event, ...] = config.setting(config.Count(1, 1000))
 
 
 @dataclass(frozen=True)
@@ -116,6 +146,7 @@ class ScenarioFile:
     uncertainty: _Uncertainty = config.setting()
     atd: _Atd = config.setting()
     limits: _Limits = config.setting()
+    payload: _Payload | None = config.setting(default=None)  # events, with [[arm.waypoint]]
 
 
 _LEAVES = config.leaves(ScenarioFile)
@@ -135,13 +166,15 @@ class ScenarioConfig:
     initial_eta0: tuple
     initial_nu0: tuple
     initial_eta_d: tuple
-    arm_qg: tuple
-    arm_hold_until: float
-    arm_reach_end: float
-    arm_payload_on: float
-    arm_payload_ramp: float
-    arm_return_start: float
-    arm_return_end: float
+    arm_qg: tuple | None
+    arm_hold_until: float | None
+    arm_reach_end: float | None
+    arm_payload_on: float | None
+    arm_payload_ramp: float | None
+    arm_return_start: float | None
+    arm_return_end: float | None
+    arm_waypoint: tuple | None
+    payload_event: tuple | None
     disturbance_offset: tuple
     disturbance_amplitude: tuple
     disturbance_freq: tuple
@@ -188,14 +221,24 @@ class ScenarioConfig:
         """
         lines = ["# arvcas scenario, effective values in SI units (angles in rad)"]
         section = None
+        entry = lambda k, v: f'{k} = {{ value = {_num(v)}, unit = "SI", source = "effective value" }}'  # noqa: E731
+        tables = lines  # array tables are the last entries of their sections (the schema's order)
         for leaf in _LEAVES:
             sec, key = leaf.key.split(".")
+            v = getattr(self, _field(leaf.key))
+            if v is None:
+                continue
             if sec != section:
                 lines.append(f"\n[{sec}]")
                 section = sec
-            v = getattr(self, _field(leaf.key))
-            val = "[" + ", ".join(repr(float(x)) for x in v) + "]" if leaf.n else repr(float(v))
-            lines.append(f'{key} = {{ value = {val}, unit = "SI", source = "effective value" }}')
+            if leaf.kind == "tables":
+                for item in v:
+                    tables.append(f"\n[[{sec}.{key}]]")
+                    for f in dataclasses.fields(item):
+                        x = getattr(item, f.name)
+                        tables.append('q = "stow"' if f.name == "q" and len(x) == 0 else entry(f.name, x))
+                continue
+            lines.append(entry(key, v))
         return "\n".join(lines) + "\n"
 
     @property
@@ -231,8 +274,14 @@ def load_scenario(path: str | Path | None = None) -> ScenarioConfig:
 
 def loads_scenario(text: str, where: str = "<scenario text>") -> ScenarioConfig:
     """Validate scenario TOML text (e.g. stored in a result file); ``where`` names it in errors."""
-    loaded = config.load_text(ScenarioFile, text, where, ScenarioError, entries=True)
-    values = {_field(k): v for k, v in config.flatten(loaded.value)}
+    doc = tomlfile.parse(text, where, ScenarioError)
+    arm = doc.get("arm")
+    if isinstance(arm, dict) and isinstance(arm.get("waypoint"), list):  # q = "stow": the system's stow pose
+        stow = {"value": [], "unit": "rad", "source": "q = \"stow\": the system's stow pose"}
+        arm["waypoint"] = [dict(w, q=stow) if isinstance(w, dict) and w.get("q") == "stow" else w
+                           for w in arm["waypoint"]]
+    loaded = config.load_doc(ScenarioFile, doc, where, ScenarioError, entries=True)
+    values = {_field(leaf.key): _get(loaded.value, leaf.attrs) for leaf in _LEAVES}
     cfg = ScenarioConfig(**values, text=text, path=where)
     _check_consistency(cfg, where)
     return cfg
@@ -254,12 +303,58 @@ def _check_consistency(cfg: ScenarioConfig, where: str) -> None:
     if round(r) > MAX_SUBSTEPS:
         raise ScenarioError(f"{where}: time.h: h / h_plant = {round(r)} plant steps per sample, at most "
                             f"{MAX_SUBSTEPS} (they are unrolled in the compiled sample step)")
-    if not (cfg.arm_hold_until < cfg.arm_reach_end <= cfg.arm_return_start < cfg.arm_return_end):
-        raise ScenarioError(f"{where}: arm times must satisfy hold_until < reach_end <= return_start < return_end")
+    _check_motion(cfg, where)
     if cfg.time_duration < cfg.time_h:
         raise ScenarioError(f"{where}: time.duration must be at least one sample time.h")
     config.check_memory(table_bytes(cfg), f"the run's time table ({n_samples(cfg)} samples of "
                         f"{cfg.substeps} plant steps)", where, "time.duration", ScenarioError)
+
+
+def _num(v) -> str:
+    return "[" + ", ".join(repr(float(x)) for x in v) + "]" if isinstance(v, tuple) else repr(float(v))
+
+
+def _get(obj, attrs):
+    for a in attrs:
+        if obj is None:
+            return None
+        obj = getattr(obj, a)
+    return obj
+
+
+_PAPER_ARM = ("qg", "hold_until", "reach_end", "payload_on", "payload_ramp", "return_start", "return_end")
+
+
+def _check_motion(cfg: ScenarioConfig, where: str) -> None:
+    """Exactly one form of arm motion, with its times in order."""
+    given = [k for k in _PAPER_ARM if getattr(cfg, "arm_" + k) is not None]
+    if cfg.arm_waypoint is None:
+        missing = [k for k in _PAPER_ARM if k not in given]
+        if missing:
+            raise ScenarioError(f"{where}: arm.{missing[0]}: missing (give the paper's reach-and-return keys "
+                                f"{', '.join(_PAPER_ARM)}, or [[arm.waypoint]] tables)")
+        if cfg.payload_event is not None:
+            raise ScenarioError(f"{where}: payload.event: the paper's form ramps the payload by arm.payload_on and "
+                                f"arm.payload_ramp; [[payload.event]] goes with [[arm.waypoint]]")
+        if not (cfg.arm_hold_until < cfg.arm_reach_end <= cfg.arm_return_start < cfg.arm_return_end):
+            raise ScenarioError(f"{where}: arm times must satisfy hold_until < reach_end <= return_start < return_end")
+        return
+    if given:
+        raise ScenarioError(f"{where}: arm.{given[0]}: not with [[arm.waypoint]] (one form of arm motion: the "
+                            f"paper's keys or waypoints)")
+    ws = cfg.arm_waypoint
+    for j, w in enumerate(ws, start=1):
+        if j > 1 and not w.t > ws[j - 2].t:
+            raise ScenarioError(f"{where}: arm.waypoint[{j}].t: {w.t:g} s must be after waypoint {j - 1}'s "
+                                f"{ws[j - 2].t:g} s")
+    sizes = {len(w.q) for w in ws if not w.stow}
+    if len(sizes) > 1:
+        raise ScenarioError(f"{where}: arm.waypoint: every q must have the same number of angles, got {sorted(sizes)}")
+    ev = cfg.payload_event or ()
+    for j, e in enumerate(ev, start=1):
+        if j > 1 and not e.t >= ev[j - 2].t + ev[j - 2].ramp:
+            raise ScenarioError(f"{where}: payload.event[{j}].t: {e.t:g} s starts before event {j - 1}'s ramp ends "
+                                f"({ev[j - 2].t + ev[j - 2].ramp:g} s)")
 
 
 def n_samples(cfg: ScenarioConfig) -> int:
@@ -283,7 +378,20 @@ def quintic(t, t0: float, t1: float):
 
 
 def joint_trajectory(cfg: ScenarioConfig, q0, t):
-    """q, qd, qdd of docs/model.md §4: hold q0, quintic to qg, hold, quintic back to q0, hold."""
+    """q, qd, qdd of the scenario's arm motion from the stow pose ``q0``.
+
+    The paper's form (docs/model.md §4): hold q0, quintic to qg, hold, quintic back to q0, hold.
+    Waypoints: hold q0 until the first waypoint, then a rest-to-rest quintic between consecutive
+    waypoints (``q = w_1 + sum_k (w_{k+1} - w_k) s_k(t)``), hold after the last.
+    """
+    if cfg.arm_waypoint is not None:
+        ws = [q0 if w.stow else ca.DM(w.q) for w in cfg.arm_waypoint]
+        q, qd, qdd = ws[0], 0 * q0, 0 * q0
+        for k in range(1, len(ws)):
+            s, sd, sdd = quintic(t, cfg.arm_waypoint[k - 1].t, cfg.arm_waypoint[k].t)
+            dq = ws[k] - ws[k - 1]
+            q, qd, qdd = q + dq * s, qd + dq * sd, qdd + dq * sdd
+        return q, qd, qdd
     qg = ca.DM(cfg.arm_qg)
     s1, sd1, sdd1 = quintic(t, cfg.arm_hold_until, cfg.arm_reach_end)
     s2, sd2, sdd2 = quintic(t, cfg.arm_return_start, cfg.arm_return_end)
@@ -295,7 +403,14 @@ def joint_trajectory(cfg: ScenarioConfig, q0, t):
 
 
 def payload_profile(cfg: ScenarioConfig, t):
-    """Payload fraction in [0, 1]: linear ramp over [payload_on, payload_on + payload_ramp] (section 4.2)."""
+    """Payload fraction in [0, 1]: the paper's linear ramp over [payload_on, payload_on + payload_ramp]
+    (section 4.2), or the scenario's events, each ramping linearly to its ``to`` over [t, t + ramp]."""
+    if cfg.arm_waypoint is not None:
+        frac, prev = 0, 0.0
+        for e in cfg.payload_event or ():
+            frac = frac + (e.to - prev) * ca.fmin(ca.fmax((t - e.t) / e.ramp, 0), 1)
+            prev = e.to
+        return frac
     return ca.fmin(ca.fmax((t - cfg.arm_payload_on) / cfg.arm_payload_ramp, 0), 1)
 
 
@@ -327,8 +442,18 @@ def noise_sequence(cfg: ScenarioConfig, seed: int, n: int | None = None) -> np.n
 
 
 def check_joint_limits(cfg: ScenarioConfig, params) -> None:
-    """The trajectory's poses q0 and qg must lie within Table 1's limits (quintics stay between them)."""
-    for label, q in (("arm.stow (q0)", [params[f"arm.stow.q{i}"] for i in range(1, 7)]), ("arm.qg", cfg.arm_qg)):
+    """Every pose of the motion (the stow pose, qg or each waypoint) has one angle per joint of the
+    system and lies within its joint limits (quintics stay between their end poses)."""
+    n = params.structure.n_joints
+    poses = [("arm.stow (q0)", [params[f"arm.stow.q{i}"] for i in range(1, n + 1)])]
+    if cfg.arm_waypoint is not None:
+        poses += [(f"arm.waypoint[{j}].q", list(w.q)) for j, w in enumerate(cfg.arm_waypoint, start=1) if not w.stow]
+    else:
+        poses.append(("arm.qg", list(cfg.arm_qg)))
+    for label, q in poses:
+        if len(q) != n:
+            raise ScenarioError(f"{cfg.path or 'scenario'}: {label}: {len(q)} joint angles, but system "
+                                f"'{params.structure.name}' has {n} joints")
         for i, qi in enumerate(q, start=1):
             lo, hi = params[f"arm.joint{i}.qmin"], params[f"arm.joint{i}.qmax"]
             if not (lo - 1e-12 <= qi <= hi + 1e-12):
@@ -336,4 +461,3 @@ def check_joint_limits(cfg: ScenarioConfig, params) -> None:
                     f"{label}: joint {i} target {math.degrees(qi):.2f} deg outside Table 1 limits "
                     f"[{math.degrees(lo):.0f}, {math.degrees(hi):.0f}] deg"
                 )
-

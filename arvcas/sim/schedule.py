@@ -34,39 +34,70 @@ from arvcas.build import calls, codegen
 from arvcas.model import manipulator, vehicle
 from arvcas.sim import scenario
 from arvcas.model.linalg import lu_nopivot, lu_pack, lu_unpack
-from arvcas.params import SCHEMA, view
+from arvcas.params import default_layout, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.uvms import ModelOptions
 
 __all__ = [
-    "RECORD_FIELDS", "RECORD_SIZE", "ARM_FIELDS", "ARM_SIZE", "TIME_FIELDS", "TIME_SIZE", "Table",
-    "record_slices", "unpack", "stage_times", "n_stages", "record_expr", "table", "functions", "clear_cache",
+    "Records", "records", "RECORD_FIELDS", "RECORD_SIZE", "ARM_FIELDS", "ARM_SIZE", "TIME_FIELDS", "TIME_SIZE",
+    "Table", "record_slices", "unpack", "stage_times", "n_stages", "record_expr", "table", "functions",
+    "clear_cache",
 ]
 
-NP = len(SCHEMA)
 
-# per time: what depends on t directly (trajectory, disturbance) ...
-TIME_FIELDS: tuple[tuple[str, int], ...] = (
-    ("q", 6), ("payload", 1), ("qd", 6), ("qdd", 6), ("dist_sin", 6), ("dist_cos", 6),
-)
-# ... and what depends on t only through the arm state (q, qd, qdd, payload)
-ARM_FIELDS: tuple[tuple[str, int], ...] = (*manipulator.schedule_fields(view(np.zeros(NP))), ("lu", 36))
-RECORD_FIELDS = TIME_FIELDS + ARM_FIELDS  # one record = its time part, then its arm part
-TIME_SIZE = sum(n for _, n in TIME_FIELDS)
-ARM_SIZE = sum(n for _, n in ARM_FIELDS)
-RECORD_SIZE = TIME_SIZE + ARM_SIZE
+class Records:
+    """The record of one system: its fields (name, size), sizes and slices.
+
+    Time part: ``q, payload, qd, qdd`` (one entry per joint), ``dist_sin, dist_cos``; arm part: the
+    terms of :func:`arvcas.model.manipulator.schedule_fields` and the LU factors of ``M + M_arm``.
+    """
+
+    def __init__(self, layout):
+        n = layout.structure.n_joints
+        self.layout = layout
+        self.time_fields: tuple[tuple[str, int], ...] = (
+            ("q", n), ("payload", 1), ("qd", n), ("qdd", n), ("dist_sin", 6), ("dist_cos", 6))
+        P = view(np.zeros(len(layout)), layout)
+        self.arm_fields: tuple[tuple[str, int], ...] = (*manipulator.schedule_fields(P), ("lu", 36))
+        self.fields = self.time_fields + self.arm_fields  # one record = its time part, then its arm part
+        self.time_size = sum(k for _, k in self.time_fields)
+        self.arm_size = sum(k for _, k in self.arm_fields)
+        self.size = self.time_size + self.arm_size
+        self.n_arm_state = 3 * n + 1  # q, payload, qd, qdd: the time part's first entries
+        self.slices: dict[str, slice] = {}
+        i = 0
+        for name, k in self.fields:
+            self.slices[name] = slice(i, i + k)
+            i += k
+
+
+_RECORDS: dict = {}
+
+
+def records(layout=None) -> Records:
+    """The :class:`Records` of a system's layout (default: Haidou-1's)."""
+    lay = layout or default_layout()
+    r = _RECORDS.get(lay.structure)
+    if r is None:
+        r = _RECORDS[lay.structure] = Records(lay)
+    return r
+
+
+_DEFAULT_NAMES = {"TIME_FIELDS": "time_fields", "ARM_FIELDS": "arm_fields", "RECORD_FIELDS": "fields",
+                  "TIME_SIZE": "time_size", "ARM_SIZE": "arm_size", "RECORD_SIZE": "size"}
+
+
+def __getattr__(name: str):
+    if name in _DEFAULT_NAMES:  # the default system's (Haidou-1's) record
+        return getattr(records(), _DEFAULT_NAMES[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def record_slices(layout=None) -> dict[str, slice]:
+    return dict(records(layout).slices)
+
+
 _SYM6 = [(i, j) for i in range(6) for j in range(i, 6)]  # upper triangle, row by row
-
-
-def record_slices() -> dict[str, slice]:
-    out, i = {}, 0
-    for name, n in RECORD_FIELDS:
-        out[name] = slice(i, i + n)
-        i += n
-    return out
-
-
-_SLICES = record_slices()
 
 
 def _sym_pack(A):
@@ -80,9 +111,9 @@ def _sym_unpack(v):
     return ca.vertcat(*[ca.horzcat(*r) for r in rows])
 
 
-def unpack(rec) -> dict:
+def unpack(rec, layout=None) -> dict:
     """A record column (SX/MX) as named terms: 6x6 matrices for ``M_arm``/``M_arm_dot``, (F, U) for ``lu``."""
-    d = {name: rec[s] for name, s in _SLICES.items()}
+    d = {name: rec[s] for name, s in records(layout).slices.items()}
     d["M_arm"] = _sym_unpack(d["M_arm"])
     d["M_arm_dot"] = _sym_unpack(d["M_arm_dot"])
     d["lu"] = lu_unpack(d["lu"], 6)
@@ -108,22 +139,28 @@ def _time_expr(cfg: ScenarioConfig, t, P):
 
 
 def _arm_expr(P, q, qd, qdd, payload):
-    sc = manipulator.arm_schedule(P, q, qd, qdd, payload)
+    if manipulator.n_joints(P) == 0:
+        z6 = ca.DM.zeros(6, 6)
+        sc = {"M_arm": z6, "M_arm_dot": z6, "h_q": ca.DM.zeros(6), "b_q": ca.DM.zeros(6), "W": 0,
+              "S": ca.DM.zeros(3), "drag_frames": ca.DM.zeros(0, 1)}
+    else:
+        sc = manipulator.arm_schedule(P, q, qd, qdd, payload)
     lu = lu_pack(*lu_nopivot(vehicle.M(P) + sc["M_arm"]))  # coupled inertia, docs/model.md §3
     parts = dict(sc, lu=lu, M_arm=_sym_pack(sc["M_arm"]), M_arm_dot=_sym_pack(sc["M_arm_dot"]))
-    return ca.densify(ca.vertcat(*[parts[name] for name, _ in ARM_FIELDS]))
+    return ca.densify(ca.vertcat(*[parts[name] for name, _ in records(P.layout).arm_fields]))
 
 
 def record_expr(cfg: ScenarioConfig, t, P):
     """One record at time ``t`` as an expression (the reference the compiled table is tested against)."""
     te = _time_expr(cfg, t, P)
-    s = {name: te[_SLICES[name]] for name, _ in TIME_FIELDS}
+    R = records(P.layout)
+    s = {name: te[R.slices[name]] for name, _ in R.time_fields}
     return ca.vertcat(te, _arm_expr(P, s["q"], s["qd"], s["qdd"], s["payload"]))
 
 
-def _time_function(cfg: ScenarioConfig) -> ca.Function:
-    t, p = ca.SX.sym("t"), ca.SX.sym("p", NP)
-    f = ca.Function("sched_time", [t, p], [_time_expr(cfg, t, view(p))], ["t", "p"], ["rec_time"])
+def _time_function(cfg: ScenarioConfig, layout) -> ca.Function:
+    t, p = ca.SX.sym("t"), ca.SX.sym("p", len(layout))
+    f = ca.Function("sched_time", [t, p], [_time_expr(cfg, t, view(p, layout))], ["t", "p"], ["rec_time"])
     n = scenario.n_samples(cfg) * n_stages(cfg)
     return f.map("sched_time_map", "serial", n, [1], [])
 
@@ -131,10 +168,12 @@ def _time_function(cfg: ScenarioConfig) -> ca.Function:
 ARM_CHUNK = 512  # arm states per call of the compiled arm part
 
 
-def _arm_function(opts: ModelOptions) -> ca.Function:
+def _arm_function(opts: ModelOptions, layout) -> ca.Function:
     """The arm part on ARM_CHUNK arm states (columns) at once: one compiled loop."""
-    q, qd, qdd, pl, p = ca.SX.sym("q", 6), ca.SX.sym("qd", 6), ca.SX.sym("qdd", 6), ca.SX.sym("payload"), ca.SX.sym("p", NP)
-    f = ca.Function("sched_arm", [ca.vertcat(q, pl, qd, qdd), p], [_arm_expr(view(p), q, qd, qdd, pl)],
+    n = layout.structure.n_joints
+    q, qd, qdd, pl = ca.SX.sym("q", n), ca.SX.sym("qd", n), ca.SX.sym("qdd", n), ca.SX.sym("payload")
+    p = ca.SX.sym("p", len(layout))
+    f = ca.Function("sched_arm", [ca.vertcat(q, pl, qd, qdd), p], [_arm_expr(view(p, layout), q, qd, qdd, pl)],
                     ["arm_state", "p"], ["rec_arm"])
     return f.map("sched_arm_map", "serial", ARM_CHUNK, [1], [])
 
@@ -146,15 +185,16 @@ _TABLES: "OrderedDict[tuple, Table]" = OrderedDict()
 _TABLES_KEEP = 4  # a table is ~20 MB at the paper's sampling
 
 
-def _compiled(kind: str, key, make) -> ca.Function:
+def _compiled(kind: str, key, make, structure=None) -> ca.Function:
     """The compiled table function ``kind`` for ``key`` (a frozen description of what shapes it):
     loaded from the cache by that description, its graph built only on a miss."""
     name = {"time": "sched_time_map", "arm": "sched_arm_map"}[kind]
+    st = "" if structure is None or structure == default_layout().structure else f" system={structure.key()}"
     with _FUNCS_LOCK:
-        f = _FUNCS.get((kind, key))
+        f = _FUNCS.get((kind, key, structure))
         if f is None:
-            f = codegen.build_described(name, f"schedule {kind} {key!r} chunk={ARM_CHUNK}", make)
-            _FUNCS[(kind, key)] = f
+            f = codegen.build_described(name, f"schedule {kind} {key!r} chunk={ARM_CHUNK}{st}", make)
+            _FUNCS[(kind, key, structure)] = f
         return f
 
 
@@ -167,7 +207,7 @@ def _changes(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _arm_batch(f_arm: ca.Function, states: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """The compiled arm part on the columns of ``states`` (19 x n), ARM_CHUNK at a time (the last padded)."""
+    """The compiled arm part on the columns of ``states`` (3 n_joints + 1 rows), ARM_CHUNK at a time (the last padded)."""
     n = states.shape[1]
     n_pad = -(-n // ARM_CHUNK) * ARM_CHUNK
     padded = np.empty((states.shape[0], n_pad), order="F")
@@ -190,33 +230,37 @@ class Table(NamedTuple):
     arm: np.ndarray
 
 
-def functions(cfg: ScenarioConfig, opts: ModelOptions = ModelOptions()) -> tuple[ca.Function, ca.Function]:
+def functions(cfg: ScenarioConfig, opts: ModelOptions = ModelOptions(), layout=None) -> tuple[ca.Function, ca.Function]:
     """The two compiled functions that build the table: its time part and its arm part."""
-    return (_compiled("time", cfg.graph_key(), lambda: _time_function(cfg)),
-            _compiled("arm", opts, lambda: _arm_function(opts)))
+    lay = layout or default_layout()
+    return (_compiled("time", cfg.graph_key(), lambda: _time_function(cfg, lay), lay.structure),
+            _compiled("arm", opts, lambda: _arm_function(opts, lay), lay.structure))
 
 
-def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions()) -> Table:
+def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions(), layout=None) -> Table:
     """The run's time table for (scenario, parameter vector ``p``), kept for the last few in this process.
 
     Fortran-ordered arrays, so the run reads them in place (:func:`arvcas.build.calls.call`).
     """
     p = np.ascontiguousarray(p, dtype=float).ravel()
-    key = (cfg.graph_key(), hashlib.sha256(p.tobytes()).hexdigest(), opts)
+    lay = layout or default_layout()
+    R = records(lay)
+    key = (cfg.graph_key(), hashlib.sha256(p.tobytes()).hexdigest(), opts, lay.structure)
     with _FUNCS_LOCK:
         tab = _TABLES.get(key)
         if tab is not None:
             _TABLES.move_to_end(key)
             return tab
-    f_time, f_arm = functions(cfg, opts)
+    f_time, f_arm = functions(cfg, opts, lay)
     times = stage_times(cfg)
     n, ns = times.shape
     rec_t = calls.call(f_time, times.reshape(1, -1), p)[0]  # (TIME_SIZE, n * ns), F-ordered
     # the arm part only where the arm state (q, payload, qd, qdd) changes: it holds still most of the run
-    first, rep = _changes(rec_t[:19].T)
-    arm_first = _arm_batch(f_arm, np.asfortranarray(rec_t[:19, first]), p)
+    na = R.n_arm_state
+    first, rep = _changes(rec_t[:na].T)
+    arm_first = _arm_batch(f_arm, np.asfortranarray(rec_t[:na, first]), p)
     rec_a = arm_first.T[rep].T  # a row gather of the transpose: contiguous copies, Fortran-ordered result
-    tab = Table(rec_t.reshape(ns * TIME_SIZE, n, order="F"), rec_a.reshape(ns * ARM_SIZE, n, order="F"))
+    tab = Table(rec_t.reshape(ns * R.time_size, n, order="F"), rec_a.reshape(ns * R.arm_size, n, order="F"))
     for a in tab:
         a.setflags(write=False)
     with _FUNCS_LOCK:

@@ -34,29 +34,35 @@ WRENCH_UNITS = "N, N, N, N m, N m, N m"
 class Signal:
     """One traced per-sample quantity.
 
-    ``width``: number of columns (``None``: the number of thrusters of the system, for per-thruster
-    signals); ``units``: one unit, or one per column, comma-separated; ``frame``: ``"{n}"`` (NED),
+    ``width``: number of columns, or ``"thrusters"`` / ``"joints"``: the system's number of thrusters
+    (per-thruster signals) or of arm joints; ``units``: one unit, or one per column, comma-separated; ``frame``: ``"{n}"`` (NED),
     ``"{b}"`` (body, at the COB) or ``""``; ``columns``: comma-separated column names (``""``: the
     signal's name); ``value(ctx)``: the CasADi expression of the signal in the compiled step.
     """
 
     name: str
-    width: int | None
+    width: int | str
     units: str
     frame: str
     columns: str
     description: str
     value: Callable[[Any], Any]
 
-    def n(self, n_thrusters: int = 6) -> int:
-        return n_thrusters if self.width is None else self.width
+    def n(self, n_thrusters: int = 6, n_joints: int = 6) -> int:
+        if self.width == "thrusters":
+            return n_thrusters
+        if self.width == "joints":
+            return n_joints
+        return self.width
 
-    def column_names(self, n_thrusters: int = 6) -> list[str]:
+    def column_names(self, n: int | None = None) -> list[str]:
+        """Column names; ``n``: the number of columns of a system-sized signal (default 6)."""
         if self.columns:
             return [c.strip() for c in self.columns.split(",")]
-        if self.n(n_thrusters) == 1:
+        k = self.n(n or 6, n or 6) if isinstance(self.width, str) else self.width
+        if k == 1:
             return [self.name]
-        return [f"{self.name}{i + 1}" for i in range(self.n(n_thrusters))]
+        return [f"{self.name}{i + 1}" for i in range(k)]
 
 
 COMMON: tuple[Signal, ...] = (
@@ -73,12 +79,12 @@ COMMON: tuple[Signal, ...] = (
     Signal("tau_cmd", 6, WRENCH_UNITS, "{b}", "X, Y, Z, K, M, N",
            "commanded body wrench tau_v (eq. 20: J(eta_hat)^T tau_eta), before allocation and saturation; CHAT's input",
            lambda c: c.tau_v),
-    Signal("thrust", None, "N", "", "",
+    Signal("thrust", "thrusters", "N", "", "",
            "thrust per thruster after saturation to [u_min, u_max], held over the sample (Appendix B)",
            lambda c: c.u_sat),
     Signal("f_true", 6, WRENCH_UNITS, "{n}", DOFS,
            "true total disturbance of eq. 6: Mhat eta_ddot - J^-T tau_v,realised", lambda c: c.f_true),
-    Signal("q", 6, "rad", "", "q1, q2, q3, q4, q5, q6", "manipulator joint angles (prescribed trajectory)",
+    Signal("q", "joints", "rad", "", "", "manipulator joint angles (prescribed trajectory)",
            lambda c: c.q),
     Signal("payload", 1, "1", "", "payload", "payload fraction in [0, 1] (ramped over the scenario's payload_ramp)",
            lambda c: c.payload),
@@ -105,5 +111,5 @@ def label(sig: Signal, column: int | None = None) -> str:
     """An axis label: ``name [unit]`` (the column's own unit where units differ per column)."""
     units = [u.strip() for u in sig.units.split(",")]
     u = units[column] if column is not None and len(units) > 1 and column < len(units) else units[0]
-    name = sig.column_names()[column] if column is not None and sig.width not in (None, 1) else sig.name
+    name = sig.column_names()[column] if column is not None and sig.width != 1 else sig.name
     return f"{name} [{u}]" if u and u != "1" else name
