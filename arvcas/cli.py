@@ -37,7 +37,8 @@ Paths = Callable[[argparse.Namespace], list]
 @dataclass(frozen=True)
 class Command:
     """One command of the table. ``inputs``: ``(dest, kind[, what])`` of arguments that name input files
-    (kind ``"file"``, or ``"front"``: a front.h5 or a study directory holding one; ``what`` names the file
+    (kind ``"file"``, ``"system"``: a shipped system's name or a system file, or ``"front"``: a front.h5
+    or a study directory holding one; ``what`` names the file
     in messages, default "file"); ``outputs``: the
     ``(label, path)`` files the command will write, from the parsed arguments; ``check``: raises
     ValueError for options that do not apply or requests too large, before any work."""
@@ -127,8 +128,8 @@ def _model_options(n_quad: int):
 
 
 def _add_model_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--params", metavar="FILE", type=Path, default=None,
-                   help="parameter file (default: the packaged haidou1.toml)")
+    p.add_argument("--system", "--params", dest="params", metavar="NAME|FILE", type=Path, default=None,
+                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
     p.add_argument("--n-quad", metavar="N", type=count_arg(1, 20, "--n-quad"), default=5,
                    help="Gauss-Legendre points per link for the drag integral (default: 5)")
 
@@ -261,6 +262,24 @@ def _run_demo(a: argparse.Namespace) -> int:
     return 0
 
 
+# ---- systems -----------------------------------------------------------------------------------
+
+
+def _add_systems(p: argparse.ArgumentParser) -> None:
+    pass
+
+
+def _run_systems(a: argparse.Namespace) -> int:
+    from arvcas.system import load_system, shipped
+
+    print(f"{'name':24} {'thrusters':>9} {'joints':>6} {'arm':>6} {'params':>6}  description")
+    for name in shipped():
+        s = load_system(name)
+        print(f"{name:24} {s.n_thrusters:9d} {s.n_joints:6d} {s.structure.arm:>6} {len(s.params):6d}  {s.description}")
+        print(f"{'':24} {s.path}")
+    return 0
+
+
 # ---- simulate ----------------------------------------------------------------------------------
 
 
@@ -271,7 +290,7 @@ def _add_simulate(p: argparse.ArgumentParser) -> None:
                    help="write the result here: HDF5 (.h5), or a MATLAB file if the name ends in .mat")
     p.add_argument("--seed", type=seed_arg, default=None, help="sensor-noise seed (default 0; 0 <= seed < 2**63)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
-                   help="scenario file (default: the packaged scenario.toml)")
+                   help="scenario file (default: the system's scenario)")
     p.add_argument("--from-front", type=Path, default=None, metavar="FRONT.h5",
                    help="replay a member of a tuning front (with --index)")
     p.add_argument("--index", type=int, default=None, help="front member to replay")
@@ -306,7 +325,7 @@ def _run_simulate(a: argparse.Namespace) -> int:
     if a.out is not None:
         results.check_dir(a.out.parent, f"--out {a.out}")
     params = load(a.params)
-    cfg = scenario.load_scenario(a.config)
+    cfg = scenario.load_scenario(a.config if a.config is not None else params.default("scenario"))
     gains = None
     controller, seed = a.controller, a.seed
     if a.from_front is not None:
@@ -428,14 +447,16 @@ def _table() -> tuple[Command, ...]:
 
     return (
         Command("export-c", "write the plant functions as a C library with Makefile, example and README",
-                _add_export_c, _run_export_c, inputs=(("params", "file"),), outputs=_export_c_outputs),
+                _add_export_c, _run_export_c, inputs=(("params", "system"),), outputs=_export_c_outputs),
         Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
-                _add_export_fmu, _run_export_fmu, inputs=(("params", "file"),), outputs=_out_file("file", "FILE.fmu")),
+                _add_export_fmu, _run_export_fmu, inputs=(("params", "system"),), outputs=_out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
+        Command("systems", "list the shipped systems (vehicle, thrusters, arm) and their files", _add_systems,
+                _run_systems),
         Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
-                _add_demo, _run_demo, inputs=(("params", "file"),)),
+                _add_demo, _run_demo, inputs=(("params", "system"),)),
         Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
-                _add_simulate, _run_simulate, inputs=(("config", "file"), ("params", "file"), ("from_front", "front")),
+                _add_simulate, _run_simulate, inputs=(("config", "file"), ("params", "system"), ("from_front", "front")),
                 outputs=_out_file("out"), check=_check_simulate),
         Command("paper", "the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
                 _add_paper, _run_paper, outputs=_paper_outputs),
@@ -457,11 +478,11 @@ def _table() -> tuple[Command, ...]:
                 outputs=x.compare_outputs, check=x.check_compare),
         Command("sweep", "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 "
                 "(table, plot)", x.add_sweep, x.run_sweep,
-                inputs=(("config", "file"), ("params", "file"), ("check", "file")),
+                inputs=(("config", "file"), ("params", "system"), ("check", "file")),
                 outputs=x.sweep_outputs, check=x.check_sweep),
         Command("montecarlo", "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance "
                 "phases: CIs, failure rate", x.add_montecarlo, x.run_montecarlo,
-                inputs=(("config", "file"), ("params", "file"), ("from_front", "front"), ("check", "file")),
+                inputs=(("config", "file"), ("params", "system"), ("from_front", "front"), ("check", "file")),
                 outputs=x.montecarlo_outputs, check=x.check_montecarlo),
     )
 
@@ -516,6 +537,18 @@ def _inputs(cmd: Command, a: argparse.Namespace) -> list[tuple[str, Path]]:
         if p is None:
             continue
         label = dest if dest in ("file", "study", "a", "b") else f"--{dest.replace('_', '-')}"
+        if kind == "system":
+            from arvcas.system import shipped
+
+            label = "--system"
+            if str(p) in shipped():
+                p = shipped()[str(p)]
+                setattr(a, dest, p)
+            elif not p.exists() and p.suffix.lower() != ".toml":
+                from arvcas.config import closest
+
+                raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
+                                 f"file{closest(str(p), shipped(), 0.3)}")
         p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
         if kind == "front" and p.is_dir():
             p = p / "front.h5"

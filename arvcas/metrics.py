@@ -108,7 +108,7 @@ def table3() -> Table3:
     )
 
 
-def normalised_objectives(chat_values, rmse_values):
+def normalised_objectives(chat_values, rmse_values, ref=None):
     """The two tuning objectives of docs/model.md §7: ``(f_chat, f_rmse)``.
 
     ``f_chat = mean_i chat_i / CHAT_AGSTA,i`` and ``f_rmse = mean_i rmse_i / RMSE_AGSTA,i`` over
@@ -118,6 +118,8 @@ def normalised_objectives(chat_values, rmse_values):
     Args:
         chat_values: per-DOF CHAT, shape ``(6,)`` (from :func:`chat`).
         rmse_values: per-DOF RMSE, shape ``(6,)`` (from :func:`rmse`).
+        ref: ``(chat_ref, rmse_ref)`` per DOF to normalise by instead of Table 3's AGSTA (another
+            system: its AGSTA at its default gains on the study's first draw, arvcas.tuning.run).
     """
     c = np.asarray(chat_values, dtype=float)
     r = np.asarray(rmse_values, dtype=float)
@@ -125,5 +127,7 @@ def normalised_objectives(chat_values, rmse_values):
         raise ValueError(
             f"normalised_objectives: expected two shape-(6,) arrays, got {c.shape} and {r.shape}"
         )
+    if ref is not None:
+        return float(np.mean(c / np.asarray(ref[0]))), float(np.mean(r / np.asarray(ref[1])))
     t = table3()
     return float(np.mean(c / t.chat_agsta)), float(np.mean(r / t.rmse_agsta))

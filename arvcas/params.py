@@ -115,6 +115,11 @@ class Params:
     path: str
     layout: Layout = dataclasses.field(repr=False, compare=False)
     description: str = dataclasses.field(default="", repr=False, compare=False)
+    defaults: tuple[tuple[str, str], ...] = dataclasses.field(default=(), repr=False, compare=False)
+
+    def default(self, what: str) -> Path | None:
+        """The file the system names as its default ``what`` ("scenario", "gains"), or None."""
+        return next((Path(v) for k, v in self.defaults if k == what), None)
 
     @property
     def structure(self) -> systemfile.Structure:
@@ -165,7 +170,7 @@ class Params:
                     raise ParamsError(f"Params.replace: {name}: expected a finite number, got {v!r}")
                 vals[i] = float(v)
             srcs[i] = "replaced at run time"
-        return Params(tuple(vals), self._units, tuple(srcs), self.path, self.layout, self.description)
+        return Params(tuple(vals), self._units, tuple(srcs), self.path, self.layout, self.description, self.defaults)
 
     def _index(self, name: str, where: str) -> int:
         try:
@@ -207,7 +212,8 @@ def load(path: str | Path | None = None) -> Params:
     sources = tuple(loaded.entries[k][1] for k in lay.leaf)
     check_physical(dict(zip(lay.names, values)), where, lay)
     desc = doc.get("system", {}).get("description", "")
-    return Params(tuple(values), units, sources, where, lay, desc if isinstance(desc, str) else "")
+    defaults = tuple((k, str(systemfile.rel_path(p, v))) for k, v in doc.get("defaults", {}).items())
+    return Params(tuple(values), units, sources, where, lay, desc if isinstance(desc, str) else "", defaults)
 
 
 def _default_name(p: Path) -> str:

@@ -81,7 +81,7 @@ def load_system(name_or_path: str | Path | None = None) -> System:
         from arvcas.config import closest
 
         raise ParamsError(f"system {name_or_path!r}: neither a shipped system ({', '.join(ships)}) nor a "
-                          f"system file{closest(name_or_path, ships)}")
+                          f"system file{closest(name_or_path, ships, 0.3)}")
     return System(params_mod.load(p))
 
 

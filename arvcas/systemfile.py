@@ -171,6 +171,14 @@ def _structure(doc: dict, default_name: str) -> Structure:
             raise _Bad(f"system.{k}: unknown key (allowed: name, description){config.closest(k, ['name', 'description'])}")
     if not isinstance(sysd.get("description", ""), str):
         raise _Bad("system.description: expected a string")
+    dfl = doc.get("defaults", {})
+    if not isinstance(dfl, dict):
+        raise _Bad("defaults: expected a table")
+    for k, v in dfl.items():
+        if k not in ("scenario", "gains"):
+            raise _Bad(f"defaults.{k}: unknown key (allowed: scenario, gains){config.closest(k, ['scenario', 'gains'])}")
+        if not isinstance(v, str) or not v:
+            raise _Bad(f"defaults.{k}: expected a file name (relative to the system file), got {v!r}")
     name = sysd.get("name", default_name)
     if not isinstance(name, str) or not NAME_RE.match(name):
         raise _Bad(f"system.name: {name!r} must match [a-z][a-z0-9_]* (it names compiled code and files)")
@@ -443,9 +451,9 @@ def schema_for(s: Structure) -> type:
 
 
 def file_doc(doc: dict) -> dict:
-    """The document as the schema reads it: ``[system]`` and ``hydro.coriolis_added_mass`` (structure)
-    removed, a thruster list keyed by name."""
-    out = {k: v for k, v in doc.items() if k != "system"}
+    """The document as the schema reads it: ``[system]``, ``[defaults]`` and ``hydro.coriolis_added_mass``
+    (not numbers) removed, a thruster list keyed by name."""
+    out = {k: v for k, v in doc.items() if k not in ("system", "defaults")}
     if isinstance(out.get("hydro"), dict) and "coriolis_added_mass" in out["hydro"]:
         out["hydro"] = {k: v for k, v in out["hydro"].items() if k != "coriolis_added_mass"}
     thr = out.get("thrusters")

@@ -51,6 +51,7 @@ def _entries(table: dict, prefix: str = ""):
 def test_params_vector_is_raw_values_times_factors(params):
     doc = tomllib.loads(ap.default_path().read_text(encoding="utf-8"))
     assert doc.pop("system") == {"name": "haidou1", "description": params.description}  # not numbers
+    assert doc.pop("defaults") == {"scenario": "scenario.toml", "gains": "gains.toml"}
     raw = dict(_entries(doc))
     assert list(raw) == params.names()
     expect = np.array([float(e["value"]) * _factors(e["unit"], 1)[0] for e in raw.values()])
@@ -63,7 +64,8 @@ def test_scenario_fields_are_raw_values_times_factors():
     cfg = load_scenario()
     raw = dict(_entries(tomllib.loads(default_scenario_path().read_text(encoding="utf-8"))))
     names = [f.name for f in dataclasses.fields(cfg) if f.name not in ("text", "path")]
-    assert [k.replace(".", "_") for k in raw] == names
+    assert cfg.arm_waypoint is None and cfg.payload_event is None  # the paper's form of arm motion
+    assert [k.replace(".", "_") for k in raw] == [n for n in names if n not in ("arm_waypoint", "payload_event")]
     for key, e in raw.items():
         got = getattr(cfg, key.replace(".", "_"))
         if isinstance(e["value"], list):

@@ -29,12 +29,23 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _table() -> dict:
-    with resources.files("arvcas").joinpath("data/gains.toml").open("rb") as f:
-        return tomllib.load(f)
+def _table(path=None) -> dict:
+    """A gain table (default: Haidou-1's ``data/gains.toml``), read once per process."""
+    key = str(path) if path is not None else ""
+    t = _TABLES.get(key)
+    if t is None:
+        if path is None:
+            with resources.files("arvcas").joinpath("data/gains.toml").open("rb") as f:
+                t = tomllib.load(f)
+        else:
+            from arvcas import tomlfile
+
+            t = tomlfile.parse(tomlfile.read_text(path, GainError, "gain table"), str(path), GainError)
+        _TABLES[key] = t
+    return t
 
 
-_TABLE = _table()
+_TABLES: dict[str, dict] = {}
 
 
 def controllers() -> tuple[str, ...]:
@@ -67,11 +78,12 @@ def gain_units(controller) -> list[str]:
     return [u for _ in DOFS for u in units]
 
 
-def default_gains(controller) -> np.ndarray:
+def default_gains(controller, system=None) -> np.ndarray:
     """The system's default gains as the flat vector (DOF by DOF, x to psi, in the column order).
 
-    A controller may carry its own defaults (``defaults``: column -> 6 values, or a flat vector)
-    instead of a block of the gain table.
+    ``system``: None (Haidou-1), a name, a file, a System or Params: its gain table is the file its
+    ``[defaults] gains`` names. A controller may carry its own defaults (``defaults``: column -> 6
+    values, or a flat vector) instead of a block of the gain table.
     """
     c = get(controller)
     own = getattr(c, "defaults", None)
@@ -80,14 +92,24 @@ def default_gains(controller) -> np.ndarray:
         if g.shape != (n_gains(c),):
             raise GainError(f"controller {c.name}: defaults has {g.size} values, expected {n_gains(c)}")
         return g.copy()
-    block = _TABLE.get(c.defaults_block)
+    path = None
+    if system is not None:
+        from arvcas.system import resolve
+
+        path = resolve(system).params.default("gains")
+    where = str(path) if path is not None else "arvcas/data/gains.toml"
+    block = _table(path).get(c.defaults_block)
     if block is None:
-        raise GainError(f"controller {c.name}: the gain table arvcas/data/gains.toml has no block "
+        raise GainError(f"controller {c.name}: the gain table {where} has no block "
                         f"[{c.defaults_block}]; give the controller its own defaults")
     if list(block.get("columns", ())) != c.columns():
-        raise GainError(f"arvcas/data/gains.toml: [{c.defaults_block}].columns {block.get('columns')} differ from "
+        raise GainError(f"{where}: [{c.defaults_block}].columns {block.get('columns')} differ from "
                         f"controller {c.name}'s gain columns {c.columns()}")
-    return np.concatenate([np.asarray(block[d], dtype=float) for d in DOFS])
+    try:
+        return np.concatenate([np.asarray(block[d], dtype=float).reshape(len(c.columns())) for d in DOFS])
+    except (KeyError, ValueError, TypeError):
+        raise GainError(f"{where}: [{c.defaults_block}]: expected {len(c.columns())} numbers for each of "
+                        f"{', '.join(DOFS)}") from None
 
 
 def upper_limits(controller, h: float) -> np.ndarray:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-__all__ = ["B_T", "allocate", "saturate", "thrust", "limit_prefixes", "limits"]
+__all__ = ["B_T", "allocate", "saturate", "thrust", "limit_prefixes", "limits", "envelope"]
 
 
 def B_T(P):
@@ -78,3 +78,26 @@ def saturate(P, u):
 def thrust(P, u):
     """Realised body wrench B_T sat(u) (docs/model.md §2)."""
     return ca.mtimes(B_T(P), saturate(P, u))
+
+
+def envelope(P):
+    """The pure-axis capacities of the allocation: for each DOF k, the largest wrenches ``-lo_k e_k`` and
+    ``hi_k e_k`` whose allocation stays within every thruster's limits (allocation is linear, so beyond
+    them a thruster saturates). Numbers (NumPy), from a view of numeric parameters: ``(lo (6,), hi (6,))``.
+    """
+    import numpy as np
+
+    B = np.array(ca.evalf(B_T(P)), dtype=float)
+    A = np.linalg.inv(B) if B.shape[1] == 6 else np.linalg.pinv(B)
+    umin, umax = (np.broadcast_to(np.array(ca.evalf(ca.DM(x) if not isinstance(x, ca.SX) else x), dtype=float).ravel(),
+                                  (B.shape[1],)) for x in limits(P))
+
+    def reach(a):  # the largest s >= 0 with umin <= s a <= umax
+        with np.errstate(divide="ignore"):
+            up = np.where(a > 1e-15, umax / a, np.inf)
+            down = np.where(a < -1e-15, umin / a, np.inf)
+        return float(min(up.min(), down.min()))
+
+    hi = np.array([reach(A[:, k]) for k in range(6)])
+    lo = np.array([reach(-A[:, k]) for k in range(6)])
+    return lo, hi

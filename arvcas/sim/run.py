@@ -50,7 +50,7 @@ class Run:
     """The description of a closed-loop run: what to compile.
 
     ``controller``: a registered name or a :class:`~arvcas.controllers.Controller`; ``scenario``: a
-    :class:`~arvcas.sim.scenario.ScenarioConfig`, a scenario file, or None (the packaged one);
+    :class:`~arvcas.sim.scenario.ScenarioConfig`, a scenario file, or None (the system's default);
     ``params``: the system: :class:`~arvcas.params.Params`, an :class:`arvcas.system.System`, a shipped
     system's name (``arvcas systems``), a system file, or None (Haidou-1);
     ``options``: :class:`~arvcas.model.uvms.ModelOptions`.
@@ -64,11 +64,12 @@ class Run:
     def compile(self) -> "CompiledRun":
         """The compiled run. Cheap when repeated: its compiled functions are memoised per process by
         description, loaded from the compile cache on a warm start, and its time table is kept."""
-        with_law = get_controller(self.controller)
-        cfg = self.scenario if isinstance(self.scenario, ScenarioConfig) else scenario.load_scenario(self.scenario)
         from arvcas.system import resolve
 
+        with_law = get_controller(self.controller)
         params = self.params if isinstance(self.params, Params) else resolve(self.params).params
+        sc = self.scenario if self.scenario is not None else params.default("scenario")
+        cfg = sc if isinstance(sc, ScenarioConfig) else scenario.load_scenario(sc)
         if not isinstance(self.options, ModelOptions):
             raise SimulationError(f"options: expected arvcas.model.uvms.ModelOptions, got {type(self.options).__name__}")
         scenario.check_joint_limits(cfg, params)
@@ -140,7 +141,7 @@ class CompiledRun:
 
     # -- inputs ------------------------------------------------------------------------------------------
     def default_gains(self) -> np.ndarray:
-        return gains_mod.default_gains(self.controller)
+        return gains_mod.default_gains(self.controller, self.params)
 
     def gain_names(self) -> list[str]:
         return gains_mod.gain_names(self.controller)

@@ -137,6 +137,9 @@ class Checkpoint:
     artifact_key: str = ""
     model_hash: str = ""  # arvcas.build.provenance.model_hash() of the code and data that computed it
     model_changes: list = field(default_factory=list)  # resumes allowed under other code or parameters
+    system: str = ""  # the system the runs used: a shipped name or a system file ("": Haidou-1)
+    ref_chat: np.ndarray | None = None  # the objectives' per-DOF normalisation (None: Table 3's AGSTA)
+    ref_rmse: np.ndarray | None = None
     engine: str = ""
     created: str = ""
     updated: str = ""
@@ -315,6 +318,11 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
     f.attrs["versions"] = json.dumps(c.versions, sort_keys=True)
     f.attrs["model_hash"] = c.model_hash
     f.attrs["model_changes"] = json.dumps(list(c.model_changes))
+    if c.system:
+        f.attrs["system"] = c.system
+    if c.ref_chat is not None:
+        f.attrs["ref_chat"] = np.asarray(c.ref_chat, dtype=float)
+        f.attrs["ref_rmse"] = np.asarray(c.ref_rmse, dtype=float)
     v = f.create_group("variables")
     v.create_dataset("names", data=np.array(c.names, dtype=object), dtype=h5py.string_dtype())
     for k in ("lower", "upper", "table2"):
@@ -419,6 +427,9 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     kw["versions"] = _json_attr(f, "versions", path, dict)
     kw["model_hash"] = _s(f.attrs["model_hash"]) if "model_hash" in f.attrs else ""
     kw["model_changes"] = _json_attr(f, "model_changes", path, list) if "model_changes" in f.attrs else []
+    kw["system"] = _s(f.attrs["system"]) if "system" in f.attrs else ""
+    if "ref_chat" in f.attrs:
+        kw["ref_chat"], kw["ref_rmse"] = np.asarray(f.attrs["ref_chat"], float), np.asarray(f.attrs["ref_rmse"], float)
     if "population" in f:
         for k in _POP:
             kw[k] = f["population"][k][()]

@@ -41,14 +41,15 @@ class EvalTask:
     draws: tuple  # ((noise_seed, uncertainty (4,), phase (6,)), ...) resolved
     cfg: ScenarioConfig
     params: Params
+    ref: tuple | None = None  # per-DOF (chat, rmse) normalisation; None: the paper's Table 3 AGSTA
 
 
-def run_key(controller: str, cfg: ScenarioConfig) -> str:
+def run_key(controller: str, cfg: ScenarioConfig, params: Params | None = None) -> str:
     """Content hash of the compiled metrics-only run (built or loaded from the cache)."""
     from arvcas.build import codegen
-    from arvcas.sim.simulation import run_function
+    from arvcas.sim.simulation import compiled_run
 
-    m = codegen.artifact_of(run_function(controller, cfg, trace=False))
+    m = codegen.artifact_of(compiled_run(controller, params, cfg).function(False))
     return "" if m is None else str(m["key"])
 
 
@@ -74,7 +75,7 @@ def evaluate_rows(task: EvalTask, gains: np.ndarray, n_threads: int | None = Non
     rmse = np.stack([o[1] for o in outs])
     ok = np.stack([o[2] for o in outs])
     t_fail = np.stack([o[3] for o in outs])
-    return chat, rmse, ok, t_fail, run_key(task.controller, task.cfg)
+    return chat, rmse, ok, t_fail, run_key(task.controller, task.cfg, task.params)
 
 
 class LocalEngine:
@@ -90,9 +91,9 @@ class LocalEngine:
         return f"local, {self.threads} thread(s)"
 
     def prepare(self, task: EvalTask) -> str:
-        k = (task.controller, task.cfg.graph_key())
+        k = (task.controller, task.cfg.graph_key(), task.params.structure)
         if k not in self._key:
-            self._key[k] = run_key(task.controller, task.cfg)
+            self._key[k] = run_key(task.controller, task.cfg, task.params)
         return self._key[k]
 
     def evaluate(self, task: EvalTask, gains: np.ndarray):
@@ -186,16 +187,16 @@ class DaskEngine:
         """The run's key; compiles it here (once) and scatters its libraries to every worker."""
         from arvcas.sim.simulation import compiled_run
 
-        k = (task.controller, task.cfg.graph_key())
+        k = (task.controller, task.cfg.graph_key(), task.params.structure)
         if k not in self._keys:
-            self._keys[k] = run_key(task.controller, task.cfg)
-            b = ship_bundle(compiled_run(task.controller, None, task.cfg))
+            self._keys[k] = run_key(task.controller, task.cfg, task.params)
+            b = ship_bundle(compiled_run(task.controller, task.params, task.cfg))
             self._bundles[k] = self.client.scatter([b], broadcast=True, hash=False)[0]  # a list: one future
         return self._keys[k]
 
     def evaluate(self, task: EvalTask, gains: np.ndarray):
         key = self.prepare(task)
-        bundle = self._bundles[(task.controller, task.cfg.graph_key())]
+        bundle = self._bundles[(task.controller, task.cfg.graph_key(), task.params.structure)]
         n = gains.shape[0]
         n_chunks = max(1, min(n, sum(self.threads())))
         blocks = [b for b in np.array_split(np.arange(n), n_chunks) if b.size]

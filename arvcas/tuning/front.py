@@ -265,6 +265,14 @@ def plot_front(front: Front | str | Path, ax=None, **kw):
 # ---- provenance -------------------------------------------------------------------------------------
 
 
+def system_params(c: ck.Checkpoint):
+    """The parameters of the system a checkpoint's study ran on (Haidou-1's when it names none)."""
+    from arvcas.params import load
+    from arvcas.system import load_system
+
+    return load_system(c.system).params if c.system else load()
+
+
 def check_provenance(path: str | Path, params, allow: bool, what: str) -> str:
     """Refuse to re-run a front's members under other model code, data or parameters (``params``: a
     :class:`arvcas.params.Params` or its vector) than the study's: the stored numbers would not be
@@ -333,7 +341,7 @@ def replay(path: str | Path, index: int, n_threads: int | None = None):
 
     Returns the :class:`~arvcas.tuning.problem.Evaluation` of that one member (F, G, per-DOF metrics).
     """
-    from arvcas.params import Params, load as load_params
+    from arvcas.params import Params
     from arvcas.sim.scenario import loads_scenario
     from arvcas.tuning.engines import EvalTask, LocalEngine
     from arvcas.tuning.run import evaluate_gains
@@ -341,9 +349,11 @@ def replay(path: str | Path, index: int, n_threads: int | None = None):
     fr = read_front(path)
     i = _member(fr, index)
     cfg = loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)")
-    p = load_params()
+    c = ck.read_checkpoint(resolve_front_path(path))
+    p = system_params(c)
     check_provenance(fr.path, p, False, "replay")
     draws = tuple((int(s), u, ph) for s, u, ph in zip(fr.draw_seeds, fr.draw_uncertainty, fr.draw_phase))
-    task = EvalTask(controller=fr.controller, draws=draws, cfg=cfg, params=p)
+    ref = None if c.ref_chat is None else (tuple(c.ref_chat), tuple(c.ref_rmse))
+    task = EvalTask(controller=fr.controller, draws=draws, cfg=cfg, params=p, ref=ref)
     assert isinstance(p, Params)
     return evaluate_gains(LocalEngine(n_threads or 1), task, fr.gains[i][None, :])

@@ -71,8 +71,9 @@ def pymoo_F(F: np.ndarray, G: np.ndarray) -> np.ndarray:
     return out
 
 
-def assemble(chat, rmse, ok, t_fail, duration: float) -> Evaluation:
-    """Objectives and constraint from per-draw metrics (K, n, 6) and status (K, n)."""
+def assemble(chat, rmse, ok, t_fail, duration: float, ref=None) -> Evaluation:
+    """Objectives and constraint from per-draw metrics (K, n, 6) and status (K, n); ``ref``: the
+    per-DOF normalisation (:func:`arvcas.metrics.normalised_objectives`), None for Table 3's AGSTA."""
     chat, rmse = np.asarray(chat, dtype=float), np.asarray(rmse, dtype=float)
     ok, t_fail = np.asarray(ok, dtype=bool), np.asarray(t_fail, dtype=float)
     K, n = ok.shape
@@ -84,7 +85,7 @@ def assemble(chat, rmse, ok, t_fail, duration: float) -> Evaluation:
             left = [x if np.isfinite(x) else 1.0 for x in left]
             G[i, 0] = 1.0 + min(1.0, max(0.0, max(left)))
             continue
-        per_draw = [normalised_objectives(chat[d, i], rmse[d, i]) for d in range(K)]
+        per_draw = [normalised_objectives(chat[d, i], rmse[d, i], ref) for d in range(K)]
         f = per_draw[0] if K == 1 else tuple(float(np.mean([p[j] for p in per_draw])) for j in range(2))
         if not all(np.isfinite(f)):
             G[i, 0] = 2.0

@@ -43,7 +43,6 @@ from pymoo.operators.mutation.pm import PM
 from pymoo.operators.sampling.rnd import FloatRandomSampling
 
 from arvcas.build.provenance import model_hash
-from arvcas.params import load as load_params
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.engines import EngineError, EvalTask, make_engine
 from arvcas.tuning.problem import Evaluation, GainProblem, assemble, pymoo_F
@@ -172,13 +171,31 @@ def make_algorithm(study: Study, controller: str) -> NSGA2:
 def eval_task(study: Study, controller: str, params=None) -> EvalTask:
     cfg = study.scenario
     draws = tuple((d.noise_seed, *d.resolved(cfg)) for d in study.draws)
-    return EvalTask(controller=controller, draws=draws, cfg=cfg, params=params if params is not None else load_params())
+    params = params if params is not None else study.system_params()
+    return EvalTask(controller=controller, draws=draws, cfg=cfg, params=params, ref=reference(study, params, draws))
+
+
+def reference(study: Study, params, draws) -> tuple | None:
+    """The objectives' per-DOF normalisation: None (the paper's Table 3 AGSTA) for Haidou-1; for another
+    system, the AGSTA at that system's default gains on the study's first draw (docs/model.md §7: the
+    system's own AGSTA scores (1, 1))."""
+    if study.system is None:
+        return None
+    from arvcas.sim.simulation import compiled_run
+
+    seed, unc, ph = draws[0]
+    run = compiled_run("agsta", params, study.scenario)
+    chat, rmse, ok, _ = run.many(run.default_gains(), [seed], uncertainty=unc, phase=ph, n_threads=1)
+    if not ok[0]:
+        raise StudyError(f"{study.path}: evaluation.system: the AGSTA at the default gains of "
+                         f"{params.structure.name} diverges on draw 1: no normalisation for the objectives")
+    return tuple(chat[0].tolist()), tuple(rmse[0].tolist())
 
 
 def evaluate_gains(engine, task: EvalTask, gains: np.ndarray) -> Evaluation:
     """One batched evaluation of gain sets (n, n_var) through ``engine``: objectives and constraint."""
     chat, rmse, ok, t_fail = engine.evaluate(task, np.atleast_2d(np.asarray(gains, dtype=float)))
-    return assemble(chat, rmse, ok, t_fail, task.cfg.time_duration)
+    return assemble(chat, rmse, ok, t_fail, task.cfg.time_duration, task.ref)
 
 
 # ---- interruption --------------------------------------------------------------------------------
@@ -226,8 +243,20 @@ def _new_checkpoint(study: Study, controller: str, task: EvalTask) -> ck.Checkpo
         draw_seeds=np.array([d[0] for d in task.draws], dtype=np.int64),
         draw_uncertainty=np.array([d[1] for d in task.draws]), draw_phase=np.array([d[2] for d in task.draws]),
         params=task.params.vector(), reference_point=np.asarray(study.objectives.reference_point, dtype=float),
-        versions=ck.versions(), model_hash=model_hash(),
+        versions=ck.versions(), model_hash=model_hash(), system=_system_ref(study),
+        ref_chat=None if task.ref is None else np.asarray(task.ref[0]),
+        ref_rmse=None if task.ref is None else np.asarray(task.ref[1]),
     )
+
+
+def _system_ref(study: Study) -> str:
+    """How a checkpoint names the study's system: a shipped name, or the system file's absolute path."""
+    if study.system is None:
+        return ""
+    from arvcas.system import shipped
+
+    name = study.params.structure.name
+    return name if name in shipped() and Path(study.params.path) == shipped()[name] else str(Path(study.params.path).resolve())
 
 
 def _identity_diff(stored: str, current: dict) -> list[str]:
@@ -332,7 +361,7 @@ def run_study(study: Study, out: str | Path, *, controllers: tuple[str, ...] | N
                 if diff:
                     raise TuningError(f"--resume: {study.path} differs from the study in {path} in {', '.join(diff)} "
                                       f"(only [termination] and [engine] may change between sessions)")
-                changed = ck.provenance_diff(existing, (params if params is not None else load_params()).vector())
+                changed = ck.provenance_diff(existing, (params if params is not None else study.system_params()).vector())
                 if changed and not allow_model_change:
                     raise TuningError(f"--resume {path}: {'; '.join(changed)}; continuing would mix two models in "
                                       f"one front (--allow-model-change to continue anyway; the checkpoint records it)")
@@ -341,7 +370,7 @@ def run_study(study: Study, out: str | Path, *, controllers: tuple[str, ...] | N
                         f"{ck._now()}: resumed at generation {existing.n_gen} with --allow-model-change: "
                         + "; ".join(changed)]
                     existing.model_hash = model_hash()
-                    existing.params = (params if params is not None else load_params()).vector()
+                    existing.params = (params if params is not None else study.system_params()).vector()
             elif resume:
                 say(f"{c}: no checkpoint at {path}: starting the study")
             plan.append((c, path, existing))

@@ -19,7 +19,8 @@ Layout (see ``studies/*.toml`` for commented examples)::
     [termination]  max_generations | max_generations_per_variable, max_evaluations?,
                    stall_generations? with ftol?
     [objectives]   names = ["chat", "rmse"], reference_point = [f_chat, f_rmse]
-    [evaluation]   scenario? (path, relative to the study file), [[evaluation.draws]] noise_seed,
+    [evaluation]   system? (a shipped system's name or a system file; default Haidou-1), scenario? (path,
+                   relative to the study file; default the system's), [[evaluation.draws]] noise_seed,
                    uncertainty? ([C, D, g, arm] factors), phase_deg? (6 disturbance phases, deg)
     [engine]       name = "local" | "dask", threads?, scheduler?, workers?, timeout_s?
 
@@ -166,10 +167,11 @@ class Variables:
     scale: float
     bounds: tuple[tuple[str, float, float], ...] = ()  # (column or dotted gain name, lower, upper)
 
-    def resolve(self, controller: str) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
-        """(names, lower, upper, table2) for this controller, in gain units."""
+    def resolve(self, controller: str, system=None) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+        """(names, lower, upper, defaults) for this controller, in gain units: bounds around the system's
+        default gains (Haidou-1: Table 2)."""
         names = gains_mod.gain_names(controller)
-        g0 = gains_mod.default_gains(controller)
+        g0 = gains_mod.default_gains(controller, system)
         lo, hi = g0 / self.scale, g0 * self.scale
         cols = gains_mod.columns(controller)
         for key, a, b in self.bounds:  # column-wide first, then per gain (more specific wins)
@@ -199,15 +201,25 @@ class Study:
     draws: tuple[Draw, ...]
     engine: EngineConfig
     scenario: scenario_mod.ScenarioConfig = dataclasses.field(repr=False, compare=False, default=None)
-    scenario_path: str | None = None  # as written in the file (None: the packaged scenario)
+    scenario_path: str | None = None  # as written in the file (None: the system's default scenario)
     text: str = dataclasses.field(repr=False, default="")
     path: str = ""
+    system: str | None = None  # evaluation.system as written (None: Haidou-1)
+    params: object = dataclasses.field(repr=False, compare=False, default=None)  # the system's Params
+
+    def system_params(self):
+        """The parameters the study's runs use (its system's; Haidou-1's by default)."""
+        if self.params is not None:
+            return self.params
+        from arvcas.params import load
+
+        return load()
 
     def n_var(self, controller: str) -> int:
         return gains_mod.n_gains(controller)
 
     def bounds(self, controller: str):
-        return self.variables.resolve(controller)
+        return self.variables.resolve(controller, self.params if self.system is not None else None)
 
     def identity(self, controller: str) -> dict:
         """Everything that shapes the search for one controller (termination and engine excluded).
@@ -226,6 +238,7 @@ class Study:
                            "reference_point": list(self.objectives.reference_point)},
             "draws": [dataclasses.asdict(d) for d in self.draws],
             "scenario_text": self.scenario.text if self.scenario is not None else "",
+            **({"system": self.params.structure.name} if self.system is not None else {}),
         }
 
     def identity_json(self, controller: str) -> str:
@@ -257,6 +270,7 @@ class _VariablesSection:
 class _EvaluationSection:
     draws: tuple[Draw, ...] = setting(Count(1, MAX_DRAWS))
     scenario: str | None = setting(default=None)  # relative to the study file
+    system: str | None = setting(default=None)  # a shipped system's name or a system file (relative)
 
 
 @dataclass(frozen=True)
@@ -279,10 +293,22 @@ def load_study(path: str | Path) -> Study:
 def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | None = None) -> Study:
     """Validate study TOML text; ``base_dir`` resolves a relative ``evaluation.scenario`` path."""
     f = config.load_text(_StudyFile, text, where, StudyError).value
+    params = None
+    if f.evaluation.system is not None:
+        from arvcas.params import ParamsError
+        from arvcas.system import shipped, load_system
+
+        ref = f.evaluation.system
+        if ref not in shipped() and not Path(ref).is_absolute() and base_dir is not None:
+            ref = str(Path(base_dir) / ref)
+        try:
+            params = load_system(ref).params
+        except ParamsError as e:
+            raise StudyError(f"{where}: evaluation.system: {e}") from None
     # scenario first: the bounds' check on omega needs h
     scen_rel = f.evaluation.scenario
     if scen_rel is None:
-        cfg = scenario_mod.load_scenario()
+        cfg = scenario_mod.load_scenario(params.default("scenario") if params is not None else None)
     else:
         sp = Path(scen_rel)
         if not sp.is_absolute() and base_dir is not None:
@@ -292,7 +318,7 @@ def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | N
         except scenario_mod.ScenarioError as e:
             raise StudyError(f"{where}: evaluation.scenario: {e}") from None
     controllers = f.study.controllers
-    variables = _variables(f.variables, controllers, cfg, where)
+    variables = _variables(f.variables, controllers, cfg, where, params)
     per_gen = f.algorithm.population + f.algorithm.n_offspring
     config.check_memory(len(f.evaluation.draws) * per_gen * _PER_CANDIDATE_DRAW_BYTES,
                         f"the per-draw metrics of one generation ({len(f.evaluation.draws)} draws x "
@@ -301,10 +327,11 @@ def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | N
         name=f.study.name, description=f.study.description, controllers=controllers, seed=f.study.seed,
         variables=variables, algorithm=f.algorithm, termination=f.termination, objectives=f.objectives,
         draws=f.evaluation.draws, engine=f.engine, scenario=cfg, scenario_path=scen_rel, text=text, path=where,
+        system=f.evaluation.system, params=params,
     )
 
 
-def _variables(sec: _VariablesSection, controllers: tuple[str, ...], cfg, where: str) -> Variables:
+def _variables(sec: _VariablesSection, controllers: tuple[str, ...], cfg, where: str, params=None) -> Variables:
     valid: list[str] = []
     for c in controllers:
         valid += [x for x in gains_mod.columns(c) + gains_mod.gain_names(c) if x not in valid]
@@ -321,7 +348,7 @@ def _variables(sec: _VariablesSection, controllers: tuple[str, ...], cfg, where:
         bounds.append((key, a, b))
     var = Variables(scale=sec.scale, bounds=tuple(bounds))
     for c in controllers:
-        names, lo, hi, g0 = var.resolve(c)
+        names, lo, hi, g0 = var.resolve(c, params)
         for i, n in enumerate(names):
             if not lo[i] <= g0[i] <= hi[i]:
                 col = n.split(".", 1)[1]
