@@ -280,6 +280,29 @@ def _run_systems(a: argparse.Namespace) -> int:
     return 0
 
 
+# ---- knees ---------------------------------------------------------------------------------------
+
+
+def _add_knees(p: argparse.ArgumentParser) -> None:
+    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR", help="the --out directory of arvcas tune")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="where to write (created if missing)")
+
+
+def _knees_outputs(a):
+    from arvcas.experiments.knees import knee_fronts, output_files
+
+    return [(f"--out {a.out}", p) for p in output_files(a.out, [f.parent.name for f in knee_fronts(a.study_dir)])]
+
+
+def _run_knees(a: argparse.Namespace) -> int:
+    from arvcas.experiments.knees import replay_knees
+    from arvcas.io import files
+
+    files.prepare_dir(a.out, f"--out {a.out}")
+    replay_knees(a.study_dir, a.out)
+    return 0
+
+
 # ---- simulate ----------------------------------------------------------------------------------
 
 
@@ -325,6 +348,11 @@ def _run_simulate(a: argparse.Namespace) -> int:
     if a.out is not None:
         results.check_dir(a.out.parent, f"--out {a.out}")
     params = load(a.params)
+    if a.from_front is not None and a.params is None:  # the front's own system
+        from arvcas.tuning import checkpoint as ck
+        from arvcas.tuning.front import resolve_front_path, system_params
+
+        params = system_params(ck.read_checkpoint(resolve_front_path(a.from_front)))
     cfg = scenario.load_scenario(a.config if a.config is not None else params.default("scenario"))
     gains = None
     controller, seed = a.controller, a.seed
@@ -453,6 +481,8 @@ def _table() -> tuple[Command, ...]:
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
         Command("systems", "list the shipped systems (vehicle, thrusters, arm) and their files", _add_systems,
                 _run_systems),
+        Command("knees", "replay the knee of every front of a study directory: result files, figures, a table",
+                _add_knees, _run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=_knees_outputs),
         Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
                 _add_demo, _run_demo, inputs=(("params", "system"),)),
         Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
@@ -536,7 +566,7 @@ def _inputs(cmd: Command, a: argparse.Namespace) -> list[tuple[str, Path]]:
         p = getattr(a, dest, None)
         if p is None:
             continue
-        label = dest if dest in ("file", "study", "a", "b") else f"--{dest.replace('_', '-')}"
+        label = dest if dest in ("file", "study", "a", "b", "study_dir") else f"--{dest.replace('_', '-')}"
         if kind == "system":
             from arvcas.system import shipped
 

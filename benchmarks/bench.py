@@ -68,6 +68,7 @@ from arvcas.sim import closedloop, scenario, schedule, simulation
 from arvcas.controllers import gains as gains_mod
 from arvcas.model import uvms
 from arvcas.params import load as load_params
+from arvcas.sim.run import Run
 
 __all__ = ["BenchError", "Settings", "run", "write", "render_markdown", "REQUIRED_KEYS"]
 
@@ -103,6 +104,8 @@ REQUIRED_KEYS = (
     "compile.run.warm_build_s", "compile.opt_sweep.run", "compile.opt_sweep.uvms_rhs", "recommendation.opt_level",
     "startup.warm_simulate_wall_s", "startup.warm_simulate_peak_rss_mb", "startup.cold_graph_metrics_s",
     "startup.cold_graph_trace_s", "startup.cold_graph_peak_rss_mb",
+    "systems.haidou1.rtf_metrics", "systems.bluerov2_heavy_alpha5.rtf_metrics",
+    "systems.bluerov2_heavy_alpha5.instructions_per_sample",
 )
 
 
@@ -681,14 +684,14 @@ def _bench_plant(s: Settings, driver: _Driver, work: Path, P, log) -> dict:
 # 2. closed loop
 
 
-def _run_args(fn: ca.Function, g, noise, cfg, p) -> list:
+def _run_args(fn: ca.Function, g, noise, cfg, p, layout=None) -> list:
     """Arguments of a run function by input name (robust to the order of the inputs)."""
     vals = {"gains": g, "noise": noise, "unc": cfg.uncertainty, "phase": np.array(cfg.disturbance_phase),
             "ekf": getattr(cfg, "ekf_vector", None), "p": p}
     args = []
     for name in fn.name_in():
         if name in ("sched_time", "sched_arm"):
-            args.append(getattr(schedule.table(cfg, p), name.split("_")[1]))
+            args.append(getattr(schedule.table(cfg, p, layout=layout), name.split("_")[1]))
             continue
         if vals.get(name) is None:
             raise BenchError(f"run function {fn.name()}: do not know what to pass as input {name!r}")
@@ -788,6 +791,33 @@ def _bench_closed_loop(s: Settings, cfg, P, log) -> dict:
         "vm_instr_per_s": total * n_samples / t_vm["median"],
         "batch": batch,
     }
+
+
+def _bench_systems(s: Settings, log) -> dict:
+    """Each shipped system's run at its default scenario and gains, side by side in one measurement:
+    metrics-only run time, real-time factor, instructions per controller sample and per second."""
+    from arvcas.system import load_system, shipped
+
+    out = {}
+    for name in shipped():
+        log(f"systems: {name} ...")
+        sysm = load_system(name)
+        run = Run(CONTROLLER, params=sysm).compile()
+        cfg = run.cfg
+        f = run.function(trace=False)
+        args = _run_args(f, run.default_gains(), scenario.noise_sequence(cfg, 0), cfg, sysm.params.vector(),
+                         layout=sysm.layout)
+        t = _time(lambda: calls.call(f, *args), s.reps)
+        spec = closedloop.RunSpec(CONTROLLER, cfg.graph_key(), run.opts, sysm.layout)
+        ins = _step_instructions(spec, trace=False)
+        n = scenario.n_samples(cfg)
+        out[name] = {
+            "controller": CONTROLLER, "duration_s": cfg.time_duration, "n_samples": n, "substeps": cfg.substeps,
+            "n_thrusters": sysm.n_thrusters, "n_joints": sysm.n_joints, "run_metrics_s": t,
+            "rtf_metrics": cfg.time_duration / t["median"], "instructions_per_sample": ins["total"],
+            "step_calls": ins["calls"], "instr_per_s": ins["total"] * n / t["median"],
+        }
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1043,6 +1073,7 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
             ("closed_loop", lambda: _bench_closed_loop(s, cfg, P, log)),
             ("compile", lambda: _bench_compile(s, cfg, P, driver, work, log)),
             ("startup", lambda: _bench_startup(s, log)),
+            ("systems", lambda: _bench_systems(s, log)),
         ):
             m = _CpuMeter()
             t0 = time.perf_counter()
@@ -1264,5 +1295,16 @@ def render_markdown(res: dict) -> str:
           f"{_g(st['cold_graph_trace_s'])} s | <= 1.5 s |",
           f"| its peak resident memory | {_g(st['cold_graph_peak_rss_mb'])} MB | <= 500 MB |",
           "", st["note"] + "."]
+    sy = res.get("systems")
+    if sy:
+        L += ["", "## 5. Systems (issue 12)", "",
+              f"Each shipped system's run at its own default scenario and gains, controller {CONTROLLER}, metrics "
+              f"only, measured one after the other in this run.", "",
+              "| system | thrusters | joints | duration s | samples x plant steps | run s (spread) | real-time factor | "
+              "instructions / sample | instructions / s |", "|---|---|---|---|---|---|---|---|---|"]
+        for name, r in sy.items():
+            L.append(f"| {name} | {r['n_thrusters']} | {r['n_joints']} | {r['duration_s']:g} | {r['n_samples']} x "
+                     f"{r['substeps']} | {_g(_m(r['run_metrics_s']))} ({_spread(r['run_metrics_s'])}) | "
+                     f"{r['rtf_metrics']:,.0f}x | {r['instructions_per_sample']:,} | {_g(r['instr_per_s'])} |")
     L += ["", "## Recommendation", "", rec["text"], ""]
     return "\n".join(L)

@@ -178,7 +178,7 @@ def test_errors_are_one_line():
         (lambda: d(x, tau, params={"a": 1}), r"params: expected arvcas.params.Params, got dict"),
         (lambda: d(x, tau, n_threads=0), r"n_threads: expected a positive integer or None, got 0"),
         (lambda: d("abc", tau), r"x: expected an array of numbers, got str"),
-        (lambda: arvcas.dynamics("uvms_rhs", system="bluerov2"), r"system: only None .* got 'bluerov2'"),
+        (lambda: arvcas.dynamics("uvms_rhs", system="bluerov2"), r"neither a shipped system .*did you mean 'bluerov2_heavy_alpha5'"),
         (lambda: arvcas.dynamics("nope"), r"unknown function 'nope'; allowed: vehicle_rhs, arm_wrench, .*uvms_rhs_jac"),
     ]
     for call, msg in cases:
@@ -251,3 +251,22 @@ def test_dynamics_repr_and_memo():
     assert d.output_names == ("xdot",)
     assert "uvms_rhs(x[12]" in repr(d)
     assert arvcas.dynamics("uvms_rhs_jac").output_names == ("xdot", "dxdot_dx", "dxdot_dtau", "dxdot_dq")
+
+
+def test_another_system_is_sized_by_it_and_defaults_to_its_parameters():
+    """dynamics(name, system=): inputs sized by the system (q[4], u[8]), p its parameters; equal to compiled."""
+    s = arvcas.load_system("bluerov2_heavy_alpha5")
+    f = arvcas.dynamics("uvms_rhs", system=s)
+    assert f.input_sizes == (12, 6, 4, 4, 4, 1, len(s.params))
+    rng = np.random.default_rng(5)
+    x, tau, q, qd, qdd = rng.normal(size=(8, 12)) * 0.1, rng.normal(size=(8, 6)), rng.normal(size=(8, 4)), \
+        rng.normal(size=(8, 4)), rng.normal(size=(8, 4))
+    got = f(x, tau, q, qd, qdd, 0.5)
+    c = arvcas.compiled("uvms_rhs", system=s)
+    for i in range(8):
+        ref = np.array(c(x[i], tau[i], q[i], qd[i], qdd[i], 0.5, s.params.vector())).ravel()
+        np.testing.assert_allclose(got[i], ref, rtol=1e-14, atol=1e-14)
+    al = arvcas.dynamics("allocate", system="bluerov2_heavy_alpha5")
+    assert al(np.eye(6)).shape == (6, 8)
+    J = arvcas.dynamics("uvms_rhs_jac", system=s)(x[0], tau[0], q[0], qd[0], qdd[0], 0.5)
+    assert J[0].shape == (12,) and J[1].shape == (12, 12) and J[3].shape == (12, 4)

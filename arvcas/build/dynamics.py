@@ -80,28 +80,29 @@ def jacobian_functions(plant: dict[str, ca.Function]) -> dict[str, ca.Function]:
     return out
 
 
-def _sx(opts) -> dict[str, ca.Function]:
+def _sx(opts, params=None) -> dict[str, ca.Function]:
     from arvcas.model.uvms import plant_functions
 
-    tag = opts.tag()
+    lay = params.layout if params is not None else None
+    tag = (opts.tag(), None if lay is None else lay.structure)
     with _LOCK:
         if tag not in _SX:
-            fns = dict(plant_functions(opts))
+            fns = dict(plant_functions(opts, lay))
             fns.update(jacobian_functions(fns))
             _SX[tag] = fns
         return _SX[tag]
 
 
-def _compiled(name: str, opts) -> ca.Function:
+def _compiled(name: str, opts, params=None) -> ca.Function:
     from arvcas.build import codegen
 
     with _LOCK:
-        key = (name, opts.tag())
+        key = (name, opts.tag(), None if params is None else params.structure)
         if key not in _COMPILED:
             if name in JACOBIANS:
-                _COMPILED[key] = codegen.build(_sx(opts)[name])
-            else:
-                _COMPILED[key] = codegen.compiled(name, opts)  # the same Function arvcas.compiled returns
+                _COMPILED[key] = codegen.build(_sx(opts, params)[name])
+            else:  # the same Function arvcas.compiled returns
+                _COMPILED[key] = codegen.compiled(name, opts, system=params)
         return _COMPILED[key]
 
 
@@ -121,18 +122,18 @@ def _unrolled(base: ca.Function, size: int, p_batched: bool) -> ca.Function:
     return ca.Function(name, ins + [p], outs, list(base.name_in()), list(base.name_out()))
 
 
-def _map(name: str, opts, size: int, p_batched: bool) -> ca.Function:
+def _map(name: str, opts, size: int, p_batched: bool, params=None) -> ca.Function:
     """map(size) of ``name``: compiled from the SX graph for :data:`CHUNK`, else over the compiled function."""
     from arvcas.build import codegen
 
-    key = (name, opts.tag(), size, p_batched)
+    key = (name, opts.tag(), size, p_batched, None if params is None else params.structure)
     with _LOCK:
         f = _MAPS.get(key)
         if f is None:
             if size == CHUNK:
-                f = codegen.build(_unrolled(_sx(opts)[name], size, p_batched))
+                f = codegen.build(_unrolled(_sx(opts, params)[name], size, p_batched))
             else:
-                base = _compiled(name, opts)
+                base = _compiled(name, opts, params)
                 reduce_in = [] if p_batched else [base.n_in() - 1]
                 f = base.map(f"{name}_map{size}", "serial", size, reduce_in, [])
             _MAPS[key] = f
@@ -148,6 +149,12 @@ def _default_p() -> np.ndarray:
             v.setflags(write=False)
             _DEFAULT_P.append(v)
         return _DEFAULT_P[0]
+
+
+def _readonly(v) -> np.ndarray:
+    v = np.ascontiguousarray(v, dtype=float)
+    v.setflags(write=False)
+    return v
 
 
 def _pool(n: int) -> ThreadPoolExecutor:
@@ -173,10 +180,11 @@ def _first_bad(a: np.ndarray) -> str:
 class Dynamics:
     """A plant function (or Jacobian) as a NumPy function; made by :func:`dynamics`."""
 
-    def __init__(self, name: str, opts):
-        f = _compiled(name, opts)
+    def __init__(self, name: str, opts, params=None):
+        f = _compiled(name, opts, params)
         self.name = name
         self.opts = opts
+        self.params = params  # another system's (None: Haidou-1's packaged parameters)
         self._f = f
         self.function = f  # the compiled casadi.Function (codegen.artifact_of(d.function)["path"]: its library)
         self.input_names = tuple(f.name_in())
@@ -199,7 +207,7 @@ class Dynamics:
         self._n_x = int(sum(self.input_sizes[:-1]))
         self._local = threading.local()
         self.n_params = self.input_sizes[-1]
-        self._p_default = _default_p()
+        self._p_default = _default_p() if params is None else _readonly(params.vector())
         self._shapes = tuple((m,) for m in self.input_sizes)  # one evaluation's shape of each input
 
     def __repr__(self) -> str:
@@ -300,7 +308,7 @@ class Dynamics:
             f = self._f
             buf, evaluate = f.buffer()
             xin = np.zeros(self._n_x)
-            pin = np.array(_default_p() if _default_p().size == self.n_params else np.zeros(self.n_params))
+            pin = np.array(self._p_default if self._p_default.size == self.n_params else np.zeros(self.n_params))
             outs = [np.zeros(int(np.prod(s))) for s in self.output_shapes]
             xv = memoryview(xin)
             for i, off in enumerate(self._offsets):
@@ -378,7 +386,7 @@ class Dynamics:
                 start += size
                 r -= size
             size //= 2
-        fns = {s: _map(self.name, self.opts, s, p_batched) for s in {sz for _, sz in segs}}
+        fns = {s: _map(self.name, self.opts, s, p_batched, self.params) for s in {sz for _, sz in segs}}
         sizes = self.input_sizes
         todo = iter(range(len(segs)))
         lock = threading.Lock()
@@ -442,8 +450,10 @@ def dynamics(name: str, system=None, *, opts=None) -> Dynamics:
     """The plant function or Jacobian ``name`` as a NumPy function (see the module docstring).
 
     ``name``: one of ``vehicle_rhs``, ``arm_wrench``, ``uvms_rhs``, ``allocate``, ``thrust``,
-    ``vehicle_rhs_jac``, ``uvms_rhs_jac``. ``system``: only ``None`` (the Haidou-1 ARV of the packaged
-    parameters) for now. ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``).
+    ``vehicle_rhs_jac``, ``uvms_rhs_jac``. ``system``: ``None`` (the Haidou-1 ARV of the packaged
+    parameters), a shipped system's name, a system file, a System or Params: inputs are sized by it and
+    ``p`` defaults to its parameters. ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default
+    ``ModelOptions()``).
     The first call of a name compiles it (or loads it from the build cache); the first batch of a
     name compiles its map. Memoized per process.
     """
@@ -451,12 +461,15 @@ def dynamics(name: str, system=None, *, opts=None) -> Dynamics:
 
     if not isinstance(name, str) or name not in NAMES:
         raise ValueError(f"dynamics: unknown function {name!r}; allowed: {', '.join(NAMES)}")
+    params = None
     if system is not None:
-        raise ValueError(f"dynamics: system: only None (the packaged Haidou-1 ARV) is available, got {system!r}")
+        from arvcas.system import resolve
+
+        params = resolve(system).params
     opts = ModelOptions.checked(opts, "dynamics: opts")
-    key = (name, opts.tag())
+    key = (name, opts.tag(), None if params is None else (params.structure, params.vector().tobytes()))
     with _LOCK:
         d = _DYN.get(key)
         if d is None:
-            d = _DYN[key] = Dynamics(name, opts)
+            d = _DYN[key] = Dynamics(name, opts, params)
         return d

@@ -153,8 +153,9 @@ def _thrust_limits(r) -> tuple[float, float]:
     pv = r.params_vector
     if pv is None:
         pv = load_params().vector()
-    names = list(PARAM_SCHEMA)
-    return float(pv[names.index("thrusters.u_min")]), float(pv[names.index("thrusters.u_max")])
+    names = list(r.meta.get("param_names") or PARAM_SCHEMA)  # the widest limits over the thrusters
+    return (min(float(pv[i]) for i, n in enumerate(names) if n.endswith("u_min")),
+            max(float(pv[i]) for i, n in enumerate(names) if n.endswith("u_max")))
 
 
 def _same_refs(rs) -> bool:

@@ -141,11 +141,12 @@ def _collect(result: Result) -> tuple[dict[str, np.ndarray], dict[str, object]]:
     attrs["status"] = _status(result)
     if result.params_vector is not None:
         p = _vector(result, "params_vector", None, "params_vector")
-        if p.shape != (len(PARAM_SCHEMA),):
-            raise ResultsError(f"Result.params_vector: expected {len(PARAM_SCHEMA)} values "
-                               f"(arvcas.params.SCHEMA), got {p.shape}")
+        names = list(result.meta.get("param_names") or PARAM_SCHEMA)  # another system's run names its own
+        if p.shape != (len(names),):
+            raise ResultsError(f"Result.params_vector: expected {len(names)} values "
+                               f"(the system's parameter names), got {p.shape}")
         attrs["params"] = p
-        attrs["param_names"] = np.array(list(PARAM_SCHEMA), dtype=object)
+        attrs["param_names"] = np.array(names, dtype=object)
     if result.uncertainty is not None:
         attrs["uncertainty"] = _vector(result, "uncertainty", 4, "uncertainty")
     if result.phase is not None:
@@ -271,8 +272,12 @@ def _read(f: h5py.File, path: Path) -> Result:
     opt = {}
     for key, field in _ROOT_ARRAYS_OPTIONAL.items():
         opt[field] = np.array(a[key], dtype=float) if key in a else None
-    if opt["params_vector"] is not None and _strs(a["param_names"]) != list(PARAM_SCHEMA):
-        raise ResultsError(f"{path}: param_names differ from this arvcas version's parameter schema")
+    meta = json.loads(_str(a["meta"])) if "meta" in a else {}
+    if opt["params_vector"] is not None:
+        names = _strs(a["param_names"])
+        if names != list(meta.get("param_names") or PARAM_SCHEMA):
+            raise ResultsError(f"{path}: param_names differ from this arvcas version's parameter schema"
+                               f"{'' if 'system' not in meta else ' of system ' + str(meta['system'])}")
     t_fail = float(a["t_fail"])
     ok = bool(a["ok"])
     return Result(
@@ -280,6 +285,6 @@ def _read(f: h5py.File, path: Path) -> Result:
         chat=np.array(a["chat"], dtype=float), rmse=np.array(a["rmse"], dtype=float),
         ok=ok, t_fail=None if ok or math.isnan(t_fail) else t_fail,
         config_text=_str(a["config"]), h=float(a["h"]), version=_str(a["arvcas_version"]),
-        meta=json.loads(_str(a["meta"])) if "meta" in a else {},
+        meta=meta,
         **opt,
     )

@@ -205,8 +205,12 @@ class CompiledRun:
 
     def _meta(self, fn: ca.Function) -> dict:
         art = codegen.artifact_of(fn) or {}
-        return {"artifact_key": art.get("key"), "artifact_flags": art.get("flags"),
+        meta = {"artifact_key": art.get("key"), "artifact_flags": art.get("flags"),
                 "scenario_file": self.cfg.path, "casadi_version": ca.__version__, "arvcas_version": __version__}
+        st = self.params.structure
+        if st != default_layout().structure:  # another system: its name, file and parameter names
+            meta |= {"system": st.name, "system_file": self.params.path, "param_names": self.params.names()}
+        return meta
 
     def batch(self, gains, seed: int = 0, uncertainty=None, phase=None, n_threads: int | None = None,
               return_status: bool = False):

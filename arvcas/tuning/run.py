@@ -427,7 +427,8 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
         c.table2_ok, c.table2_t_fail = t2.ok[:, 0], t2.t_fail[:, 0]
         ck.write_checkpoint(c, path)
         t2txt = (f"f_chat {t2.F[0, 0]:.4g}, f_rmse {t2.F[0, 1]:.4g}" if t2.G[0, 0] <= 0 else "infeasible (diverged)")
-        say(f"{controller}: Table 2 gains on the study's draws: {t2txt}")
+        which = "Table 2 gains" if study.system is None else f"default gains of {task.params.structure.name}"
+        say(f"{controller}: {which} on the study's draws: {t2txt}")
     else:
         if c.n_gen > 0:
             _restore(alg, term, c)

@@ -1,0 +1,115 @@
+"""The knees of a study's fronts, replayed: one traced run per controller, their result files, figures
+and a table (``arvcas knees STUDY_DIR --out DIR``).
+
+Each front's knee (pymoo's pseudo-weights, :func:`arvcas.tuning.front.knee_index`) is replayed with
+its gains, the study's noise seed and scenario and the system the study ran on (the checkpoint names
+it), so the replay's CHAT and RMSE are the front member's own, bit for bit (checked here). The table
+adds the system's saturation envelope (:func:`arvcas.model.thrusters.envelope`) and each knee's
+largest thrust, so a reader sees how much of the vehicle's capacity station keeping used.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from arvcas.controllers.gains import DOFS
+
+__all__ = ["knee_fronts", "replay_knees", "output_files"]
+
+
+def knee_fronts(study_dir: str | Path) -> list[Path]:
+    """The ``front.h5`` of every controller in a study's output directory (sorted by name)."""
+    d = Path(study_dir)
+    fronts = sorted(d.glob("*/front.h5"))
+    if not fronts:
+        raise ValueError(f"{d}: no <controller>/front.h5 in this directory (the --out of arvcas tune)")
+    return fronts
+
+
+def output_files(out: str | Path, controllers) -> list[Path]:
+    out = Path(out)
+    return ([out / f"knee_{c}.h5" for c in controllers]
+            + [out / n for n in ("knees.md", "knees_states.png", "knees_errors.png", "knees_thrust.png")])
+
+
+def replay_knees(study_dir: str | Path, out: str | Path, say=print) -> dict:
+    """Replay every front's knee; write ``knee_<controller>.h5``, ``knees.md`` and three figures."""
+    from arvcas.io import files, results
+    from arvcas.io.plots import plot_errors, plot_states
+    from arvcas.model import thrusters
+    from arvcas.params import view
+    from arvcas.sim.scenario import loads_scenario
+    from arvcas.sim.simulation import simulate
+    from arvcas.tuning import checkpoint as ck
+    from arvcas.tuning.front import member_gains, read_front, system_params
+
+    out = Path(out)
+    rows, runs = [], []
+    system = None
+    for path in knee_fronts(study_dir):
+        fr = read_front(path)
+        k = fr.knee()
+        c = ck.read_checkpoint(path)
+        params = system_params(c)
+        system = params
+        controller, gains, seed, cfg_text = member_gains(path, k)
+        cfg = loads_scenario(cfg_text, f"{path} (study scenario)")
+        r = simulate(controller, gains=gains, seed=seed, params=params, cfg=cfg)
+        if not (np.array_equal(r.chat, fr.chat[0, k]) and np.array_equal(r.rmse, fr.rmse[0, k])):
+            raise RuntimeError(f"{path}: the knee's replay does not reproduce its stored CHAT/RMSE "
+                               f"(max difference {np.abs(r.chat - fr.chat[0, k]).max():.3g}); the model changed?")
+        r.meta["front"], r.meta["front_index"] = str(path), int(k)
+        dest = results.write_result(r, out / f"knee_{controller}.h5")
+        say(f"{controller}: knee {k} of {fr.size}, F = ({fr.F[k, 0]:.4g}, {fr.F[k, 1]:.4g}); wrote {dest}")
+        rows.append((controller, k, fr.size, fr.F[k], r))
+        runs.append(r)
+    lo, hi = thrusters.envelope(view(system))
+    files.write_figure(out / "knees_states.png", plot_states(runs))
+    files.write_figure(out / "knees_errors.png", plot_errors(runs))
+    files.write_figure(out / "knees_thrust.png", _thrust_figure(runs))
+    files.write_text(out / "knees.md", _table(rows, system, lo, hi))
+    return {c: r for c, *_, r in rows}
+
+
+def _thrust_figure(runs):
+    """Thrust of every thruster (one panel per run: the vehicle may have any number of thrusters)."""
+    from matplotlib.figure import Figure
+
+    from arvcas.io.plots import controller_label
+
+    fig = Figure(figsize=(8.0, 2.4 * len(runs)), layout="constrained")
+    axes = fig.subplots(len(runs), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, r in zip(axes, runs):
+        u = np.asarray(r.thrust)
+        for j in range(u.shape[1]):
+            ax.plot(r.t, u[:, j], lw=0.8, label=f"T{j + 1}")
+        ax.set_title(controller_label(r.controller), fontsize="medium")
+        ax.set_ylabel("thrust (N)")
+        ax.legend(fontsize="x-small", ncol=min(8, u.shape[1]), loc="upper right")
+    axes[-1].set_xlabel("t (s)")
+    fig.suptitle("Thrust per thruster at each front's knee")
+    return fig
+
+
+def _table(rows, params, lo, hi) -> str:
+    name = params.structure.name
+    L = [f"# Knees of the fronts: {name}", "",
+         "Each front's knee (pymoo pseudo-weights 0.5/0.5) replayed with its gains, the study's noise seed and "
+         "scenario; the replay reproduces the member's stored CHAT and RMSE bit for bit.", "",
+         "| controller | knee | f_chat | f_rmse | " + " | ".join(f"CHAT {d}" for d in DOFS) + " | "
+         + " | ".join(f"RMSE {d}" for d in DOFS) + " | max thrust N |",
+         "|---|---|---|---|" + "---|" * 12 + "---|"]
+    for controller, k, n, F, r in rows:
+        L.append(f"| {controller} | {k} of {n} | {F[0]:.4g} | {F[1]:.4g} | "
+                 + " | ".join(f"{x:.4g}" for x in r.chat) + " | " + " | ".join(f"{x:.4g}" for x in r.rmse)
+                 + f" | {np.abs(r.thrust).max():.3g} |")
+    L += ["", "CHAT in N (x, y, z) and N m (phi, theta, psi) per sample; RMSE in m and rad.", "",
+          f"Saturation envelope of {name} (pure-axis capacity of the allocation within every thruster's limits, "
+          "`arvcas.model.thrusters.envelope`):", "",
+          "| | " + " | ".join(DOFS) + " |", "|---|" + "---|" * 6,
+          "| negative | " + " | ".join(f"{-x:.4g}" for x in lo) + " |",
+          "| positive | " + " | ".join(f"{x:.4g}" for x in hi) + " |", "",
+          "N for x, y, z; N m for phi, theta, psi."]
+    return "\n".join(L) + "\n"
