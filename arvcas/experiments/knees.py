@@ -66,8 +66,10 @@ def replay_knees(study_dir: str | Path, out: str | Path, say=print) -> dict:
         rows.append((controller, k, fr.size, fr.F[k], r))
         runs.append(r)
     lo, hi = thrusters.envelope(view(system))
-    files.write_figure(out / "knees_states.png", plot_states(runs))
-    files.write_figure(out / "knees_errors.png", plot_errors(runs))
+    name = system.structure.name
+    files.write_figure(out / "knees_states.png", plot_states(runs, title=f"Vehicle states at the fronts' knees ({name})"))
+    files.write_figure(out / "knees_errors.png",
+                       plot_errors(runs, title=rf"State errors $e = \eta - y_1$ at the fronts' knees ({name})"))
     files.write_figure(out / "knees_thrust.png", _thrust_figure(runs))
     files.write_text(out / "knees.md", _table(rows, system, lo, hi))
     return {c: r for c, *_, r in rows}

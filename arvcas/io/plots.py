@@ -168,14 +168,14 @@ def _same_refs(rs) -> bool:
 # Figures 5-11
 
 
-def plot_states(results, fig: Figure | None = None) -> Figure:
+def plot_states(results, fig: Figure | None = None, title: str = "Vehicle states during station-keeping (Fig. 5)") -> Figure:
     """Figure 5: eta (solid, one line per run) and the ATD reference y1 (dashed) per DOF.
 
     Runs sharing one seed have the same reference (y1 starts at the EKF's first estimate); it is then
     drawn once, in black, else once per run in the run's colour. Units m and rad, frame {n}.
     """
     rs = _as_list(results)
-    fig, axes = _six(fig, "Vehicle states during station-keeping (Fig. 5)")
+    fig, axes = _six(fig, title)
     shared = _same_refs(rs)
     for i, ax in enumerate(axes):
         for j, r in enumerate(rs):
@@ -190,10 +190,10 @@ def plot_states(results, fig: Figure | None = None) -> Figure:
     return fig
 
 
-def plot_errors(results, fig: Figure | None = None) -> Figure:
+def plot_errors(results, fig: Figure | None = None, title: str = r"State errors $e = \eta - y_1$ (Fig. 6)") -> Figure:
     """Figure 6: tracking error e = eta - eta_ref per DOF (m, rad; {n}), one line per run."""
     rs = _as_list(results)
-    fig, axes = _six(fig, r"State errors $e = \eta - y_1$ (Fig. 6)")
+    fig, axes = _six(fig, title)
     for i, ax in enumerate(axes):
         for j, r in enumerate(rs):
             k = _valid(r)

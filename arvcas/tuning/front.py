@@ -81,6 +81,7 @@ class Front:
     scenario_text: str
     study_text: str
     versions: dict
+    system: str = ""  # the study's system ("": Haidou-1, objectives normalised by the paper's Table 3)
 
     @property
     def size(self) -> int:
@@ -118,7 +119,7 @@ def read_front(path: str | Path) -> Front:
         table2_G=c.table2_G if c.table2_G is not None else np.full(1, np.nan),
         reference_point=c.reference_point, history=c.history, seed=c.seed, draw_seeds=c.draw_seeds,
         draw_uncertainty=c.draw_uncertainty, draw_phase=c.draw_phase, scenario_text=c.scenario_text,
-        study_text=c.study_text, versions=c.versions,
+        study_text=c.study_text, versions=c.versions, system=c.system,
     )
 
 
@@ -240,13 +241,14 @@ def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bo
                     label=f"{lab}: knee ({fr.F[k, 0]:.3g}, {fr.F[k, 1]:.3g})")
         if np.isfinite(fr.table2_F).all():
             ax.plot(fr.table2_F[0], fr.table2_F[1], "*", color=col, ms=15, mec="k", mew=0.8,
-                    label=f"{lab}: Table 2 gains, same draw(s)")
+                    label=f"{lab}: {'default' if fr.system else 'Table 2'} gains, same draw(s)")
     if paper:
         a, p = _paper_points()
         ax.plot(*a, "s", mfc="none", mec="0.3", ms=8, label="paper Table 3 AGSTA (their simulator)")
         ax.plot(*p, "^", mfc="none", mec="0.3", ms=8, label="paper Table 3 proposed (their simulator)")
-    ax.set_xlabel("f_chat: mean CHAT / paper's AGSTA CHAT")
-    ax.set_ylabel("f_rmse: mean RMSE / paper's AGSTA RMSE")
+    norm = "paper's AGSTA" if not any(fr.system for fr in fronts) else "AGSTA at the system's default gains"
+    ax.set_xlabel(f"f_chat: mean CHAT / {norm} CHAT")
+    ax.set_ylabel(f"f_rmse: mean RMSE / {norm} RMSE")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.grid(True, which="both", alpha=0.3)
