@@ -358,3 +358,54 @@ def test_indefinite_link_inertia_refused(tmp_path):
     arm = ua.bad_urdf(ua.random_arm(np.random.default_rng(83), 3), "not_pd")
     msg = _load_error(tmp_path, arm)
     assert "link2" in msg and "inertia" in msg, msg
+
+
+# ---- 4. the shipped BlueROV2's arm (written in the file, chain form) ------------------------------------
+
+
+def _chain_urdf(v: dict, n: int) -> str:
+    """The chain-form arm of a loaded system, written as URDF (the reference reads it with Pinocchio)."""
+    vec = lambda k: np.array([v[f"{k}.{c}"] for c in "xyz"])  # noqa: E731
+    links = [ua.LinkSpec("base_link")]
+    joints = []
+    for i in range(1, n + 1):
+        ks = [f"arm.link{i}.inertia.{e}" for e in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")]
+        ixx, iyy, izz, ixy, ixz, iyz = (v[k] for k in ks)
+        I = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+        links.append(ua.LinkSpec(f"link{i}", v[f"arm.link{i}.mass"], vec(f"arm.link{i}.com"), np.zeros(3), I))
+        j = f"arm.joint{i}"
+        joints.append(ua.JointSpec(f"joint{i}", "revolute", "base_link" if i == 1 else f"link{i - 1}", f"link{i}",
+                                   np.array([v[j + ".x"], v[j + ".y"], v[j + ".z"]]),
+                                   np.array([v[j + ".roll"], v[j + ".pitch"], v[j + ".yaw"]]), vec(j + ".axis"),
+                                   v[j + ".qmin"], v[j + ".qmax"]))
+    links.append(ua.LinkSpec("tool_link"))
+    joints.append(ua.JointSpec("tool", "fixed", f"link{n}", "tool_link",
+                               np.array([v["arm.tool.x"], v["arm.tool.y"], v["arm.tool.z"]]), np.zeros(3)))
+    return ua.urdf_text("chain", links, joints)
+
+
+def test_bluerov2_arm_matches_pinocchio_dry():
+    """The shipped BlueROV2 + Alpha 5 (mount rotation, full link tensors off the joint axes): arm_wrench
+    at rho = 0 against Pinocchio built from its arm written as URDF, to 1e-9 relative."""
+    system = arvcas.load_system("bluerov2_heavy_alpha5")
+    dry = _dry(system.params)
+    v = _values(dry)
+    n = system.n_joints
+    I_o = np.array([[v["vehicle.Ixx"], -v["vehicle.Ixy"], -v["vehicle.Ixz"]],
+                    [-v["vehicle.Ixy"], v["vehicle.Iyy"], -v["vehicle.Iyz"]],
+                    [-v["vehicle.Ixz"], -v["vehicle.Iyz"], v["vehicle.Izz"]]])
+    mount = [v[f"arm.mount.{k}"] for k in ("x", "y", "z")], [v[f"arm.mount.{k}"] for k in ("roll", "pitch", "yaw")]
+    ref = pu.build(_chain_urdf(v, n), *mount, v["vehicle.m"], I_o,
+                   [v["vehicle.xG"], v["vehicle.yG"], v["vehicle.zG"]], g=v["env.g"])
+    f_arm = arvcas.compiled("arm_wrench", system=system)
+    qmin = np.array([v[f"arm.joint{i}.qmin"] for i in range(1, n + 1)])
+    qmax = np.array([v[f"arm.joint{i}.qmax"] for i in range(1, n + 1)])
+    rng = np.random.default_rng(77)
+    worst = 0.0
+    for k in range(N_STATES):
+        s = _state(rng, qmin, qmax)
+        payload = (0.0, 1.0)[k % 2]
+        got = _call(f_arm, *s, payload, dry.vector())
+        want = pu.arm_wrench_on_vehicle(ref, *s, payload_mass=payload * v["payload.mass"])
+        worst = max(worst, _rel(got, want))
+    assert worst < RTOL, f"max relative error {worst:.3e}"
