@@ -225,23 +225,36 @@ def _quintic(t: float, q0, qg, t0: float, t1: float):
 def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 25.0, dt: float = 1.0):
     """Coupling wrench tau_m (N, N m; in {b} about the COB) along the demo arm motion.
 
-    The arm moves from q0 = [90, 90, -90, 0, 90, 0] deg to qg = [60, 60, -60, 0, 60, 0] deg by a
-    quintic over 5..20 s; the vehicle is at rest and level, payload 0. Returns rows (t, Fx..Mz).
+    Haidou-1: the arm moves from q0 = [90, 90, -90, 0, 90, 0] deg to qg = [60, 60, -60, 0, 60, 0] deg by
+    a quintic over 5..20 s; another system: the arm motion of its default scenario. The vehicle is at
+    rest and level, payload 0. Returns rows (t, Fx..Mz).
     """
+    import casadi as ca
     import numpy as np
 
     from arvcas.build.codegen import compiled
-    from arvcas.params import load
+    from arvcas.params import default_layout, load, view
 
-    p = load(params_path).vector()
-    f = compiled("arm_wrench", _model_options(n_quad))
-    q0 = [math.radians(v) for v in _Q0_DEG]
-    qg = [math.radians(v) for v in _QG_DEG]
+    params = load(params_path)
+    p = params.vector()
+    f = compiled("arm_wrench", _model_options(n_quad), system=params)
     z6 = np.zeros(6)
+    if params.structure == default_layout().structure:
+        q0 = [math.radians(v) for v in _Q0_DEG]
+        qg = [math.radians(v) for v in _QG_DEG]
+        traj = lambda t: _quintic(t, q0, qg, 5.0, 20.0)  # noqa: E731
+    else:
+        from arvcas.model.manipulator import stow_pose
+        from arvcas.sim import scenario
+
+        cfg = scenario.load_scenario(params.default("scenario"))
+        ts = ca.SX.sym("t")
+        fq = ca.Function("q", [ts], list(scenario.joint_trajectory(cfg, stow_pose(view(p, params.layout)), ts)))
+        traj = lambda t: [np.array(x).ravel() for x in fq(t)]  # noqa: E731
     rows = []
     for k in range(int(round(t_end / dt)) + 1):
         t = k * dt
-        q, qd, qdd = _quintic(t, q0, qg, 5.0, 20.0)
+        q, qd, qdd = traj(t)
         tau_m = np.asarray(f(z6, z6, z6, q, qd, qdd, 0.0, p)).ravel()
         rows.append((t, *tau_m))
     return rows
@@ -252,9 +265,16 @@ def _add_demo(p: argparse.ArgumentParser) -> None:
 
 
 def _run_demo(a: argparse.Namespace) -> int:
+    from arvcas.params import load
+
     rows = demo_table(a.params, a.n_quad)
+    params = load(a.params)
     print("coupling wrench tau_m of the arm on the vehicle ({b}, about the COB), vehicle at rest and level,")
-    print("arm q0 = [90 90 -90 0 90 0] deg -> qg = [60 60 -60 0 60 0] deg by a quintic over 5..20 s, payload 0")
+    if a.params is None or params.structure.name == "haidou1":
+        print("arm q0 = [90 90 -90 0 90 0] deg -> qg = [60 60 -60 0 60 0] deg by a quintic over 5..20 s, payload 0")
+    else:
+        print(f"{params.structure.name}: the arm motion of its default scenario ({params.default('scenario').name}), "
+              f"payload 0")
     cols = ("t [s]", "Fx [N]", "Fy [N]", "Fz [N]", "Mx [N m]", "My [N m]", "Mz [N m]")
     print("".join(f"{c:>12}" for c in cols))
     for r in rows:

@@ -38,21 +38,48 @@ def write_result_dir(out_dir, stem: str, result, write_h5, markdown, plot, dpi: 
     return written
 
 
-def stored_inputs(path, config_text: str, params_vector, error: type[ValueError] = ResultsError):
+def stored_inputs(path, config_text: str, params_vector, error: type[ValueError] = ResultsError, system: str = ""):
     """The scenario and parameters a result file at ``path`` stores, for re-running it.
 
-    ``config_text``: the stored scenario file; ``params_vector``: the parameter values in schema order
-    (``error`` is raised when they do not fit this version's schema). Returns ``(cfg, params)``.
+    ``config_text``: the stored scenario file; ``params_vector``: the parameter values in the order of
+    the system's parameters (``error`` is raised when they do not fit); ``system``: the stored system
+    (a shipped name or a system file; "" for Haidou-1). Returns ``(cfg, params)``.
     """
-    from arvcas.params import SCHEMA as PARAM_SCHEMA, load as load_params
+    from arvcas.params import load as load_params
     from arvcas.sim import scenario
+    from arvcas.system import load_system
 
     cfg = scenario.loads_scenario(config_text, f"{path} (stored scenario)")
-    names = list(PARAM_SCHEMA)
+    base = load_system(system).params if system else load_params()
+    names = base.names()
     if params_vector.shape != (len(names),):
-        raise error(f"{path}: stored params do not match this arvcas version's parameter schema")
-    params = load_params().replace(dict(zip(names, params_vector.tolist())))
+        raise error(f"{path}: stored params do not match the parameters of system {base.structure.name}")
+    params = base.replace(dict(zip(names, params_vector.tolist())))
     return cfg, params
+
+
+def system_ref(params) -> str:
+    """How a result file names the system of ``params``: "" for Haidou-1, a shipped name, or the file."""
+    from arvcas.params import default_layout
+    from arvcas.system import shipped
+
+    st = params.structure
+    if st == default_layout().structure:
+        return ""
+    ships = shipped()
+    return st.name if st.name in ships and Path(params.path) == ships[st.name] else str(Path(params.path).resolve())
+
+
+def system_reference(params, cfg) -> tuple | None:
+    """The objectives' per-DOF normalisation for another system: its AGSTA at its default gains on noise
+    seed 0 with the scenario's factors and phases (docs/model.md §8); None for Haidou-1 (Table 3)."""
+    if not system_ref(params):
+        return None
+    from arvcas.sim.simulation import compiled_run
+
+    run = compiled_run("agsta", params, cfg)
+    chat, rmse, ok, _ = run.many(run.default_gains(), [0], n_threads=1)
+    return (tuple(chat[0]), tuple(rmse[0])) if ok[0] else None
 
 
 def provenance() -> dict[str, str]:

@@ -84,7 +84,8 @@ def add_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--noise-scale", type=float, default=None, metavar="X",
                    help="multiply the sensor noise by X (0: perfect measurements, the EKF unchanged; default 1)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
-    p.add_argument("--params", type=Path, default=None, metavar="FILE", help="parameter file (default: packaged)")
+    p.add_argument("--system", "--params", dest="params", type=Path, default=None, metavar="NAME|FILE",
+                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
     p.add_argument("--check", type=Path, default=None, metavar="FILE.h5",
                    help="re-run a stored sweep from its file alone and compare bit for bit (no other option)")
 
@@ -137,7 +138,8 @@ def run_sweep(a: argparse.Namespace) -> int:
         _new, diff = reproduce_sweep(a.check)
         return _report_check(a.check, diff, "chat, rmse, ok, t_fail, zigzag measures, k1 series")
     _io.prepare_dir(a.out, f"--out {a.out}")
-    params, cfg = load(a.params), scenario.load_scenario(a.config)
+    params = load(a.params)
+    cfg = scenario.load_scenario(a.config if a.config is not None else params.default("scenario"))
     sw = run_sweep(a.h, a.controllers or CONTROLLERS, a.seeds or [0], cfg=cfg, params=params,
                    noise_scale=1.0 if a.noise_scale is None else a.noise_scale, progress=_say)
     files = write_sweep_dir(sw, a.out)
@@ -159,7 +161,8 @@ def add_montecarlo(p: argparse.ArgumentParser) -> None:
     p.add_argument("--spread", type=float, default=None,
                    help="half-width of the nominal-model factors' uniform draw around 1 (default 0.3: +-30 %%)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
-    p.add_argument("--params", type=Path, default=None, metavar="FILE", help="parameter file (default: packaged)")
+    p.add_argument("--system", "--params", dest="params", type=Path, default=None, metavar="NAME|FILE",
+                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
     p.add_argument("--from-front", type=Path, default=None, metavar="FRONT",
                    help="use the gains of a tuning front member (with --index)")
     p.add_argument("--index", default=None, help="front member: an integer, or 'knee'")
@@ -225,7 +228,7 @@ def run_montecarlo(a: argparse.Namespace) -> int:
         return 0
     out = _io.target(a.out, f"--out {a.out}")
     params = load(a.params)
-    cfg = scenario.load_scenario(a.config)
+    cfg = scenario.load_scenario(a.config if a.config is not None else params.default("scenario"))
     changed = None
     controller, gains, source, front_path = a.controller, None, None, None
     if a.from_front is not None:

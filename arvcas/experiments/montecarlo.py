@@ -153,8 +153,9 @@ class MonteCarlo:
     def objectives(self) -> np.ndarray:
         """docs/model.md §7 normalised (f_chat, f_rmse) per run, shape (runs, 2) (NaN for diverged runs)."""
         out = np.full((self.runs, 2), np.nan)
+        ref = self.meta.get("reference")
         for i in np.flatnonzero(self.ok):
-            out[i] = metrics.normalised_objectives(self.chat[i], self.rmse[i])
+            out[i] = metrics.normalised_objectives(self.chat[i], self.rmse[i], ref)
         return out
 
 
@@ -170,7 +171,7 @@ def run_montecarlo(controller: str, runs: int, seed: int = 0, gains=None, spread
     d = draw(runs, seed, spread)
     cfg = cfg if cfg is not None else scenario.load_scenario()
     params = params if params is not None else load_params()
-    g = gains_mod.default_gains(controller) if gains is None else np.asarray(gains, dtype=float)
+    g = gains_mod.default_gains(controller, params) if gains is None else np.asarray(gains, dtype=float)
     g = gains_mod.check_gains(controller, g, h=cfg.time_h)
     if g.ndim != 1:
         raise ValueError(f"gains: a Monte Carlo study takes one gain vector, got shape {g.shape}")
@@ -186,9 +187,15 @@ def run_montecarlo(controller: str, runs: int, seed: int = 0, gains=None, spread
                                        phase=d.phase[a:b], params=params, cfg=cfg, n_threads=n_threads, opts=opts)
         chat[a:b], rmse[a:b], ok[a:b], t_fail[a:b] = c_, r_, o_, t_
     src = gains_source if gains_source is not None else ("Table 2" if gains is None else "given")
-    art = codegen.artifact_of(run_function(controller, cfg, trace=False, opts=opts)) or {}
+    from arvcas.sim.simulation import compiled_run
+
+    art = codegen.artifact_of(compiled_run(controller, params, cfg, opts).function(False)) or {}
+    meta = {"artifact_key": str(art.get("key", "")), "scenario_file": cfg.path}
+    sysref = _io.system_ref(params)
+    if sysref:  # another system: its name and its objectives' normalisation (docs/model.md §8)
+        meta |= {"system": sysref, "param_names": params.names(), "reference": _io.system_reference(params, cfg)}
     return MonteCarlo(controller, g, d, chat, rmse, ok, t_fail, cfg.to_toml(), params.vector(), cfg.time_h,
-                      n_quad, src, meta={"artifact_key": str(art.get("key", "")), "scenario_file": cfg.path})
+                      n_quad, src, meta=meta)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -208,7 +215,8 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
         "gains_source": mc.gains_source, "master_seed": int(d.master_seed), "runs": int(d.runs),
         "spread": float(d.spread), "draw_rule": DRAW_RULE,
         "config": mc.config_text, "h": float(mc.h), "n_quad": int(mc.n_quad),
-        "params": np.asarray(mc.params_vector, float), "param_names": np.array(list(PARAM_SCHEMA), dtype=object),
+        "params": np.asarray(mc.params_vector, float),
+        "param_names": np.array(list(mc.meta.get("param_names") or PARAM_SCHEMA), dtype=object),
         "dofs": np.array(DOFS, dtype=object),
         "chat_units": "N (x, y, z), N m (phi, theta, psi) per controller sample; eq. 42",
         "rmse_units": "m (x, y, z), rad (phi, theta, psi); eq. 43",
@@ -217,6 +225,11 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
         "front_path": str(mc.meta.get("front_path", "")),
         **_io.provenance(),
     }
+    if mc.meta.get("system"):  # another system: its name and the objectives' normalisation
+        attrs["system"] = str(mc.meta["system"])
+        ref = mc.meta.get("reference")
+        if ref is not None:
+            attrs["ref_chat"], attrs["ref_rmse"] = np.asarray(ref[0], float), np.asarray(ref[1], float)
 
     def fill(tmp: Path) -> None:
         with h5py.File(tmp, "w") as f:
@@ -266,8 +279,11 @@ def read_montecarlo(path) -> MonteCarlo:
             t_fail=arrays["t_fail"].astype(float), config_text=_io.str_attr(a["config"]),
             params_vector=np.array(a["params"], float), h=float(a["h"]), n_quad=int(a["n_quad"]),
             gains_source=_io.str_attr(a["gains_source"]),
-            meta={k: _io.str_attr(a[k]) for k in ("arvcas_version", "casadi_version", "numpy_version", "created",
-                                                  "artifact_key", "scenario_file", "front_path") if k in a},
+            meta={**{k: _io.str_attr(a[k]) for k in ("arvcas_version", "casadi_version", "numpy_version", "created",
+                                                     "artifact_key", "scenario_file", "front_path", "system") if k in a},
+                  **({"param_names": [_io.str_attr(x) for x in a["param_names"]],
+                      "reference": (tuple(np.array(a["ref_chat"], float)), tuple(np.array(a["ref_rmse"], float)))
+                      if "ref_chat" in a else None} if "system" in a else {})},
         )
     except KeyError as e:
         raise ResultsError(f"{path}: damaged file: missing {e}") from None
@@ -281,7 +297,7 @@ def reproduce(path, n_threads: int | None = None) -> tuple[MonteCarlo, list[str]
     Returns the new study and the list of fields that differ from the file (empty: bit for bit).
     """
     old = read_montecarlo(path)
-    cfg, params = _io.stored_inputs(path, old.config_text, old.params_vector, ResultsError)
+    cfg, params = _io.stored_inputs(path, old.config_text, old.params_vector, ResultsError, old.meta.get("system", ""))
     new = run_montecarlo(old.controller, old.runs, old.draws.master_seed, gains=old.gains, spread=old.draws.spread,
                          cfg=cfg, params=params, n_quad=old.n_quad, n_threads=n_threads, gains_source=old.gains_source)
     diff = []

@@ -103,8 +103,9 @@ class Sweep:
     def objectives(self) -> np.ndarray:
         """docs/model.md §7 (f_chat, f_rmse), shape [controller, h, seed, 2]; NaN for diverged runs."""
         out = np.full(self.ok.shape + (2,), np.nan)
+        ref = self.meta.get("reference")
         for idx in zip(*np.nonzero(self.ok)):
-            out[idx] = metrics.normalised_objectives(self.chat[idx], self.rmse[idx])
+            out[idx] = metrics.normalised_objectives(self.chat[idx], self.rmse[idx], ref)
         return out
 
 
@@ -150,7 +151,7 @@ def run_sweep(hs: Sequence[float], controllers: Sequence[str] = CONTROLLERS, see
         raise ValueError(f"--seeds: give non-negative integers, got {seeds}")
     if not (isinstance(noise_scale, (int, float)) and math.isfinite(noise_scale) and noise_scale >= 0):
         raise ValueError(f"--noise-scale: must be a finite number >= 0, got {noise_scale!r}")
-    G = {c: np.asarray((gains or {}).get(c, gains_mod.default_gains(c)), dtype=float) for c in controllers}
+    G = {c: np.asarray((gains or {}).get(c, gains_mod.default_gains(c, params)), dtype=float) for c in controllers}
     for c in controllers:  # RESO stability at every h before anything runs
         for cf in cfgs:
             gains_mod.check_gains(c, G[c], h=cf.time_h, where=f"gains of {c} at h = {cf.time_h:g}")
@@ -177,8 +178,12 @@ def run_sweep(hs: Sequence[float], controllers: Sequence[str] = CONTROLLERS, see
                     t_fail[i, j, m] = r.t_fail
                 if m == 0:
                     k1_0[c].append(np.asarray(r.k1, dtype=float))
+    meta = {}
+    sysref = _io.system_ref(params)
+    if sysref:  # another system: its name and its objectives' normalisation (docs/model.md §8)
+        meta = {"system": sysref, "param_names": params.names(), "reference": _io.system_reference(params, cfg)}
     return Sweep(hs, controllers, seeds, G, chat, rmse, ok, t_fail, zz["reversals"], zz["rises_inside"],
-                 zz["amplitude"], k1_0, cfg.to_toml(), params.vector(), float(noise_scale))
+                 zz["amplitude"], k1_0, cfg.to_toml(), params.vector(), float(noise_scale), meta)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -205,7 +210,11 @@ def write_sweep(sw: Sweep, path) -> Path:
             a["noise_scale"] = float(sw.noise_scale)
             a["h_plant"] = scenario.loads_scenario(sw.config_text).time_h_plant if sw.config_text else float("nan")
             a["params"] = np.asarray(sw.params_vector, float)
-            a["param_names"] = np.array(list(PARAM_SCHEMA), dtype=object)
+            a["param_names"] = np.array(list(sw.meta.get("param_names") or PARAM_SCHEMA), dtype=object)
+            if sw.meta.get("system"):
+                a["system"] = str(sw.meta["system"])
+                if sw.meta.get("reference") is not None:
+                    a["ref_chat"], a["ref_rmse"] = (np.asarray(x, float) for x in sw.meta["reference"])
             a["zigzag_definition"] = __doc__.split("Zigzag of k1", 1)[1].split("Totals are", 1)[0].strip()
             for k, v in _io.provenance().items():
                 a[k] = v
@@ -238,7 +247,10 @@ def read_sweep(path) -> Sweep:
             k1_seed0={c: [np.array(f[f"k1/{c}/{j}"][()]) for j in range(len(hs))] for c in ctrls},
             config_text=_io.str_attr(a["config"]), params_vector=np.array(a["params"], float),
             noise_scale=float(a["noise_scale"]),
-            meta={k: _io.str_attr(a[k]) for k in ("arvcas_version", "casadi_version", "created") if k in a},
+            meta={**{k: _io.str_attr(a[k]) for k in ("arvcas_version", "casadi_version", "created", "system") if k in a},
+                  **({"param_names": [_io.str_attr(x) for x in a["param_names"]],
+                      "reference": (tuple(np.array(a["ref_chat"], float)), tuple(np.array(a["ref_rmse"], float)))
+                      if "ref_chat" in a else None} if "system" in a else {})},
         )
     finally:
         f.close()
@@ -248,7 +260,7 @@ def reproduce_sweep(path) -> tuple[Sweep, list[str]]:
     """Re-run the sweep stored in ``path`` from its stored configuration (scenario, parameters, gains,
     periods, seeds, noise scale); returns the new sweep and the fields that differ (empty: bit for bit)."""
     old = read_sweep(path)
-    cfg, params = _io.stored_inputs(path, old.config_text, old.params_vector, ValueError)
+    cfg, params = _io.stored_inputs(path, old.config_text, old.params_vector, ValueError, old.meta.get("system", ""))
     new = run_sweep(old.hs, old.controllers, old.seeds, cfg=cfg, params=params, gains=old.gains,
                     noise_scale=old.noise_scale)
     diff = [k for k in _ARRAYS if not np.array_equal(getattr(new, k), getattr(old, k), equal_nan=k != "ok")]
