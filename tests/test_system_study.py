@@ -75,3 +75,16 @@ def test_simulate_from_front_takes_the_fronts_system(study_dir, capsys):
     front = study_dir / "out" / "proposed"
     assert cli.main(["simulate", "--from-front", str(front), "--index", "0"]) == 0
     assert "proposed: seed 1, 20 s, ok" in capsys.readouterr().out
+
+
+def test_montecarlo_on_another_system_reproduces_from_its_file(study_dir):
+    """`arvcas montecarlo --system ...` stores its system; `--check` re-runs it bit for bit."""
+    out = study_dir / "mc.h5"
+    assert cli.main(["montecarlo", "--system", "bluerov2_heavy_alpha5", "--controller", "proposed", "--runs", "3",
+                     "--seed", "4", "--config", str(study_dir / "short.toml"), "--out", str(out)]) == 0
+    from arvcas.experiments.montecarlo import read_montecarlo
+
+    mc = read_montecarlo(out)
+    assert mc.meta["system"] == "bluerov2_heavy_alpha5" and mc.meta["reference"] is not None
+    assert np.isfinite(mc.objectives()).all()
+    assert cli.main(["montecarlo", "--check", str(out)]) == 0
