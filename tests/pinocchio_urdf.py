@@ -205,3 +205,13 @@ def build_for(arm, g: float = 9.81) -> Ref:
     """:func:`build` from a ``urdf_arms.RandomArm`` (its URDF text, mount and vehicle)."""
     return build(arm.urdf if arm.n_joints else None, arm.mount_xyz, arm.mount_rpy, arm.vehicle_mass,
                  arm.vehicle_inertia_origin, arm.vehicle_com, g=g, base_link=arm.base_link, tool_link=arm.tool_link)
+
+
+def random_state(rng, qmin, qmax):
+    """A random (eta, nu, nud, q, qd, qdd) with q inside the limits (infinite limits: [-pi, pi])."""
+    n = len(qmin)
+    lo = np.where(np.isfinite(qmin), qmin, -np.pi)
+    hi = np.where(np.isfinite(qmax), qmax, np.pi)
+    eta = np.concatenate([rng.normal(size=3), rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi, 1)])
+    nu = rng.normal(size=6) * np.array([1, 1, 1, 0.5, 0.5, 0.5])
+    return eta, nu, rng.normal(size=6), rng.uniform(lo, hi), rng.normal(size=n), 3 * rng.normal(size=n)

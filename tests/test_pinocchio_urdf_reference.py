@@ -57,13 +57,7 @@ def _limits(p, n=6):
             np.array([p[f"arm.joint{i}.qmax"] for i in range(1, n + 1)]))
 
 
-def _state(rng, qmin, qmax):
-    n = len(qmin)
-    lo = np.where(np.isfinite(qmin), qmin, -np.pi)
-    hi = np.where(np.isfinite(qmax), qmax, np.pi)
-    eta = np.concatenate([rng.normal(size=3), rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi, 1)])
-    nu = rng.normal(size=6) * np.array([1, 1, 1, 0.5, 0.5, 0.5])
-    return eta, nu, rng.normal(size=6), rng.uniform(lo, hi), rng.normal(size=n), 3 * rng.normal(size=n)
+_state = pu.random_state
 
 
 # ---- 1. URDF reference == DH reference ---------------------------------------------------------------

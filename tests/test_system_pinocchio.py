@@ -80,13 +80,7 @@ def _call(fn, *args) -> np.ndarray:
     return np.array(fn(*args)).ravel()
 
 
-def _state(rng, qmin, qmax):
-    n = len(qmin)
-    lo = np.where(np.isfinite(qmin), qmin, -np.pi)
-    hi = np.where(np.isfinite(qmax), qmax, np.pi)
-    eta = np.concatenate([rng.normal(size=3), rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi, 1)])
-    nu = rng.normal(size=6) * np.array([1, 1, 1, 0.5, 0.5, 0.5])
-    return eta, nu, rng.normal(size=6), rng.uniform(lo, hi), rng.normal(size=n), 3 * rng.normal(size=n)
+_state = pu.random_state
 
 
 class _Systems:

@@ -373,12 +373,9 @@ def _rot_x(a: float) -> np.ndarray:
 
 def _cylinder_inertia(mass: float, diameter: float, s: np.ndarray) -> np.ndarray:
     """Solid cylinder along s, about its centre (tests/pinocchio_model.py's formula)."""
-    L = np.linalg.norm(s)
-    u = s / L
-    r = 0.5 * diameter
-    I_ax = 0.5 * mass * r**2
-    I_tr = mass * (3.0 * r**2 + L**2) / 12.0
-    return I_tr * np.eye(3) + (I_ax - I_tr) * np.outer(u, u)
+    from pinocchio_model import cylinder_inertia
+
+    return cylinder_inertia(mass, diameter, s)
 
 
 def haidou1_link_vectors(params, n: int = 6) -> list[np.ndarray]:
