@@ -139,15 +139,16 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
 
 def _add_export_c(p: argparse.ArgumentParser) -> None:
     p.add_argument("dir", type=Path, help="output directory (created if its parent exists)")
-    p.add_argument("--prefix", default="arvcas_haidou1_",
-                   help="prefix of every C symbol; the library is lib<prefix without its last _>.so (default: arvcas_haidou1_)")
+    p.add_argument("--prefix", default=None,
+                   help="prefix of every C symbol; the library is lib<prefix without its last _>.so "
+                        "(default: arvcas_<system>_, e.g. arvcas_haidou1_)")
     _add_model_args(p)
 
 
 def _export_c_outputs(a: argparse.Namespace) -> list:
-    from arvcas.build.export import files
+    from arvcas.build.export import default_prefix, files
 
-    return [(f"DIR {a.dir}", a.dir / n) for n in files(a.prefix)]
+    return [(f"DIR {a.dir}", a.dir / n) for n in files(a.prefix or default_prefix(a.params))]
 
 
 def _run_export_c(a: argparse.Namespace) -> int:
@@ -167,7 +168,8 @@ def _run_export_c(a: argparse.Namespace) -> int:
 def _add_export_fmu(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", metavar="FILE.fmu", type=Path, help="output file (name ending in .fmu)")
     p.add_argument("--inputs", choices=("wrench", "thrusters"), default="wrench",
-                   help="first six inputs: the body wrench tau at the COB in {b} (default) or the six thruster commands u")
+                   help="first inputs: the body wrench tau at the COB in {b} (six, default) or the system's thruster "
+                        "commands u (one per thruster)")
     _add_model_args(p)
 
 

@@ -3,6 +3,8 @@
 export-c: build the exported library with make and with CMake (and a project using its installed
 package config), run the C, C++ and Python ctypes examples and compare every output with CasADi's VM
 to 1e-12 relative; symbols, header, flags, and the refusal to replace files arvcas did not write.
+Every export test runs for both shipped systems (Haidou-1: 6 thrusters, 6 joints, 140 parameters;
+the BlueROV2 Heavy + Alpha 5: 8 thrusters, 4 joints, 239 parameters).
 Command line: one-line errors with exit code 2, ``cache``, ``demo``.
 """
 
@@ -23,25 +25,46 @@ import arvcas
 from arvcas import cli
 from arvcas.build import codegen
 from arvcas.build.dynamics import NAMES, jacobian_functions
-from arvcas.build.export import DEFAULT_PREFIX, MANIFEST, ExportError, _check_reentrant, example_inputs, export_c, files
+from arvcas.build.export import (DEFAULT_PREFIX, MANIFEST, ExportError, _check_reentrant, default_prefix,
+                                 example_inputs, export_c, files)
 from arvcas.model import uvms
 from arvcas.params import load
+from arvcas.system import SHIPPED, load_system
 
 RTOL = 1e-12
 
 
+@pytest.fixture(scope="module", params=SHIPPED)
+def system(request):
+    """Each shipped system in turn (the export fixtures below are per system)."""
+    return load_system(request.param)
+
+
 @pytest.fixture(scope="module")
-def plant():
-    fns = dict(uvms.plant_functions(uvms.ModelOptions()))
+def prefix(system):
+    return default_prefix(system)
+
+
+@pytest.fixture(scope="module")
+def plant(system):
+    fns = dict(uvms.plant_functions(uvms.ModelOptions(), system.layout))
     fns.update(jacobian_functions(fns))
     return fns
 
 
 @pytest.fixture(scope="module")
-def exported(tmp_path_factory):
+def exported(tmp_path_factory, system):
     out = tmp_path_factory.mktemp("export") / "plant_c"
-    assert cli.main(["export-c", str(out)]) == 0
+    argv = ["export-c", str(out)] if system.name == "haidou1" else ["export-c", "--system", system.name, str(out)]
+    assert cli.main(argv) == 0
     return out
+
+
+def test_default_prefix_names_the_system():
+    assert default_prefix() == default_prefix("haidou1") == DEFAULT_PREFIX == "arvcas_haidou1_"
+    assert default_prefix("bluerov2_heavy_alpha5") == "arvcas_bluerov2_heavy_alpha5_"
+    assert files() == files(DEFAULT_PREFIX) and files(default_prefix("bluerov2_heavy_alpha5"))[0] == \
+        "arvcas_bluerov2_heavy_alpha5.c"
 
 
 def _run(cmd, **kw):
@@ -88,11 +111,11 @@ def parse_example(text: str) -> dict[str, dict[str, dict[str, np.ndarray]]]:
     return res
 
 
-def _check_against_vm(text: str, plant, where: str):
+def _check_against_vm(text: str, plant, where: str, system):
     got = parse_example(text)
     assert list(got) == list(NAMES), where
-    p = load().vector()
-    ref_inputs = example_inputs()
+    p = system.params.vector()
+    ref_inputs = example_inputs(system)
     for fn_name, io in got.items():
         f = plant[fn_name]
         assert list(io["in"]) == [n for n in f.name_in() if n != "p"]
@@ -113,8 +136,8 @@ def _check_against_vm(text: str, plant, where: str):
                                        err_msg=f"{where}: {fn_name}.{k}")
 
 
-def test_export_writes_all_files_and_manifest(exported):
-    names = files()
+def test_export_writes_all_files_and_manifest(exported, prefix):
+    names = files(prefix)
     for name in names:
         assert (exported / name).is_file() and (exported / name).stat().st_size > 0, name
     m = json.loads((exported / MANIFEST).read_text())
@@ -123,34 +146,35 @@ def test_export_writes_all_files_and_manifest(exported):
         assert hashlib.sha256((exported / name).read_bytes()).hexdigest() == sha, name
 
 
-def test_make_examples_match_python(made, plant):
+def test_make_examples_match_python(made, plant, system):
     c = _run([str(made / "example")], cwd="/")
     cpp = _run([str(made / "example_cpp")], cwd="/")
     py = _run([sys.executable, str(made / "example.py")], cwd="/")
-    _check_against_vm(c, plant, "make example (C)")
+    _check_against_vm(c, plant, "make example (C)", system)
     assert cpp == c  # C++ through the _eval wrappers: the same library, the same bits
     assert py == c  # ctypes
     # and the compiled library gives the bits arvcas.dynamics gives (same flags, same compiler)
     got = parse_example(c)
-    e = example_inputs()
-    np.testing.assert_array_equal(got["uvms_rhs"]["out"]["xdot"],
-                                  arvcas.dynamics("uvms_rhs")(e["x"], e["tau"], e["q"], e["qd"], e["qdd"], e["payload"]))
+    e = example_inputs(system)
+    assert got["uvms_rhs"]["in"]["q"].size == system.n_joints and got["thrust"]["in"]["u"].size == system.n_thrusters
+    np.testing.assert_array_equal(got["uvms_rhs"]["out"]["xdot"], arvcas.dynamics("uvms_rhs", system=system)(
+        e["x"], e["tau"], e["q"], e["qd"], e["qdd"], e["payload"]))
 
 
-def test_cmake_package_builds_and_matches(cmake_outputs, made, plant):
+def test_cmake_package_builds_and_matches(cmake_outputs, made, plant, system, prefix):
     c = _run([str(made / "example")], cwd="/")
     for key in ("cmake example", "cmake example_cpp", "installed consumer example_cpp"):
-        _check_against_vm(cmake_outputs[key], plant, key)
+        _check_against_vm(cmake_outputs[key], plant, key, system)
         assert cmake_outputs[key] == c, key
     pre = cmake_outputs["prefix"]
-    lib = DEFAULT_PREFIX.rstrip("_")
+    lib = prefix.rstrip("_")
     assert list(pre.glob(f"lib*/cmake/{lib}/{lib}Config.cmake"))
     assert (pre / "include" / f"{lib}.h").is_file() and (pre / "include" / f"{lib}_params.h").is_file()
 
 
-def test_build_files_use_the_cache_flags(exported, made, monkeypatch, tmp_path):
+def test_build_files_use_the_cache_flags(exported, made, monkeypatch, tmp_path, system, prefix):
     cflags = [codegen.DEFAULT_OPT_LEVEL, *codegen.FIXED_FLAGS]
-    lib = DEFAULT_PREFIX.rstrip("_")
+    lib = prefix.rstrip("_")
     dry = _run(["make", "-B", "-n", "-C", str(made)])
     lib_cmd = next(ln for ln in dry.splitlines() if f"-o lib{lib}.so" in ln)
     assert all(f in lib_cmd.split() for f in [*cflags, *codegen.BASE_FLAGS, *codegen.LIBS]), lib_cmd
@@ -158,24 +182,24 @@ def test_build_files_use_the_cache_flags(exported, made, monkeypatch, tmp_path):
     assert f"target_compile_options({lib} PRIVATE {' '.join(cflags)})" in cm
     # read from codegen at export time, not copied: a changed FIXED_FLAGS shows up in both files
     monkeypatch.setattr(codegen, "FIXED_FLAGS", (*codegen.FIXED_FLAGS, "-fno-trapping-math"))
-    export_c(tmp_path / "other")
+    export_c(tmp_path / "other", params=system.params)
     assert "-fno-trapping-math" in (tmp_path / "other" / "Makefile").read_text()
     assert "-fno-trapping-math" in (tmp_path / "other" / "CMakeLists.txt").read_text()
 
 
-def test_symbols_carry_the_prefix_and_header_declares_them(made):
+def test_symbols_carry_the_prefix_and_header_declares_them(made, prefix):
     if shutil.which("nm") is None:
         pytest.skip("nm is not installed")
-    lib = DEFAULT_PREFIX.rstrip("_")
+    lib = prefix.rstrip("_")
     out = _run(["nm", "-D", "--defined-only", str(made / f"lib{lib}.so")])
     syms = [ln.split()[-1] for ln in out.splitlines() if ln.split() and ln.split()[-2] in "TDBR"]
     assert len(syms) > 7 * 10
-    assert [s for s in syms if not s.startswith(DEFAULT_PREFIX)] == []
+    assert [s for s in syms if not s.startswith(prefix)] == []
     for name in NAMES:
-        assert DEFAULT_PREFIX + name in syms
+        assert prefix + name in syms
     header = (made / f"{lib}.h").read_text()
     c_text = (made / f"{lib}.c").read_text()
-    helpers = {DEFAULT_PREFIX + h for h in re.findall(r"^#define casadi_\w+ CASADI_PREFIX\((\w+)\)$", c_text, flags=re.M)}
+    helpers = {prefix + h for h in re.findall(r"^#define casadi_\w+ CASADI_PREFIX\((\w+)\)$", c_text, flags=re.M)}
     api = set(re.findall(r"^CASADI_SYMBOL_EXPORT [^(]*?\b(\w+)\(", c_text, flags=re.M))
     assert set(syms) <= api | helpers and api <= set(syms)  # CasADi's helpers are global too, prefixed
     for s in sorted(api):  # every function of the API declared exactly once
@@ -191,13 +215,19 @@ def test_symbols_carry_the_prefix_and_header_declares_them(made):
     _run(["c++", "-Wall", "-Werror", "-fsyntax-only", "-x", "c++", str(made / f"{lib}.h")])
 
 
-def test_header_documents_every_argument(exported, plant):
-    lib = DEFAULT_PREFIX.rstrip("_")
+def test_header_documents_every_argument(exported, plant, system, prefix):
+    lib = prefix.rstrip("_")
     text = (exported / f"{lib}.h").read_text()
     assert "THREAD SAFETY" in text and "reentrant" in text and "own arg, res, iw and w" in text
+    nj, nt = system.n_joints, system.n_thrusters
+    if system.name == "haidou1":
+        assert text.startswith(f"/* {lib}.h: the arvcas plant functions of the Haidou-1 ARV and its manipulator")
+    else:
+        assert f"{nt} thrusters, {nj} joints" in text and f"q[{nj}], u[{nt}], p[{len(system.params)}]" in text
+        assert "u[6]" not in text and "q1..q6" not in text and "12 x 6, column-major: d xdot_i / d q_j" not in text
     for name in NAMES:
         f = plant[name]
-        full = DEFAULT_PREFIX + name
+        full = prefix + name
         block = text.split(f" * {full}: ", 1)[1].split("*/", 1)[0]
         rows = re.findall(r"^ \*   (arg|res)\[(\d+)\]\s+(\w+)\s+(\S+)  (.+)$", block, flags=re.M)
         expect = [("arg", str(i), f.name_in(i), str(f.numel_in(i))) for i in range(f.n_in())]
@@ -205,31 +235,46 @@ def test_header_documents_every_argument(exported, plant):
                     else str(f.size1_out(i))) for i in range(f.n_out())]
         assert [r[:4] for r in rows] == expect, name
         assert all(len(r[4]) > 10 for r in rows), name  # every argument has a meaning with units
+        sizes = {r[2]: r[3] for r in rows}
+        assert sizes.get("q", str(nj)) == str(nj) and sizes.get("u", str(nt)) == str(nt), name
+        assert sizes["p"] == str(len(system.params)), name
+        meaning = {r[2]: r[4] for r in rows}
+        if "q" in meaning:
+            assert f"q1..q{nj} (rad)" in meaning["q"], name
+        if "u" in meaning and system.structure.thrusters is not None:
+            assert ", ".join(system.structure.thrusters) in meaning["u"], name
         sz = {k: int(re.search(rf"#define {full.upper()}_{k} (\d+)", text).group(1)) for k in ("SZ_ARG", "SZ_RES")}
         assert sz["SZ_ARG"] >= f.n_in() and sz["SZ_RES"] >= f.n_out(), name
 
 
-def test_params_header_is_the_default_vector(exported):
-    lib = DEFAULT_PREFIX.rstrip("_")
+def test_params_header_is_the_default_vector(exported, system, prefix):
+    lib = prefix.rstrip("_")
     text = (exported / f"{lib}_params.h").read_text()
-    P = load()
+    P = system.params
     names, v = P.names(), P.vector()
-    assert f"#define ARVCAS_HAIDOU1_NP {len(names)}" in text
+    up = prefix.upper()
+    assert f"#define {up}NP {len(names)}" in text
     rows = re.findall(r"^\s+(\S+),\s+/\* \[\s*(\d+)\] (\S+)\s+(.*?) \*/$", text, flags=re.M)
     assert [int(i) for _, i, _, _ in rows] == list(range(len(names)))
     assert [n for _, _, n, _ in rows] == names
     assert [float(x) for x, _, _, _ in rows] == list(v)  # exact
     units = {n: u for _, _, n, u in rows}
-    assert units["env.rho"] == "kg/m^3"
-    assert units["arm.joint1.alpha"] == "rad (file: deg)"
-    assert f"#define ARVCAS_HAIDOU1_P_ENV_G {names.index('env.g')}" in text
+    assert units["env.rho"] == "kg/m^3" and units["vehicle.m"] == "kg" and units["payload.volume"] == "m^3"
+    if system.name == "haidou1":
+        assert units["arm.joint1.alpha"] == "rad (file: deg)"
+        assert units["hydro.X_u"] == "per_rho"  # per unit density (Table A1)
+    else:  # SI hydrodynamic coefficients: the unit of each term
+        assert units["arm.joint1.roll"] == "rad (file: deg)" and units["thrusters.T1.u_max"] == "N"
+        assert units["hydro.X_udot"] == "kg" and units["hydro.X_u"] == "kg/s" and units["hydro.X_u_absu"] == "kg/m"
+        assert units["hydro.K_p_absp"] == "kg*m^2/rad^2" and units["hydro.M_q"] == "kg*m^2/(s*rad)"
+    assert f"#define {up}P_ENV_G {names.index('env.g')}" in text
 
 
-def test_readme_lists_io_from_the_functions(exported, plant):
+def test_readme_lists_io_from_the_functions(exported, plant, prefix):
     text = (exported / "README.md").read_text()
     for name in NAMES:
         f = plant[name]
-        section = text.split(f"### `{DEFAULT_PREFIX}{name}`\n", 1)[1].split("###", 1)[0]
+        section = text.split(f"### `{prefix}{name}`\n", 1)[1].split("###", 1)[0]
         rows = re.findall(r"^\| (in|out) \| (\d+) \| `(\w+)` \| (\d+)x(\d+)", section, flags=re.M)
         expect = [("in", str(i), f.name_in(i), *map(str, f.size_in(i))) for i in range(f.n_in())]
         expect += [("out", str(i), f.name_out(i), *map(str, f.size_out(i))) for i in range(f.n_out())]
@@ -325,7 +370,15 @@ def _quintic_ref(t):
     return q0 + (qg - q0) * pos, (qg - q0) * vel, (qg - q0) * acc
 
 
-def test_demo_table(cache, plant, capsys):
+@pytest.fixture(scope="module")
+def haidou1_plant():
+    fns = dict(uvms.plant_functions(uvms.ModelOptions()))
+    fns.update(jacobian_functions(fns))
+    return fns
+
+
+def test_demo_table(cache, haidou1_plant, capsys):
+    plant = haidou1_plant
     assert cli.main(["demo"]) == 0
     lines = capsys.readouterr().out.splitlines()
     head = next(i for i, ln in enumerate(lines) if ln.split()[:2] == ["t", "[s]"])
@@ -340,7 +393,8 @@ def test_demo_table(cache, plant, capsys):
     assert rows[0, 3] > 0  # at rest and level the arm's weight in water pushes the vehicle down (+z)
 
 
-def test_cache_command(cache, plant, capsys):
+def test_cache_command(cache, haidou1_plant, capsys):
+    plant = haidou1_plant
     from arvcas.build.codegen import build
 
     build(plant["arm_wrench"])  # into this module's cache (compiled() may be memoized from elsewhere)

@@ -452,3 +452,170 @@ def test_foreign_file_refused_then_forced(tmp_path, fmu_path):
     assert out == foreign and validate_fmu(str(out)) == []
     # no temporary left; the one writer records what arvcas wrote in the directory's manifest
     assert sorted(p.name for p in tmp_path.iterdir()) == [".arvcas-manifest.json", "mine.fmu", "other.fmu", "tool.fmu"]
+
+
+# ---------------------------------------------------------------------------------------------
+# another system: the BlueROV2 Heavy + Reach Alpha 5 (8 thrusters, 4 joints, 239 parameters)
+
+BLUEROV2 = "bluerov2_heavy_alpha5"
+T_END_B = 3.0  # a few seconds: the vehicle moves, the arm swings
+
+
+@pytest.fixture(scope="module")
+def bluerov2():
+    from arvcas.system import load_system
+
+    return load_system(BLUEROV2)
+
+
+@pytest.fixture(scope="module")
+def bluerov2_fmu(tmp_path_factory, bluerov2):
+    """``arvcas export-fmu --system bluerov2_heavy_alpha5 FILE.fmu``, the command line."""
+    from arvcas import cli
+
+    path = tmp_path_factory.mktemp("fmu_b") / "bluerov2.fmu"
+    assert cli.main(["export-fmu", "--system", BLUEROV2, str(path)]) == 0
+    return path
+
+
+def _input_names(system, first="tau"):
+    n_in = 6 if first == "tau" else system.n_thrusters
+    nj = system.n_joints
+    return ([f"{first}[{i}]" for i in range(1, n_in + 1)] + [f"{n}[{i}]" for n in ("q", "qd", "qdd")
+                                                               for i in range(1, nj + 1)] + ["payload"])
+
+
+def _split(u, n_in, nj):
+    """The FMU's inputs in order -> the uvms_rhs arguments (first, q, qd, qdd, payload)."""
+    return u[:n_in], u[n_in:n_in + nj], u[n_in + nj:n_in + 2 * nj], u[n_in + 2 * nj:n_in + 3 * nj], u[-1]
+
+
+@pytest.fixture(scope="module")
+def bluerov2_profile(bluerov2):
+    """(t, U) on t_k = k H over T_END_B: a wrench of sinusoids, each joint swinging about the stowed
+    pose (q, qd, qdd consistent), the payload ramped on from 1 s to 2 s."""
+    P, nj = bluerov2.params, bluerov2.n_joints
+    t = ca.SX.sym("t")
+    q0 = ca.DM([P[f"arm.stow.q{i}"] for i in range(1, nj + 1)])
+    w = ca.DM([0.8 + 0.3 * i for i in range(nj)])
+    q = q0 + 0.3 * ca.sin(w * t)
+    qd, qdd = 0.3 * w * ca.cos(w * t), -0.3 * w * w * ca.sin(w * t)
+    pl = ca.fmin(ca.fmax(t - 1.0, 0.0), 1.0)
+    tau = ca.vertcat(8 * ca.sin(0.9 * t), 6 * ca.cos(0.7 * t), 5 * ca.sin(1.1 * t), 0.5 * ca.sin(1.3 * t),
+                     0.6 * ca.sin(0.8 * t), 0.7 * ca.cos(1.2 * t))
+    f = ca.Function("inputs_b", [t], [ca.vertcat(tau, q, qd, qdd, pl)])
+    ts = H * np.arange(int(round(T_END_B / H)) + 1)
+    U = np.array(f.map(ts.size)(ts.reshape(1, -1)))
+    assert U.shape == (6 + 3 * nj + 1, ts.size) and U[-1, -1] == 1.0
+    return ts, U
+
+
+def _x0_of(system):
+    cfg = scenario.load_scenario(system.params.default("scenario"))
+    return np.array([*cfg.initial_eta0, *cfg.initial_nu0])
+
+
+def test_bluerov2_validation_and_description(bluerov2_fmu, bluerov2):
+    """The FMU is sized by the system: 6 + 3 * 4 + 1 inputs, the 239 parameters with their SI units
+    (an SI hydrodynamic coefficient with its term's unit), h_rk4 and the parameters after the inputs."""
+    assert validate_fmu(str(bluerov2_fmu)) == []
+    md = fmpy.read_model_description(str(bluerov2_fmu))
+    P, names = bluerov2.params, _input_names(bluerov2)
+    assert md.modelExchange is not None and md.coSimulation is not None and BLUEROV2 in md.description
+    by = {v.name: v for v in md.modelVariables}
+    assert [v.name for v in md.modelVariables if v.causality == "input"] == names
+    assert len(names) == 6 + 3 * bluerov2.n_joints + 1 == 19
+    assert [u.variable.name for u in md.outputs] == STATES
+    assert [d.variable.name for d in md.derivatives] == [f"der({n})" for n in STATES]
+    params = [v for v in md.modelVariables if v.causality == "parameter" and v.name != "h_rk4"]
+    assert [v.name for v in params] == P.names() and len(params) == len(P) == 239
+    assert [float(v.start) for v in params] == list(P.vector())
+    lay = fmu_mod.layout(P)
+    assert lay["vr_h"] == by["h_rk4"].valueReference == 24 + 19 and params[0].valueReference == lay["vr_p"]
+    assert by["env.rho"].unit == "kg/m3" and by["thrusters.T1.u_max"].unit == "N"
+    assert by["arm.joint1.roll"].unit == "rad" and by["arm.joint1.roll"].displayUnit == "deg"
+    assert by["hydro.X_u_absu"].unit == "kg/m" and by["hydro.X_udot"].unit == "kg"
+    assert by["hydro.K_p_absp"].unit == "kg.m2/rad2"
+    units = {u.name: u.baseUnit for u in md.unitDefinitions}
+    assert (units["kg/m"].kg, units["kg/m"].m) == (1, -1)
+    assert [float(by[f"q[{j}]"].start) for j in range(1, 5)] == [P[f"arm.stow.q{j}"] for j in range(1, 5)]
+    np.testing.assert_array_equal([float(by[n].start) for n in STATES], _x0_of(bluerov2))
+    deps = {d.variable.name: {k.name for k in d.dependencies} for d in md.derivatives}
+    assert deps["der(eta[1])"] == {"eta[4]", "eta[5]", "eta[6]", "nu[1]", "nu[2]", "nu[3]"}
+    assert set(names) <= deps["der(nu[1])"]
+
+
+def test_bluerov2_derivatives_equal_compiled_rhs(bluerov2_fmu, bluerov2):
+    md = fmpy.read_model_description(str(bluerov2_fmu))
+    f, p, nj = compiled("uvms_rhs", system=bluerov2), bluerov2.params.vector(), bluerov2.n_joints
+    names = _input_names(bluerov2)
+    rng = np.random.default_rng(7)
+    with _instance(bluerov2_fmu, md, "b") as m:
+        for _ in range(4):
+            x = np.concatenate([rng.normal(size=3), rng.uniform(-0.5, 0.5, 3), rng.normal(size=6) * 0.3])
+            u = np.concatenate([rng.normal(size=6) * 20, rng.uniform(-1.5, 1.5, nj), rng.normal(size=2 * nj) * 0.3,
+                                rng.uniform(size=1)])
+            dx = _derivatives(m, names, x, u)
+            ref = np.array(f(x, *_split(u, 6, nj), p)).ravel()
+            assert np.abs(ref).max() > 1e-2
+            np.testing.assert_allclose(dx, ref, rtol=0, atol=1e-12 * max(1.0, np.abs(ref).max()))
+
+
+def test_bluerov2_simulate_fmu_matches_arvcas_integration(bluerov2_fmu, bluerov2, bluerov2_profile):
+    """fmpy.simulate_fmu, Model Exchange with Euler and Co-Simulation (RK4 at h_rk4 = H inside), over
+    T_END_B = 3 s, against the same schemes on arvcas's compiled uvms_rhs of the system, inputs held."""
+    ts, U = bluerov2_profile
+    names, nj = _input_names(bluerov2), bluerov2.n_joints
+    sig = np.zeros(ts.size, dtype=[("time", np.float64)] + [(n, np.float64) for n in names])
+    sig["time"] = ts
+    for i, n in enumerate(names):
+        sig[n] = U[i]
+    f, p = compiled("uvms_rhs", system=bluerov2), bluerov2.params.vector()
+
+    def rhs(x, u):
+        return np.array(f(x, *_split(u, 6, nj), p)).ravel()
+
+    euler, rk4 = np.empty((12, ts.size)), np.empty((12, ts.size))
+    euler[:, 0] = rk4[:, 0] = _x0_of(bluerov2)
+    for k in range(ts.size - 1):
+        u, x = U[:, k], rk4[:, k]
+        euler[:, k + 1] = euler[:, k] + H * rhs(euler[:, k], u)
+        k1 = rhs(x, u)
+        k2 = rhs(x + 0.5 * H * k1, u)
+        k3 = rhs(x + 0.5 * H * k2, u)
+        k4 = rhs(x + H * k3, u)
+        rk4[:, k + 1] = x + H / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    assert np.abs(euler - rk4).max() > 1e-6  # the two schemes are told apart
+    for fmi_type, kw, ref in (("ModelExchange", dict(solver="Euler", step_size=H), euler),
+                              ("CoSimulation", {}, rk4)):
+        res = fmpy.simulate_fmu(str(bluerov2_fmu), fmi_type=fmi_type, output_interval=H, stop_time=T_END_B,
+                                input=sig, output=STATES, **kw)
+        X = _states(res)
+        assert X.shape == ref.shape
+        assert np.abs(ref[:, -1] - ref[:, 0]).max() > 1e-2  # the vehicle does move
+        err = np.abs(X - ref).max()
+        print(f"BlueROV2 {fmi_type}: max |FMU - reference| =", err)
+        assert err < 1e-8, fmi_type
+
+
+def test_bluerov2_thruster_inputs(tmp_path, bluerov2):
+    """inputs="thrusters" on the BlueROV2: its eight thrusters by name, derivatives = uvms_rhs at
+    tau = thrust(u) = B_T sat(u) of the system."""
+    path = fmu_mod.export_fmu(tmp_path / "thr_b.fmu", params=BLUEROV2, inputs="thrusters")
+    assert validate_fmu(str(path)) == []
+    md = fmpy.read_model_description(str(path))
+    names, nt, nj = _input_names(bluerov2, "u"), bluerov2.n_thrusters, bluerov2.n_joints
+    ins = [v for v in md.modelVariables if v.causality == "input"]
+    assert [v.name for v in ins] == names and len(names) == nt + 3 * nj + 1 == 21
+    assert "thruster T8" in ins[7].description
+    f, thrust, p = compiled("uvms_rhs", system=bluerov2), compiled("thrust", system=bluerov2), bluerov2.params.vector()
+    rng = np.random.default_rng(5)
+    with _instance(path, md, "tb") as m:
+        for _ in range(3):
+            x = np.concatenate([rng.normal(size=3), rng.uniform(-0.5, 0.5, 3), rng.normal(size=6) * 0.3])
+            u = np.concatenate([rng.normal(size=nt) * 40, rng.uniform(-1.5, 1.5, nj), rng.normal(size=2 * nj) * 0.3,
+                                rng.uniform(size=1)])  # beyond the T200's +-30.4 N: saturated
+            dx = _derivatives(m, names, x, u)
+            first, *rest = _split(u, nt, nj)
+            ref = np.array(f(x, thrust(first, p), *rest, p)).ravel()
+            np.testing.assert_allclose(dx, ref, rtol=0, atol=1e-12 * max(1.0, np.abs(ref).max()))

@@ -4,12 +4,15 @@ DIR receives sources only (nothing here runs a compiler; :mod:`arvcas.build.code
 arvcas itself):
 
 * ``<lib>.c``: CasADi's generated code of the seven functions (:data:`arvcas.build.dynamics.NAMES`),
-  renamed ``<prefix><name>`` (default prefix ``arvcas_haidou1_``); CasADi's helpers are prefixed too,
-  so every global symbol of the library starts with the prefix and two exports link into one program.
-* ``<lib>.h``: the documented header: per function the order, size, unit and frame of every argument,
+  renamed ``<prefix><name>`` (default prefix ``arvcas_<system>_``, e.g. ``arvcas_haidou1_``); CasADi's
+  helpers are prefixed too, so every global symbol of the library starts with the prefix and two
+  exports (of one system or of two) link into one program.
+* ``<lib>.h``: the documented header: per function the order, size, unit and frame of every argument
+  (sized by the system: ``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``),
   the work array sizes, every prototype, and an ``<prefix><name>_eval`` wrapper with named arguments
   and work arrays on the stack; the calling convention and thread safety at the top.
-* ``<lib>_params.h``: the default parameter vector ``p`` with name, index and unit of each entry.
+* ``<lib>_params.h``: the system's default parameter vector ``p`` with name, index and SI unit of each
+  entry (the units from the system's layout, :mod:`arvcas.build.units`).
 * ``Makefile`` and ``CMakeLists.txt`` (with an installable CMake package config), both compiling
   with the flags of the build cache (:data:`arvcas.build.codegen.BASE_FLAGS`, ``DEFAULT_OPT_LEVEL``,
   ``FIXED_FLAGS``, ``LIBS``), so the library gives the numbers arvcas gives.
@@ -35,9 +38,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["ExportError", "export_c", "example_inputs", "files", "MANIFEST", "DEFAULT_PREFIX"]
+__all__ = ["ExportError", "export_c", "example_inputs", "files", "default_prefix", "MANIFEST", "DEFAULT_PREFIX"]
 
-DEFAULT_PREFIX = "arvcas_haidou1_"
+DEFAULT_PREFIX = "arvcas_haidou1_"  # the default system's: default_prefix("haidou1")
 MANIFEST = "arvcas-export.json"
 MANIFEST_FORMAT = 1
 
@@ -65,6 +68,39 @@ _GLOSSARY = {
     "dxdot_dq": "d xdot / d q, 12 x 6, column-major: d xdot_i / d q_j at [i + 12 j]",
 }
 
+
+def _glossary(P) -> dict[str, str]:
+    """:data:`_GLOSSARY` for the system of ``P``: joint and thruster counts and the thrusters' names
+    (Haidou-1's text exactly as before)."""
+    st = P.structure
+    g = dict(_GLOSSARY)
+    if _is_haidou1(st):
+        return g
+    nj = st.n_joints
+    g["q"] = f"joint angles q1..q{nj} (rad)" if nj > 1 else ("joint angle q1 (rad)" if nj else "no joints (empty)")
+    if st.thrusters is not None:
+        g["u"] = f"thrust per thruster (N): {', '.join(st.thrusters)}"
+    g["dxdot_dq"] = f"d xdot / d q, 12 x {nj}, column-major: d xdot_i / d q_j at [i + 12 j]"
+    return g
+
+
+def _is_haidou1(st) -> bool:
+    """The structure of Haidou-1, whose exports keep their text from before systems were data."""
+    return st.name == "haidou1" and st.thrusters is None and st.n_joints == 6
+
+
+def default_prefix(system=None) -> str:
+    """``arvcas_<system name>_``, the default symbol prefix of a system's export (``arvcas_haidou1_``).
+
+    ``system``: anything :func:`arvcas.system.resolve` takes (a name, a file, a System, a Params).
+    Characters of the name that cannot be in a C identifier become ``_``.
+    """
+    from arvcas.system import resolve
+
+    name = resolve(system).name
+    ident = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", name)).strip("_")
+    return f"arvcas_{ident}_" if ident else "arvcas_"
+
 # one line per function, from the docstrings of arvcas.model (vehicle.rhs, manipulator.arm_wrench,
 # uvms.uvms_xdot, thrusters.allocate, thrusters.thrust)
 _SUMMARY = {
@@ -84,8 +120,28 @@ class ExportError(ValueError):
     """The output directory cannot be used, or a file there is not arvcas's to replace (one line)."""
 
 
-def example_inputs() -> dict[str, np.ndarray]:
-    """The fixed state of the examples, by input name (SI units; ``p`` is the default vector)."""
+def _cycled(values, n: int) -> np.ndarray:
+    return np.array([values[i % len(values)] for i in range(n)], dtype=float)
+
+
+def example_inputs(system=None) -> dict[str, np.ndarray]:
+    """The fixed state of the examples, by input name (SI units; ``p`` is the default vector).
+
+    ``system`` (default Haidou-1; anything :func:`arvcas.system.resolve` takes) sizes ``q``, ``qd``,
+    ``qdd`` (n_joints) and ``u`` (n_thrusters): Haidou-1's six values each, repeated or cut.
+    """
+    from arvcas.system import resolve
+
+    st = resolve(system).structure
+    inputs = _haidou1_inputs()
+    if st.n_joints != 6 or st.n_thrusters != 6:
+        for k in ("q", "qd", "qdd"):
+            inputs[k] = _cycled(inputs[k], st.n_joints)
+        inputs["u"] = _cycled(inputs["u"], st.n_thrusters)
+    return inputs
+
+
+def _haidou1_inputs() -> dict[str, np.ndarray]:
     eta = [1.0, -0.5, 2.0, 0.05, -0.03, 0.2]
     nu = [0.3, 0.05, -0.02, 0.01, 0.02, -0.03]
     return {
@@ -191,19 +247,13 @@ def _c_double(v: float) -> str:
     return r if ("." in r or "e" in r) else r + ".0"
 
 
-def _si_unit(dimension: str) -> str:
-    from arvcas.params import UNITS
-
-    return next(u for u, (dim, factor) in UNITS.items() if dim == dimension and factor == 1.0)
-
-
 def _ident(name: str) -> str:
     return "".join(c if c.isalnum() else "_" for c in name).upper()
 
 
 def _params_header(P, opts, prefix: str) -> str:
     from arvcas import __version__
-    from arvcas.params import SCHEMA
+    from arvcas.build.units import si_unit
 
     up = prefix.upper()
     names = P.names()
@@ -232,9 +282,9 @@ def _params_header(P, opts, prefix: str) -> str:
     lines += ["", f"static const double {prefix}p_default[{up}NP] = {{"]
     lines.append("  /* value, then [index] name, SI unit (and the unit the parameter file uses, if another) */")
     for i, n in enumerate(names):
-        si = _si_unit(SCHEMA[n][0])
+        si = si_unit(P, n)  # from the system's layout
         file_unit = P.unit(n)
-        unit = si if file_unit == si else f"{si} (file: {file_unit})"
+        unit = si if file_unit in (si, "SI") else f"{si} (file: {file_unit})"
         lines.append(f"  {_c_double(values[i]) + ',':<24} /* [{i:3d}] {n:<{width}}  {unit} */")
     lines += ["};", "", f"#endif /* {guard} */", ""]
     return "\n".join(lines)
@@ -290,13 +340,13 @@ def _check_reentrant(c_text: str, full_names: list[str]) -> None:
 # the header
 
 
-def _arg_rows(f: ca.Function) -> list[tuple[str, int, str, str, str]]:
+def _arg_rows(f: ca.Function, glossary: dict[str, str]) -> list[tuple[str, int, str, str, str]]:
     """(kind, index, name, size text, meaning) of every input and output."""
     rows = []
     for i in range(f.n_in()):
-        rows.append(("in", i, f.name_in(i), _size(f.size_in(i)), _GLOSSARY.get(f.name_in(i), "")))
+        rows.append(("in", i, f.name_in(i), _size(f.size_in(i)), glossary.get(f.name_in(i), "")))
     for i in range(f.n_out()):
-        rows.append(("out", i, f.name_out(i), _size(f.size_out(i)), _GLOSSARY.get(f.name_out(i), "")))
+        rows.append(("out", i, f.name_out(i), _size(f.size_out(i)), glossary.get(f.name_out(i), "")))
     return rows
 
 
@@ -309,8 +359,17 @@ def _header(fns: dict[str, ca.Function], c_text: str, prefix: str, opts, P) -> s
 
     lib = prefix.rstrip("_")
     guard = f"{lib.upper()}_H"
+    st = P.structure
+    if _is_haidou1(st):
+        what = [f"/* {lib}.h: the arvcas plant functions of the Haidou-1 ARV and its manipulator, in C."]
+    else:
+        what = [f"/* {lib}.h: the arvcas plant functions of the system {st.name}, in C:",
+                f" * {P.description.replace('*/', '* /')}" if P.description else None,
+                f" * {st.n_thrusters} thrusters, {st.n_joints} joints ({st.arm} arm), {len(P)} parameters:"
+                f" q[{st.n_joints}], u[{st.n_thrusters}], p[{len(P)}] (names, SI units in {lib}_params.h)."]
+        what = [ln for ln in what if ln is not None]
     L = [
-        f"/* {lib}.h: the arvcas plant functions of the Haidou-1 ARV and its manipulator, in C.",
+        *what,
         " *",
         f" * Generated by arvcas {__version__} with CasADi {ca.__version__}; model options {opts!r}; default",
         f" * parameters from {P.path} (in {lib}_params.h). Link with -l{lib} -lm.",
@@ -367,7 +426,7 @@ def _header(fns: dict[str, ca.Function], c_text: str, prefix: str, opts, P) -> s
         full = prefix + short
         F = full.upper()
         ws = _work_sizes(c_text, full)
-        rows = _arg_rows(f)
+        rows = _arg_rows(f, _glossary(P))
         width = max(len(r[2]) for r in rows)
         L += ["", "/* " + "-" * 96, f" * {full}: {_SUMMARY[short]}", " *"]
         for kind, i, name, size, meaning in rows:
@@ -682,12 +741,17 @@ def _readme(fns, opts, P, inputs, prefix: str) -> str:
     from arvcas import __version__
 
     lib = prefix.rstrip("_")
+    gl = _glossary(P)
     L = [
         f"# lib{lib}: the arvcas plant functions in C",
         "",
         f"Generated by arvcas {__version__} with CasADi {ca.__version__}; model options `{opts!r}`"
         f" (tag `{opts.tag()}`); default parameters from `{P.path}`.",
         "",
+        *([] if _is_haidou1(P.structure) else [
+            f"System `{P.structure.name}`: {P.description or P.structure.name}; {P.structure.n_thrusters}"
+            f" thrusters, {P.structure.n_joints} joints ({P.structure.arm} arm), {len(P)} parameters, so"
+            f" `q` has {P.structure.n_joints} entries, `u` {P.structure.n_thrusters} and `p` {len(P)}.", ""]),
         "## Files",
         "",
         f"- `{lib}.c`: the {len(fns)} functions below (CasADi's generated C; every global symbol starts with `{prefix}`)",
@@ -714,10 +778,10 @@ def _readme(fns, opts, P, inputs, prefix: str) -> str:
               "| | index | name | size | meaning |", "|---|---|---|---|---|"]
         for i in range(f.n_in()):
             k = f.name_in(i)
-            L.append(f"| in | {i} | `{k}` | {f.size1_in(i)}x{f.size2_in(i)} | {_GLOSSARY.get(k, '')} |")
+            L.append(f"| in | {i} | `{k}` | {f.size1_in(i)}x{f.size2_in(i)} | {gl.get(k, '')} |")
         for i in range(f.n_out()):
             k = f.name_out(i)
-            L.append(f"| out | {i} | `{k}` | {f.size1_out(i)}x{f.size2_out(i)} | {_GLOSSARY.get(k, '')} |")
+            L.append(f"| out | {i} | `{k}` | {f.size1_out(i)}x{f.size2_out(i)} | {gl.get(k, '')} |")
         L.append("")
     L += ["## The examples' fixed state", "", f"SI units; `p` is `{prefix}p_default`.", ""]
     for k, v in inputs.items():
@@ -729,20 +793,30 @@ def _readme(fns, opts, P, inputs, prefix: str) -> str:
 # ---------------------------------------------------------------------------------------------
 
 
-def export_c(out_dir, opts=None, params=None, *, prefix: str = DEFAULT_PREFIX, force: bool = False) -> list[Path]:
+def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, force: bool = False) -> list[Path]:
     """Write the C library, headers, build files, examples and README into ``out_dir``.
 
-    ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``params``: a
-    :class:`arvcas.params.Params` for the defaults in ``<lib>_params.h`` (default: the packaged
-    file); ``prefix``: of every symbol (a C identifier ending in ``_``; the library is
-    ``lib<prefix without the last _>.so``). ``out_dir`` is created if its parent exists. A file there
+    ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``params``: the
+    system, a :class:`arvcas.params.Params` (or a :class:`arvcas.system.System`): its layout sizes the
+    functions (``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``) and its numbers are the defaults
+    in ``<lib>_params.h`` (default: Haidou-1); ``prefix``: of every symbol (a C identifier ending in
+    ``_``; the library is ``lib<prefix without the last _>.so``; default :func:`default_prefix`,
+    ``arvcas_<system>_``). ``out_dir`` is created if its parent exists. A file there
     that the manifest does not list with its current sha256 is refused unless ``force``. Returns the
     written paths, in :func:`files` order. Raises :class:`ExportError` (a ValueError).
     """
     from arvcas.build.dynamics import jacobian_functions
     from arvcas.model.uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
     from arvcas.params import Params, load
+    from arvcas.system import System
 
+    P = load() if params is None else params
+    if isinstance(P, System):
+        P = P.params
+    if not isinstance(P, Params):
+        raise ExportError(f"export-c: params must be arvcas.params.Params, got {type(P).__name__}")
+    if prefix is None:
+        prefix = default_prefix(P)
     if not isinstance(prefix, str) or not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*_", prefix) or "__" in prefix:
         raise ExportError(f"export-c: prefix: expected a C identifier ending in one '_' (like {DEFAULT_PREFIX}), got {prefix!r}")
     if not isinstance(force, bool):
@@ -751,18 +825,15 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str = DEFAULT_PREFIX, f
     opts = ModelOptions() if opts is None else opts
     if not isinstance(opts, ModelOptions):
         raise ExportError(f"export-c: opts must be arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
-    P = load() if params is None else params
-    if not isinstance(P, Params):
-        raise ExportError(f"export-c: params must be arvcas.params.Params, got {type(P).__name__}")
     names = files(prefix)
     manifest = _read_manifest(out, force) if out.exists() else {}
     if out.exists():
         _check_overwrite(out, names, manifest, force)
 
-    plant = plant_functions(opts)
+    plant = plant_functions(opts, P.layout)  # sized by the system
     fns = {n: plant[n] for n in PUBLIC_FUNCTIONS}
     fns.update(jacobian_functions(plant))
-    inputs = example_inputs()
+    inputs = example_inputs(P)
     _example_values(fns, inputs)
     lib = prefix.rstrip("_")
     cg = ca.CodeGenerator(lib, {"with_header": False, "casadi_real": "double", "casadi_int": "long long int"})

@@ -7,11 +7,14 @@ BSD), writes ``modelDescription.xml``, compiles ``binaries/<platform>/<modelIden
 the cache's compiler flags and zips it all, sources included, to ``FILE.fmu`` (a temporary file in
 the same directory, then :func:`os.replace`).
 
-The FMU: states ``eta`` (pose in {n}) and ``nu`` (velocity in {b} at the COB), which are also its
-outputs; inputs the body wrench ``tau`` at the COB in {b} (or, with ``inputs="thrusters"``, the six
-thruster commands ``u``, realised as ``B_T sat(u)``), the joint positions, velocities and
-accelerations ``q, qd, qdd`` and the payload fraction; parameters every number of ``Params`` (SI,
-with units) and ``h_rk4``, the Co-Simulation RK4 step. Variables, units and use: docs/fmu.md.
+The FMU is sized by its system (``params``: Haidou-1 by default; any system file): states ``eta``
+(pose in {n}) and ``nu`` (velocity in {b} at the COB), which are also its outputs; inputs the body
+wrench ``tau`` at the COB in {b} (or, with ``inputs="thrusters"``, the ``n_thrusters`` thrust
+commands ``u``, realised as ``B_T sat(u)``), the ``n_joints`` joint positions, velocities and
+accelerations ``q, qd, qdd`` and the payload fraction; parameters every number of the system's
+``Params`` (SI, with units from the system's layout) and ``h_rk4``, the Co-Simulation RK4 step.
+Value references: states 0-11, derivatives 12-23, inputs from 24 (:func:`layout`), ``h_rk4``, then
+the parameters. Variables, units and use: docs/fmu.md.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -33,7 +37,7 @@ from arvcas.io import files
 
 import casadi as ca
 
-__all__ = ["FMUError", "export_fmu", "MODEL_IDENTIFIER", "INPUTS", "variables"]
+__all__ = ["FMUError", "export_fmu", "MODEL_IDENTIFIER", "INPUTS", "variables", "layout"]
 
 MODEL_IDENTIFIER = "arvcas_uvms"
 INPUTS = ("wrench", "thrusters")
@@ -93,6 +97,40 @@ class FMUError(ValueError):
     """The FMU cannot be written (one line naming the argument and what is allowed)."""
 
 
+_HAIDOU1_THRUSTERS = ("stern-left", "stern-right", "side 1", "side 2", "vertical 1", "vertical 2")
+VR_U = 24  # the first input's value reference (after the 12 states and their 12 derivatives)
+
+
+def layout(params=None, inputs: str = "wrench") -> dict[str, int]:
+    """Value references of the FMU of the system ``params``: the sizes ``n_in`` (the first inputs: 6
+    for the wrench, n_thrusters for the thrusters), ``n_joints``, ``n_u`` (every input), the offsets
+    of ``q``, ``qd``, ``qdd`` and ``payload`` within the inputs, and ``vr_h``, ``vr_p`` (Haidou-1:
+    25 inputs, h_rk4 at 49, the parameters from 50)."""
+    P = _check_params(params)
+    _check_inputs(inputs)
+    st = P.structure
+    n_in = 6 if inputs == "wrench" else st.n_thrusters
+    nj = st.n_joints
+    n_u = n_in + 3 * nj + 1
+    return dict(n_in=n_in, n_joints=nj, n_u=n_u, q=n_in, qd=n_in + nj, qdd=n_in + 2 * nj, payload=n_in + 3 * nj,
+                vr_h=VR_U + n_u, vr_p=VR_U + n_u + 1, n_p=len(P))
+
+
+def _parameter_unit(P, name: str) -> tuple[str | None, str, dict | None]:
+    """(FMI unit or None, description prefix, base-unit exponents of a derived unit or None) of
+    parameter ``name`` of the system of ``P``."""
+    from arvcas.build.units import si_exponents, unit_text
+
+    dim = P.layout.dims[P.layout.index[name]]
+    if dim != "per_rho":
+        return _DIM_UNIT[dim], "", None
+    exps = si_exponents(P, name)
+    if exps is None:  # per unit density: no one unit
+        return None, "per unit density (SI coefficient = env.rho * value); ", None
+    unit = unit_text(exps, mul=".", power="")  # a derived unit (kg/m, kg.m2/rad2, ...), by its base units
+    return unit, "hydrodynamic coefficient (SI); ", (None if unit in _UNITS else exps)
+
+
 # ---------------------------------------------------------------------------------------------
 # variables
 
@@ -100,16 +138,17 @@ class FMUError(ValueError):
 def variables(params=None, inputs: str = "wrench") -> list[dict]:
     """The FMU's ScalarVariables in order (value reference = index): name, causality, unit, start, ...
 
-    ``params`` gives the parameters' start values (default: the packaged ``haidou1.toml``); the states'
-    start values are the scenario's ``eta0``, ``nu0`` (``data/scenario.toml``), the joints' the stowed
-    pose ``arm.stow``.
+    ``params`` is the system (its Params, a system file or None for Haidou-1): it sizes the inputs
+    (:func:`layout`) and gives the parameters' start values; the states' start values are the
+    ``eta0``, ``nu0`` of the system's default scenario (Haidou-1: ``data/scenario.toml``), the
+    joints' the stowed pose ``arm.stow``.
     """
-    from arvcas.params import SCHEMA
     from arvcas.sim.scenario import load_scenario
 
     P = _check_params(params)
-    _check_inputs(inputs)
-    cfg = load_scenario()
+    lay = layout(P, inputs)
+    st = P.structure
+    cfg = load_scenario(P.default("scenario"))
     x0 = [*cfg.initial_eta0, *cfg.initial_nu0]
     V: list[dict] = []
 
@@ -127,48 +166,57 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
         add(f"der({V[i]['name']})", "local", "continuous", units_dx[i], f"time derivative of {V[i]['name']}",
             derivative=i + 1)
     if inputs == "wrench":
-        for k in range(6):
+        for k in range(lay["n_in"]):
             add(f"tau[{k + 1}]", "input", "continuous", "N" if k < 3 else "N.m",
                 f"body wrench at the COB in {{b}}: {'XYZKMN'[k]} ({'force' if k < 3 else 'moment'})", start=0.0)
-    else:
-        names = ("stern-left", "stern-right", "side 1", "side 2", "vertical 1", "vertical 2")
-        for k in range(6):
+    elif st.thrusters is None:  # Haidou-1's parametric layout
+        for k in range(lay["n_in"]):
             add(f"u[{k + 1}]", "input", "continuous", "N",
-                f"thrust command of the {names[k]} thruster (saturated to [thrusters.u_min, thrusters.u_max])",
+                f"thrust command of the {_HAIDOU1_THRUSTERS[k]} thruster (saturated to [thrusters.u_min, "
+                "thrusters.u_max])", start=0.0)
+    else:
+        for k, t in enumerate(st.thrusters):
+            add(f"u[{k + 1}]", "input", "continuous", "N",
+                f"thrust command of thruster {t} (saturated to [thrusters.{t}.u_min, thrusters.{t}.u_max])",
                 start=0.0)
-    q0 = [P[f"arm.stow.q{j}"] for j in range(1, 7)]
-    for vec, unit, what, starts in (("q", "rad", "joint angle", q0), ("qd", "rad/s", "joint rate", [0.0] * 6),
-                                     ("qdd", "rad/s2", "joint acceleration", [0.0] * 6)):
-        for j in range(6):
+    nj = lay["n_joints"]
+    q0 = [P[f"arm.stow.q{j}"] for j in range(1, nj + 1)]
+    for vec, unit, what, starts in (("q", "rad", "joint angle", q0), ("qd", "rad/s", "joint rate", [0.0] * nj),
+                                     ("qdd", "rad/s2", "joint acceleration", [0.0] * nj)):
+        for j in range(nj):
             add(f"{vec}[{j + 1}]", "input", "continuous", unit, f"{what} of joint {j + 1}", start=starts[j])
     add("payload", "input", "continuous", "1",
         "payload fraction in [0, 1]: scales payload.mass and payload.volume at the tool point", start=0.0)
     add("h_rk4", "parameter", "fixed", "s", "Co-Simulation only: the RK4 step (each communication step is "
         "split into ceil(H / h_rk4) equal steps)", start=_H_RK4_DEFAULT, initial="exact")
     vals = P.vector()
-    for i, name in enumerate(SCHEMA):
-        dim = SCHEMA[name][0]
-        unit = _DIM_UNIT[dim]
+    for i, name in enumerate(P.names()):  # the system's parameters, units from its layout
+        unit, what, base = _parameter_unit(P, name)
         src = P.source(name)
-        desc = src if dim != "per_rho" else f"per unit density (SI coefficient = env.rho * value); {src}"
+        desc = what + src
         file_unit = P.unit(name)
         display = None
         if unit in _DISPLAY and file_unit == _DISPLAY[unit][0]:
             display = file_unit
-        add(name, "parameter", "fixed", unit, desc, start=float(vals[i]), initial="exact", display=display)
-    assert len(V) == 50 + len(SCHEMA)
+        add(name, "parameter", "fixed", unit, desc, start=float(vals[i]), initial="exact", display=display,
+            **({"base": base} if base else {}))
+    assert len(V) == lay["vr_p"] + len(P)
     return V
 
 
 def _check_params(params):
     from arvcas import params as params_mod
+    from arvcas.system import System, load_system
 
     if params is None:
         return params_mod.load()
-    if isinstance(params, (str, os.PathLike)):
-        return params_mod.load(params)
+    if isinstance(params, System):
+        return params.params
+    if isinstance(params, (str, os.PathLike)):  # a shipped system's name or a system file
+        return load_system(params).params
     if not isinstance(params, params_mod.Params):
-        raise FMUError(f"params: expected arvcas.params.Params, a parameter file path or None, got {type(params).__name__}")
+        raise FMUError(f"params: expected arvcas.params.Params, a system (name or file) or None, got "
+                       f"{type(params).__name__}")
     return params
 
 
@@ -189,7 +237,7 @@ def _dependencies(fn: ca.Function) -> list[list[int]]:
     """For each of the 12 derivatives, the 1-based indices of the states and inputs it depends on."""
     syms = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
     xdot = fn.call(syms)[0]
-    known = ca.vertcat(*syms[:-1])  # x (indices 1..12), then the 25 inputs (indices 25..49)
+    known = ca.vertcat(*syms[:-1])  # x (indices 1..12), then the inputs (indices 25.., VR_U + 1 on)
     sp = ca.jacobian_sparsity(xdot, known)
     cols = [1 + j if j < 12 else 25 + (j - 12) for j in range(known.numel())]
     rows, cs = sp.get_triplet()
@@ -199,13 +247,17 @@ def _dependencies(fn: ca.Function) -> list[list[int]]:
     return [sorted(d) for d in deps]
 
 
-def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: str) -> str:
+def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: str, P) -> str:
     from arvcas import __version__
 
-    used = sorted({v["unit"] for v in V if v["unit"]}, key=list(_UNITS).index)
+    bases = {v["unit"]: v.get("base") or _UNITS[v["unit"]] for v in V if v["unit"]}
+    used = [u for u in _UNITS if u in bases] + [u for u in bases if u not in _UNITS]  # derived units last
     L = ['<?xml version="1.0" encoding="UTF-8"?>']
     stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-    desc = ("Haidou-1 ARV with its 6-DOF manipulator (Ding et al. 2021), exactly coupled (arvcas uvms_rhs, "
+    st = P.structure
+    what = "Haidou-1 ARV with its 6-DOF manipulator (Ding et al. 2021)" if _is_haidou1(st) else \
+        f"system {st.name}: {P.description or st.name} ({st.n_thrusters} thrusters, {st.n_joints} joints)"
+    desc = (f"{what}, exactly coupled (arvcas uvms_rhs, "
             f"docs/model.md); inputs: {'body wrench tau' if inputs == 'wrench' else 'thruster commands u'}, "
             "q, qd, qdd, payload")
     L.append(f'<fmiModelDescription fmiVersion="2.0" modelName="arvcas_uvms" guid={quoteattr(guid)} '
@@ -224,7 +276,7 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
              f'canSerializeFMUstate="true" providesDirectionalDerivative="false">{src}</CoSimulation>')
     L.append("  <UnitDefinitions>")
     for u in used:
-        base = "".join(f' {k}="{e}"' for k, e in _UNITS[u].items())
+        base = "".join(f' {k}="{e}"' for k, e in bases[u].items())
         disp = ""
         if u in _DISPLAY:
             dn, fac = _DISPLAY[u]
@@ -275,15 +327,20 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
 # C
 
 
-def _rhs_function(opts, inputs: str) -> ca.Function:
+def _is_haidou1(st) -> bool:
+    return st.name == "haidou1" and st.thrusters is None and st.n_joints == 6
+
+
+def _rhs_function(opts, inputs: str, P) -> ca.Function:
     from arvcas.model.uvms import plant_functions
 
-    fns = plant_functions(opts)
+    fns = plant_functions(opts, P.layout)  # sized by the system
     f = fns["uvms_rhs"]
     if inputs == "wrench":
         return f
-    x, u, pl = ca.SX.sym("x", 12), ca.SX.sym("u", 6), ca.SX.sym("payload", 1)
-    q, qd, qdd = ca.SX.sym("q", 6), ca.SX.sym("qd", 6), ca.SX.sym("qdd", 6)
+    nt, nj = P.structure.n_thrusters, P.structure.n_joints
+    x, u, pl = ca.SX.sym("x", 12), ca.SX.sym("u", nt), ca.SX.sym("payload", 1)
+    q, qd, qdd = ca.SX.sym("q", nj), ca.SX.sym("qd", nj), ca.SX.sym("qdd", nj)
     p = ca.SX.sym("p", f.size1_in(6))
     tau = fns["thrust"](u, p)
     return ca.Function("uvms_rhs_u", [x, u, q, qd, qdd, pl, p], [f(x, tau, q, qd, qdd, pl, p)],
@@ -362,10 +419,11 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
     """Write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm to ``path``.
 
     ``path`` must end in ``.fmu``; an existing file is replaced only if it is an FMU arvcas wrote, or
-    with ``force=True``. ``params`` (:class:`arvcas.params.Params`, a parameter file, or None for the
-    packaged one) sets the parameters' start values; every one stays settable in the FMU. ``opts`` is
+    with ``force=True``. ``params``, the system (its :class:`arvcas.params.Params` or
+    :class:`arvcas.system.System`, a system file, or None for Haidou-1), sizes the FMU (:func:`layout`)
+    and sets the parameters' start values; every one stays settable in the FMU. ``opts`` is
     an :class:`arvcas.model.uvms.ModelOptions` (n_quad of the link drag). ``inputs``: ``"wrench"``
-    (the body wrench ``tau``, 6) or ``"thrusters"`` (the six thrust commands ``u``, realised as
+    (the body wrench ``tau``, 6) or ``"thrusters"`` (the n_thrusters thrust commands ``u``, realised as
     ``B_T sat(u)``). Returns the absolute path written. Raises :class:`FMUError` for bad arguments,
     :class:`arvcas.build.codegen.CompileError` if the C compiler fails.
     """
@@ -381,7 +439,8 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
     platform, suffix = _platform()
 
     V = variables(P, inputs)
-    fn = _rhs_function(opts, inputs)
+    lay = layout(P, inputs)
+    fn = _rhs_function(opts, inputs, P)
     deps = _dependencies(fn)
     cg = ca.CodeGenerator(_MODEL_C[:-2], dict(codegen._CODEGEN_OPTS))
     cg.add(fn)
@@ -395,10 +454,15 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
         h.update(b"\0")
     guid = "{" + str(uuid.UUID(bytes=h.digest()[:16])) + "}"
     wrapper = (_templates() / "fmu_wrapper.c").read_text(encoding="utf-8")
-    for k, v in {"@MODEL_C@": _MODEL_C, "@NP@": str(len(V) - 50), "@GUID@": guid, "@RHS@": fn.name(),
-                 "@START@": start, "@IN@": "tau" if inputs == "wrench" else "u"}.items():
-        wrapper = wrapper.replace(k, v)
-    md = _model_description(V, deps, guid, inputs)
+    assert len(V) - lay["vr_p"] == len(P) and fn.nnz_in() == 12 + lay["n_u"] + len(P)
+    fields = {"@MODEL_C@": _MODEL_C, "@NP@": len(V) - lay["vr_p"], "@GUID@": guid, "@RHS@": fn.name(),
+              "@START@": start, "@IN@": "tau" if inputs == "wrench" else "u", "@NU@": lay["n_u"],
+              "@NIN@": lay["n_in"], "@NJ@": lay["n_joints"], "@VR_H@": lay["vr_h"], "@VR_P@": lay["vr_p"],
+              "@U_Q@": lay["q"], "@U_QD@": lay["qd"], "@U_QDD@": lay["qdd"], "@U_PAYLOAD@": lay["payload"]}
+    for k, v in fields.items():
+        wrapper = wrapper.replace(k, str(v))
+    assert not re.search(r"@[A-Z_]+@", wrapper), "an unfilled field in fmu_wrapper.c"
+    md = _model_description(V, deps, guid, inputs, P)
 
     work = Path(tempfile.mkdtemp(prefix=".arvcas-fmu-", dir=out.parent))
     try:

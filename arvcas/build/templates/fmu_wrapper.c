@@ -7,7 +7,7 @@
  * Value references = ScalarVariable index - 1:
  *   [VR_X,  VR_X + 12)   states eta[1..6], nu[1..6] (outputs)
  *   [VR_DX, VR_DX + 12)  their derivatives
- *   [VR_U,  VR_U + 25)   inputs @IN@[1..6], q[1..6], qd[1..6], qdd[1..6], payload
+ *   [VR_U,  VR_U + @NU@)   inputs @IN@[1..@NIN@], q[1..@NJ@], qd[1..@NJ@], qdd[1..@NJ@], payload
  *   VR_H                 Co-Simulation RK4 step (s)
  *   [VR_P,  VR_P + NP)   model parameters (SI), the p input of uvms_rhs
  */
@@ -25,13 +25,13 @@
 #include "@MODEL_C@"
 
 #define NX 12
-#define NU 25
+#define NU @NU@
 #define NP @NP@
 #define VR_X 0
 #define VR_DX 12
 #define VR_U 24
-#define VR_H 49
-#define VR_P 50
+#define VR_H @VR_H@
+#define VR_P @VR_P@
 #define NVR (VR_P + NP)
 #define GUID "@GUID@"
 
@@ -86,14 +86,14 @@ static fmi2Status fail(Inst *c, const char *fn, const char *why) {
 #define CHECK_MODE(c, fn, m, msg) do { CHECK(c, fn); \
     if ((c)->mode != (m)) return fail((c), (fn), (msg)); } while (0)
 
-/* xdot = f(x, u) with the inputs u (25 numbers) and the instance's parameters */
+/* xdot = f(x, u) with the inputs u (@NU@ numbers) and the instance's parameters */
 static int rhs(Inst *c, const double *x, const double *u, double *xdot) {
     c->arg[0] = x;
     c->arg[1] = u;
-    c->arg[2] = u + 6;
-    c->arg[3] = u + 12;
-    c->arg[4] = u + 18;
-    c->arg[5] = u + 24;
+    c->arg[2] = u + @U_Q@;
+    c->arg[3] = u + @U_QD@;
+    c->arg[4] = u + @U_QDD@;
+    c->arg[5] = u + @U_PAYLOAD@;
     c->arg[6] = c->r + VR_P;
     c->res[0] = xdot;
     return RHS(c->arg, c->res, c->iw, c->w, 0);
