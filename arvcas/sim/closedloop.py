@@ -42,6 +42,9 @@ from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
 __all__ = ["Layout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "INPUTS"]
 
 NP = len(SCHEMA)
+_PSYM = [(i, j) for i in range(12) for j in range(i, 12)]  # the EKF covariance's upper triangle, row by row
+_PSYM_INDEX = {ij: k for k, ij in enumerate(_PSYM)}
+N_PSYM = len(_PSYM)
 
 # the run's inputs, in the order of the compiled function (everything else binds them by name)
 INPUTS: tuple[str, ...] = ("gains", "noise", "unc", "phase", "ekf", "p", "sched_time", "sched_arm")
@@ -70,7 +73,7 @@ def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int) -> Layou
     status; then the run's constants (carried through the loop, never changed)."""
     return Layout([
         ("x", 12),  # true plant state [eta; nu]
-        ("xh", 12), ("Pc", 144),  # EKF prior for this sample
+        ("xh", 12), ("Pc", N_PSYM),  # EKF prior for this sample (covariance: upper triangle, row by row)
         ("y1", 6), ("y2", 6), ("r0", 6),  # ATD reference
         *[(f"c_{name}", n) for name, n in ctrl.state],  # the controller's state
         ("tau_prev", 6), ("u_hold", n_thr),  # previous command (CHAT) and held realised thrust
@@ -196,9 +199,9 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     # 2. EKF update (H = I, R = sensor covariance); the first sample starts from y_0 with P = R
     ekf = L.get(S, "ekf")  # [q_eta, q_nu, var_position, var_attitude, var_velocity]
     r_meas = ca.vertcat(ca.repmat(ekf[2], 3, 1), ca.repmat(ekf[3], 3, 1), ca.repmat(ekf[4], 6, 1))
-    Rn = ca.diag(r_meas)
     xh = ca.if_else(first, y, L.get(S, "xh"))
-    Pc = ca.if_else(first, Rn, ca.reshape(L.get(S, "Pc"), 12, 12))
+    Pu = L.get(S, "Pc")
+    Pc = [ca.if_else(first, r_meas[i] if i == j else 0, Pu[k]) for k, (i, j) in enumerate(_PSYM)]
     xh, Pc = _ekf_update(xh, Pc, y, r_meas)
     eta_hat, nu_hat = xh[0:6], xh[6:12]
     eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
@@ -248,7 +251,7 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     ok_c = ca.logic_and(ok, ca.logic_and(ca.mmax(ca.fabs(e_true) / lim) < 1, ca.mmax(ca.fabs(tau_v)) < 1e12))
     y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
     C = L.pack({
-        "x": x, "xh": _ekf_f(xh, h), "Pc": ca.vec(_ekf_cov(xh, Pc, h, ekf[0], ekf[1])),
+        "x": x, "xh": _ekf_f(xh, h), "Pc": _ekf_cov(xh, Pc, h, ekf[0], ekf[1]),
         "y1": y1n, "y2": y2n, "r0": r0, **{f"c_{name}": xc_next[name] for name, _ in law.state},
         "tau_prev": tau_v, "u_hold": u_sat,
         "chat_sum": chat_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
@@ -286,20 +289,29 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     return fn, L, pc_fn
 
 
-def _ekf_update(xh, Pc, y, r):
+def _sym_get(Pu, i, j):
+    return Pu[_PSYM_INDEX[(i, j) if i <= j else (j, i)]]
+
+
+def _ekf_update(xh, Pu, y, r):
     """EKF measurement update with H = I and diagonal R = diag(r), as 12 sequential scalar updates.
 
     Exactly the batch update ``K = P (P + R)^-1`` for uncorrelated measurement noise, at a fraction
-    of the cost of a 12x12 solve in the graph.
+    of the cost of a 12x12 solve in the graph. ``Pu``: the covariance's upper triangle (a list in
+    ``_PSYM`` order); each scalar update ``P - P_i P_i' / s`` is symmetric, so only that triangle is
+    computed and P stays symmetric by construction. Returns (xh, the updated triangle).
     """
     n = xh.shape[0]
+    Pu = list(Pu)
+    xh = [xh[a] for a in range(n)]
     for i in range(n):
-        Pi = Pc[:, i]
-        s = Pi[i] + r[i]
-        K = Pi / s
-        xh = xh + K * (y[i] - xh[i])
-        Pc = Pc - ca.mtimes(K, Pi.T)
-    return xh, Pc
+        col = [_sym_get(Pu, a, i) for a in range(n)]  # P[:, i] = P[i, :]
+        s = col[i] + r[i]
+        K = [c / s for c in col]
+        innov = y[i] - xh[i]
+        xh = [xh[a] + K[a] * innov for a in range(n)]
+        Pu = [Pu[k] - K[a] * col[b] for k, (a, b) in enumerate(_PSYM)]
+    return ca.vertcat(*xh), Pu
 
 
 def _ekf_f(xh, h):
@@ -307,12 +319,27 @@ def _ekf_f(xh, h):
     return ca.vertcat(xh[0:6] + h * ca.mtimes(J(xh[0:6]), xh[6:12]), xh[6:12])
 
 
-def _ekf_cov(xh, Pc, h, q_eta, q_nu):
-    """P+ = F P F' + Q with F the AD Jacobian of the transition (docs/model.md §4), Q = diag(q_eta I6, q_nu I6)."""
+def _ekf_cov(xh, Pu, h, q_eta, q_nu):
+    """P+ = F P F' + Q with F the AD Jacobian of the transition (docs/model.md §4), Q = diag(q_eta I6, q_nu I6).
+
+    ``Pu``: P's upper triangle (``_PSYM`` order); returns that of P+ as a column. F is kept sparse
+    (its structural zeros and ones are never multiplied: the velocity rows are the identity, the
+    pose block is I + h d(J nu)/d eta with only the attitude columns), and only the upper triangle of
+    the symmetric F P F' is formed, each entry a sparse row product ``(F P)[a, :] . F[b, :]``.
+    """
     xs = ca.SX.sym("xs", 12)
     F = ca.substitute(ca.jacobian(_ekf_f(xs, h), xs), xs, xh)
-    Q = ca.diag(ca.vertcat(ca.repmat(q_eta, 6, 1), ca.repmat(q_nu, 6, 1)))
-    return ca.mtimes([F, Pc, F.T]) + Q
+    P = ca.SX(12, 12)
+    for a in range(12):
+        for b in range(12):
+            P[a, b] = _sym_get(Pu, a, b)
+    FP = ca.mtimes(F, P)
+    q = [q_eta] * 6 + [q_nu] * 6
+    out = []
+    for a, b in _PSYM:
+        v = ca.mtimes(FP[a, :], F[b, :].T)
+        out.append(v + q[a] if a == b else v)
+    return ca.vertcat(*out)
 
 
 def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
