@@ -54,6 +54,7 @@ import sys
 import tempfile
 import time
 from contextlib import contextmanager
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -100,6 +101,10 @@ REQUIRED_KEYS = (
     "closed_loop.run_cold_s", "closed_loop.table_s", "closed_loop.rtf_cold",
     "closed_loop.instructions_per_sample", "closed_loop.instr_per_s",
     "closed_loop.batch.runs_per_s_1", "closed_loop.batch.runs_per_s_2", "closed_loop.batch.ratio_2_over_1",
+    "targets.default.h_plant", "targets.previous.h_plant", "targets.default.rtf", "targets.previous.rtf",
+    "targets.default.rtf_vm", "targets.default.instructions_per_sample", "targets.default.ratio_2_over_1",
+    "targets.default.study_min", "targets.default.peak_mb_per_thread_2", "targets.default.work_mb_per_thread",
+    "targets.ratio_default_over_previous",
     "compile.uvms_rhs.cold_build_s", "compile.uvms_rhs.warm_build_s", "compile.run.cold_build_s",
     "compile.run.warm_build_s", "compile.opt_sweep.run", "compile.opt_sweep.uvms_rhs", "recommendation.opt_level",
     "startup.warm_simulate_wall_s", "startup.warm_simulate_peak_rss_mb", "startup.cold_graph_metrics_s",
@@ -126,18 +131,20 @@ class Settings:
     single_calls: int  # single calls from Python per repetition
     map_n: int  # f.map(N)
     batch_n: int  # gain sets per simulate_batch call
+    study_pop: int  # gain sets per batch of the issue 14 targets (a generation of the paper study)
     opt_levels: tuple[str, ...]
     compile_level: str | None  # level of the cold/warm measurement; None: codegen.build's default
 
     @classmethod
     def full(cls) -> "Settings":
         return cls("full", reps=7, reps_slow=5, c_target_s=0.25, c_min_evals=100_000, c_max_evals=1_000_000,
-                   single_calls=2000, map_n=10_000, batch_n=16, opt_levels=OPT_LEVELS, compile_level=None)
+                   single_calls=2000, map_n=10_000, batch_n=16, study_pop=80, opt_levels=OPT_LEVELS,
+                   compile_level=None)
 
     @classmethod
     def quick(cls) -> "Settings":
         return cls("quick", reps=2, reps_slow=1, c_target_s=0.005, c_min_evals=1000, c_max_evals=5000,
-                   single_calls=20, map_n=200, batch_n=4, opt_levels=("-O0",), compile_level="-O0")
+                   single_calls=20, map_n=200, batch_n=4, study_pop=4, opt_levels=("-O0",), compile_level="-O0")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -821,6 +828,108 @@ def _bench_systems(s: Settings, log) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------
+# 2b. issue 14's targets: the default plant step against the previous one and the VM
+
+PREVIOUS_H_PLANT = 0.01  # the plant step before issue 14 (results/step chose 0.05 s)
+STUDY_RUNS = 40_000  # a gamultiobj-sized study
+TARGETS = {"rtf": 20_000.0, "study_min": 2.0, "ratio_2_over_1": 1.95}
+
+_BATCH_CHILD = """
+import dataclasses, json
+import numpy as np
+from arvcas.controllers import gains as gains_mod
+from arvcas.params import load
+from arvcas.sim import scenario, schedule, simulation
+cfg = dataclasses.replace(scenario.load_scenario(), time_h_plant={hp!r})
+g = gains_mod.default_gains({controller!r})
+G = g[None, :] * np.random.default_rng(2024).uniform(0.95, 1.05, ({n}, g.size))
+simulation.compiled_run({controller!r}, None, cfg).function(False)
+schedule.table(cfg, load().vector())
+scenario.noise_sequence(cfg, 0)
+base = {hwm}
+simulation.simulate_batch({controller!r}, G, seed=0, cfg=cfg, n_threads={nt})
+print(json.dumps({{"base_mb": base, "peak_mb": {hwm}}}))
+"""
+
+
+def _batch_memory(hp: float, n: int, nt: int) -> dict:
+    """Peak resident memory (VmHWM) of a fresh process running one batch of ``n`` runs on ``nt``
+    threads, over the same process with the run loaded and its time table built."""
+    code = _BATCH_CHILD.format(hp=hp, controller=CONTROLLER, n=n, nt=nt, hwm=_HWM)
+    r = json.loads(_child([sys.executable, "-c", code])[1].strip().splitlines()[-1])
+    return {"base_mb": r["base_mb"], "peak_mb": r["peak_mb"], "extra_mb": r["peak_mb"] - r["base_mb"]}
+
+
+def _bench_targets(s: Settings, cfg, P, log) -> dict:
+    """Issue 14: one run, a batch on 1 and 2 threads, the 40,000-run projection and the memory per
+    thread, at the default plant step and at the previous one (0.01 s), with the VM, in one run."""
+    g = gains_mod.default_gains(CONTROLLER)
+    p = P.vector()
+    steps = {"default": cfg, "previous": dataclasses.replace(cfg, time_h_plant=PREVIOUS_H_PLANT)}
+    fn, args, out = {}, {}, {}
+    for k, c in steps.items():
+        log(f"targets: the run at h_plant = {c.time_h_plant:g} s (compiled, VM) ...")
+        fn[k] = simulation.run_function(CONTROLLER, c, trace=False)
+        args[k] = _run_args(fn[k], g, scenario.noise_sequence(c, 0), c, p)
+        calls.call(fn[k], *args[k])  # warm-up, time table
+    # compiled runs, the two steps interleaved round by round (the machine's drift hits both)
+    t = {k: [] for k in steps}
+    gc.disable()
+    try:
+        for _ in range(3 * s.reps):
+            for k in steps:
+                t0 = time.perf_counter()
+                calls.call(fn[k], *args[k])
+                t[k].append(time.perf_counter() - t0)
+    finally:
+        gc.enable()
+    rng = np.random.default_rng(2024)
+    G = g[None, :] * rng.uniform(0.95, 1.05, (s.study_pop, g.size))
+    for k, c in steps.items():
+        spec = closedloop.RunSpec(CONTROLLER, c)
+        f_vm = closedloop.build_run(spec, trace=False)
+        a_vm = _run_args(f_vm, g, scenario.noise_sequence(c, 0), c, p)
+        t_vm = _time(lambda: calls.call(f_vm, *a_vm), s.reps_slow, warmup=0)
+        ins = _step_instructions(spec, trace=False)
+        log(f"targets: batch of {s.study_pop} at h_plant = {c.time_h_plant:g} s, 1 and 2 threads ...")
+        bt = {1: [], 2: []}
+        for nt in (1, 2):
+            simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, params=P, n_threads=nt)  # warm-up
+        for _ in range(s.reps_slow):
+            for nt in (1, 2):
+                t0 = time.perf_counter()
+                simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, params=P, n_threads=nt)
+                bt[nt].append(time.perf_counter() - t0)
+        run_s = _stat(t[k])
+        n = scenario.n_samples(c)
+        rps = {nt: s.study_pop / statistics.median(v) for nt, v in bt.items()}
+        out[k] = {
+            "h_plant": c.time_h_plant, "substeps": c.substeps,
+            "run_s": run_s, "rtf": c.time_duration / run_s["median"], "rtf_best": c.time_duration / run_s["min"],
+            "vm_run_s": t_vm, "rtf_vm": c.time_duration / t_vm["median"],
+            "ratio_vm_over_compiled": t_vm["median"] / run_s["median"],
+            "instructions_per_sample": ins["total"], "step_calls": ins["calls"],
+            "instr_per_s": ins["total"] * n / run_s["median"],
+            "batch_n": s.study_pop, "batch_s_1": _stat(bt[1]), "batch_s_2": _stat(bt[2]),
+            "runs_per_s_1": rps[1], "runs_per_s_2": rps[2], "ratio_2_over_1": rps[2] / rps[1],
+            "study_min": STUDY_RUNS / rps[2] / 60.0,
+            "work_mb_per_thread": (fn[k].sz_w() + fn[k].sz_iw()) * 8 / 1e6,
+            "table_mb": scenario.table_bytes(c) / 1e6,
+        }
+    log("targets: peak memory per thread (fresh processes) ...")
+    for k, c in steps.items():
+        m1, m2 = _batch_memory(c.time_h_plant, s.study_pop, 1), _batch_memory(c.time_h_plant, s.study_pop, 2)
+        out[k].update(memory_1=m1, memory_2=m2, peak_mb_per_thread_1=m1["extra_mb"],
+                      peak_mb_per_thread_2=m2["extra_mb"] / 2, process_base_mb=m1["base_mb"])
+    out["ratio_default_over_previous"] = out["previous"]["run_s"]["median"] / out["default"]["run_s"]["median"]
+    out["ratio_batch_default_over_previous"] = out["default"]["runs_per_s_2"] / out["previous"]["runs_per_s_2"]
+    out["targets"] = TARGETS
+    out["study_note"] = (f"{STUDY_RUNS:,} runs / the 2-thread batch rate: the runs alone; a real study adds "
+                         "NSGA-II's bookkeeping and a checkpoint per generation")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
 # 3. compiling
 
 
@@ -1071,6 +1180,7 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
         for key, fn in (
             ("plant", lambda: _bench_plant(s, driver, work, P, log)),
             ("closed_loop", lambda: _bench_closed_loop(s, cfg, P, log)),
+            ("targets", lambda: _bench_targets(s, cfg, P, log)),
             ("compile", lambda: _bench_compile(s, cfg, P, driver, work, log)),
             ("startup", lambda: _bench_startup(s, log)),
             ("systems", lambda: _bench_systems(s, log)),
@@ -1125,6 +1235,73 @@ def _g(x: float, digits: int = 3) -> str:
         dec = max(0, digits - 1 - int(math.floor(math.log10(abs(x)))))
         return f"{x:,.{dec}f}"
     return f"{x:.{digits - 1}e}"
+
+
+def _verdict(value: float, target: float, higher_is_better: bool) -> str:
+    ok = value >= target if higher_is_better else value <= target
+    if ok:
+        return "met"
+    miss = (target / value - 1) if higher_is_better else (value / target - 1)
+    return f"**missed by {miss:.0%}**"
+
+
+def _targets_markdown(tg: dict) -> list[str]:
+    d, pv = tg["default"], tg["previous"]
+    T = tg["targets"]
+
+    def parts(r):
+        return " + ".join(f"{c['calls']} x {k} {c['n_instructions']:,}" for k, c in r["step_calls"].items())
+
+    def row(label, a, b, ratio=""):
+        return f"| {label} | {a} | {b} | {ratio} |"
+
+    m1, m2 = d["memory_1"], d["memory_2"]
+    L = [
+        f"## 2b. Issue 14: the default plant step ({d['h_plant']:g} s) against the previous one "
+        f"({pv['h_plant']:g} s) and CasADi's VM",
+        "",
+        f"Same process, same controller (`{CONTROLLER}`, Table 2 gains, seed 0). Compiled runs: the two steps "
+        f"interleaved round by round, {d['run_s']['n']} rounds (median; spread in brackets). Batches: "
+        f"{d['batch_n']} gain sets (one generation of the paper study), 1 and 2 threads interleaved, "
+        f"{d['batch_s_1']['n']} rounds each (median).",
+        "",
+        f"| | default, h_plant = {d['h_plant']:g} s ({d['substeps']} RK4 steps per sample) | previous, "
+        f"{pv['h_plant']:g} s ({pv['substeps']} steps) | default / previous |",
+        "|---|--:|--:|--:|",
+        row("one 100 s run, compiled, metrics only: wall s", f"{_g(_m(d['run_s']))} ({_spread(d['run_s'])})",
+            f"{_g(_m(pv['run_s']))} ({_spread(pv['run_s'])})", f"{tg['ratio_default_over_previous']:.2f}x faster"),
+        row(f"real-time factor (target >= {T['rtf']:,.0f} at the default)",
+            f"**{_g(d['rtf'])}** (best round {_g(d['rtf_best'])}): {_verdict(d['rtf'], T['rtf'], True)}",
+            _g(pv["rtf"]), ""),
+        row("the same run in CasADi's VM: wall s (real-time factor)", f"{_g(_m(d['vm_run_s']))} ({_g(d['rtf_vm'])})",
+            f"{_g(_m(pv['vm_run_s']))} ({_g(pv['rtf_vm'])})", ""),
+        row("compiled vs VM", f"{d['ratio_vm_over_compiled']:.1f}x", f"{pv['ratio_vm_over_compiled']:.1f}x", ""),
+        row("instructions per controller sample", f"{parts(d)} = **{d['instructions_per_sample']:,}**",
+            f"{parts(pv)} = {pv['instructions_per_sample']:,}",
+            f"{pv['instructions_per_sample'] / d['instructions_per_sample']:.2f}x fewer"),
+        row("instructions per second, compiled", _g(d["instr_per_s"]), _g(pv["instr_per_s"]), ""),
+        row("batch, 1 thread: runs/s", _g(d["runs_per_s_1"]), _g(pv["runs_per_s_1"]), ""),
+        row("batch, 2 threads: runs/s", _g(d["runs_per_s_2"]), _g(pv["runs_per_s_2"]),
+            f"{tg['ratio_batch_default_over_previous']:.2f}x"),
+        row(f"2 threads / 1 thread (target >= {T['ratio_2_over_1']:.2f}x)",
+            f"**{d['ratio_2_over_1']:.2f}x**: {_verdict(d['ratio_2_over_1'], T['ratio_2_over_1'], True)}",
+            f"{pv['ratio_2_over_1']:.2f}x", ""),
+        row(f"{STUDY_RUNS:,} runs on 2 threads, min (target <= {T['study_min']:g} min; runs only)",
+            f"**{d['study_min']:.2f}**: {_verdict(d['study_min'], T['study_min'], False)}", f"{pv['study_min']:.2f}", ""),
+        row("peak memory per thread, MB: batch over the loaded process, 1 thread / 2 threads (per thread)",
+            f"{_g(d['peak_mb_per_thread_1'])} / {_g(d['peak_mb_per_thread_2'])}",
+            f"{_g(pv['peak_mb_per_thread_1'])} / {_g(pv['peak_mb_per_thread_2'])}", ""),
+        row("work memory per thread (the compiled run's work vectors), MB", _g(d["work_mb_per_thread"]),
+            _g(pv["work_mb_per_thread"]), ""),
+        row("shared by all threads: the time table, MB; the loaded process, MB",
+            f"{_g(d['table_mb'])}; {_g(d['process_base_mb'])}", f"{_g(pv['table_mb'])}; {_g(pv['process_base_mb'])}", ""),
+        "",
+        f"Peak memory: VmHWM of a fresh process (run loaded, time table built: {_g(m1['base_mb'])} MB) after one "
+        f"batch on 1 thread ({_g(m1['peak_mb'])} MB) and, in another, on 2 threads ({_g(m2['peak_mb'])} MB). "
+        f"The {STUDY_RUNS:,}-run row: {tg['study_note']}.",
+        "",
+    ]
+    return L
 
 
 def render_markdown(res: dict) -> str:
@@ -1244,6 +1421,7 @@ def render_markdown(res: dict) -> str:
         "",
         f"2 threads / 1 thread: **{b['ratio_2_over_1']:.2f}x**.",
         "",
+        *(_targets_markdown(res["targets"]) if "targets" in res else []),
         "## 3. Compiling (issue 6)",
         "",
         f"Cold: a build into a fresh, empty `ARVCAS_CACHE` (generate C, hash, compile, load). Warm: the "

@@ -71,7 +71,7 @@ def test_sweep_files(small_sweep, tmp_path):
 
 
 def test_sweep_cli_bad_input_one_line(tmp_path, capsys):
-    assert main(["sweep", "--h", "0.015", "--out", str(tmp_path / "o")]) == 2  # not a multiple of 0.01
+    assert main(["sweep", "--h", "0.015", "--out", str(tmp_path / "o")]) == 2  # 100 s is not a whole number of samples
     assert main(["sweep", "--h", "0.1", "--controllers", "lqr", "--out", str(tmp_path / "o")]) == 2
     assert main(["sweep", "--h", "0.1,0.1", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -112,11 +112,11 @@ def test_scenario_other_units_convert():
 
 
 @pytest.mark.parametrize("old,new,fragment", [
-    ("duration = { value = 100.0,", "duration = { value = 10000.0,",
-     "time.duration: the run's time table (100001 samples of 10 plant steps) would need about 3.61 GB, more than the 2 GB cap"),
+    ("duration = { value = 100.0,", "duration = { value = 30000.0,",
+     "time.duration: the run's time table (300001 samples of 2 plant steps) would need about 2.58 GB, more than the 2 GB cap"),
     ("duration = { value = 100.0,", "duration = { value = 1e9,", "time.duration: value must be <= 1e+06 s, got 1000000000.0"),
-    ("h_plant = { value = 0.01,", "h_plant = { value = 1e-9,", "time.h_plant: value must be >= 1e-06 s, got 1e-09"),
-    ("h_plant = { value = 0.01,", "h_plant = { value = 0.00001,", "time.h: h / h_plant = 10000 plant steps per sample, at most 1000"),
+    ("h_plant = { value = 0.05,", "h_plant = { value = 1e-9,", "time.h_plant: value must be >= 1e-06 s, got 1e-09"),
+    ("h_plant = { value = 0.05,", "h_plant = { value = 0.00001,", "time.h: h / h_plant = 10000 plant steps per sample, at most 1000"),
 ])
 def test_scenario_sizes_bounded(tmp_path, old, new, fragment):
     p = tmp_path / "s.toml"
@@ -133,7 +133,7 @@ def test_time_table_estimate_is_the_table():
     cfg = dataclasses.replace(load_scenario(), time_duration=3.0)
     from arvcas.sim import schedule
 
-    assert scenario.table_bytes(load_scenario()) == pytest.approx(36.2e6, rel=0.01)  # 100 s at h_plant = 0.01 s
+    assert scenario.table_bytes(load_scenario()) == pytest.approx(8.62e6, rel=0.01)  # 100 s at h_plant = 0.05 s
     tab = schedule.table(cfg, ap.load().vector())
     assert scenario.table_bytes(cfg) == tab.time.nbytes + tab.arm.nbytes
 
@@ -144,7 +144,12 @@ def test_with_h_checks_the_field_rule():
         cfg.with_h(0.0)
     with pytest.raises(ScenarioError, match=r"ScenarioConfig.with_h: time.h: value must be a number"):
         cfg.with_h("0.1")
-    assert cfg.with_h(0.05).substeps == 5
+    assert cfg.with_h(0.05).substeps == 1 and cfg.with_h(0.2).substeps == 4  # the scenario's plant step where it divides h
+    c = cfg.with_h(0.02)  # it does not: the largest step below it that does
+    assert c.time_h_plant == pytest.approx(0.02) and c.substeps == 1
+    c = cfg.with_h(0.12)
+    assert c.time_h_plant == pytest.approx(0.04) and c.substeps == 3
+    assert dataclasses.replace(cfg, time_h_plant=0.01).with_h(0.05).substeps == 5
 
 
 STUDY = """\

@@ -26,7 +26,7 @@ from arvcas.build import fmu as fmu_mod  # noqa: E402
 from arvcas.build.codegen import compiled  # noqa: E402
 from arvcas.sim import scenario  # noqa: E402
 
-H = 0.01  # the scenario's plant step (docs/model.md §4)
+H = 0.01  # the FMU's default RK4 step (the scenario's former plant step, docs/model.md §4)
 T_END = 30.0  # arm reach 5-20 s, payload ramp 22-22.5 s, return from 25 s
 INPUTS = ([f"tau[{i}]" for i in range(1, 7)] + [f"{n}[{i}]" for n in ("q", "qd", "qdd") for i in range(1, 7)]
           + ["payload"])

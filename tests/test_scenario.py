@@ -35,7 +35,7 @@ def _write(tmp_path, text, name="s.toml", binary=False):
 BAD_EDITS = [
     ("[time]", "[time", "malformed TOML"),
     ("duration =", "durration =", "unknown key 'time.durration' (did you mean 'time.duration'?)"),
-    ('h_plant = { value = 0.01, unit = "s", source = "docs/model.md §4: plant RK4 step" }\n', "", "missing key 'time.h_plant'"),
+    ('h_plant = { value = 0.05, unit = "s", source = "results/step/README.md: the coarsest step dividing h within 1e-6 m, rad of CVODES and 1e-5 relative in CHAT/RMSE of the 0.01 s run (docs/model.md §4); every other step stays available here" }' + "\n", "", "missing key 'time.h_plant'"),
     ("duration = { value = 100.0,", 'duration = { value = "long",', "time.duration: value must be a number"),
     ("duration = { value = 100.0,", "duration = { value = nan,", "time.duration: value must be finite"),
     ("duration = { value = 100.0,", "duration = { value = inf,", "time.duration: value must be finite"),
@@ -91,7 +91,7 @@ def test_unreadable_inputs(tmp_path):
 def test_values_in_si(cfg):
     assert cfg.initial_eta0[3] == pytest.approx(math.pi / 90)  # eta0 attitude: pi/90 (section 4.2)
     assert cfg.arm_qg[4] == pytest.approx(math.radians(60))
-    assert cfg.substeps == 10 and scenario.n_samples(cfg) == 1001
+    assert cfg.substeps == 2 and scenario.n_samples(cfg) == 1001  # h_plant = 0.05 s (results/step)
     np.testing.assert_allclose(cfg.sensor_variances[[0, 3, 6]], [1e-4, 2.74e-5, 2.5e-7])
 
 

@@ -4,9 +4,10 @@ The study compares the closed loop's RK4 trajectory with CVODES driven by the ru
 (``cvodes_states``). Checked here: (1) an independent textbook RK4 of the same ODE (``rk4_states``)
 agrees with CVODES to 1e-9 at h_plant = 0.01 s, and its error falls ~16x per halving of the step (order
 4 +- 0.5), on a 3 s window of a compressed scenario whose arm reaches, takes the payload and returns
-(every kink on the sample grid, as in the packaged scenario); (2) the compiled closed loop at the
-packaged step, driven by its own controller, matches CVODES on its first 2 s to 1e-9. Accuracy only:
-no timing is asserted.
+(every kink on the sample grid, as in the packaged scenario); (2) the compiled closed loop, driven by
+its own controller, matches CVODES on its first 2 s: to 1e-9 at h_plant = 0.01 s, and to 1e-8 at the
+packaged step 0.05 s (results/step: 1.6e-8 m worst over 100 s and 52 runs; the issue's rule 1e-6).
+Accuracy only: no timing is asserted.
 """
 
 from __future__ import annotations
@@ -61,16 +62,19 @@ def test_rk4_matches_cvodes_and_order_four(case):
     assert err[0.01] < err[0.025] < err[0.05]
 
 
-def test_closed_loop_matches_cvodes_on_its_own_thrust(params):
+@pytest.mark.parametrize("h_plant,bound", [(0.01, 1e-9), (None, 1e-8)], ids=["0.01 s", "packaged step"])
+def test_closed_loop_matches_cvodes_on_its_own_thrust(params, h_plant, bound):
     import arvcas
 
     cfg = load_scenario()
+    if h_plant is not None:
+        cfg = dataclasses.replace(cfg, time_h_plant=h_plant)
     r = arvcas.Run(controller="proposed", scenario=cfg).compile().simulate()
     X = np.hstack([r.eta, r.nu])
     n = 20
     ref = sa.cvodes_states(cfg, params.vector(), X[0], sa.held_wrench(params.vector(), r.thrust), r.phase,
                            tol=1e-14, n_samples=n)
     err = np.abs(X[: n + 1] - ref).max()
-    print("closed loop vs CVODES over 2 s:", err)
-    assert err < 1e-9
+    print(f"closed loop at h_plant = {cfg.time_h_plant:g} s vs CVODES over 2 s:", err)
+    assert err < bound
     assert np.abs(np.diff(r.thrust[: n + 1], axis=0)).max() > 0  # the thrust does change from sample to sample

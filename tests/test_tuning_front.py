@@ -127,3 +127,25 @@ def test_compare(fronts, tmp_path, capsys):
     assert rc == 0 and "hypervolume" in out and "where" in out and png.exists()
     rc = cli.main(["compare", str(fronts["agsta"]), str(fronts["proposed"]), "--ref", "1,x"])
     assert rc == 2 and "--ref" in capsys.readouterr().err
+
+
+def _front_indices_by_pairs(F, G):
+    """The definition, pair by pair: feasible rows no other feasible row dominates (ties: the earliest)."""
+    feas = [i for i in range(len(F)) if G[i, 0] <= 0 and np.isfinite(F[i]).all()]
+    keep = [i for i in feas if not any(j != i and np.all(F[j] <= F[i]) and (np.any(F[j] < F[i]) or j < i)
+                                         for j in feas)]
+    keep = np.array(keep, dtype=int)
+    return keep[np.lexsort((F[keep, 1], F[keep, 0]))] if keep.size else keep
+
+
+def test_front_indices_is_the_pairwise_definition():
+    from arvcas.tuning.checkpoint import front_indices
+
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 5, 40, 200):
+        F = np.round(rng.uniform(0, 3, (n, 2)), 1)  # coarse values: ties and exact duplicates occur
+        F[rng.uniform(size=n) < 0.05] = np.nan
+        G = np.where(rng.uniform(size=(n, 1)) < 0.1, 1.0, 0.0)
+        got, ref = front_indices(F, G), _front_indices_by_pairs(F, G)
+        assert got.dtype == ref.dtype and np.array_equal(got, ref), (n, got, ref)
+    assert len(front_indices(np.zeros((3, 2)), np.zeros((3, 1)))) == 1  # three duplicates: the first kept

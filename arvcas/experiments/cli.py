@@ -76,7 +76,8 @@ def _say(msg: str) -> None:
 
 def add_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--h", type=_floats, default=None, metavar="H1,H2,...",
-                   help="controller sampling periods in s (whole multiples of the plant step 0.01 s)")
+                   help="controller sampling periods in s (the plant's RK4 step: the scenario's where it divides h, "
+                        "else the largest step below it that does)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR", help="writes DIR/sweep.h5, sweep.md, sweep.png")
     p.add_argument("--controllers", type=_names, default=None, metavar="A,B,...",
                    help="default: proposed, traditional, implicit, agsta")

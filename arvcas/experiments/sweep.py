@@ -4,7 +4,8 @@ The paper (section 4.3) claims that the traditional decreasing law's zigzag of k
 only appear after the controller is discretized and becomes severe with the increase of sampling
 time", while the proposed law "is not affected by the sampling time". :func:`run_sweep` runs each
 controller with its Table 2 gains (continuous-time parameters, unchanged) at each ``h`` (sensors,
-EKF, ATD, RESO and GSTA all sampled at ``h``; the plant's RK4 step stays ``h_plant = 0.01 s``) for
+EKF, ATD, RESO and GSTA all sampled at ``h``; the plant's RK4 step stays the scenario's ``h_plant`` where it divides
+``h``, else the largest step below it that does: :meth:`ScenarioConfig.with_h`) for
 one or more noise seeds, and measures CHAT, RMSE and the zigzag of k1.
 
 Zigzag of k1 (per DOF; laws with a k1min only: proposed, traditional, implicit), from the stored
@@ -280,6 +281,17 @@ def _nanmean(x, axis):
     return np.where(cnt > 0, s / np.maximum(cnt, 1), np.nan)
 
 
+def _plant_steps(cfg: ScenarioConfig | None, hs) -> str:
+    """The plant's RK4 step of the sweep's runs, in words."""
+    if cfg is None:
+        return "stays the scenario's"
+    steps = {h: cfg.with_h(h).time_h_plant for h in hs}
+    if len(set(steps.values())) == 1:
+        return f"stays {cfg.time_h_plant:g} s"
+    return "is " + ", ".join(f"{hp:g} s at h = {h:g}" for h, hp in steps.items()) + \
+        f" (the scenario's {cfg.time_h_plant:g} s where it divides h)"
+
+
 def sweep_markdown(sw: Sweep) -> str:
     cfg = scenario.loads_scenario(sw.config_text) if sw.config_text else None
     obj = sw.objectives()
@@ -291,7 +303,7 @@ def sweep_markdown(sw: Sweep) -> str:
     L = ["# Sampling-period sweep", "",
          f"Controllers {', '.join(sw.controllers)} with their Table 2 gains at h = "
          f"{', '.join(f'{h:g}' for h in sw.hs)} s (controller, sensors, EKF, ATD, RESO, GSTA; the plant's RK4 step "
-         f"stays {cfg.time_h_plant if cfg else 0.01:g} s), {noise}, noise seeds {', '.join(map(str, sw.seeds))}; "
+         f"{_plant_steps(cfg, sw.hs)}), {noise}, noise seeds {', '.join(map(str, sw.seeds))}; "
          "the scenario's disturbance phases and nominal-model factors. Values are means over the seeds "
          f"({ns} run(s) per cell) of the completed runs. f_chat, f_rmse: docs/model.md §7 objectives (per-DOF value / "
          "paper's AGSTA value, averaged over the 6 DOF); CHAT is per controller sample, CHAT/h per second.", "",
@@ -414,7 +426,8 @@ def plot_sweep(sw: Sweep, fig: Figure | None = None, dof: int = 0,
     ax.grid(True, lw=0.4, alpha=0.5)
     ax.legend(fontsize="small", loc="upper right")
     ns = sw.noise_scale
-    fig.suptitle("Sampling-period sweep: Table 2 gains, plant RK4 at 0.01 s; "
+    cfg = scenario.loads_scenario(sw.config_text) if sw.config_text else None
+    fig.suptitle(f"Sampling-period sweep: Table 2 gains, plant RK4 step {_plant_steps(cfg, sw.hs)}; "
                  "f = mean over DOF of value / paper's AGSTA value"
                  + ("" if ns == 1.0 else f", sensor noise x {ns:g}")
                  + f"; mean over {len(sw.seeds)} seed(s), bars min..max")

@@ -12,10 +12,11 @@ One controller sample k (t_k = k h) of :func:`step`:
 6. plant: ``h / h_plant`` RK4 steps of the exactly coupled vehicle + arm with the prescribed arm
    trajectory, payload ramp and disturbance eq. 41.
 
-The run is ``step.fold(N + 1)`` (metrics only: CHAT and RMSE accumulated in the state) or
-``step.mapaccum(N + 1)`` (a trace of every sample), built by :func:`_fold` / :func:`_mapaccum`
-(CasADi's own nesting without the unused level that cost 3 s and 1.5 GB at 1001 samples). Gains, noise, nominal-model factors,
-disturbance phases and model parameters are inputs: a new gain set or seed never recompiles.
+The run is sample 0's step, then N steps of k >= 1 (:func:`_chain` of :func:`_levels`: nested
+chains of 10 calls, like CasADi's ``mapaccum`` but passing only the loop state from call to call, and
+the run's constants, a separate input, to every call unchanged); CHAT and RMSE accumulate in the
+state, the trace is an output column per sample. Gains, noise, nominal-model factors, disturbance
+phases and model parameters are inputs: a new gain set or seed never recompiles.
 
 What depends on time but not on the state (the arm's trajectory and the terms of its wrench that
 follow from it, the LU factors of ``M + M_arm``, the disturbance's ``sin``/``cos`` of time) comes in
@@ -41,12 +42,16 @@ from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
 
 __all__ = ["Layout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "INPUTS"]
 
+_PSYM = [(i, j) for i in range(12) for j in range(i, 12)]  # the EKF covariance's upper triangle, row by row
+_PSYM_INDEX = {ij: k for k, ij in enumerate(_PSYM)}
+N_PSYM = len(_PSYM)
+
 # the run's inputs, in the order of the compiled function (everything else binds them by name)
 INPUTS: tuple[str, ...] = ("gains", "noise", "unc", "phase", "ekf", "p", "sched_time", "sched_arm")
 
 
 class Layout:
-    """Named slices of a flat column vector (the loop state is one column for fold/mapaccum)."""
+    """Named slices of a flat column vector (the loop state and the run's constants)."""
 
     def __init__(self, spec):
         self.slices: dict[str, slice] = {}
@@ -68,7 +73,7 @@ def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int
     status; then the run's constants (carried through the loop, never changed)."""
     return Layout([
         ("x", 12),  # true plant state [eta; nu]
-        ("xh", 12), ("Pc", 144),  # EKF prior for this sample
+        ("xh", 12), ("Pc", N_PSYM),  # EKF prior for this sample (covariance: upper triangle, row by row)
         ("y1", 6), ("y2", 6), ("r0", 6),  # ATD reference
         *[(f"c_{name}", n) for name, n in ctrl.state],  # the controller's state
         ("tau_prev", 6), ("u_hold", n_thr),  # previous command (CHAT) and held realised thrust
@@ -169,11 +174,17 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     return rk4, pc_fn
 
 
-def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, ca.Function]:
-    """One controller sample: (S, t_k, noise_k, sched_time_k, sched_arm_k) -> (S_next[, trace_k]).
+def build_step(spec: RunSpec, trace: bool = True, first: bool = False) -> tuple[ca.Function, Layout, ca.Function]:
+    """One controller sample: (S, K, t_k, noise_k, sched_time_k, sched_arm_k) -> (S_next[, trace_k]).
+
+    ``S`` is the loop state (the fields of the layout before ``gains``), ``K`` the run's constants
+    (``gains`` to the end: read by every sample, never written, so never copied from sample to
+    sample). ``first``: the step of sample 0, which starts the EKF, the reference and the
+    controller's state (:func:`build_run` runs it once, then the step of k >= 1; each is compiled
+    with its branch fixed, so neither tests ``k == 0`` per sample).
 
     Returns (the step, the state's layout, the function of the RK4 substep's per-run constants that
-    fills the state's ``pc``; see :func:`_plant_substep`).
+    fills the constants' ``pc``; see :func:`_plant_substep`).
 
     An MX function calling three generated SX functions: the controller part, ``h / h_plant`` RK4
     substeps of the plant, and the divergence check. ``sched_*_k`` are column k of the run's time
@@ -181,15 +192,60 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     is the run's signals (:func:`arvcas.sim.signals.trace_signals`) stacked in table order; without
     ``trace`` the per-sample outputs that only the trace needs (e.g. ``f_true``) are not computed.
     """
+    steps, L, pc_fn = _build_steps(spec, trace, (first,))
+    return steps[0], L, pc_fn
+
+
+def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.Function]:
+    """:func:`build_step` for each flag of ``firsts``, sharing one plant substep and one finalize."""
     law, cfg, opts, lay = spec.law, spec.cfg, spec.opts, spec.lay
     cols = law.columns()
     ng = 6 * len(cols)
     rk4, pc_fn = _plant_substep(spec)
     n_thr = lay.structure.n_thrusters
     L = state_layout(law, ng, n_thr, pc_fn.size1_out(0), len(lay))
-    S = ca.SX.sym("S", L.size)
+    i_x1, i_ok, i_const = L.slices["x"].stop, L.slices["ok"].start, L.slices["gains"].start  # constants follow t_fail
+    Sd, Kc = ca.SX.sym("S", i_const), ca.SX.sym("K", L.size - i_const)
+    S = ca.vertcat(Sd, Kc)
     tk = ca.SX.sym("t_k")
+    n_sub = cfg.substeps
+    ctrls = [_controller_part(spec, L, S, [Sd, Kc], tk, first, trace) for first in firsts]
+
+    # finalize: a run that diverges (non-finite state, error bound) is frozen with ok = 0, t_fail set
+    # (C: the controller part's new loop state without x)
+    Cs, Ss, xn, tks = ca.SX.sym("C", i_const - i_x1), ca.SX.sym("S", i_const), ca.SX.sym("xn", 12), ca.SX.sym("t")
+    ok_n = ca.logic_and(Cs[i_ok - i_x1], ca.mmax(ca.fabs(xn)) < 1e6)
+    Cn = ca.vertcat(xn, Cs)
+    Sfail = ca.vertcat(Ss[:i_ok], 0, ca.if_else(L.get(Ss, "ok"), tks, L.get(Ss, "t_fail")))
+    fin = ca.Function("cl_finalize", [Cs, Ss, xn, tks], [ca.if_else(ok_n, Cn, Sfail)])
+
+    Rec = schedule.records(lay)
+    TS, AS, ns = Rec.time_size, Rec.arm_size, schedule.n_stages(cfg)
+    Sm, Km, tkm, nm = ca.MX.sym("S", i_const), ca.MX.sym("K", L.size - i_const), ca.MX.sym("t"), ca.MX.sym("noise", 12)
+    sch_t, sch_a = ca.MX.sym("sched_time", ns * TS), ca.MX.sym("sched_arm", ns * AS)
+    kslice = {name: slice(L.slices[name].start - i_const, L.slices[name].stop - i_const)
+              for name in ("p", "consts", "phase_cs", "pc")}
+    pm, cm, phm, pcm = (Km[kslice[name]] for name in ("p", "consts", "phase_cs", "pc"))
+    steps = []
+    for first, ctrl in zip(firsts, ctrls):
+        res = ctrl(Sm, Km, tkm, nm, sch_t[0:TS], sch_a[0:AS])
+        Cm, tau_m_real = res[0], res[1]
+        xm = Sm[L.slices["x"]]
+        for i in range(n_sub):
+            xm = rk4(xm, sch_t[2 * i * TS:(2 * i + 3) * TS], sch_a[2 * i * AS:(2 * i + 3) * AS], tau_m_real, pm, cm, phm, pcm)
+        steps.append(ca.Function(f"cl_step_{law.name}" + ("_first" if first else ""), [Sm, Km, tkm, nm, sch_t, sch_a],
+                                 [fin(Cm, Sm, xm, tkm)] + list(res[2:]), ["S", "K", "t", "noise", "sched_time", "sched_arm"],
+                                 ["S_next"] + (["trace"] if trace else [])))
+    return steps, L, pc_fn
+
+
+def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: bool) -> ca.Function:
+    """The controller part of one sample (sample 0 if ``first``): (S, K, t_k, noise_k, rec0_time, rec0_arm)
+    -> (C, tau_real[, trace_k]); ``S`` the SX loop state and constants stacked, ``ins`` its two symbols."""
+    law, cfg, opts = spec.law, spec.cfg, spec.opts
+    cols = law.columns()
     noise = ca.SX.sym("noise", 12)
+    lay = spec.lay
     Rec = schedule.records(lay)
     rec0_t, rec0_a = ca.SX.sym("rec0_time", Rec.time_size), ca.SX.sym("rec0_arm", Rec.arm_size)
     R0 = schedule.unpack(ca.vertcat(rec0_t, rec0_a), lay)  # the time table's record at t_k
@@ -200,8 +256,8 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     consts = L.get(S, "consts")
     Fz, Mx, My, Mhat = consts[0], consts[1], consts[2], consts[3:9]
     unc, phase_cs = L.get(S, "unc"), L.get(S, "phase_cs")
-    h, n_sub = cfg.time_h, cfg.substeps
-    first = tk < 0.5 * h
+    h = cfg.time_h
+    first = ca.SX(1.0 if first else 0.0)  # a constant: every branch on it folds away
     ok = L.get(S, "ok")
     eta_d = ca.DM(cfg.initial_eta_d)
 
@@ -211,9 +267,9 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     # 2. EKF update (H = I, R = sensor covariance); the first sample starts from y_0 with P = R
     ekf = L.get(S, "ekf")  # [q_eta, q_nu, var_position, var_attitude, var_velocity]
     r_meas = ca.vertcat(ca.repmat(ekf[2], 3, 1), ca.repmat(ekf[3], 3, 1), ca.repmat(ekf[4], 6, 1))
-    Rn = ca.diag(r_meas)
     xh = ca.if_else(first, y, L.get(S, "xh"))
-    Pc = ca.if_else(first, Rn, ca.reshape(L.get(S, "Pc"), 12, 12))
+    Pu = L.get(S, "Pc")
+    Pc = [ca.if_else(first, r_meas[i] if i == j else 0, Pu[k]) for k, (i, j) in enumerate(_PSYM)]
     xh, Pc = _ekf_update(xh, Pc, y, r_meas)
     eta_hat, nu_hat = xh[0:6], xh[6:12]
     eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
@@ -262,59 +318,48 @@ def build_step(spec: RunSpec, trace: bool = True) -> tuple[ca.Function, Layout, 
     lim = ca.DM([cfg.limits_e_position] * 3 + [cfg.limits_e_attitude] * 3)
     ok_c = ca.logic_and(ok, ca.logic_and(ca.mmax(ca.fabs(e_true) / lim) < 1, ca.mmax(ca.fabs(tau_v)) < 1e12))
     y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
-    C = L.pack({
-        "x": x, "xh": _ekf_f(xh, h), "Pc": ca.vec(_ekf_cov(xh, Pc, h, ekf[0], ekf[1])),
+    # the sample's new loop state except x (the plant's, set in finalize) and the run's constants
+    # (never changed: the step passes them on itself)
+    new = {
+        "xh": _ekf_f(xh, h), "Pc": _ekf_cov(xh, Pc, h, ekf[0], ekf[1]),
         "y1": y1n, "y2": y2n, "r0": r0, **{f"c_{name}": xc_next[name] for name, _ in law.state},
         "tau_prev": tau_v, "u_hold": u_sat,
         "chat_sum": chat_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
-        "gains": g, "unc": unc, "phase_cs": phase_cs, "ekf": ekf, "p": L.get(S, "p"), "consts": consts,
-        "pc": L.get(S, "pc"),
-    })
+    }
+    names = list(L.slices)
+    assert names.index("x") == 0 and list(new) == names[1:names.index("gains")]
+    C = ca.vertcat(*new.values())
     outs = [C, tau_real]
     if trace:
         ctx.__dict__.update(tau_v=tau_v, u_sat=u_sat, f_true=f_true, eta=eta, nu=nu, q=q, payload=pl)
         outs.append(ca.vertcat(*[sig.value(ctx) for sig in signals_mod.trace_signals(law)]))
-    ctrl = ca.Function(f"cl_ctrl_{law.name}" + ("_tr" if trace else ""), [S, tk, noise, rec0_t, rec0_a], ca.cse(outs))
-
-    # finalize: a run that diverges (non-finite state, error bound) is frozen with ok = 0, t_fail set
-    Cs, Ss, xn, tks = ca.SX.sym("C", L.size), ca.SX.sym("S", L.size), ca.SX.sym("xn", 12), ca.SX.sym("t")
-    ok_n = ca.logic_and(L.get(Cs, "ok"), ca.mmax(ca.fabs(xn)) < 1e6)
-    i_x0, i_x1 = L.slices["x"].start, L.slices["x"].stop
-    i_ok, i_const = L.slices["ok"].start, L.slices["gains"].start  # constants follow t_fail
-    Cn = ca.vertcat(Cs[:i_x0], xn, Cs[i_x1:i_const])
-    Sfail = ca.vertcat(Ss[:i_ok], 0, ca.if_else(L.get(Ss, "ok"), tks, L.get(Ss, "t_fail")))
-    S_fin = ca.vertcat(ca.if_else(ok_n, Cn, Sfail), Ss[i_const:])
-    fin = ca.Function("cl_finalize", [Cs, Ss, xn, tks], [S_fin])
-
-    TS, AS, ns = Rec.time_size, Rec.arm_size, schedule.n_stages(cfg)
-    Sm, tkm, nm = ca.MX.sym("S", L.size), ca.MX.sym("t"), ca.MX.sym("noise", 12)
-    sch_t, sch_a = ca.MX.sym("sched_time", ns * TS), ca.MX.sym("sched_arm", ns * AS)
-    res = ctrl(Sm, tkm, nm, sch_t[0:TS], sch_a[0:AS])
-    Cm, tau_m_real = res[0], res[1]
-    xm = Sm[L.slices["x"]]
-    pm, cm, phm, pcm = Sm[L.slices["p"]], Sm[L.slices["consts"]], Sm[L.slices["phase_cs"]], Sm[L.slices["pc"]]
-    for i in range(n_sub):
-        xm = rk4(xm, sch_t[2 * i * TS:(2 * i + 3) * TS], sch_a[2 * i * AS:(2 * i + 3) * AS], tau_m_real, pm, cm, phm, pcm)
-    Snext = fin(Cm, Sm, xm, tkm)
-    fn = ca.Function(f"cl_step_{law.name}", [Sm, tkm, nm, sch_t, sch_a], [Snext] + list(res[2:]),
-                     ["S", "t", "noise", "sched_time", "sched_arm"], ["S_next"] + (["trace"] if trace else []))
-    return fn, L, pc_fn
+    name = f"cl_ctrl_{law.name}" + ("_first" if first.is_one() else "") + ("_tr" if trace else "")
+    return ca.Function(name, [*ins, tk, noise, rec0_t, rec0_a], ca.cse(outs))
 
 
-def _ekf_update(xh, Pc, y, r):
+def _sym_get(Pu, i, j):
+    return Pu[_PSYM_INDEX[(i, j) if i <= j else (j, i)]]
+
+
+def _ekf_update(xh, Pu, y, r):
     """EKF measurement update with H = I and diagonal R = diag(r), as 12 sequential scalar updates.
 
     Exactly the batch update ``K = P (P + R)^-1`` for uncorrelated measurement noise, at a fraction
-    of the cost of a 12x12 solve in the graph.
+    of the cost of a 12x12 solve in the graph. ``Pu``: the covariance's upper triangle (a list in
+    ``_PSYM`` order); each scalar update ``P - P_i P_i' / s`` is symmetric, so only that triangle is
+    computed and P stays symmetric by construction. Returns (xh, the updated triangle).
     """
     n = xh.shape[0]
+    Pu = list(Pu)
+    xh = [xh[a] for a in range(n)]
     for i in range(n):
-        Pi = Pc[:, i]
-        s = Pi[i] + r[i]
-        K = Pi / s
-        xh = xh + K * (y[i] - xh[i])
-        Pc = Pc - ca.mtimes(K, Pi.T)
-    return xh, Pc
+        col = [_sym_get(Pu, a, i) for a in range(n)]  # P[:, i] = P[i, :]
+        s = col[i] + r[i]
+        K = [c / s for c in col]
+        innov = y[i] - xh[i]
+        xh = [xh[a] + K[a] * innov for a in range(n)]
+        Pu = [Pu[k] - K[a] * col[b] for k, (a, b) in enumerate(_PSYM)]
+    return ca.vertcat(*xh), Pu
 
 
 def _ekf_f(xh, h):
@@ -322,12 +367,27 @@ def _ekf_f(xh, h):
     return ca.vertcat(xh[0:6] + h * ca.mtimes(J(xh[0:6]), xh[6:12]), xh[6:12])
 
 
-def _ekf_cov(xh, Pc, h, q_eta, q_nu):
-    """P+ = F P F' + Q with F the AD Jacobian of the transition (docs/model.md §4), Q = diag(q_eta I6, q_nu I6)."""
+def _ekf_cov(xh, Pu, h, q_eta, q_nu):
+    """P+ = F P F' + Q with F the AD Jacobian of the transition (docs/model.md §4), Q = diag(q_eta I6, q_nu I6).
+
+    ``Pu``: P's upper triangle (``_PSYM`` order); returns that of P+ as a column. F is kept sparse
+    (its structural zeros and ones are never multiplied: the velocity rows are the identity, the
+    pose block is I + h d(J nu)/d eta with only the attitude columns), and only the upper triangle of
+    the symmetric F P F' is formed, each entry a sparse row product ``(F P)[a, :] . F[b, :]``.
+    """
     xs = ca.SX.sym("xs", 12)
     F = ca.substitute(ca.jacobian(_ekf_f(xs, h), xs), xs, xh)
-    Q = ca.diag(ca.vertcat(ca.repmat(q_eta, 6, 1), ca.repmat(q_nu, 6, 1)))
-    return ca.mtimes([F, Pc, F.T]) + Q
+    P = ca.SX(12, 12)
+    for a in range(12):
+        for b in range(12):
+            P[a, b] = _sym_get(Pu, a, b)
+    FP = ca.mtimes(F, P)
+    q = [q_eta] * 6 + [q_nu] * 6
+    out = []
+    for a, b in _PSYM:
+        v = ca.mtimes(FP[a, :], F[b, :].T)
+        out.append(v + q[a] if a == b else v)
+    return ca.vertcat(*out)
 
 
 def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
@@ -340,7 +400,7 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
 
     ``trace=False``: outputs (chat[6], rmse[6], ok, t_fail); ``trace=True``: also the per-sample trace.
     """
-    step, L, pc_fn = build_step(spec, trace=trace)
+    (step0, step), L, pc_fn = _build_steps(spec, trace, (True, False))
     cfg, law = spec.cfg, spec.law
     n = scenario.n_samples(cfg)
     ng = 6 * len(law.columns())
@@ -355,23 +415,20 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     sched_a = ca.MX.sym("sched_arm", schedule.n_stages(cfg) * Rec.arm_size, n)
     consts = _consts_fn(spec.opts, spec.lay)(p)
     x0 = ca.DM(list(cfg.initial_eta0) + list(cfg.initial_nu0))
-    z = lambda k: ca.MX.zeros(k)  # noqa: E731
     phase_cs = ca.vertcat(ca.cos(phase), ca.sin(phase))
-    i_ok = L.slices["ok"].start  # every loop state before "ok" starts at zero (first-sample values are set in the step)
-    S0 = ca.vertcat(x0, z(i_ok - 12), ca.MX(1), ca.MX(-1), G, unc, phase_cs, ekf, p, consts, pc_fn(p, consts, phase_cs))
-    assert S0.shape[0] == L.size
+    i_ok = L.slices["ok"].start  # every loop state before "ok" starts at zero (sample 0's step sets its values)
+    S0 = ca.vertcat(x0, ca.MX.zeros(i_ok - 12), ca.MX(1), ca.MX(-1))
+    K = ca.vertcat(G, unc, phase_cs, ekf, p, consts, pc_fn(p, consts, phase_cs))
+    assert S0.shape[0] + K.shape[0] == L.size
     tgrid = ca.DM(np.arange(n) * cfg.time_h).T
     N = n - 1
-    if trace:
-        S_all, tr = _mapaccum(step, n)(S0, tgrid, noise, sched_t, sched_a)
-        Sf = S_all[:, -1]
-    else:
-        Sf = _fold(step, n)(S0, tgrid, noise, sched_t, sched_a)
+    out = _chain(f"run_{law.name}_loop", [step0] + _levels(step, N)).call([S0, K, tgrid, noise, sched_t, sched_a])
+    Sf = out[0]
     chat = Sf[L.slices["chat_sum"]] / N
     rmse = ca.sqrt(Sf[L.slices["e2_sum"]] / N)
     ok = Sf[L.slices["ok"]]
     t_fail = Sf[L.slices["t_fail"]]
-    outs = [chat, rmse, ok, t_fail] + ([tr] if trace else [])
+    outs = [chat, rmse, ok, t_fail] + ([out[1]] if trace else [])
     names = ["chat", "rmse", "ok", "t_fail"] + (["trace"] if trace else [])
     name = f"run_{law.name}" + ("_trace" if trace else "")
     ins = {"gains": G, "noise": noise, "unc": unc, "phase": phase, "ekf": ekf, "p": p, "sched_time": sched_t,
@@ -379,47 +436,43 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     return ca.Function(name, [ins[k] for k in INPUTS], outs, list(INPUTS), names)
 
 
-def _mapaccum(f: ca.Function, n: int, base: int = 10) -> ca.Function:
-    """``f.mapaccum(n)`` (state = input/output 0) built as CasADi 3.8 builds it, less its unused level.
-
-    CasADi writes n in base 10 and chains 10-fold nested mapaccums of ``f``, but its loop also
-    builds the level above the top digit, which nothing calls: 10**4 samples for n = 1001 (3.4 s,
-    1.5 GB for the time table's symbols, where the run itself needs 0.5 s). The levels, the chain
-    and so the generated C here are CasADi's own (same text, same build-cache key).
-    """
+def _levels(f: ca.Function, n: int, base: int = 10) -> list:
+    """Functions that run ``f`` n times in all, in order: n written in base 10, each digit d of
+    weight 10^j giving d calls of a level of 10^j samples (level j+1 = :func:`_chain` of 10 level-j
+    calls). Only the levels that are called are built (3 levels of 10 for n = 1000)."""
     chain, c, m = [], f, n
     while True:
         chain += [c] * (m % base)
         m //= base
         if m == 0:
-            break
-        c = c.mapaccum(c.name() + "_acc" + str(base), base, 1, {"base": -1})  # one level: base calls of c
-    if len(chain) == 1:
-        return chain[0]
-    # CasADi's Function::mapaccum(name, chain, n_accum = 1) (private in C++)
-    arg = f.mx_in()
-    varg = [[arg[0]]] + [[] for _ in range(1, f.n_in())]
-    vres = [[] for _ in range(f.n_out())]
-    for g in chain:
-        for i in range(1, f.n_in()):
-            arg[i] = ca.MX.sym(f.name_in(i) + "_" + str(i), g.sparsity_in(i))
-            varg[i].append(arg[i])
-        res = g.call(arg)
-        for i, r in enumerate(res):
-            vres[i].append(r)
-        ncol_out, ncol_in = g.size2_out(0), f.size2_in(0)
-        arg[0] = ca.horzsplit(res[0], [0, ncol_out - ncol_in, ncol_out])[-1] if ncol_out > ncol_in else res[0]
-    return ca.Function("mapaccum_" + f.name(), [ca.horzcat(*v) for v in varg], [ca.horzcat(*v) for v in vres],
-                       f.name_in(), f.name_out())
+            return chain
+        c = _chain(f"{c.name()}_x{base}", [c] * base)
 
 
-def _fold(f: ca.Function, n: int) -> ca.Function:
-    """``f.fold(n)``: CasADi's fold (the last column of the state) over :func:`_mapaccum`."""
-    acc = _mapaccum(f, n)
-    a = acc.mx_in()
-    out = acc.call(a)
-    out[0] = out[0][:, list(range((n - 1) * f.size2_out(0), n * f.size2_out(0)))]
-    return ca.Function("fold_" + f.name(), a, out, f.name_in(), f.name_out())
+def _chain(name: str, funcs) -> ca.Function:
+    """The samples of ``funcs`` one after another: (S, K, per-sample inputs...) -> (S_last, per-sample outputs...).
+
+    Input 0 is the loop state, passed from call to call (only the last is an output: a run that
+    needs the state of every sample does not exist, so none is stored); input 1 the run's
+    constants, the same for every call; the other inputs and outputs are per sample, a column
+    block per call. Each input is the horzcat of the calls' own symbols, so the generated code reads
+    a call's block in place (no copy); the state stays in the work vector between calls.
+    """
+    f0 = funcs[0]
+    S, K = ca.MX.sym("S", f0.sparsity_in(0)), ca.MX.sym("K", f0.sparsity_in(1))
+    per_in = [[] for _ in range(2, f0.n_in())]
+    per_out = [[] for _ in range(1, f0.n_out())]
+    s = S
+    for j, g in enumerate(funcs):
+        syms = [ca.MX.sym(f"{g.name_in(i)}_{j}", g.sparsity_in(i)) for i in range(2, g.n_in())]
+        res = g.call([s, K, *syms])
+        s = res[0]
+        for lst, v in zip(per_in, syms):
+            lst.append(v)
+        for lst, v in zip(per_out, res[1:]):
+            lst.append(v)
+    return ca.Function(name, [S, K] + [ca.horzcat(*v) for v in per_in], [s] + [ca.horzcat(*v) for v in per_out],
+                       f0.name_in(), f0.name_out())
 
 
 def _consts_fn(opts: ModelOptions, layout: ParamLayout | None = None) -> ca.Function:

@@ -155,16 +155,13 @@ def front_indices(F: np.ndarray, G: np.ndarray) -> np.ndarray:
     if F is None or len(F) == 0:
         return np.zeros(0, dtype=int)
     feas = np.where((G[:, 0] <= 0) & np.isfinite(F).all(axis=1))[0]
-    keep = []
-    for i in feas:
-        dominated = False
-        for j in feas:
-            if j != i and np.all(F[j] <= F[i]) and (np.any(F[j] < F[i]) or j < i):
-                dominated = True  # strictly dominated, or an exact duplicate of an earlier row
-                break
-        if not dominated:
-            keep.append(i)
-    keep = np.array(keep, dtype=int)
+    Ff = F[feas]
+    # [i, j]: row j weakly below row i in every objective, and strictly in one or an earlier duplicate
+    le = (Ff[None, :, :] <= Ff[:, None, :]).all(axis=2)
+    lt = (Ff[None, :, :] < Ff[:, None, :]).any(axis=2)
+    earlier = feas[None, :] < feas[:, None]
+    dominated = (le & (lt | earlier)).any(axis=1)  # a row is never below itself strictly nor earlier
+    keep = feas[~dominated].astype(int)
     return keep[np.lexsort((F[keep, 1], F[keep, 0]))] if keep.size else keep
 
 

@@ -3,6 +3,7 @@
 # machine, sharing it with other jobs: the Table 2 part (sweeps, 4 x 500 Monte Carlo runs, compares)
 # about 7 min with a warm compile cache (+ about 4 min for 16 compiles of the traced run when cold);
 # the fronts part (2 x 500 knee runs, 69 + 80 front members and Table 2 x 50 draws) about 8 min.
+# (Those times are at h_plant = 0.01 s; at the default 0.05 s all of it took 2 min 36 s, cache warm.)
 # FRONTS=DIR points the second part at another copy of the paper study's output.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
