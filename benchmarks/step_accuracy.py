@@ -1,7 +1,12 @@
 """Accuracy of the plant's RK4 step against CVODES, and what the step changes in the closed loop.
 
-    python benchmarks/step_accuracy.py            # full: writes results/step/step_accuracy.json and README.md
+    python benchmarks/step_accuracy.py            # full, Haidou-1: writes results/step/step_accuracy.json and README.md
+    python benchmarks/step_accuracy.py --system bluerov2_heavy_alpha5   # writes results/step/bluerov2_heavy_alpha5/
     python benchmarks/step_accuracy.py --quick --out /tmp/step   # smoke run: proposed only, steps 0.01 and 0.1
+
+``--system NAME`` (a shipped system, :data:`SYSTEMS`; default haidou1) chooses the plant (its ``uvms_rhs``, its
+``B_T`` with one column per thruster, its stow pose), its default scenario, its committed fronts, the
+controllers studied and the output directory.
 
 For each plant step ``h_plant`` that divides the controller period (0.01, 0.02, 0.025, 0.05, 0.1 s):
 
@@ -28,6 +33,11 @@ timed at every step in this same run, as a ratio against 0.01 s.
 Rule: the recommended default is the coarsest step whose worst-case open-loop state error (a) is
 <= 1e-6 (m for positions, rad for angles) and whose worst-case relative CHAT/RMSE change (b) is
 <= 1e-5. The script reports; it does not change ``arvcas/data/scenario.toml``.
+
+When no step of the table passes (the base itself fails), :func:`finer_steps` goes below the base:
+h/20 and h/40 on the traced runs with the largest error at the base step (textbook RK4 of their 0.01 s
+thrust against CVODES), and every metrics-only run at h/20 against h/40; it recommends from those.
+A diverged traced run is compared on its samples before the failure.
 """
 
 from __future__ import annotations
@@ -56,30 +66,43 @@ MC_RUNS = 50
 TIMING_ROUNDS = 7
 TRACE_EVERY = 4  # every fourth front member is traced (state, CVODES); all are in the metrics
 MC_TRACED = 3  # Monte Carlo draws per controller that are also traced (state, CVODES)
-FRONTS = {"proposed": ROOT / "results/tuning/paper/proposed/front.h5",
-          "agsta": ROOT / "results/tuning/paper/agsta/front.h5"}
+# per shipped system: its committed fronts, the controllers whose default gains are studied (None: every
+# registered one), those with a Monte Carlo sample at their default gains, and the output directory
+SYSTEMS = {
+    "haidou1": dict(
+        fronts={"proposed": ROOT / "results/tuning/paper/proposed/front.h5",
+                "agsta": ROOT / "results/tuning/paper/agsta/front.h5"},
+        controllers=None, mc=("proposed", "agsta"), out=ROOT / "results" / "step", label="Haidou-1"),
+    "bluerov2_heavy_alpha5": dict(
+        fronts={c: ROOT / f"results/bluerov2/{c}/front.h5" for c in ("proposed", "agsta", "pid")},
+        controllers=("proposed", "agsta", "pid"), mc=("proposed", "agsta"),
+        out=ROOT / "results" / "step" / "bluerov2_heavy_alpha5", label="BlueROV2 Heavy + Reach Alpha 5"),
+}
+FRONTS = SYSTEMS["haidou1"]["fronts"]
 
 
 # ---- the reference: CVODES on the plant with the thrust held per sample ---------------------------------
 
-def _plant_ode(cfg, opts=None):
+def _plant_ode(cfg, opts=None, layout=None):
     """(x, s, par, xdot): the plant over one sample, local time ``s`` in [0, h], ``par = [tau (6); t_k; phase (6); p]``.
 
     ``tau`` is the held body wrench of the thrusters; ``t = t_k + s``. The right-hand side is the SX
     plant function ``uvms_rhs`` (direct Newton-Euler arm wrench, the trim of docs/model.md §3 at q0) with the scenario's
-    joint trajectory, payload ramp and eq. 41's disturbance as functions of ``t``.
+    joint trajectory, payload ramp and eq. 41's disturbance as functions of ``t``. ``layout``: the system's
+    :class:`arvcas.params.Layout` (default Haidou-1's); ``p`` is its parameter vector.
     """
     from arvcas.model import manipulator
     from arvcas.model.uvms import ModelOptions, plant_functions
-    from arvcas.params import SCHEMA, view
+    from arvcas.params import default_layout, view
     from arvcas.sim import scenario
 
-    uvms = plant_functions(opts or ModelOptions())["uvms_rhs"]
-    npar = len(SCHEMA)
+    lay = layout or default_layout()
+    uvms = plant_functions(opts or ModelOptions(), layout=lay)["uvms_rhs"]
+    npar = len(lay)
     x, s, par = ca.SX.sym("x", 12), ca.SX.sym("s"), ca.SX.sym("par", 13 + npar)
     tau, tk, ph, p = par[0:6], par[6], par[7:13], par[13:]
     t = tk + s
-    q, qd, qdd = scenario.joint_trajectory(cfg, manipulator.stow_pose(view(p)), t)
+    q, qd, qdd = scenario.joint_trajectory(cfg, manipulator.stow_pose(view(p, lay)), t)
     pl = scenario.payload_profile(cfg, t)
     xdot = uvms(x, tau + scenario.disturbance(cfg, t, ph), q, qd, qdd, pl, p)
     return x, s, par, xdot
@@ -98,22 +121,24 @@ def scenario_n(cfg) -> int:
     return scenario.n_samples(cfg)
 
 
-def held_wrench(pv, thrust) -> np.ndarray:
-    """Body wrench ``B_T u`` per sample (rows) of the held, saturated thrust ``thrust`` (N+1, n_thr)."""
+def held_wrench(pv, thrust, layout=None) -> np.ndarray:
+    """Body wrench ``B_T u`` per sample (rows) of the held, saturated thrust ``thrust`` (N+1, n_thrusters);
+    ``B_T`` (6 x n_thrusters) of the system of ``layout`` (default Haidou-1)."""
     from arvcas.model import thrusters
     from arvcas.params import view
 
-    B = np.array(ca.evalf(thrusters.B_T(view(ca.DM(np.asarray(pv, float))))))
+    B = np.array(ca.evalf(thrusters.B_T(view(ca.DM(np.asarray(pv, float)), layout))))
     return np.asarray(thrust, float) @ B.T
 
 
-def cvodes_states(cfg, pv, x0, taus, phase, tol: float = CVODES_TOL, n_samples: int | None = None, opts=None):
+def cvodes_states(cfg, pv, x0, taus, phase, tol: float = CVODES_TOL, n_samples: int | None = None, opts=None,
+                  layout=None):
     """Plant states at t_k, k = 0..n (rows, (n+1, 12)) under the held wrenches ``taus[k]`` over [t_k, t_k + h].
 
     CVODES (Adams, functional iteration: the plant is not stiff, and the AD Jacobian of the drag term
     is NaN at zero relative velocity), abstol = reltol = ``tol``, restarted at every sample.
     """
-    x, s, par, xdot = _plant_ode(cfg, opts)
+    x, s, par, xdot = _plant_ode(cfg, opts, layout)
     o = dict(abstol=tol, reltol=tol, max_num_steps=1_000_000, linear_multistep_method="adams",
              nonlinear_solver_iteration="functional")
     F = ca.integrator("ref", "cvodes", {"x": x, "p": par, "t": s, "ode": xdot}, 0.0, [cfg.time_h], o)
@@ -123,12 +148,12 @@ def cvodes_states(cfg, pv, x0, taus, phase, tol: float = CVODES_TOL, n_samples: 
     return np.vstack([np.asarray(x0, float)[None, :], X])
 
 
-def rk4_states(cfg, pv, x0, taus, phase, h_plant: float, n_samples: int | None = None, opts=None):
+def rk4_states(cfg, pv, x0, taus, phase, h_plant: float, n_samples: int | None = None, opts=None, layout=None):
     """The textbook RK4 of the same ODE (same held wrenches), ``h / h_plant`` steps per sample; (n+1, 12).
 
     An independent RK4 (no time table, the direct plant function) that checks the reference machinery.
     """
-    x, s, par, xdot = _plant_ode(cfg, opts)
+    x, s, par, xdot = _plant_ode(cfg, opts, layout)
     f = ca.Function("f", [x, s, par], [xdot])
     m = int(round(cfg.time_h / h_plant))
     assert abs(m * h_plant - cfg.time_h) < 1e-12, "h_plant must divide h"
@@ -201,32 +226,65 @@ def _front_args(fr) -> dict:
                 n_threads=1, return_status=True)
 
 
-def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, log=print) -> dict:
+def _valid(r, h: float) -> int:
+    """Samples of a traced run to compare: all of them, or those before its failure time (a diverged run)."""
+    n = len(r.eta)
+    tf = float(r.t_fail) if (not r.ok and r.t_fail is not None) else float("nan")
+    return max(2, min(n, int(np.floor(tf / h)))) if np.isfinite(tf) else n
+
+
+def _run_and_reference(sysm, cfg, c, g, seed, unc, ph, tol):
+    """One traced run at ``cfg``'s step and CVODES on its held thrust: (result, n, states (n+1, 12), wrenches,
+    reference states), over the samples before a failure."""
+    import arvcas
+
+    r = arvcas.Run(controller=c, scenario=cfg, params=sysm).compile().simulate(gains=g, seed=seed, uncertainty=unc,
+                                                                                phase=ph)
+    n = min(_valid(r, cfg.time_h), scenario_n(cfg)) - 1
+    X = np.hstack([r.eta, r.nu])[:n + 1]
+    taus = held_wrench(sysm.params.vector(), r.thrust, sysm.layout)
+    return r, n, X, taus, cvodes_states(cfg, sysm.params.vector(), X[0], taus, r.phase, tol=tol, n_samples=n,
+                                        layout=sysm.layout)
+
+
+def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, log=print, system: str = "haidou1",
+          trace_every: int = TRACE_EVERY, timing_rounds: int = TIMING_ROUNDS, duration: float | None = None) -> dict:
+    """The study for one shipped system (:data:`SYSTEMS`). ``duration`` (s) shortens the scenario (smoke tests)."""
     import arvcas
     from arvcas.controllers import names as controller_names
     from arvcas.experiments.montecarlo import draw
-    from arvcas.params import load as load_params
     from arvcas.sim.scenario import load_scenario, loads_scenario
-    from arvcas.tuning.front import read_front
+    from arvcas.tuning.checkpoint import read_checkpoint
+    from arvcas.tuning.front import read_front, system_params
 
-    cfg0 = load_scenario()
-    pv = load_params().vector()
+    if system not in SYSTEMS:
+        raise ValueError(f"system {system!r}: not one of {', '.join(SYSTEMS)}")
+    spec = SYSTEMS[system]
+    sysm = arvcas.load_system(system)
+    lay = sysm.layout
+    cfg0 = load_scenario(sysm.params.default("scenario"))
+    pv = sysm.params.vector()
     steps = (0.01, 0.1) if quick else STEPS
-    ctrls = ("proposed",) if quick else tuple(controller_names())
+    ctrls = ("proposed",) if quick else tuple(spec["controllers"] or controller_names())
     mc_runs = 3 if quick else mc_runs
-    fronts = {c: read_front(p) for c, p in FRONTS.items() if c in ctrls}
+    fronts = {c: read_front(p) for c, p in spec["fronts"].items() if c in ctrls}
     for c, fr in fronts.items():
         cfg_f = loads_scenario(fr.scenario_text, str(fr.path))
         if cfg_f.graph_key() != dataclasses.replace(cfg0.graph_key()):
             raise RuntimeError(f"{fr.path}: the study's scenario differs from the packaged one")
+        pf = system_params(read_checkpoint(fr.path))
+        if pf.structure.name != sysm.name or not np.array_equal(pf.vector(), pv):
+            raise RuntimeError(f"{fr.path}: the study's system ({pf.structure.name}) differs from {sysm.name}")
+    if duration is not None:  # after the check against the fronts' scenario: a shortened horizon
+        cfg0 = dataclasses.replace(cfg0, time_duration=float(duration))
     draws = draw(mc_runs, seed=0, spread=0.3)
-    mc_ctrls = tuple(c for c in ("proposed", "agsta") if c in ctrls)
+    mc_ctrls = tuple(c for c in spec["mc"] if c in ctrls)
 
     # the traced runs: (label, controller, gains or None, seed, uncertainty, phase)
     traced = [(f"{c} default", c, None, 0, None, None) for c in ctrls]
     member_sets = {}
     for c, fr in fronts.items():
-        idx = sorted({*range(0, fr.size, TRACE_EVERY), fr.knee(), fr.size - 1}) if not quick else [0]
+        idx = sorted({*range(0, fr.size, trace_every), fr.knee(), fr.size - 1}) if not quick else [0]
         member_sets[c] = idx
         for i in idx:
             traced.append((f"{c} front[{i}]", c, fr.gains[i], int(fr.draw_seeds[0]), fr.draw_uncertainty[0],
@@ -243,19 +301,23 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
         cfg = dataclasses.replace(cfg0, time_h_plant=hp)
         log(f"h_plant = {hp}: compiling and running")
         t_c = time.perf_counter()
-        runs = {c: arvcas.Run(controller=c, scenario=cfg).compile() for c in ctrls}
+        runs = {c: arvcas.Run(controller=c, scenario=cfg, params=sysm).compile() for c in ctrls}
         rec = {"traced": {}, "compile_and_first_call_s": None}
         for label, c, g, seed, unc, ph in traced:
             r = runs[c].simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
-            X = np.hstack([r.eta, r.nu])
+            nv = _valid(r, cfg.time_h)  # a diverged run: its samples before the failure only
+            X = np.hstack([r.eta, r.nu])[:nv]
             states[(label, hp)] = X
             metrics[(label, hp)] = (r.chat[None, :], r.rmse[None, :], np.array([r.ok]))
-            taus = held_wrench(pv, r.thrust)
+            taus = held_wrench(pv, r.thrust, lay)
             t0 = time.perf_counter()
-            Xc = cvodes_states(cfg, pv, X[0], taus, r.phase, tol=tol)
+            Xc = cvodes_states(cfg, pv, X[0], taus, r.phase, tol=tol, n_samples=min(nv, scenario_n(cfg)) - 1,
+                               layout=lay)
             t_cv = time.perf_counter() - t0
             e = _state_err(X, Xc)
             rec["traced"][label] = {"ok": bool(r.ok), "vs_cvodes": e, "cvodes_s": t_cv}
+            if not r.ok:
+                rec["traced"][label]["samples_compared"] = int(nv)
             log(f"  {label:22s} ok={r.ok} vs CVODES: {e['position_m']:.2e} m, {e['angle_rad']:.2e} rad "
                 f"({t_cv:.1f} s)")
         rec["compile_and_first_call_s"] = time.perf_counter() - t_c
@@ -274,7 +336,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
 
     # speed: the front batches at every step, in interleaved rounds (the machine's load drifts; a round
     # sees every step at about the same load), least disturbed round per step
-    rounds = 2 if quick else TIMING_ROUNDS
+    rounds = 2 if quick else timing_rounds
     times = {(hp, c): [] for hp in steps for c in fronts}
     for rd in range(rounds):
         order = steps[rd % len(steps):] + steps[:rd % len(steps)]
@@ -298,7 +360,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
         hf = BASE / 2
         cfg_f = dataclasses.replace(cfg0, time_h_plant=hf)
         log(f"base check: h_plant = {hf}")
-        runs_f = {c: arvcas.Run(controller=c, scenario=cfg_f).compile() for c in ctrls}
+        runs_f = {c: arvcas.Run(controller=c, scenario=cfg_f, params=sysm).compile() for c in ctrls}
         bgroups = []
         for c in ctrls:
             for hp_, rr_ in ((hf, runs_f[c]), (BASE, compiled[BASE][c])):
@@ -319,11 +381,12 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
     # reference self-check: the first traced run at the base step, CVODES at tol and tol / 10
     label0 = traced[0][0]
     cfg_b = dataclasses.replace(cfg0, time_h_plant=BASE)
-    r0 = arvcas.Run(controller=traced[0][1], scenario=cfg_b).compile().simulate()
-    taus0 = held_wrench(pv, r0.thrust)
+    r0 = arvcas.Run(controller=traced[0][1], scenario=cfg_b, params=sysm).compile().simulate()
+    taus0 = held_wrench(pv, r0.thrust, lay)
     X0 = np.hstack([r0.eta, r0.nu])[0]
-    ref_a = cvodes_states(cfg_b, pv, X0, taus0, r0.phase, tol=tol)
-    ref_b = cvodes_states(cfg_b, pv, X0, taus0, r0.phase, tol=tol / 10)
+    n0 = min(_valid(r0, cfg_b.time_h), scenario_n(cfg_b)) - 1
+    ref_a = cvodes_states(cfg_b, pv, X0, taus0, r0.phase, tol=tol, n_samples=n0, layout=lay)
+    ref_b = cvodes_states(cfg_b, pv, X0, taus0, r0.phase, tol=tol / 10, n_samples=n0, layout=lay)
     ref_check = {"run": label0, "tol": tol, "tol_fine": tol / 10, "difference": _state_err(ref_a, ref_b)}
     log(f"reference: CVODES {tol:g} vs {tol / 10:g} on {label0}: {ref_check['difference']}")
 
@@ -332,15 +395,13 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
     # (the observed order; the drag's |v|, |w| factors have kinks at zero velocity, where RK4's order drops)
     worst = max(per_step[BASE]["traced"], key=lambda k: per_step[BASE]["traced"][k]["vs_cvodes"]["position_m"])
     lab, c, g, seed, unc, ph = next(t for t in traced if t[0] == worst)
-    rw = arvcas.Run(controller=c, scenario=cfg_b).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
-    Xw = np.hstack([rw.eta, rw.nu])
-    tw = held_wrench(pv, rw.thrust)
-    ref_w = cvodes_states(cfg_b, pv, Xw[0], tw, rw.phase, tol=tol)
+    rw, nw, Xw, tw, ref_w = _run_and_reference(sysm, cfg_b, c, g, seed, unc, ph, tol)
     conv = {"run": worst, "closed_loop_vs_textbook_rk4": float(np.abs(
-        rk4_states(cfg_b, pv, Xw[0], tw, rw.phase, BASE) - Xw).max()), "steps": {}}
+        rk4_states(cfg_b, pv, Xw[0], tw, rw.phase, BASE, n_samples=nw, layout=lay) - Xw).max()), "steps": {}}
     hs = [cfg0.time_h / m for m in (2, 4, 8, 16)]  # halvings, coarse to fine (the finest near the reference's floor)
     for hh in hs:
-        conv["steps"][repr(hh)] = _state_err(rk4_states(cfg_b, pv, Xw[0], tw, rw.phase, hh), ref_w)
+        conv["steps"][repr(hh)] = _state_err(rk4_states(cfg_b, pv, Xw[0], tw, rw.phase, hh, n_samples=nw, layout=lay),
+                                             ref_w)
     conv["observed_order"] = {
         key: [float(np.log2(conv["steps"][repr(a)][key] / conv["steps"][repr(b)][key])) for a, b in zip(hs[:-1], hs[1:])]
         for key in ("position_m", "angle_rad", "linear_rate_m_s", "angular_rate_rad_s")}
@@ -359,7 +420,8 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
         cl = {"position_m": 0.0, "angle_rad": 0.0, "linear_rate_m_s": 0.0, "angular_rate_rad_s": 0.0}
         worst_cl_run = None
         for label, *_ in traced:
-            e = _state_err(states[(label, hp)], states[(label, BASE)])
+            A, Bs = states[(label, hp)], states[(label, BASE)]
+            e = _state_err(A[:len(Bs)], Bs[:len(A)])  # a diverged run: the samples before both failures
             if worst_cl_run is None or max(e["position_m"], e["angle_rad"]) > max(cl["position_m"], cl["angle_rad"]):
                 worst_cl_run = label
             for k in cl:
@@ -382,7 +444,9 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
         })
     ok_steps = [row["h_plant"] for row in table if row["passes_rule"]]
     recommended = max(ok_steps) if ok_steps else None
-    return {
+    out = {
+        "system": sysm.name, "system_label": spec["label"], "n_thrusters": sysm.n_thrusters,
+        "n_joints": sysm.n_joints, "trace_every": trace_every,
         "rule": (f"the coarsest h_plant dividing h whose worst-case open-loop state error against CVODES is "
                  f"<= {STATE_TOL:g} (m for positions, rad for angles) and whose worst-case relative change of "
                  f"per-DOF CHAT and RMSE against the {BASE} s run is <= {METRIC_TOL:g}, with no run changing "
@@ -397,13 +461,118 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
         "traced_runs": [t[0] for t in traced], "front_members_traced": member_sets,
         "monte_carlo": {"runs": mc_runs, "master_seed": 0, "spread": 0.3, "controllers": list(mc_ctrls)},
         "fronts": {c: {"path": str(Path(p).relative_to(ROOT)), "members": int(fronts[c].size)}
-                   for c, p in FRONTS.items() if c in fronts},
+                   for c, p in spec["fronts"].items() if c in fronts},
         "table": table,
         "per_step": {str(k): v for k, v in per_step.items()},
         "machine": {"platform": platform.platform(), "python": sys.version.split()[0], "casadi": ca.__version__,
                     "cpus": os.cpu_count(), "load_avg_1min_end": _load_avg()},
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
+    if system == "haidou1" and duration is None:  # Haidou-1's JSON as committed before --system (no new keys)
+        for k in ("system", "system_label", "n_thrusters", "n_joints", "trace_every"):
+            out.pop(k)
+    elif duration is not None:
+        out["duration_shortened"] = True
+    return out
+
+
+def _rebuild_traced(label: str, system: str, mc_runs: int):
+    """(controller, gains or None, seed, uncertainty, phase) of a traced run from its label in the JSON."""
+    from arvcas.experiments.montecarlo import draw
+    from arvcas.tuning.front import read_front
+
+    c, rest = label.split(" ", 1)
+    if rest == "default":
+        return c, None, 0, None, None
+    kind, i = rest[:-1].split("[")
+    i = int(i)
+    if kind == "front":
+        fr = read_front(SYSTEMS[system]["fronts"][c])
+        return c, fr.gains[i], int(fr.draw_seeds[0]), fr.draw_uncertainty[0], fr.draw_phase[0]
+    d = draw(mc_runs, seed=0, spread=0.3)
+    return c, None, int(d.noise_seed[i]), d.factors[i], d.phase[i]
+
+
+def finer_steps(res: dict, system: str, n_worst: int = 12, divisors=(20, 40), tol: float = CVODES_TOL,
+                log=print, metrics: bool = True) -> dict:
+    """Steps finer than the base, h / 20 and h / 40, on the ``n_worst`` traced runs with the largest open-loop
+    error at the base step: the textbook RK4 (equal to the closed loop's at the base step) of each run's own
+    0.01 s thrust sequence against CVODES, and CVODES at ``tol / 10`` on the worst run. Open loop only: what
+    a step below the base would give for (a) where the base itself fails the rule."""
+    import arvcas
+    from arvcas.sim.scenario import load_scenario
+
+    sysm = arvcas.load_system(system)
+    lay, pv = sysm.layout, sysm.params.vector()
+    cfg_b = dataclasses.replace(load_scenario(sysm.params.default("scenario")), time_h_plant=BASE)
+    if res.get("duration_shortened"):
+        cfg_b = dataclasses.replace(cfg_b, time_duration=res["duration"])
+    tr = res["per_step"][repr(BASE)]["traced"]
+    worst = sorted(tr, key=lambda k: -max(tr[k]["vs_cvodes"]["position_m"], tr[k]["vs_cvodes"]["angle_rad"]))[:n_worst]
+    out = {"runs": {}, "steps": [BASE] + [cfg_b.time_h / m for m in divisors], "reference_fine": None}
+    for j, label in enumerate(worst):
+        c, g, seed, unc, ph = _rebuild_traced(label, system, res["monte_carlo"]["runs"])
+        r, n, X, taus, ref = _run_and_reference(sysm, cfg_b, c, g, seed, unc, ph, tol)
+        rec = {"closed_loop": _state_err(X, ref)}
+        for hh in out["steps"][1:]:
+            rec[repr(hh)] = _state_err(rk4_states(cfg_b, pv, X[0], taus, r.phase, hh, n_samples=n, layout=lay), ref)
+        if j == 0:
+            fine = cvodes_states(cfg_b, pv, X[0], taus, r.phase, tol=tol / 10, n_samples=n, layout=lay)
+            out["reference_fine"] = {"run": label, "tol_fine": tol / 10, "difference": _state_err(ref, fine)}
+        out["runs"][label] = rec
+        log(f"finer steps, {label}: " + ", ".join(f"{k}: {v['position_m']:.2e} m, {v['angle_rad']:.2e} rad"
+                                                  for k, v in rec.items()))
+    # the metrics rule one level down: every metrics-only run (default gains, fronts, Monte Carlo draws) at
+    # h / divisors[0] against h / divisors[1] (the base check's BASE / 2 vs BASE, moved down)
+    if metrics:
+        from arvcas.experiments.montecarlo import draw
+        from arvcas.tuning.front import read_front
+
+        spec = SYSTEMS[system]
+        ctrls = list(dict.fromkeys(lab.split(" ", 1)[0] for lab in res["traced_runs"]))
+        fronts = {c: read_front(spec["fronts"][c]) for c in res["fronts"]}
+        mc = tuple(res["monte_carlo"]["controllers"])
+        d = draw(res["monte_carlo"]["runs"], seed=0, spread=0.3)
+        hs = [cfg_b.time_h / m for m in divisors[:2]]
+        met, groups, tbatch = {}, [], {}
+        for hh in [BASE, *hs]:
+            cfg = dataclasses.replace(cfg_b, time_h_plant=hh)
+            runs = {c: arvcas.Run(controller=c, scenario=cfg, params=sysm).compile() for c in ctrls}
+            for c in ctrls:
+                met[(f"{c} default (batch)", hh)] = runs[c].batch(runs[c].default_gains(), seed=0, n_threads=1,
+                                                                  return_status=True)[0:3]
+            tb = []
+            for rd in range(3):  # the fronts' batch, least disturbed of 3, as a ratio against BASE
+                t0 = time.perf_counter()
+                for c, fr in fronts.items():
+                    met[(f"{c} front", hh)] = runs[c].batch(fr.gains, **_front_args(fr))[0:3]
+                tb.append(time.perf_counter() - t0)
+            tbatch[hh] = min(tb)
+            if hh == BASE:
+                continue
+            for c in mc:
+                met[(f"{c} mc", hh)] = runs[c].many(runs[c].default_gains(), d.noise_seed, uncertainty=d.factors,
+                                                   phase=d.phase, n_threads=1)[0:3]
+            log(f"finer steps: metrics at {hh:g} s")
+        groups = [f"{c} default (batch)" for c in ctrls] + [f"{c} front" for c in fronts] + [f"{c} mc" for c in mc]
+        out["metrics"] = dict(h_plant=hs[0], base=hs[1], **_compare_metrics(met, groups, hs[0], hs[1]))
+        out["speed_vs_base"] = {repr(hh): tbatch[BASE] / tbatch[hh] for hh in hs}
+        out["batch_s"] = {repr(hh): tbatch[hh] for hh in tbatch}
+        log(f"finer steps: metrics {hs[0]:g} vs {hs[1]:g} s: CHAT {out['metrics']['rel_chat']:.2e}, RMSE "
+            f"{out['metrics']['rel_rmse']:.2e}")
+    # the coarsest finer step within the state rule on these runs and (the first finer step only, the one
+    # whose metrics are compared one level down) within the metrics rule
+    ok = []
+    for hh in out["steps"][1:]:
+        state_ok = all(max(rec[repr(hh)][k] for rec in out["runs"].values()) <= STATE_TOL
+                       for k in ("position_m", "angle_rad"))
+        m = out.get("metrics")
+        metric_ok = (m is None or m["h_plant"] != hh
+                     or (max(m["rel_chat"], m["rel_rmse"]) <= METRIC_TOL and m["status_changed"] == 0))
+        if state_ok and metric_ok:  # the finest step is the metrics' reference: its state error decides
+            ok.append(hh)
+    out["recommended_h_plant"] = max(ok) if ok else None
+    return out
 
 
 def markdown(res: dict) -> str:
@@ -411,22 +580,30 @@ def markdown(res: dict) -> str:
     lines = [
         "# Plant step: accuracy against CVODES and effect on the closed loop",
         "",
-        "Produced by `python benchmarks/step_accuracy.py` (" + ("quick smoke run" if res["quick"] else "full run")
-        + f", {res['created']}); every figure is in `step_accuracy.json`. Haidou-1, the packaged scenario "
-        f"({res['duration']:g} s, controller period h = {res['h']:g} s); each step divides h.",
+        "Produced by `python benchmarks/step_accuracy.py" + (f" --system {res['system']}" if "system" in res else "")
+        + "` (" + ("quick smoke run" if res["quick"] else "full run")
+        + f", {res['created']}); every figure is in `step_accuracy.json`. "
+        + (f"{res['system_label']} (`{res['system']}`: {res['n_thrusters']} thrusters, {res['n_joints']} joints), "
+           "its default scenario" if "system" in res else "Haidou-1, the packaged scenario")
+        + f" ({res['duration']:g} s, controller period h = {res['h']:g} s); each step divides h.",
         "",
         "- **(a) open loop vs CVODES**: each traced run's own held thrust sequence (saturated, `B_T u` held over "
         "each sample) drives the plant `uvms_rhs` (direct Newton-Euler arm wrench, not the closed loop's time "
         f"table) through CVODES (Adams, functional iteration, abstol = reltol = {res['cvodes']['tol']:g}, restarted "
         "at every sample); max over the run's samples of |x_RK4 - x_CVODES|, worst over the traced runs "
-        f"({len(res['traced_runs'])}): " + _compact(res["traced_runs"]) + ".",
+        f"({len(res['traced_runs'])}" + (f"; front members every {res['trace_every']}th plus knee and last"
+                                          if res.get("trace_every", TRACE_EVERY) != TRACE_EVERY else "")
+        + "): " + _compact(res["traced_runs"]) + "."
+        + (" A diverged run is compared on its samples before the failure." if any(
+            "samples_compared" in v for ps in res["per_step"].values() for v in ps["traced"].values()) else ""),
         f"- **(b) closed loop vs {res['base']:g} s**: the same runs (same gains, noise, model factors, phases) at "
         f"h_plant = {res['base']:g} s. State: worst over the traced runs. CHAT/RMSE: max over DOFs and runs of "
         "|m - m_base| / |m_base|, over the default gains of every controller, every member of the committed fronts "
         "(" + ", ".join(f"{c}: {v['members']}" for c, v in res["fronts"].items()) + ", on each study's draw) and "
         f"{res['monte_carlo']['runs']} Monte Carlo draws (master seed 0, +-30 % model factors, random phases) of "
         + " and ".join(res["monte_carlo"]["controllers"]) + f" at their default gains: {res['table'][0]['metric_runs']} runs per step.",
-        "- **speed**: the batch of both fronts' members (one thread) against "
+        "- **speed**: the batch of " + ("both fronts'" if len(res["fronts"]) == 2 else "every front's")
+        + " members (one thread) against "
         f"{res['base']:g} s, measured in this run in {res['timing_rounds']} interleaved rounds over the steps "
         "(least disturbed round per step) on a shared machine (1-min load average after timing: "
         f"{res['load_avg_1min_after_timing']:.1f}); a ratio, not an absolute speed.",
@@ -487,13 +664,64 @@ def markdown(res: dict) -> str:
         f"**Rule**: {res['rule']}.",
         "",
         f"**Recommended default step: h_plant = {res['recommended_h_plant']:g} s**" if res["recommended_h_plant"]
-        else "**No step passes the rule.**",
+        else ("**No step of the table passes the rule.**" + (
+            f" **Recommended default step: h_plant = {res['finer']['recommended_h_plant']:g} s** "
+            f"({int(round(res['h'] / res['finer']['recommended_h_plant']))} RK4 steps per sample; steps below the base, "
+            "above: within the state rule on the runs that fail it at the base step, and within the metrics rule "
+            "against the next finer step)." if res.get("finer", {}).get("recommended_h_plant") else "")),
         "",
+        *(_base_fails_md(res) if not res["table"][0]["passes_rule"] else []),
+        *(_finer_md(res) if res.get("finer") else []),
         "Every other step stays available (`time.h_plant` in the scenario file, or "
         "`dataclasses.replace(cfg, time_h_plant=...)`). This report does not change the packaged default.",
         "",
     ]
     return "\n".join(lines)
+
+
+def _base_fails_md(res) -> list:
+    row = res["table"][0]
+    a = row["open_loop_vs_cvodes"]
+    bc = res.get("base_check") or {}
+    return [f"**The base step {res['base']:g} s itself fails the rule**: its worst (a) error is {a['position_m']:.2g} m, "
+            f"{a['angle_rad']:.2g} rad (`{row['open_loop_worst_run']}`)"
+            + (f", and the base check ({bc['h_plant']:g} s against {res['base']:g} s) moves the metrics by up to "
+               f"{max(bc['rel_chat'], bc['rel_rmse']):.2g} relative" if bc else "")
+            + ". The (b) columns of the table compare against a base that is not converged to the rule's "
+            "tolerances; the steps below the base decide.", ""]
+
+
+def _finer_md(res) -> list:
+    fz = res["finer"]
+    f = lambda v: f"{v:.2g}"  # noqa: E731
+    dofs = ("x", "y", "z", "phi", "theta", "psi")
+    rows = ["**Steps below the base** (open loop only, `finer_steps`): the textbook RK4 of each run's own "
+            f"{res['base']:g} s thrust sequence against CVODES, on the {len(fz['runs'])} traced runs with the largest "
+            "(a) error at the base step (worst state: position or angle DOF with the largest error):", "",
+            "| run | " + " | ".join(f"{h:g} s (a) position m, angle rad" for h in fz["steps"]) + " |",
+            "|---|" + "---|" * len(fz["steps"])]
+    for lab, rec in fz["runs"].items():
+        cells = [rec["closed_loop"]] + [rec[repr(h)] for h in fz["steps"][1:]]
+        rows.append(f"| {lab} | " + " | ".join(f"{f(e['position_m'])}, {f(e['angle_rad'])} ({dofs[e['argmax_state']]})"
+                                               for e in cells) + " |")
+    rf = fz["reference_fine"]
+    rows += ["", f"CVODES at {res['cvodes']['tol']:g} against {rf['tol_fine']:g} on `{rf['run']}`: "
+             f"{f(rf['difference']['position_m'])} m, {f(rf['difference']['angle_rad'])} rad.", ""]
+    ok = [h for h in fz["steps"] if all(max((rec["closed_loop"] if h == fz["steps"][0] else rec[repr(h)])[k]
+                                            for rec in fz["runs"].values()) <= STATE_TOL
+                                        for k in ("position_m", "angle_rad"))]
+    rows += [("On these runs the coarsest step within the state rule is " + f"{max(ok):g} s." if ok else
+              "None of these steps is within the state rule on these runs."), ""]
+    if fz.get("metrics"):
+        m = fz["metrics"]
+        rows += [f"Metrics one level down: every metrics-only run ({m['runs']}: default gains of every controller, "
+                 f"the fronts, the Monte Carlo draws) at h_plant = {m['h_plant']:g} s against {m['base']:g} s: at "
+                 f"most {f(m['rel_chat'])} (CHAT) and {f(m['rel_rmse'])} (RMSE) relative, {m['status_changed']} "
+                 f"runs changing their ok status; worst: {_worst_metric(m)}."
+                 + (" Fronts' batch speed against the base (least disturbed of 3, same run): " + ", ".join(
+                     f"{float(k):g} s: {v:.2f}x" for k, v in fz["speed_vs_base"].items()) + "."
+                    if fz.get("speed_vs_base") else ""), ""]
+    return rows
 
 
 def _compact(labels) -> str:
@@ -525,19 +753,35 @@ def _worst_metric(row) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--system", default="haidou1", choices=tuple(SYSTEMS), help="shipped system (default haidou1)")
     ap.add_argument("--quick", action="store_true", help="smoke run: proposed only, steps 0.01 and 0.1, 3 draws")
-    ap.add_argument("--out", default=str(ROOT / "results" / "step"), help="output directory")
+    ap.add_argument("--out", default=None, help="output directory (default: the system's, results/step[/NAME])")
     ap.add_argument("--mc-runs", type=int, default=MC_RUNS)
+    ap.add_argument("--trace-every", type=int, default=TRACE_EVERY, help="trace every n-th front member")
+    ap.add_argument("--timing-rounds", type=int, default=TIMING_ROUNDS)
+    ap.add_argument("--duration", type=float, default=None, help="shorten the scenario to this many seconds (smoke)")
     ap.add_argument("--tol", type=float, default=CVODES_TOL)
     ap.add_argument("--report-only", action="store_true", help="rewrite README.md from the JSON in --out")
+    ap.add_argument("--finer", action="store_true", help="add steps below the base (h/20, h/40) on the worst "
+                    "traced runs to the JSON in --out (or after the study, when no step passes the rule)")
     a = ap.parse_args(argv)
-    out = Path(a.out)
+    out = Path(a.out) if a.out else Path(SYSTEMS[a.system]["out"])
+    if a.finer and (out / "step_accuracy.json").exists() and a.report_only:
+        res = json.loads((out / "step_accuracy.json").read_text())
+        res["finer"] = finer_steps(res, res.get("system", a.system), tol=res["cvodes"]["tol"])
+        (out / "step_accuracy.json").write_text(json.dumps(res, indent=1) + "\n")
+        (out / "README.md").write_text(markdown(res))
+        print(markdown(res))
+        return 0
     if a.report_only:
         res = json.loads((out / "step_accuracy.json").read_text())
         (out / "README.md").write_text(markdown(res))
         print(markdown(res))
         return 0
-    res = study(quick=a.quick, mc_runs=a.mc_runs, tol=a.tol)
+    res = study(quick=a.quick, mc_runs=a.mc_runs, tol=a.tol, system=a.system, trace_every=a.trace_every,
+                timing_rounds=a.timing_rounds, duration=a.duration)
+    if a.finer or res["recommended_h_plant"] is None:
+        res["finer"] = finer_steps(res, a.system, tol=a.tol)
     out.mkdir(parents=True, exist_ok=True)
     (out / "step_accuracy.json").write_text(json.dumps(res, indent=1) + "\n")
     (out / "README.md").write_text(markdown(res))

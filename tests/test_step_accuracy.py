@@ -7,6 +7,9 @@ agrees with CVODES to 1e-9 at h_plant = 0.01 s, and its error falls ~16x per hal
 (every kink on the sample grid, as in the packaged scenario); (2) the compiled closed loop, driven by
 its own controller, matches CVODES on its first 2 s: to 1e-9 at h_plant = 0.01 s, and to 1e-8 at the
 packaged step 0.05 s (results/step: 1.6e-8 m worst over 100 s and 52 runs; the issue's rule 1e-6).
+(3) the study itself in its quick mode, for each shipped system, on a 3 s horizon: its reference
+machinery (CVODES at two tolerances, the textbook RK4 against the closed loop's own trajectory, the
+closed loop against CVODES at 0.01 s) agrees and the report renders.
 Accuracy only: no timing is asserted.
 """
 
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
+import json
 from pathlib import Path
 
 import numpy as np
@@ -78,3 +82,22 @@ def test_closed_loop_matches_cvodes_on_its_own_thrust(params, h_plant, bound):
     print(f"closed loop at h_plant = {cfg.time_h_plant:g} s vs CVODES over 2 s:", err)
     assert err < bound
     assert np.abs(np.diff(r.thrust[: n + 1], axis=0)).max() > 0  # the thrust does change from sample to sample
+
+
+@pytest.mark.parametrize("system", list(sa.SYSTEMS))
+def test_quick_study_per_system(system):
+    import arvcas
+
+    res = sa.study(quick=True, system=system, duration=3.0, log=lambda *a: None)
+    json.dumps(res)  # the JSON it writes
+    sysm = arvcas.load_system(system)
+    assert res["system"] == sysm.name and res["n_thrusters"] == sysm.n_thrusters and res["duration"] == 3.0
+    assert [row["h_plant"] for row in res["table"]] == [0.01, 0.1]
+    base = res["table"][0]
+    assert base["open_loop_vs_cvodes"]["position_m"] < 1e-7 and base["open_loop_vs_cvodes"]["angle_rad"] < 1e-7
+    assert res["convergence"]["closed_loop_vs_textbook_rk4"] < 1e-12
+    assert res["reference_check"]["difference"]["position_m"] < 1e-10
+    assert res["table"][1]["metric_runs"] > 0 and res["table"][1]["status_changed"] == 0
+    assert res["fronts"]["proposed"]["path"].startswith("results/tuning/paper" if system == "haidou1" else "results/bluerov2")
+    text = sa.markdown(res)
+    assert f"--system {system}" in text and "Recommended default step" in text
