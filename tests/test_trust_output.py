@@ -127,7 +127,9 @@ def test_sighup_in_a_subprocess_leaves_no_temp_file(tmp_path):
     target = tmp_path / "out.md"
     files.write_text(target, "previous\n")
     before = snapshot(tmp_path)
-    r = subprocess.run([sys.executable, "-c", code, str(target)], timeout=120)
+    from test_tuning_run import default_signals
+
+    r = subprocess.run([sys.executable, "-c", code, str(target)], timeout=120, preexec_fn=default_signals)
     assert r.returncode == 3
     assert snapshot(tmp_path) == before
 

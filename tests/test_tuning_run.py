@@ -91,9 +91,18 @@ def test_resume_with_a_different_study_is_refused_but_longer_termination_continu
     assert_same_study(ref, ck.read_checkpoint(out / "front.h5"))
 
 
+def default_signals() -> None:
+    """In a child: SIGHUP and SIGTERM at their defaults, as from a user's shell (a test run under nohup
+    would otherwise hand its children an ignored SIGHUP, and they rightly keep ignoring it)."""
+    import signal
+
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _tune_process(study: Path, out: Path, *extra) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "arvcas.cli", "tune", str(study), "--out", str(out), *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
 
 
 def _wait_for(proc: subprocess.Popen, marker: str, timeout: float = 120.0) -> list[str]:
