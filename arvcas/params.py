@@ -89,6 +89,12 @@ def layout_for(structure: systemfile.Structure) -> Layout:
     return lay
 
 
+def system_tag(structure) -> str:
+    """How a system's structure enters a compile-cache description: nothing for the default system
+    (Haidou-1, whose descriptions predate systems), `` system=<structure>`` for any other."""
+    return "" if structure == default_layout().structure else f" system={structure.key()}"
+
+
 def default_path() -> Path:
     return Path(str(resources.files("arvcas") / "data" / "haidou1.toml"))
 

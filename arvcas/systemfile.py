@@ -210,8 +210,6 @@ def _structure(doc: dict, default_name: str) -> Structure:
         raise _Bad(f"hydro: every derivative's unit must be \"per_rho\" (SI value = rho * value) or every "
                    f"one \"SI\", got {', '.join(sorted(units))}")
     per_rho = units == {"per_rho"}
-    if any(f in ("ds", "ds2") for t in terms for f in t.factors):
-        pass  # checked below against the thruster layout
     thr = _table(doc, "thrusters", "")
     if "unit" in thr:
         units_list = thr["unit"]
@@ -237,10 +235,10 @@ def _structure(doc: dict, default_name: str) -> Structure:
                        f"(thrusters.delta_sL, delta_sR)")
     else:
         thrusters = None
+    vehicle_only = (name, "excess" if has_ex else "volume", tuple(terms), per_rho, cam, thrusters)
     arm = doc.get("arm")
     if arm is None:
-        return Structure(name, "excess" if has_ex else "volume", tuple(terms), per_rho, cam, thrusters,
-                         "none", 0, False, (), ())
+        return Structure(*vehicle_only, "none", 0, False, (), ())
     if not isinstance(arm, dict):
         raise _Bad("arm: expected a table")
     if "urdf" in arm:
@@ -256,8 +254,7 @@ def _structure(doc: dict, default_name: str) -> Structure:
     if rpy and len(rpy) != 3:
         raise _Bad("arm.mount: give all of roll, pitch, yaw or none")
     if nj == 0:
-        return Structure(name, "excess" if has_ex else "volume", tuple(terms), per_rho, cam, thrusters,
-                         "none", 0, False, (), ())
+        return Structure(*vehicle_only, "none", 0, False, (), ())
     j1 = arm["joint1"]
     if not isinstance(j1, dict):
         raise _Bad("arm.joint1: expected a table")
@@ -273,8 +270,7 @@ def _structure(doc: dict, default_name: str) -> Structure:
                 raise _Bad(f"arm.link{i}: a drag segment needs drag_diameter, drag_from and drag_to (or none)")
             drag.append(bool(have))
             cd.append("Cd" in lk)
-    return Structure(name, "excess" if has_ex else "volume", tuple(terms), per_rho, cam, thrusters,
-                     form, nj, bool(rpy), tuple(drag), tuple(cd))
+    return Structure(*vehicle_only, form, nj, bool(rpy), tuple(drag), tuple(cd))
 
 
 # ---- the schema of one structure ------------------------------------------------------------------------

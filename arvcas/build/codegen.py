@@ -725,17 +725,12 @@ def compiled(name: str, opts=None, system=None) -> ca.Function:
                     _PLANT[tag] = plant_functions(opts, lay)
                 return _PLANT[tag][name]
 
-            desc = f"plant {name} {opts!r}" if st.name == "haidou1" and st == _default_structure() else \
-                f"plant {name} {opts!r} {st.key()}"
+            from arvcas.params import system_tag
+
+            desc = f"plant {name} {opts!r}{system_tag(st)}"
             f = build_described(name, desc, make)
             _COMPILED[mkey] = f
         return f
-
-
-def _default_structure():
-    from arvcas.params import default_layout
-
-    return default_layout().structure
 
 
 # ---------------------------------------------------------------------------------------------

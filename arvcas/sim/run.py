@@ -32,7 +32,7 @@ from arvcas.build import calls, codegen
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model.uvms import ModelOptions
-from arvcas.params import Params, default_layout, load as load_params
+from arvcas.params import Params, default_layout, system_tag
 from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
 from arvcas.sim.scenario import ScenarioConfig
 
@@ -108,8 +108,7 @@ class CompiledRun:
         """What keys the compiled run in the cache (beside the package's model hash and the toolchain)."""
         law = self.controller
         own = [f for f in law.source_files() if not f.startswith(str(Path(codegen.__file__).resolve().parents[1]))]
-        st = self.params.structure
-        system = "" if st == default_layout().structure else f" system={st.key()}"
+        system = system_tag(self.params.structure)
         return (f"run controller={law.identity()} own_source={_file_digest(own)} trace={trace} "
                 f"scenario={self.cfg.graph_key()!r} options={self.opts!r}{system}")
 

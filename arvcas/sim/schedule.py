@@ -34,7 +34,7 @@ from arvcas.build import calls, codegen
 from arvcas.model import manipulator, vehicle
 from arvcas.sim import scenario
 from arvcas.model.linalg import lu_nopivot, lu_pack, lu_unpack
-from arvcas.params import default_layout, view
+from arvcas.params import default_layout, system_tag, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.uvms import ModelOptions
 
@@ -189,7 +189,7 @@ def _compiled(kind: str, key, make, structure=None) -> ca.Function:
     """The compiled table function ``kind`` for ``key`` (a frozen description of what shapes it):
     loaded from the cache by that description, its graph built only on a miss."""
     name = {"time": "sched_time_map", "arm": "sched_arm_map"}[kind]
-    st = "" if structure is None or structure == default_layout().structure else f" system={structure.key()}"
+    st = "" if structure is None else system_tag(structure)
     with _FUNCS_LOCK:
         f = _FUNCS.get((kind, key, structure))
         if f is None:
