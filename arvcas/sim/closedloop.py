@@ -212,12 +212,18 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
     ctrls = [_controller_part(spec, L, S, [Sd, Kc], tk, first, trace) for first in firsts]
 
     # finalize: a run that diverges (non-finite state, error bound) is frozen with ok = 0, t_fail set
-    # (C: the controller part's new loop state without x)
+    # (C: the controller part's new loop state without x). A branch, not an element-wise select:
+    # cl_ok decides, then one of two copies runs (cl_keep: the new state; cl_freeze: the old one with
+    # ok = 0 and t_fail), so a sample pays for one copy of the state instead of three operations per entry.
     Cs, Ss, xn, tks = ca.SX.sym("C", i_const - i_x1), ca.SX.sym("S", i_const), ca.SX.sym("xn", 12), ca.SX.sym("t")
-    ok_n = ca.logic_and(Cs[i_ok - i_x1], ca.mmax(ca.fabs(xn)) < 1e6)
-    Cn = ca.vertcat(xn, Cs)
+    ok_fn = ca.Function("cl_ok", [Cs, xn], [ca.logic_and(Cs[i_ok - i_x1], ca.mmax(ca.fabs(xn)) < 1e6)])
+    keep = ca.Function("cl_keep", [Cs, Ss, xn, tks], [ca.vertcat(xn, Cs)])
     Sfail = ca.vertcat(Ss[:i_ok], 0, ca.if_else(L.get(Ss, "ok"), tks, L.get(Ss, "t_fail")))
-    fin = ca.Function("cl_finalize", [Cs, Ss, xn, tks], [ca.if_else(ok_n, Cn, Sfail)])
+    freeze = ca.Function("cl_freeze", [Cs, Ss, xn, tks], [Sfail])
+    switch = ca.Function.if_else("cl_finalize", keep, freeze)  # input 0: 1 -> keep, 0 -> freeze
+
+    def fin(Cm, Sm, xm, tkm):
+        return switch(ok_fn(Cm, xm), Cm, Sm, xm, tkm)
 
     Rec = schedule.records(lay)
     TS, AS, ns = Rec.time_size, Rec.arm_size, schedule.n_stages(cfg)
