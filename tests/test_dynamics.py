@@ -94,7 +94,7 @@ def test_batch_matches_vm(name, n, sx):
 def test_batch_same_bits_on_any_thread_count_and_as_single_calls():
     rng = np.random.default_rng(5)
     d = arvcas.dynamics("uvms_rhs")
-    n = 2 * dyn.CHUNK + 37
+    n = 2 * dyn.THREAD_MIN_BATCH + 37
     args = [np.array(_inputs(uvms.plant_functions()["uvms_rhs"], rng)[i]) for i in range(6)]
     x = np.array([_inputs(uvms.plant_functions()["vehicle_rhs"], rng)[0] for _ in range(n)])
     a1 = d(x, *args[1:], n_threads=1)
@@ -102,7 +102,7 @@ def test_batch_same_bits_on_any_thread_count_and_as_single_calls():
     a3 = d(x, *args[1:], n_threads=5)
     np.testing.assert_array_equal(a1, a2)
     np.testing.assert_array_equal(a1, a3)
-    for i in (0, dyn.CHUNK, n - 1):
+    for i in (0, dyn.THREAD_MIN_BATCH, n - 1):
         np.testing.assert_array_equal(a1[i], d(x[i], *args[1:]))
 
 

@@ -249,14 +249,14 @@ class _Plan:
         return f"{self.name}-{self.key[:20]}"
 
 
-def _plan(fn: ca.Function, cmd_flags: list[str]) -> _Plan:
+def _plan(fn: ca.Function, cmd_flags: list[str], extra_c: str = "") -> _Plan:
     name = fn.name()
     if not name.isidentifier() or not name.isascii():
         raise ValueError(f"function name {name!r} is not a C identifier")
     t0 = time.perf_counter()
     cg = ca.CodeGenerator(name, _CODEGEN_OPTS)  # CASADI_PREFIX(ID) = <name>_ID: symbols prefixed by name
     cg.add(fn)
-    text = cg.dump()
+    text = cg.dump() + extra_c
     codegen_s = time.perf_counter() - t0
     try:
         n_ins = int(fn.n_instructions())
@@ -457,29 +457,34 @@ def build(
     opt_level: str = DEFAULT_OPT_LEVEL,
     flags: tuple[str, ...] = (),
     lock_timeout: float = LOCK_TIMEOUT_S,
+    extra_c: str = "",
 ) -> ca.Function:
     """``fn`` compiled to C and loaded with :func:`casadi.external` (same name, inputs, outputs).
 
     ``opt_level`` is passed to ``cc`` as is (``-O0``..``-O3``, ``-Os``, ``-Og``), then ``flags``.
+    ``extra_c``: C source appended to the generated file (part of the cache key), e.g. a loop over
+    ``fn`` that other code calls from the same library (:mod:`arvcas.build.dynamics`).
     Raises ValueError for ``-Ofast``/``-ffast-math`` and kin, :class:`CacheError` for an unsafe cache
     directory, :class:`CompileError` if ``cc`` is missing or fails.
     """
     if not isinstance(fn, ca.Function):
         raise TypeError(f"build: expected a casadi.Function, got {type(fn).__name__}")
     cmd_flags = _check_flags(opt_level, flags)
-    mkey = (fn.__hash__(), fn.name(), tuple(cmd_flags), str(_cache_path()))
+    if not isinstance(extra_c, str):
+        raise TypeError(f"build: extra_c: expected C source text, got {type(extra_c).__name__}")
+    mkey = (fn.__hash__(), fn.name(), tuple(cmd_flags), str(_cache_path()), extra_c)
     with _LOCK:
         hit = _MEMO.get(mkey)
         if hit is not None:  # already loaded in this process: no disk access at all
             _STATS["memo_hit"] += 1
             return hit[1]
-        f = _build(fn, cmd_flags, cache_dir(), lock_timeout)
+        f = _build(fn, cmd_flags, cache_dir(), lock_timeout, extra_c)
         _MEMO[mkey] = (fn, f)  # holding fn keeps its identity from being reused
         return f
 
 
-def _build(fn: ca.Function, cmd_flags: list[str], d: Path, lock_timeout: float) -> ca.Function:
-    plan = _plan(fn, cmd_flags)
+def _build(fn: ca.Function, cmd_flags: list[str], d: Path, lock_timeout: float, extra_c: str = "") -> ca.Function:
+    plan = _plan(fn, cmd_flags, extra_c)
     return _lookup_or_publish(plan, lambda: plan, d, lock_timeout)
 
 

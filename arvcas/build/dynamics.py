@@ -12,16 +12,15 @@ How a call runs (costs in ``docs/calling-dynamics.md``, measured by ``arvcas ben
 * **one evaluation**: the inputs are copied into buffers bound once per thread to the compiled
   function (``Function.buffer``), so a call is a few NumPy slice copies, one finite check and one C
   evaluation, without CasADi's conversion to ``DM`` and back.
-* **a batch**: the loop over the batch is C. 256 calls of the SX function on consecutive columns,
-  a shared ``p`` passed to each by pointer (:func:`_unrolled`), are compiled through the build cache
-  (:func:`arvcas.build.codegen.build`) and called on consecutive blocks of 256 rows of the caller's
-  arrays in place (a C-ordered ``(n, 12)`` array is exactly the column-major ``12 x n`` block it
-  reads). The last ``n mod 256`` rows go
-  through uncompiled maps of the compiled function of sizes 128, 64, ..., 1 (no compiling, but
-  a few tenths of a microsecond per evaluation more). Each block's evaluation releases the GIL;
-  batches of at least :data:`THREAD_MIN_BATCH` rows run the blocks on as many threads as the process
-  may use cores (``n_threads=`` overrides), each thread with its own work memory. Results do not
-  depend on the thread count, to the bit.
+* **a batch**: the loop over the batch is C. The first batch of a name compiles, through the build
+  cache (:func:`arvcas.build.codegen.build`), the plant function's SX graph with a loop appended
+  (:func:`_loop_c`: ``n`` evaluations, input ``k`` of row ``i`` at ``a[k] + i * stride[k]``, stride 0
+  for an input all rows share), and calls it through ``ctypes`` on the caller's arrays in place (a
+  C-ordered ``(n, 12)`` array is exactly the column-major ``12 x n`` block the loop reads; shared
+  inputs, ``p`` among them, are read by pointer, never repeated). ``ctypes`` releases the GIL for
+  the call; batches of at least :data:`THREAD_MIN_BATCH` rows are split into consecutive blocks run
+  on as many threads as the process may use cores (``n_threads=`` overrides), each thread with its
+  own work memory. Results do not depend on the thread count, and equal single calls, to the bit.
 
 Checks (one-line ``ValueError`` naming the function and the argument): the number of inputs, every
 shape, batch sizes that disagree, and non-finite values (NaN or inf) anywhere in the inputs.
@@ -34,6 +33,7 @@ batched they are ``(n, 12, 12)`` etc.
 
 from __future__ import annotations
 
+import ctypes
 import math
 import os
 import threading
@@ -44,20 +44,20 @@ import numpy as np
 
 from arvcas.model.uvms import PUBLIC_FUNCTIONS
 
-__all__ = ["dynamics", "jacobian_functions", "Dynamics", "NAMES", "JACOBIANS", "CHUNK", "THREAD_MIN_BATCH"]
+__all__ = ["dynamics", "jacobian_functions", "Dynamics", "NAMES", "JACOBIANS", "THREAD_MIN_BATCH", "BLOCKS_PER_THREAD"]
 
 # name -> (plant function, inputs differentiated); outputs: xdot, then d xdot / d input per input
 JACOBIANS = {
     "vehicle_rhs_jac": ("vehicle_rhs", ("x", "tau")),
     "uvms_rhs_jac": ("uvms_rhs", ("x", "tau", "q")),
 }
-CHUNK = 256  # rows per call of the compiled map
-THREAD_MIN_BATCH = 4 * CHUNK  # smaller batches run on the calling thread
+THREAD_MIN_BATCH = 1024  # smaller batches run on the calling thread, in one call
+BLOCKS_PER_THREAD = 4  # a threaded batch is cut into this many blocks per thread (the pool balances them)
 
 _LOCK = threading.RLock()
 _SX: dict[str, dict[str, ca.Function]] = {}
 _COMPILED: dict[tuple[str, str], ca.Function] = {}
-_MAPS: dict[tuple[str, str, int, bool], ca.Function] = {}
+_LOOPS: dict[tuple, "_Loop"] = {}
 _DEFAULT_P: list[np.ndarray] = []
 _POOLS: dict[int, ThreadPoolExecutor] = {}
 _F64 = np.dtype(np.float64)
@@ -99,45 +99,68 @@ def _compiled(name: str, opts, params=None) -> ca.Function:
     with _LOCK:
         key = (name, opts.tag(), None if params is None else params.structure)
         if key not in _COMPILED:
-            if name in JACOBIANS:
-                _COMPILED[key] = codegen.build(_sx(opts, params)[name])
+            if name in JACOBIANS:  # one library for single calls and batches (its loop appended)
+                _COMPILED[key] = _loop(name, opts, params).keep
             else:  # the same Function arvcas.compiled returns
                 _COMPILED[key] = codegen.compiled(name, opts, system=params)
         return _COMPILED[key]
 
 
-def _unrolled(base: ca.Function, size: int, p_batched: bool) -> ca.Function:
-    """``size`` calls of ``base`` on consecutive columns, as one MX Function (``base``'s body once in C).
+def _loop_c(f: ca.Function) -> str:
+    """C appended to ``f``'s generated code: ``<name>_arvcas_batch``, ``n`` evaluations of ``f``.
 
-    Like ``base.map(size)``, but a shared ``p`` is passed to every call by pointer: CasADi's map with
-    ``reduce_in`` copies it ``size`` times into its work memory first, and each evaluation then reads
-    its own copy (measured: vehicle_rhs 335 -> 247 ns per evaluation, thrust 85 -> 45 ns).
+    ``int <name>_arvcas_batch(long long n, const double* const* a, const long long* sa,
+    double* const* r, const long long* sr, long long* iw, double* w)``: input ``k`` of evaluation
+    ``i`` is ``a[k] + i * sa[k]`` (``sa[k] = 0``: all share it), output ``k`` goes to ``r[k] + i * sr[k]``;
+    ``iw``, ``w``: the caller's work arrays (``f.sz_iw()``, ``f.sz_w()`` entries), one set per
+    concurrent call. Returns 0, or 1 if an evaluation failed.
     """
-    ip = base.n_in() - 1
-    ins = [ca.MX.sym(base.name_in(i), base.size1_in(i), size) for i in range(ip)]
-    p = ca.MX.sym("p", base.size1_in(ip), size if p_batched else 1)
-    calls = [base.call([a[:, j] for a in ins] + [p[:, j] if p_batched else p]) for j in range(size)]
-    outs = [ca.horzcat(*[c[k] for c in calls]) for k in range(base.n_out())]
-    name = f"{base.name()}_loop{size}{'_p' if p_batched else ''}"
-    return ca.Function(name, ins + [p], outs, list(base.name_in()), list(base.name_out()))
+    name = f.name()
+    n_in, n_out = f.n_in(), f.n_out()
+    return f"""
+/* arvcas: {name} on n rows (arvcas.build.dynamics) */
+CASADI_SYMBOL_EXPORT int {name}_arvcas_batch(long long int n, const casadi_real* const* a,
+    const long long int* sa, casadi_real* const* r, const long long int* sr, casadi_int* iw, casadi_real* w) {{
+  const casadi_real* arg[{max(f.sz_arg(), n_in, 1)}];
+  casadi_real* res[{max(f.sz_res(), n_out, 1)}];
+  long long int i;
+  int k;
+  for (i = 0; i < n; ++i) {{
+    for (k = 0; k < {n_in}; ++k) arg[k] = a[k] + i * sa[k];
+    for (k = 0; k < {n_out}; ++k) res[k] = r[k] + i * sr[k];
+    if ({name}(arg, res, iw, w, 0)) return 1;
+  }}
+  return 0;
+}}
+"""
 
 
-def _map(name: str, opts, size: int, p_batched: bool, params=None) -> ca.Function:
-    """map(size) of ``name``: compiled from the SX graph for :data:`CHUNK`, else over the compiled function."""
-    from arvcas.build import codegen
+class _Loop:
+    """The compiled batch loop of one plant function: its ctypes entry point and work sizes."""
 
-    key = (name, opts.tag(), size, p_batched, None if params is None else params.structure)
+    def __init__(self, f: ca.Function):
+        from arvcas.build import codegen
+
+        lib_f = codegen.build(f, extra_c=_loop_c(f))
+        self.keep = lib_f  # the library stays loaded while this object lives
+        self.path = codegen.artifact_of(lib_f)["path"]
+        self.lib = ctypes.CDLL(self.path)  # the same file CasADi loaded: dlopen returns its handle
+        fn = getattr(self.lib, f"{f.name()}_arvcas_batch")
+        vp = ctypes.c_void_p
+        fn.argtypes = [ctypes.c_longlong, vp, vp, vp, vp, vp, vp]
+        fn.restype = ctypes.c_int
+        self.fn = fn
+        self.n_in, self.n_out = f.n_in(), f.n_out()
+        self.sz_iw, self.sz_w = max(1, int(f.sz_iw())), max(1, int(f.sz_w()))
+
+
+def _loop(name: str, opts, params=None) -> _Loop:
+    key = (name, opts.tag(), None if params is None else params.structure)
     with _LOCK:
-        f = _MAPS.get(key)
-        if f is None:
-            if size == CHUNK:
-                f = codegen.build(_unrolled(_sx(opts, params)[name], size, p_batched))
-            else:
-                base = _compiled(name, opts, params)
-                reduce_in = [] if p_batched else [base.n_in() - 1]
-                f = base.map(f"{name}_map{size}", "serial", size, reduce_in, [])
-            _MAPS[key] = f
-        return f
+        lp = _LOOPS.get(key)
+        if lp is None:
+            lp = _LOOPS[key] = _Loop(_sx(opts, params)[name])
+        return lp
 
 
 def _default_p() -> np.ndarray:
@@ -209,6 +232,8 @@ class Dynamics:
         self.n_params = self.input_sizes[-1]
         self._p_default = _default_p() if params is None else _readonly(params.vector())
         self._shapes = tuple((m,) for m in self.input_sizes)  # one evaluation's shape of each input
+        self._n_args = len(self.input_sizes) - 1  # without p
+        self._one_vector = len(self.output_shapes) == 1 and len(self.output_shapes[0]) == 1
 
     def __repr__(self) -> str:
         ins = ", ".join(f"{n}[{s}]" for n, s in zip(self.input_names, self.input_sizes))
@@ -263,6 +288,12 @@ class Dynamics:
 
     def __call__(self, *args, p=None, params=None, n_threads: int | None = None):
         """Evaluate; see the module docstring. Returns an array, or a tuple of arrays for a Jacobian."""
+        if p is None and params is None and n_threads is None and len(args) == self._n_args:
+            for a, sh in zip(args, self._shapes):  # the common case: one evaluation, default p, float arrays
+                if type(a) is not np.ndarray or a.shape != sh or a.dtype != _F64:
+                    break
+            else:
+                return self._fast(args)
         args, p = self._args(args, p, params)
         arrs, ns = [], []
         shapes = self._shapes
@@ -320,6 +351,23 @@ class Dynamics:
             # 1e-300s: for the finite check (x * 1e-300 never overflows); last: the p array pin holds
         return st
 
+    def _fast(self, arrs):
+        """:meth:`_single` for float arrays of one evaluation's shapes and the default p (checked by the caller)."""
+        st = self._local.__dict__.get("st") or self._state()
+        buf, evaluate, xin, tiny, pin, outs, last_p = st
+        if last_p[0] is not self._p_default:  # pin holds a caller's p: let _single restore the default
+            return self._single(arrs, self._p_default, False)
+        np.concatenate(arrs, out=xin)
+        if not math.isfinite(xin @ tiny):
+            self._raise_nonfinite(arrs)
+        evaluate()
+        if _ret(buf) != 0:
+            raise RuntimeError(f"{self.name}: evaluation failed (return code {_ret(buf)})")
+        if self._one_vector:
+            return outs[0].copy()
+        res = [o.reshape(s[::-1]).T.copy() if len(s) == 2 else o.copy() for o, s in zip(outs, self.output_shapes)]
+        return res[0] if len(res) == 1 else tuple(res)
+
     def _single(self, arrs, parr, p_given):
         buf, evaluate, xin, tiny, pin, outs, last_p = self._state()
         if len(arrs) > 1 and all(a.ndim == 1 for a in arrs):
@@ -350,88 +398,62 @@ class Dynamics:
     def _batch(self, n, arrs, parr, p_batched, p_given, n_threads):
         if p_given and not np.isfinite(parr).all():
             raise ValueError(f"{self.name}: p has a non-finite value {_first_bad(parr)}")
-        allin = list(arrs) + [parr]
         for i, a in enumerate(arrs):
             if not np.isfinite(a).all():
                 raise ValueError(f"{self._where(i)} has a non-finite value {_first_bad(a)}")
-        ip = len(allin) - 1
-        width = min(CHUNK, n)
-        # per input: a C-ordered (n, m) array (read in place) or a shared row repeated `width` times
-        per_row, flat = {}, []
-        for i, a in enumerate(allin):
+        lp = _loop(self.name, self.opts, self.params)
+        # per input: a C-ordered array read in place, with its row stride (0: shared by all rows)
+        keep, base, stride = [], [], []
+        for i, a in enumerate(list(arrs) + [parr]):
             m = self.input_sizes[i]
-            if i == ip and not p_batched:
-                flat.append(memoryview(np.ascontiguousarray(a.reshape(-1))))
-                continue
-            if a.ndim == 2 or (m == 1 and a.ndim == 1 and a.shape[0] == n and n > 1):
-                c = np.ascontiguousarray(a.reshape(n, m))
-                per_row[i] = c.reshape(-1)
-                flat.append(None)
-            else:
-                rep = np.ascontiguousarray(np.broadcast_to(a.reshape(1, m), (width, m))).reshape(-1)
-                flat.append(rep)
-        outs = [np.empty(n * int(np.prod(s))) for s in self.output_shapes]
+            per_row = (a.ndim == 2 or (m == 1 and a.ndim == 1 and a.shape[0] == n and n > 1)) if i < len(arrs) \
+                else p_batched
+            c = np.ascontiguousarray(a.reshape(n, m) if per_row else a.reshape(-1), dtype=float)
+            keep.append(c)
+            base.append(c.ctypes.data)
+            stride.append(m if per_row else 0)
         out_sizes = [int(np.prod(s)) for s in self.output_shapes]
-        # segments: full compiled chunks, then the remainder by powers of two
-        segs, start = [], 0
-        n_full = n // CHUNK
-        for _ in range(n_full):
-            segs.append((start, CHUNK))
-            start += CHUNK
-        r = n - start
-        size = CHUNK // 2
-        while r:
-            if r >= size:
-                segs.append((start, size))
-                start += size
-                r -= size
-            size //= 2
-        fns = {s: _map(self.name, self.opts, s, p_batched, self.params) for s in {sz for _, sz in segs}}
-        sizes = self.input_sizes
-        todo = iter(range(len(segs)))
+        outs = [np.empty(n * w) for w in out_sizes]
+        obase = [o.ctypes.data for o in outs]
+        sa = (ctypes.c_longlong * len(stride))(*stride)
+        sr = (ctypes.c_longlong * len(out_sizes))(*out_sizes)
+        if n_threads is None:
+            n_threads = _usable_cpus() if n >= THREAD_MIN_BATCH else 1
+        nt = max(1, min(n_threads, n))
+        if nt == 1:
+            blocks = [(0, n)]
+        else:
+            size = -(-n // (nt * BLOCKS_PER_THREAD))
+            blocks = [(s0, min(size, n - s0)) for s0 in range(0, n, size)]
+        todo = iter(blocks)
         lock = threading.Lock()
         errors: list[str] = []
 
         def work():
-            from arvcas.build.calls import _buffer
-
-            bound: dict[int, object] = {}
+            iw = np.empty(lp.sz_iw, dtype=np.int64)
+            w = np.empty(lp.sz_w)
+            a_ptr = (ctypes.c_void_p * len(base))()
+            r_ptr = (ctypes.c_void_p * len(obase))()
             while True:
                 with lock:
-                    j = next(todo, None)
-                if j is None or errors:
+                    blk = next(todo, None)
+                if blk is None or errors:
                     return
-                s0, sz = segs[j]
-                f = fns[sz]
-                buf, evaluate = _buffer(f)
-                if bound.get(sz) is not buf:  # bind the shared inputs once per buffer and call
-                    for i, v in enumerate(flat):
-                        if v is None:
-                            continue
-                        if isinstance(v, memoryview):
-                            buf.set_arg(i, v)
-                        else:
-                            buf.set_arg(i, memoryview(v[: sz * sizes[i]]))
-                    bound[sz] = buf
-                for i, c in per_row.items():
-                    m = sizes[i]
-                    buf.set_arg(i, memoryview(c[s0 * m:(s0 + sz) * m]))
-                for k, o in enumerate(outs):
-                    w = out_sizes[k]
-                    buf.set_res(k, memoryview(o[s0 * w:(s0 + sz) * w]))
-                evaluate()
-                if buf.ret() != 0:
-                    errors.append(f"{self.name}: evaluation of rows {s0}..{s0 + sz - 1} failed (return code {buf.ret()})")
+                s0, sz = blk
+                for k, (b0, st) in enumerate(zip(base, stride)):
+                    a_ptr[k] = b0 + 8 * s0 * st
+                for k, (b0, wk) in enumerate(zip(obase, out_sizes)):
+                    r_ptr[k] = b0 + 8 * s0 * wk
+                if lp.fn(sz, a_ptr, sa, r_ptr, sr, iw.ctypes.data, w.ctypes.data) != 0:
+                    errors.append(f"{self.name}: evaluation of rows {s0}..{s0 + sz - 1} failed")
 
-        if n_threads is None:
-            n_threads = _usable_cpus() if n >= THREAD_MIN_BATCH else 1
-        nt = max(1, min(n_threads, len(segs)))
         if nt == 1:
             work()
         else:
-            futs = [_pool(nt).submit(work) for _ in range(nt)]
+            futs = [_pool(nt).submit(work) for _ in range(min(nt, len(blocks)))]
             for fu in futs:
                 fu.result()
+        del keep  # the inputs stayed alive (and in place) during the calls
         if errors:
             raise RuntimeError(errors[0])
         res = []
@@ -455,7 +477,7 @@ def dynamics(name: str, system=None, *, opts=None) -> Dynamics:
     ``p`` defaults to its parameters. ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default
     ``ModelOptions()``).
     The first call of a name compiles it (or loads it from the build cache); the first batch of a
-    name compiles its map. Memoized per process.
+    name compiles its batch loop. Memoized per process.
     """
     from arvcas.model.uvms import ModelOptions
 
