@@ -103,6 +103,7 @@ REQUIRED_KEYS = (
     "closed_loop.batch.runs_per_s_1", "closed_loop.batch.runs_per_s_2", "closed_loop.batch.ratio_2_over_1",
     "targets.default.h_plant", "targets.previous.h_plant", "targets.default.rtf", "targets.previous.rtf",
     "targets.default.rtf_vm", "targets.default.instructions_per_sample", "targets.default.ratio_2_over_1",
+    "targets.default.ratio_2_over_1_paired",
     "targets.default.study_min", "targets.default.peak_mb_per_thread_2", "targets.default.work_mb_per_thread",
     "targets.ratio_default_over_previous",
     "compile.uvms_rhs.cold_build_s", "compile.uvms_rhs.warm_build_s", "compile.run.cold_build_s",
@@ -907,11 +908,12 @@ def _bench_targets(s: Settings, cfg, P, log) -> dict:
         bt = {1: [], 2: []}
         for nt in (1, 2):
             simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, params=P, n_threads=nt)  # warm-up
-        for _ in range(s.reps_slow):
+        for _ in range(2 * s.reps_slow):
             for nt in (1, 2):
                 t0 = time.perf_counter()
                 simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, params=P, n_threads=nt)
                 bt[nt].append(time.perf_counter() - t0)
+        paired = [a / b for a, b in zip(bt[1], bt[2])]  # each round: 1 then 2 threads, back to back
         run_s = _stat(t[k])
         n = scenario.n_samples(c)
         rps = {nt: s.study_pop / statistics.median(v) for nt, v in bt.items()}
@@ -924,6 +926,7 @@ def _bench_targets(s: Settings, cfg, P, log) -> dict:
             "instr_per_s": ins["total"] * n / run_s["median"],
             "batch_n": s.study_pop, "batch_s_1": _stat(bt[1]), "batch_s_2": _stat(bt[2]),
             "runs_per_s_1": rps[1], "runs_per_s_2": rps[2], "ratio_2_over_1": rps[2] / rps[1],
+            "ratio_2_over_1_paired": statistics.median(paired), "ratio_2_over_1_paired_max": max(paired),
             "study_min": STUDY_RUNS / rps[2] / 60.0,
             "work_mb_per_thread": (fn[k].sz_w() + fn[k].sz_iw()) * 8 / 1e6,
             "table_mb": scenario.table_bytes(c) / 1e6,
@@ -1275,7 +1278,7 @@ def _targets_markdown(tg: dict) -> list[str]:
         f"Same process, same controller (`{CONTROLLER}`, Table 2 gains, seed 0). Compiled runs: the two steps "
         f"interleaved round by round, {d['run_s']['n']} rounds (median; spread in brackets). Batches: "
         f"{d['batch_n']} gain sets (one generation of the paper study), 1 and 2 threads interleaved, "
-        f"{d['batch_s_1']['n']} rounds each (median).",
+        f"{d['batch_s_1']['n']} rounds each (median; the 2-thread ratio also per round).",
         "",
         f"| | default, h_plant = {d['h_plant']:g} s ({d['substeps']} RK4 steps per sample) | previous, "
         f"{pv['h_plant']:g} s ({pv['substeps']} steps) | default / previous |",
@@ -1295,9 +1298,11 @@ def _targets_markdown(tg: dict) -> list[str]:
         row("batch, 1 thread: runs/s", _g(d["runs_per_s_1"]), _g(pv["runs_per_s_1"]), ""),
         row("batch, 2 threads: runs/s", _g(d["runs_per_s_2"]), _g(pv["runs_per_s_2"]),
             f"{tg['ratio_batch_default_over_previous']:.2f}x"),
-        row(f"2 threads / 1 thread (target >= {T['ratio_2_over_1']:.2f}x)",
-            f"**{d['ratio_2_over_1']:.2f}x**: {_verdict(d['ratio_2_over_1'], T['ratio_2_over_1'], True)}",
-            f"{pv['ratio_2_over_1']:.2f}x", ""),
+        row(f"2 threads / 1 thread (target >= {T['ratio_2_over_1']:.2f}x): the median of the rounds' ratios "
+            "(each round one batch on 1 thread, then one on 2, back to back); the ratio of the medians; the best round",
+            f"**{d['ratio_2_over_1_paired']:.2f}x**: {_verdict(d['ratio_2_over_1_paired'], T['ratio_2_over_1'], True)}; "
+            f"{d['ratio_2_over_1']:.2f}x; {d['ratio_2_over_1_paired_max']:.2f}x",
+            f"{pv['ratio_2_over_1_paired']:.2f}x; {pv['ratio_2_over_1']:.2f}x; {pv['ratio_2_over_1_paired_max']:.2f}x", ""),
         row(f"{STUDY_RUNS:,} runs on 2 threads, min (target <= {T['study_min']:g} min; runs only)",
             f"**{d['study_min']:.2f}**: {_verdict(d['study_min'], T['study_min'], False)}", f"{pv['study_min']:.2f}", ""),
         row("peak memory per thread, MB: batch over the loaded process, 1 thread / 2 threads (per thread)",
