@@ -233,6 +233,8 @@ class Dynamics:
         self._p_default = _default_p() if params is None else _readonly(params.vector())
         self._shapes = tuple((m,) for m in self.input_sizes)  # one evaluation's shape of each input
         self._n_args = len(self.input_sizes) - 1  # without p
+        ends = np.cumsum([0] + [int(np.prod(s)) for s in self.output_shapes]).tolist()
+        self._out_slices = tuple(zip(ends[:-1], ends[1:]))
         self._one_vector = len(self.output_shapes) == 1 and len(self.output_shapes[0]) == 1
 
     def __repr__(self) -> str:
@@ -340,21 +342,24 @@ class Dynamics:
             buf, evaluate = f.buffer()
             xin = np.zeros(self._n_x)
             pin = np.array(self._p_default if self._p_default.size == self.n_params else np.zeros(self.n_params))
-            outs = [np.zeros(int(np.prod(s))) for s in self.output_shapes]
+            sizes = [int(np.prod(s)) for s in self.output_shapes]
+            allout = np.zeros(sum(sizes))  # the outputs one after another: one copy returns them all
+            ends = np.cumsum([0] + sizes).tolist()
+            outs = [allout[a:b] for a, b in zip(ends[:-1], ends[1:])]
             xv = memoryview(xin)
             for i, off in enumerate(self._offsets):
                 buf.set_arg(i, xv[off:off + self.input_sizes[i]])
             buf.set_arg(len(self._offsets), memoryview(pin))
             for i, o in enumerate(outs):
                 buf.set_res(i, memoryview(o))
-            st = self._local.st = (buf, evaluate, xin, np.full(self._n_x, 1e-300), pin, outs, [None])
+            st = self._local.st = (buf, evaluate, xin, np.full(self._n_x, 1e-300), pin, outs, [None], allout)
             # 1e-300s: for the finite check (x * 1e-300 never overflows); last: the p array pin holds
         return st
 
     def _fast(self, arrs):
         """:meth:`_single` for float arrays of one evaluation's shapes and the default p (checked by the caller)."""
         st = self._local.__dict__.get("st") or self._state()
-        buf, evaluate, xin, tiny, pin, outs, last_p = st
+        buf, evaluate, xin, tiny, pin, outs, last_p, allout = st
         if last_p[0] is not self._p_default:  # pin holds a caller's p: let _single restore the default
             return self._single(arrs, self._p_default, False)
         np.concatenate(arrs, out=xin)
@@ -365,11 +370,10 @@ class Dynamics:
             raise RuntimeError(f"{self.name}: evaluation failed (return code {_ret(buf)})")
         if self._one_vector:
             return outs[0].copy()
-        res = [o.reshape(s[::-1]).T.copy() if len(s) == 2 else o.copy() for o, s in zip(outs, self.output_shapes)]
-        return res[0] if len(res) == 1 else tuple(res)
+        return self._results(allout.copy())
 
     def _single(self, arrs, parr, p_given):
-        buf, evaluate, xin, tiny, pin, outs, last_p = self._state()
+        buf, evaluate, xin, tiny, pin, outs, last_p, allout = self._state()
         if len(arrs) > 1 and all(a.ndim == 1 for a in arrs):
             np.concatenate(arrs, out=xin)  # one copy of all inputs
         else:
@@ -386,7 +390,11 @@ class Dynamics:
         evaluate()
         if _ret(buf) != 0:
             raise RuntimeError(f"{self.name}: evaluation failed (return code {_ret(buf)})")
-        res = [o.reshape(s[::-1]).T.copy() if len(s) == 2 else o.copy() for o, s in zip(outs, self.output_shapes)]
+        return self._results(allout.copy())
+
+    def _results(self, flat):
+        """One evaluation's outputs as views of ``flat`` (a matrix is column-major: its transpose's view)."""
+        res = [flat[a:b].reshape(s[::-1]).T if len(s) == 2 else flat[a:b] for (a, b), s in zip(self._out_slices, self.output_shapes)]
         return res[0] if len(res) == 1 else tuple(res)
 
     def _raise_nonfinite(self, arrs):
