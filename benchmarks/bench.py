@@ -104,6 +104,7 @@ REQUIRED_KEYS = (
     "targets.default.h_plant", "targets.previous.h_plant", "targets.default.rtf", "targets.previous.rtf",
     "targets.default.rtf_vm", "targets.default.instructions_per_sample", "targets.default.ratio_2_over_1",
     "targets.default.ratio_2_over_1_paired", "targets.default.ratio_2_over_1_best",
+    "targets.isa.flags", "targets.corun.ceiling_best", "targets.corun.ceiling_median",
     "targets.default.study_min", "targets.default.peak_mb_per_thread_2", "targets.default.work_mb_per_thread",
     "targets.ratio_default_over_previous",
     "compile.uvms_rhs.cold_build_s", "compile.uvms_rhs.warm_build_s", "compile.run.cold_build_s",
@@ -865,6 +866,72 @@ print(json.dumps({{"base_mb": base, "peak_mb": {hwm}}}))
 """
 
 
+_CORUN_CHILD = """
+import dataclasses, json, sys, time
+import numpy as np
+from arvcas.controllers import gains as gains_mod
+from arvcas.sim import scenario, simulation
+cfg = dataclasses.replace(scenario.load_scenario(), time_h_plant={hp!r})
+g = gains_mod.default_gains({controller!r})
+G = g[None, :] * np.random.default_rng(2024).uniform(0.95, 1.05, ({n}, g.size))
+simulation.simulate_batch({controller!r}, G, seed=0, cfg=cfg, n_threads=1)  # load, table, warm
+print("ready", flush=True)
+start = float(sys.stdin.readline())
+while time.time() < start:
+    pass
+ts = []
+for _ in range({reps}):
+    t0 = time.perf_counter()
+    simulation.simulate_batch({controller!r}, G, seed=0, cfg=cfg, n_threads=1)
+    ts.append(time.perf_counter() - t0)
+print(json.dumps(ts))
+"""
+
+
+def _corun(hp: float, n: int, reps: int) -> dict:
+    """The 2-core ceiling of this machine, free of arvcas's threading: ``reps`` batches of ``n`` runs
+    on 1 thread in one process alone, then in two processes started at the same instant. A 2-thread
+    batch cannot beat ``2 * alone / together`` (shared caches, memory, clock, the VM's host)."""
+    code = _CORUN_CHILD.format(hp=hp, controller=CONTROLLER, n=n, reps=reps)
+
+    def batch(k: int) -> list[list[float]]:
+        ps = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True) for _ in range(k)]
+        try:
+            for q in ps:
+                if q.stdout.readline().strip() != "ready":
+                    raise BenchError(f"co-run child: {q.stderr.read().strip()[-300:]}")
+            start = time.time() + 0.5
+            outs = [q.communicate(f"{start!r}\n", timeout=600) for q in ps]
+        finally:
+            for q in ps:
+                if q.poll() is None:
+                    q.kill()
+        if any(q.returncode for q in ps):
+            raise BenchError(f"co-run child: exit {[q.returncode for q in ps]}: {outs[0][1].strip()[-300:]}")
+        return [json.loads(o.strip().splitlines()[-1]) for o, _ in outs]
+
+    alone = batch(1)[0]
+    both = batch(2)
+    slow = max(min(v) for v in both)  # a 2-thread batch waits for the slower core
+    return {"n_runs": n, "alone_s": _stat(alone), "together_s": [_stat(v) for v in both],
+            "ceiling_best": 2 * min(alone) / slow,
+            "ceiling_median": 2 * statistics.median(alone) / max(statistics.median(v) for v in both)}
+
+
+@contextmanager
+def _env(name: str, value: str):
+    old = os.environ.get(name)
+    os.environ[name] = value
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = old
+
+
 def _batch_memory(hp: float, n: int, nt: int) -> dict:
     """Peak resident memory (VmHWM) of a fresh process running one batch of ``n`` runs on ``nt``
     threads, over the same process with the run loaded and its time table built."""
@@ -885,12 +952,22 @@ def _bench_targets(s: Settings, cfg, P, log) -> dict:
         fn[k] = simulation.run_function(CONTROLLER, c, trace=False)
         args[k] = _run_args(fn[k], g, scenario.noise_sequence(c, 0), c, p)
         calls.call(fn[k], *args[k])  # warm-up, time table
-    # compiled runs, the two steps interleaved round by round (the machine's drift hits both)
-    t = {k: [] for k in steps}
+    isa = codegen.isa_flags()
+    if isa:  # the yardstick of the instruction-set flags: the same run, built without them
+        log(f"targets: the run at the default step built without {' '.join(isa)} (ARVCAS_ISA=baseline) ...")
+        with _env(codegen.ISA_ENV, "baseline"):
+            fn["baseline_isa"] = codegen.build(closedloop.build_run(closedloop.RunSpec(CONTROLLER, cfg), trace=False))
+        args["baseline_isa"] = _run_args(fn["baseline_isa"], g, scenario.noise_sequence(cfg, 0), cfg, p)
+        same = all(np.array_equal(a.view(np.uint64), b.view(np.uint64))
+                   for a, b in zip(calls.call(fn["baseline_isa"], *args["baseline_isa"]), calls.call(fn["default"], *args["default"])))
+        if not same:
+            raise BenchError(f"the run built with {' '.join(isa)} and without differ: the flags change the numbers")
+    # compiled runs, the two steps (and the baseline build) interleaved round by round (the machine's drift hits all)
+    t = {k: [] for k in fn}
     gc.disable()
     try:
         for _ in range(3 * s.reps):
-            for k in steps:
+            for k in fn:
                 t0 = time.perf_counter()
                 calls.call(fn[k], *args[k])
                 t[k].append(time.perf_counter() - t0)
@@ -939,6 +1016,14 @@ def _bench_targets(s: Settings, cfg, P, log) -> dict:
         m1, m2 = _batch_memory(c.time_h_plant, s.study_pop, 1), _batch_memory(c.time_h_plant, s.study_pop, 2)
         out[k].update(memory_1=m1, memory_2=m2, peak_mb_per_thread_1=m1["extra_mb"],
                       peak_mb_per_thread_2=m2["extra_mb"] / 2, process_base_mb=m1["base_mb"])
+    out["isa"] = {"flags": list(isa)}
+    if isa:
+        b = _stat(t["baseline_isa"])
+        out["isa"].update(baseline_run_s=b, rtf_baseline_best=cfg.time_duration / b["min"],
+                          ratio_baseline_over_isa=b["median"] / out["default"]["run_s"]["median"],
+                          ratio_baseline_over_isa_best=b["min"] / out["default"]["run_s"]["min"], bitwise_equal=True)
+    log("targets: the machine's own 2-core ceiling (two independent processes at once) ...")
+    out["corun"] = _corun(cfg.time_h_plant, s.study_pop // 2, 2 * s.reps_slow)
     out["ratio_default_over_previous"] = out["previous"]["run_s"]["median"] / out["default"]["run_s"]["median"]
     out["ratio_batch_default_over_previous"] = out["default"]["runs_per_s_2"] / out["previous"]["runs_per_s_2"]
     out["targets"] = TARGETS
@@ -1193,7 +1278,7 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
     try:
         driver = _Driver(work, _default_opt_level())
         machine["driver_flags"] = " ".join(driver.flags)
-        machine["codegen_flags"] = " ".join([*codegen.BASE_FLAGS, _default_opt_level(), *codegen.FIXED_FLAGS])
+        machine["codegen_flags"] = " ".join([*codegen.BASE_FLAGS, _default_opt_level(), *codegen.FIXED_FLAGS, *codegen.isa_flags()])
         res: dict = {"schema": 1, "mode": s.mode, "machine": machine, "settings": s.__dict__ | {"opt_levels": list(s.opt_levels)}}
         for key, fn in (
             ("plant", lambda: _bench_plant(s, driver, work, P, log)),
@@ -1274,6 +1359,7 @@ def _targets_markdown(tg: dict) -> list[str]:
         return f"| {label} | {a} | {b} | {ratio} |"
 
     m1, m2 = d["memory_1"], d["memory_2"]
+    isa, cr = tg.get("isa", {"flags": []}), tg.get("corun")  # absent from a bench.json before them
     L = [
         f"## 2b. Issue 14: the default plant step ({d['h_plant']:g} s) against the previous one "
         f"({pv['h_plant']:g} s) and CasADi's VM",
@@ -1298,6 +1384,11 @@ def _targets_markdown(tg: dict) -> list[str]:
             f"{parts(pv)} = {pv['instructions_per_sample']:,}",
             f"{pv['instructions_per_sample'] / d['instructions_per_sample']:.2f}x fewer"),
         row("instructions per second, compiled", _g(d["instr_per_s"]), _g(pv["instr_per_s"]), ""),
+        *([row(f"the same run built without `{' '.join(isa['flags'])}` (ARVCAS_ISA=baseline; outputs bitwise equal): "
+               "wall s; real-time factor, fastest round",
+               f"{_g(_m(isa['baseline_run_s']))} ({_spread(isa['baseline_run_s'])}); {_g(isa['rtf_baseline_best'])}", "",
+               f"{isa['ratio_baseline_over_isa']:.2f}x faster with it (fastest rounds {isa['ratio_baseline_over_isa_best']:.2f}x)")]
+          if isa["flags"] else []),
         row("batch, 1 thread: runs/s", _g(d["runs_per_s_1"]), _g(pv["runs_per_s_1"]), ""),
         row("batch, 2 threads: runs/s", _g(d["runs_per_s_2"]), _g(pv["runs_per_s_2"]),
             f"{tg['ratio_batch_default_over_previous']:.2f}x"),
@@ -1306,6 +1397,9 @@ def _targets_markdown(tg: dict) -> list[str]:
             f"**{d['ratio_2_over_1_best']:.2f}x**: {_verdict(d['ratio_2_over_1_best'], T['ratio_2_over_1'], True)}; "
             f"{d['ratio_2_over_1']:.2f}x; {d['ratio_2_over_1_paired']:.2f}x",
             f"{pv['ratio_2_over_1_best']:.2f}x; {pv['ratio_2_over_1']:.2f}x; {pv['ratio_2_over_1_paired']:.2f}x", ""),
+        *([row(f"the machine's 2-core ceiling: two independent processes, each {cr['n_runs']} runs on 1 thread, "
+               "started together, against one alone (2 x alone / the slower of the two): fastest rounds; medians",
+               f"{cr['ceiling_best']:.2f}x; {cr['ceiling_median']:.2f}x", "", "")] if cr else []),
         row(f"{STUDY_RUNS:,} runs on 2 threads, min (target <= {T['study_min']:g} min; runs only)",
             f"**{d['study_min']:.2f}**: {_verdict(d['study_min'], T['study_min'], False)}", f"{pv['study_min']:.2f}", ""),
         row("peak memory per thread, MB: batch over the loaded process, 1 thread / 2 threads (per thread)",

@@ -183,3 +183,31 @@ def test_simulate_many_rows_equal_single_runs(cfg):
         np.testing.assert_array_equal(chat[i], r.chat)
         np.testing.assert_array_equal(rmse[i], r.rmse)
     assert len({tuple(c) for c in chat}) == 3
+
+
+@pytest.mark.skipif(not codegen.supported_isa(), reason="this CPU has none of codegen.ISA_FLAGS' features")
+def test_isa_flags_leave_every_output_bitwise_equal(cfg, monkeypatch):
+    """The run built with this CPU's instruction-set flags (-mavx) and without (ARVCAS_ISA=baseline)
+    gives the same bits: chat, rmse, ok, t_fail of a running and of a diverging gain set."""
+    P = load_params()
+    F = closedloop.build_run(closedloop.RunSpec("agsta", cfg), trace=False)
+    fast = codegen.build(F)
+    monkeypatch.setenv("ARVCAS_ISA", "baseline")
+    base = codegen.build(F)
+    monkeypatch.delenv("ARVCAS_ISA")
+    flags = codegen.artifact_of(fast)["flags"], codegen.artifact_of(base)["flags"]
+    assert all(f in flags[0] for f in codegen.supported_isa()) and not any(f in flags[1] for f in codegen.supported_isa())
+    g = gains.default_gains("agsta").copy()
+    names = gains.gain_names("agsta")
+    bad = g.copy()
+    for d in gains.DOFS:
+        bad[names.index(f"{d}.mu2")] = 50.0  # diverges (test_divergence_is_reported_not_raised)
+    oks = []
+    for gs in (g, bad):
+        args = (gs, scenario.noise_sequence(cfg, 2), cfg.uncertainty, np.array(cfg.disturbance_phase),
+                cfg.ekf_vector, P.vector(), *schedule.table(cfg, P.vector()))
+        out_fast, out_base = calls.call(fast, *args), calls.call(base, *args)
+        for a, b in zip(out_fast, out_base):
+            np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+        oks.append(float(out_fast[2].item()))
+    assert oks == [1.0, 0.0]

@@ -361,3 +361,24 @@ def test_compiled_unknown_name():
         C.compiled("uvms")
     with pytest.raises(ValueError, match="ModelOptions"):
         C.compiled("thrust", opts={"n_quad": 5})
+
+
+def test_isa_flags_follow_the_cpu_and_the_environment(monkeypatch):
+    """-mavx only where /proc/cpuinfo lists avx on x86-64 Linux; ARVCAS_ISA=baseline drops it; any
+    other value is refused in one line naming the variable."""
+    import platform
+
+    monkeypatch.setattr(C, "_cpu_flags", lambda: frozenset({"fpu", "sse2", "avx"}))
+    on_x86 = sys.platform == "linux" and platform.machine() in ("x86_64", "AMD64")
+    assert C.supported_isa.__wrapped__() == (("-mavx",) if on_x86 else ())
+    monkeypatch.setattr(C, "_cpu_flags", lambda: frozenset({"fpu", "sse2"}))
+    assert C.supported_isa.__wrapped__() == ()
+    monkeypatch.setenv("ARVCAS_ISA", "baseline")
+    assert C.isa_flags() == () and not any(f in C._check_flags("-O2", ()) for f in ("-mavx",))
+    monkeypatch.setenv("ARVCAS_ISA", "avx512")
+    with pytest.raises(C.CacheError, match="ARVCAS_ISA='avx512': expected 'auto'") as e:
+        C.isa_flags()
+    assert "\n" not in str(e.value)
+    monkeypatch.setenv("ARVCAS_ISA", "auto")
+    assert C.isa_flags() == C.supported_isa()
+    assert C._check_flags("-O2", ())[-2 - len(C.supported_isa()):-1] == [*C.FIXED_FLAGS[-1:], *C.supported_isa()]

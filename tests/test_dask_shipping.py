@@ -105,3 +105,19 @@ def test_a_worker_refuses_libraries_of_another_platform(tmp_path, cluster):
         assert "\n" not in msg and "riscv128" in msg and "worker" in msg
     finally:
         client.close()
+
+
+def test_a_bundle_needing_an_instruction_set_the_cpu_lacks_is_refused(monkeypatch):
+    """A bundle records the ISA flags its libraries were built with; a process whose CPU lacks one
+    refuses it (one line naming the flag and ARVCAS_ISA=baseline), one that has them all loads it."""
+    from arvcas.sim.simulation import compiled_run
+
+    bundle = engines.ship_bundle(compiled_run("pid"))
+    assert bundle["platform"]["isa"] == list(codegen.isa_flags())
+    needs = dict(bundle, platform={**bundle["platform"], "isa": ["-mavx"]})
+    monkeypatch.setattr(codegen, "supported_isa", lambda: ())
+    with pytest.raises(codegen.CacheError, match="need -mavx, which this CPU lacks.*ARVCAS_ISA=baseline") as e:
+        codegen.preload(needs)
+    assert "\n" not in str(e.value)
+    monkeypatch.setattr(codegen, "supported_isa", lambda: ("-mavx",))
+    assert codegen.preload(dict(bundle, platform={**bundle["platform"], "isa": []})) >= 0  # baseline runs anywhere
