@@ -70,3 +70,17 @@ def test_recommendation_rule():
     assert r["opt_level"] == "-O1" and not r["keep_default"]
     r = bench._recommend(_sweep([("-O0", 1.0, 0.30), ("-O1", 7.0, 0.12), ("-O2", 10.0, 0.10), ("-O3", 11.0, 0.10)]))
     assert r["opt_level"] == "-O2" and r["keep_default"] and "paid back after" in r["text"]
+
+
+def test_lockstep_rewrite_is_bitwise_equal_and_refuses_what_it_cannot_rewrite(tmp_path):
+    """benchmarks/lockstep.py: every lane of the rewritten plant step equals the scalar call to the bit
+    (the script fails otherwise), and a line outside the rewrite's vocabulary stops it by name."""
+    import importlib
+
+    lockstep = importlib.import_module("benchmarks.lockstep")
+    r = lockstep.measure(tmp_path, evals=400, reps=1)
+    assert r["lanes"] and all(v["bitwise_equal"] and v["lane_ns_min"] > 0 for v in r["lanes"].values())
+    assert (tmp_path / "README.md").is_file() and json.loads((tmp_path / "lockstep.json").read_text())["lanes"]
+    src = "static int casadi_f0(const casadi_real** arg) {\n  casadi_real a0;\n  a0=atan2(a0,a0);\n  return 0;\n}\n"
+    with pytest.raises(SystemExit, match="toy: an operation this rewrite does not handle: a0=atan2"):
+        lockstep.lane_c(src, "toy", 2)
