@@ -53,3 +53,38 @@ def test_call_many_bad_input_is_one_line(f):
         calls.call_many(f, 6, (np.zeros((3, 2)), np.zeros((2, 24)), np.zeros((3, 2)), 1.0), per_run=(0, 1))
     with pytest.raises(ValueError, match="n must be a positive integer"):
         calls.call_many(f, 0, (np.zeros((3, 0)), np.zeros((2, 0)), np.zeros((3, 2)), 1.0), per_run=(0, 1))
+
+
+@pytest.fixture(scope="module")
+def f_loop(f, tmp_path_factory):
+    """``f`` compiled with codegen.batch_loop_c's loops in its library (as the run functions are)."""
+    import os
+
+    from arvcas.build import codegen
+
+    old = os.environ.get("ARVCAS_CACHE")
+    os.environ["ARVCAS_CACHE"] = str(tmp_path_factory.mktemp("cache"))
+    try:
+        g = codegen.build_described("f", "test_calls f, 3 + 8 + 6 + 1 inputs", lambda: f, batch_loop=True)
+    finally:
+        if old is None:
+            os.environ.pop("ARVCAS_CACHE")
+        else:
+            os.environ["ARVCAS_CACHE"] = old
+    return g
+
+
+@pytest.mark.parametrize("n_threads", [1, 2, 3, 16])
+def test_call_many_through_the_library_loop_equals_its_single_calls(f_loop, n_threads):
+    """A library with the batch loop is evaluated by it (one ctypes call per thread, runs from a shared
+    counter): every run equals CasADi's own call of the same compiled function, bit for bit."""
+    assert calls._next_loop(f_loop) is not None
+    rng = np.random.default_rng(2)
+    n = 13
+    A, Bs, C, s = rng.normal(size=(3, n)), rng.normal(size=(2, 4 * n)), rng.normal(size=(3, 2)), -1.3
+    y, z = calls.call_many(f_loop, n, (A, Bs, C, s), per_run=(0, 1), n_threads=n_threads)
+    y_ref, z_ref = _plain(f_loop, A, Bs, C, s)
+    np.testing.assert_array_equal(y, y_ref)
+    np.testing.assert_array_equal(z, z_ref)
+    (y1,) = calls.call_many(f_loop, n, (A, Bs, C, s), per_run=(0, 1), n_threads=1)[:1]
+    np.testing.assert_array_equal(y1, y)

@@ -60,6 +60,7 @@ __all__ = [
     "preload",
     "platform_id",
     "isa_flags",
+    "batch_loop_c",
     "supported_isa",
     "CacheError",
     "CompileError",
@@ -591,6 +592,7 @@ def build_described(
     opt_level: str = DEFAULT_OPT_LEVEL,
     flags: tuple[str, ...] = (),
     lock_timeout: float = LOCK_TIMEOUT_S,
+    batch_loop: bool = False,
 ) -> ca.Function:
     """The compiled function ``name`` described by ``description``, built by ``make()`` only on a miss.
 
@@ -599,13 +601,16 @@ def build_described(
     flags, CasADi's and arvcas's versions): a warm start loads the library without building the
     CasADi graph at all. ``description`` must name everything else that shapes the graph (the caller's
     options, scenario fields, a user controller's own source). ``make()`` must return a Function
-    called ``name``. Memoized per process.
+    called ``name``. Memoized per process. ``batch_loop``: the library also holds
+    :func:`batch_loop_c`'s loops (part of the key), which :func:`arvcas.build.calls.call_many` uses.
     """
     from arvcas.build.provenance import model_hash
 
     cmd_flags = _check_flags(opt_level, flags)
     if not name.isidentifier() or not name.isascii():
         raise ValueError(f"function name {name!r} is not a C identifier")
+    if batch_loop:
+        description = description + " +batch_loop"
     ident = _ident(name, description, cmd_flags)
     with _LOCK:
         f = _PRELOADED.get(ident)  # shipped by a client (a Dask worker): no compiler needed
@@ -625,13 +630,66 @@ def build_described(
             fn = make()
             if not isinstance(fn, ca.Function) or fn.name() != name:
                 raise TypeError(f"build_described: make() must return a casadi.Function named {name!r}")
-            p = _plan(fn, cmd_flags)
+            p = _plan(fn, cmd_flags, batch_loop_c(fn) if batch_loop else "")
             return _Plan(p.name, p.n_instructions, p.c_text, p.codegen_s, p.compiler, p.cmd_flags, key)
 
         f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout)
         _MANIFESTS[f.__hash__()]["ident"] = ident
         _DESCRIBED[mkey] = f
         return f
+
+
+def batch_loop_c(f: ca.Function) -> str:
+    """C appended to ``f``'s generated code: two loops over ``n`` evaluations of ``f``.
+
+    ``int <name>_arvcas_batch(long long n, const double* const* a, const long long* sa,
+    double* const* r, const long long* sr, long long* iw, double* w)``: input ``k`` of evaluation
+    ``i`` is ``a[k] + i * sa[k]`` (``sa[k] = 0``: all share it), output ``k`` goes to ``r[k] + i * sr[k]``;
+    ``iw``, ``w``: the caller's work arrays (``f.sz_iw()``, ``f.sz_w()`` entries), one set per
+    concurrent call. Returns 0, or 1 if an evaluation failed.
+
+    ``int <name>_arvcas_batch_next(n, next, stop, failed, a, sa, r, sr, iw, w)``: the same, except that
+    the evaluations are taken one at a time from the shared counter ``*next`` (atomically), so
+    several threads calling it at once share the ``n`` evaluations dynamically; each stops before
+    its next evaluation once ``*stop`` is set (by another caller or by an interrupted Python), and a
+    failed evaluation sets ``*stop`` and stores its index in ``*failed``.
+    """
+    name = f.name()
+    n_in, n_out = f.n_in(), f.n_out()
+    decl = f"""  const casadi_real* arg[{max(f.sz_arg(), n_in, 1)}];
+  casadi_real* res[{max(f.sz_res(), n_out, 1)}];
+  long long int i;
+  int k;"""
+    point = f"""    for (k = 0; k < {n_in}; ++k) arg[k] = a[k] + i * sa[k];
+    for (k = 0; k < {n_out}; ++k) res[k] = r[k] + i * sr[k];"""
+    return f"""
+/* arvcas: {name} on n evaluations (arvcas.build.codegen.batch_loop_c) */
+CASADI_SYMBOL_EXPORT int {name}_arvcas_batch(long long int n, const casadi_real* const* a,
+    const long long int* sa, casadi_real* const* r, const long long int* sr, casadi_int* iw, casadi_real* w) {{
+{decl}
+  for (i = 0; i < n; ++i) {{
+{point}
+    if ({name}(arg, res, iw, w, 0)) return 1;
+  }}
+  return 0;
+}}
+CASADI_SYMBOL_EXPORT int {name}_arvcas_batch_next(long long int n, long long int* next, int* stop,
+    long long int* failed, const casadi_real* const* a, const long long int* sa, casadi_real* const* r,
+    const long long int* sr, casadi_int* iw, casadi_real* w) {{
+{decl}
+  for (;;) {{
+    if (__atomic_load_n(stop, __ATOMIC_RELAXED)) return 0;
+    i = __atomic_fetch_add(next, 1, __ATOMIC_RELAXED);
+    if (i >= n) return 0;
+{point}
+    if ({name}(arg, res, iw, w, 0)) {{
+      *failed = i;
+      __atomic_store_n(stop, 1, __ATOMIC_RELAXED);
+      return 1;
+    }}
+  }}
+}}
+"""
 
 
 # ---------------------------------------------------------------------------------------------

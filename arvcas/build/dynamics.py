@@ -14,7 +14,7 @@ How a call runs (costs in ``docs/calling-dynamics.md``, measured by ``arvcas ben
   evaluation, without CasADi's conversion to ``DM`` and back.
 * **a batch**: the loop over the batch is C. The first batch of a name compiles, through the build
   cache (:func:`arvcas.build.codegen.build`), the plant function's SX graph with a loop appended
-  (:func:`_loop_c`: ``n`` evaluations, input ``k`` of row ``i`` at ``a[k] + i * stride[k]``, stride 0
+  (:func:`arvcas.build.codegen.batch_loop_c`: ``n`` evaluations, input ``k`` of row ``i`` at ``a[k] + i * stride[k]``, stride 0
   for an input all rows share), and calls it through ``ctypes`` on the caller's arrays in place (a
   C-ordered ``(n, 12)`` array is exactly the column-major ``12 x n`` block the loop reads; shared
   inputs, ``p`` among them, are read by pointer, never repeated). ``ctypes`` releases the GIL for
@@ -106,42 +106,13 @@ def _compiled(name: str, opts, params=None) -> ca.Function:
         return _COMPILED[key]
 
 
-def _loop_c(f: ca.Function) -> str:
-    """C appended to ``f``'s generated code: ``<name>_arvcas_batch``, ``n`` evaluations of ``f``.
-
-    ``int <name>_arvcas_batch(long long n, const double* const* a, const long long* sa,
-    double* const* r, const long long* sr, long long* iw, double* w)``: input ``k`` of evaluation
-    ``i`` is ``a[k] + i * sa[k]`` (``sa[k] = 0``: all share it), output ``k`` goes to ``r[k] + i * sr[k]``;
-    ``iw``, ``w``: the caller's work arrays (``f.sz_iw()``, ``f.sz_w()`` entries), one set per
-    concurrent call. Returns 0, or 1 if an evaluation failed.
-    """
-    name = f.name()
-    n_in, n_out = f.n_in(), f.n_out()
-    return f"""
-/* arvcas: {name} on n rows (arvcas.build.dynamics) */
-CASADI_SYMBOL_EXPORT int {name}_arvcas_batch(long long int n, const casadi_real* const* a,
-    const long long int* sa, casadi_real* const* r, const long long int* sr, casadi_int* iw, casadi_real* w) {{
-  const casadi_real* arg[{max(f.sz_arg(), n_in, 1)}];
-  casadi_real* res[{max(f.sz_res(), n_out, 1)}];
-  long long int i;
-  int k;
-  for (i = 0; i < n; ++i) {{
-    for (k = 0; k < {n_in}; ++k) arg[k] = a[k] + i * sa[k];
-    for (k = 0; k < {n_out}; ++k) res[k] = r[k] + i * sr[k];
-    if ({name}(arg, res, iw, w, 0)) return 1;
-  }}
-  return 0;
-}}
-"""
-
-
 class _Loop:
     """The compiled batch loop of one plant function: its ctypes entry point and work sizes."""
 
     def __init__(self, f: ca.Function):
         from arvcas.build import codegen
 
-        lib_f = codegen.build(f, extra_c=_loop_c(f))
+        lib_f = codegen.build(f, extra_c=codegen.batch_loop_c(f))
         self.keep = lib_f  # the library stays loaded while this object lives
         self.lib = ctypes.CDLL(codegen.artifact_of(lib_f)["path"])  # the file CasADi loaded: the same handle
         fn = getattr(self.lib, f"{f.name()}_arvcas_batch")

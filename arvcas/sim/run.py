@@ -120,7 +120,8 @@ class CompiledRun:
             name = f"run_{self.controller.name}" + ("_trace" if trace else "")
             fn = _FUNCTIONS.get((name, self.description(trace)))
             if fn is None:
-                fn = codegen.build_described(name, self.description(trace), lambda: closedloop.build_run(spec, trace))
+                fn = codegen.build_described(name, self.description(trace), lambda: closedloop.build_run(spec, trace),
+                                             batch_loop=True)
                 _FUNCTIONS[(name, self.description(trace))] = fn
             self._fns[trace] = fn
         return fn
