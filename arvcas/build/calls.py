@@ -142,9 +142,8 @@ def _call_loop(f: ca.Function, loop, n: int, bound, per_run, outs, n_threads: in
     base = state.ctypes.data
     keep = (bound, outs, A, SA, R, SR, state)  # alive while any thread may still read or write them
 
-    def work() -> int:
+    def work(keep=keep) -> int:  # the pool holds this call, and so keep, until the C loop returns
         iw, w = _work_arrays(f)
-        assert keep
         return loop(n, base, base + 8, base + 16, ctypes.addressof(A), SA.ctypes.data, ctypes.addressof(R),
                     SR.ctypes.data, iw.ctypes.data, w.ctypes.data)
 
