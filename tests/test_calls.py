@@ -78,7 +78,7 @@ def f_loop(f, tmp_path_factory):
 def test_call_many_through_the_library_loop_equals_its_single_calls(f_loop, n_threads):
     """A library with the batch loop is evaluated by it (one ctypes call per thread, runs from a shared
     counter): every run equals CasADi's own call of the same compiled function, bit for bit."""
-    assert calls._next_loop(f_loop) is not None
+    assert calls.batch_loop(f_loop) is not None
     rng = np.random.default_rng(2)
     n = 13
     A, Bs, C, s = rng.normal(size=(3, n)), rng.normal(size=(2, 4 * n)), rng.normal(size=(3, 2)), -1.3

@@ -30,7 +30,7 @@ from concurrent.futures import ThreadPoolExecutor
 import casadi as ca
 import numpy as np
 
-__all__ = ["call", "call_many", "call_named", "fortran"]
+__all__ = ["call", "call_many", "call_named", "fortran", "batch_loop", "run_loop"]
 
 
 def fortran(a, shape: tuple[int, int]) -> np.ndarray:
@@ -90,15 +90,16 @@ def _block_views(a: np.ndarray, n: int) -> list[memoryview]:
     return [memoryview(a[:, j * w:(j + 1) * w].reshape(-1, order="F")) for j in range(n)]
 
 
-_NEXT: dict[int, tuple] = {}  # hash of a compiled Function -> (it, its batch_loop_c entry point or None, library)
-_NEXT_LOCK = threading.Lock()
+_LOOPS: dict[int, tuple] = {}  # hash of a compiled Function -> (it, its batch_loop_c entry point or None, library)
+_LOOPS_LOCK = threading.Lock()
 
 
-def _next_loop(f: ca.Function):
-    """``<name>_arvcas_batch_next`` of ``f``'s library (:func:`arvcas.build.codegen.batch_loop_c`), or None."""
+def batch_loop(f: ca.Function):
+    """``<name>_arvcas_batch`` of ``f``'s library (:func:`arvcas.build.codegen.batch_loop_c`) as a
+    ``ctypes`` function, or None when the library has none (or ``f`` is not compiled)."""
     h = f.__hash__()
-    with _NEXT_LOCK:
-        hit = _NEXT.get(h)
+    with _LOOPS_LOCK:
+        hit = _LOOPS.get(h)
         if hit is not None and hit[0] is f:
             return hit[1]
     from arvcas.build import codegen
@@ -108,21 +109,21 @@ def _next_loop(f: ca.Function):
     if path:
         try:
             lib = ctypes.CDLL(path)  # the file CasADi loaded: the same handle
-            fn = getattr(lib, f"{f.name()}_arvcas_batch_next")
+            fn = getattr(lib, f"{f.name()}_arvcas_batch")
         except (OSError, AttributeError):
             fn = None
         else:
-            fn.argtypes = [ctypes.c_longlong] + [ctypes.c_void_p] * 9
+            fn.argtypes = [ctypes.c_longlong, ctypes.c_longlong] + [ctypes.c_void_p] * 9
             fn.restype = ctypes.c_int
-    with _NEXT_LOCK:
-        _NEXT[h] = (f, fn, lib)
+    with _LOOPS_LOCK:
+        _LOOPS[h] = (f, fn, lib)
     return fn
 
 
-def _work_arrays(f: ca.Function) -> tuple[np.ndarray, np.ndarray]:
-    """This thread's work arrays for ``f`` (the largest asked for so far; pages untouched by a
-    function are never committed)."""
-    niw, nw = max(1, int(f.sz_iw())), max(1, int(f.sz_w()))
+def _work_arrays(niw: int, nw: int) -> tuple[np.ndarray, np.ndarray]:
+    """This thread's work arrays, at least ``niw`` integers and ``nw`` reals (the largest asked for
+    so far; pages a function does not touch are never committed)."""
+    niw, nw = max(1, niw), max(1, nw)
     have = getattr(_LOCAL, "work", None)
     if have is None or have[0].size < niw or have[1].size < nw:
         have = _LOCAL.work = (np.empty(max(niw, have[0].size if have else 0), dtype=np.int64),
@@ -130,32 +131,49 @@ def _work_arrays(f: ca.Function) -> tuple[np.ndarray, np.ndarray]:
     return have
 
 
-def _call_loop(f: ca.Function, loop, n: int, bound, per_run, outs, n_threads: int) -> None:
-    """``call_many`` through the library's own loop: every thread one ``ctypes`` call (GIL released)."""
-    strides_in = [f.sparsity_in(i).nnz() if i in per_run else 0 for i in range(f.n_in())]
-    A = (ctypes.c_void_p * max(1, len(bound)))(*[a.ctypes.data for a in bound])
-    SA = np.array(strides_in or [0], dtype=np.int64)
-    R = (ctypes.c_void_p * max(1, len(outs)))(*[r.ctypes.data for r in outs])
-    SR = np.array([f.sparsity_out(i).nnz() for i in range(f.n_out())] or [0], dtype=np.int64)
-    state = np.zeros(3, dtype=np.int64)  # next run, stop flag (its low 32 bits), the failed run
+def run_loop(loop, n: int, a_ptrs, sa, r_ptrs, sr, sz_iw: int, sz_w: int, n_threads: int, chunk: int = 1,
+             keep=(), on_caller: bool = False) -> int | None:
+    """``n`` evaluations through a library's :func:`arvcas.build.codegen.batch_loop_c` loop: each of
+    ``n_threads`` threads makes one ``ctypes`` call (the GIL released) that takes ``chunk`` evaluations
+    at a time from a shared counter. ``a_ptrs``/``r_ptrs``: the inputs' and outputs' addresses,
+    ``sa``/``sr`` their strides per evaluation in elements (0: shared); ``keep``: the objects behind
+    them, held until every call has returned. ``on_caller``: one thread runs on the calling thread
+    (no hand-over; an interrupt then waits for the whole loop), else the pool's threads run while the
+    caller waits, and an interrupt stops each after its current chunk. Returns the index of a failed
+    evaluation, or None."""
+    A = (ctypes.c_void_p * max(1, len(a_ptrs)))(*a_ptrs)
+    SA = (ctypes.c_longlong * max(1, len(sa)))(*sa)
+    R = (ctypes.c_void_p * max(1, len(r_ptrs)))(*r_ptrs)
+    SR = (ctypes.c_longlong * max(1, len(sr)))(*sr)
+    state = np.zeros(3, dtype=np.int64)  # next evaluation, stop flag (its low 32 bits), the failed one
     state[2] = -1
     base = state.ctypes.data
-    keep = (bound, outs, A, SA, R, SR, state)  # alive while any thread may still read or write them
+    held = (keep, A, SA, R, SR, state)
 
-    def work(keep=keep) -> int:  # the pool holds this call, and so keep, until the C loop returns
-        iw, w = _work_arrays(f)
-        return loop(n, base, base + 8, base + 16, ctypes.addressof(A), SA.ctypes.data, ctypes.addressof(R),
-                    SR.ctypes.data, iw.ctypes.data, w.ctypes.data)
+    def work(held=held) -> int:  # the pool holds this call, and so everything it points to, until it returns
+        iw, w = _work_arrays(sz_iw, sz_w)
+        return loop(n, chunk, base, base + 8, base + 16, A, SA, R, SR, iw.ctypes.data, w.ctypes.data)
 
-    nt = max(1, min(int(n_threads), n))
-    pool = _pool(nt)  # even for one thread: the calling thread waits, so an interrupt reaches it
-    futs = [pool.submit(work) for _ in range(nt)]
-    try:
-        rcs = [fut.result() for fut in futs]
-    finally:  # an interrupt: each thread stops after the run it is in
-        state[1] = 1
-    if any(rcs):
-        raise RuntimeError(f"{f.name()}: evaluation {int(state[2])} of {n} failed (return code 1)")
+    nt = max(1, min(int(n_threads), -(-n // chunk)))
+    if nt == 1 and on_caller:
+        rcs = [work()]
+    else:
+        futs = [_pool(nt).submit(work) for _ in range(nt)]
+        try:
+            rcs = [fut.result() for fut in futs]
+        finally:  # an interrupt: each thread stops after the chunk it is in
+            state[1] = 1
+    return int(state[2]) if any(rcs) else None
+
+
+def _call_loop(f: ca.Function, loop, n: int, bound, per_run, outs, n_threads: int) -> None:
+    """``call_many`` through the library's own loop, one run at a time from the shared counter."""
+    failed = run_loop(loop, n, [a.ctypes.data for a in bound],
+                      [f.sparsity_in(i).nnz() if i in per_run else 0 for i in range(f.n_in())],
+                      [r.ctypes.data for r in outs], [f.sparsity_out(i).nnz() for i in range(f.n_out())],
+                      int(f.sz_iw()), int(f.sz_w()), n_threads, keep=(bound, outs))
+    if failed is not None:
+        raise RuntimeError(f"{f.name()}: evaluation {failed} of {n} failed (return code 1)")
 
 
 def call_many(f: ca.Function, n: int, args, per_run, n_threads: int = 1) -> list[np.ndarray]:
@@ -171,7 +189,7 @@ def call_many(f: ca.Function, n: int, args, per_run, n_threads: int = 1) -> list
     if n < 1:
         raise ValueError(f"{f.name()}: n must be a positive integer, got {n!r}")
     per_run = frozenset(per_run)
-    loop = _next_loop(f)
+    loop = batch_loop(f)
     bound, blocks = [], {}
     for i, a in enumerate(args):
         sp = f.sparsity_in(i)

@@ -640,52 +640,42 @@ def build_described(
 
 
 def batch_loop_c(f: ca.Function) -> str:
-    """C appended to ``f``'s generated code: two loops over ``n`` evaluations of ``f``.
+    """C appended to ``f``'s generated code: ``<name>_arvcas_batch``, a loop over ``n`` evaluations of ``f``.
 
-    ``int <name>_arvcas_batch(long long n, const double* const* a, const long long* sa,
-    double* const* r, const long long* sr, long long* iw, double* w)``: input ``k`` of evaluation
-    ``i`` is ``a[k] + i * sa[k]`` (``sa[k] = 0``: all share it), output ``k`` goes to ``r[k] + i * sr[k]``;
-    ``iw``, ``w``: the caller's work arrays (``f.sz_iw()``, ``f.sz_w()`` entries), one set per
-    concurrent call. Returns 0, or 1 if an evaluation failed.
-
-    ``int <name>_arvcas_batch_next(n, next, stop, failed, a, sa, r, sr, iw, w)``: the same, except that
-    the evaluations are taken one at a time from the shared counter ``*next`` (atomically), so
-    several threads calling it at once share the ``n`` evaluations dynamically; each stops before
-    its next evaluation once ``*stop`` is set (by another caller or by an interrupted Python), and a
-    failed evaluation sets ``*stop`` and stores its index in ``*failed``.
+    ``int <name>_arvcas_batch(long long n, long long chunk, long long* next, int* stop, long long* failed,
+    const double* const* a, const long long* sa, double* const* r, const long long* sr, long long* iw,
+    double* w)``: input ``k`` of evaluation ``i`` is ``a[k] + i * sa[k]`` (``sa[k] = 0``: all share it),
+    output ``k`` goes to ``r[k] + i * sr[k]``; ``iw``, ``w``: the caller's work arrays (``f.sz_iw()``,
+    ``f.sz_w()`` entries), one set per concurrent call. The evaluations are taken ``chunk`` at a time
+    from the shared counter ``*next`` (atomically), so several threads calling it at once share the
+    ``n`` evaluations dynamically; each stops before its next chunk once ``*stop`` is set (by another
+    caller or by an interrupted Python), and a failed evaluation sets ``*stop``, stores its index in
+    ``*failed`` and returns 1 (else 0). :func:`arvcas.build.calls.run_loop` calls it.
     """
     name = f.name()
     n_in, n_out = f.n_in(), f.n_out()
-    decl = f"""  const casadi_real* arg[{max(f.sz_arg(), n_in, 1)}];
-  casadi_real* res[{max(f.sz_res(), n_out, 1)}];
-  long long int i;
-  int k;"""
-    point = f"""    for (k = 0; k < {n_in}; ++k) arg[k] = a[k] + i * sa[k];
-    for (k = 0; k < {n_out}; ++k) res[k] = r[k] + i * sr[k];"""
     return f"""
 /* arvcas: {name} on n evaluations (arvcas.build.codegen.batch_loop_c) */
-CASADI_SYMBOL_EXPORT int {name}_arvcas_batch(long long int n, const casadi_real* const* a,
-    const long long int* sa, casadi_real* const* r, const long long int* sr, casadi_int* iw, casadi_real* w) {{
-{decl}
-  for (i = 0; i < n; ++i) {{
-{point}
-    if ({name}(arg, res, iw, w, 0)) return 1;
-  }}
-  return 0;
-}}
-CASADI_SYMBOL_EXPORT int {name}_arvcas_batch_next(long long int n, long long int* next, int* stop,
+CASADI_SYMBOL_EXPORT int {name}_arvcas_batch(long long int n, long long int chunk, long long int* next, int* stop,
     long long int* failed, const casadi_real* const* a, const long long int* sa, casadi_real* const* r,
     const long long int* sr, casadi_int* iw, casadi_real* w) {{
-{decl}
+  const casadi_real* arg[{max(f.sz_arg(), n_in, 1)}];
+  casadi_real* res[{max(f.sz_res(), n_out, 1)}];
+  long long int i, i0, i1;
+  int k;
   for (;;) {{
     if (__atomic_load_n(stop, __ATOMIC_RELAXED)) return 0;
-    i = __atomic_fetch_add(next, 1, __ATOMIC_RELAXED);
-    if (i >= n) return 0;
-{point}
-    if ({name}(arg, res, iw, w, 0)) {{
-      *failed = i;
-      __atomic_store_n(stop, 1, __ATOMIC_RELAXED);
-      return 1;
+    i0 = __atomic_fetch_add(next, chunk, __ATOMIC_RELAXED);
+    if (i0 >= n) return 0;
+    i1 = i0 + chunk < n ? i0 + chunk : n;
+    for (i = i0; i < i1; ++i) {{
+      for (k = 0; k < {n_in}; ++k) arg[k] = a[k] + i * sa[k];
+      for (k = 0; k < {n_out}; ++k) res[k] = r[k] + i * sr[k];
+      if ({name}(arg, res, iw, w, 0)) {{
+        *failed = i;
+        __atomic_store_n(stop, 1, __ATOMIC_RELAXED);
+        return 1;
+      }}
     }}
   }}
 }}

@@ -18,9 +18,9 @@ How a call runs (costs in ``docs/calling-dynamics.md``, measured by ``arvcas ben
   for an input all rows share), and calls it through ``ctypes`` on the caller's arrays in place (a
   C-ordered ``(n, 12)`` array is exactly the column-major ``12 x n`` block the loop reads; shared
   inputs, ``p`` among them, are read by pointer, never repeated). ``ctypes`` releases the GIL for
-  the call; batches of at least :data:`THREAD_MIN_BATCH` rows are split into consecutive blocks run
-  on as many threads as the process may use cores (``n_threads=`` overrides), each thread with its
-  own work memory. Results do not depend on the thread count, and equal single calls, to the bit.
+  the call; batches of at least :data:`THREAD_MIN_BATCH` rows run on as many threads as the process
+  may use cores (``n_threads=`` overrides), each with its own work memory, taking consecutive blocks
+  of rows from a counter they share in C (:func:`arvcas.build.calls.run_loop`, as a batch of runs does). Results do not depend on the thread count, and equal single calls, to the bit.
 
 Checks (one-line ``ValueError`` naming the function and the argument): the number of inputs, every
 shape, batch sizes that disagree, and non-finite values (NaN or inf) anywhere in the inputs.
@@ -33,15 +33,14 @@ batched they are ``(n, 12, 12)`` etc.
 
 from __future__ import annotations
 
-import ctypes
 import math
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
 
 import casadi as ca
 import numpy as np
 
+from arvcas.build import calls
 from arvcas.model.uvms import PUBLIC_FUNCTIONS
 
 __all__ = ["dynamics", "jacobian_functions", "Dynamics", "NAMES", "JACOBIANS", "THREAD_MIN_BATCH", "BLOCKS_PER_THREAD"]
@@ -52,14 +51,13 @@ JACOBIANS = {
     "uvms_rhs_jac": ("uvms_rhs", ("x", "tau", "q")),
 }
 THREAD_MIN_BATCH = 1024  # smaller batches run on the calling thread, in one call
-BLOCKS_PER_THREAD = 4  # a threaded batch is cut into this many blocks per thread (the pool balances them)
+BLOCKS_PER_THREAD = 4  # a threaded batch is taken in blocks of n / (threads * this) rows (the shared counter balances them)
 
 _LOCK = threading.RLock()
 _SX: dict[str, dict[str, ca.Function]] = {}
 _COMPILED: dict[tuple[str, str], ca.Function] = {}
 _LOOPS: dict[tuple, "_Loop"] = {}
 _DEFAULT_P: list[np.ndarray] = []
-_POOLS: dict[int, ThreadPoolExecutor] = {}
 _F64 = np.dtype(np.float64)
 _ret = getattr(getattr(ca, "_casadi", None), "FunctionBuffer_ret", None) or ca.FunctionBuffer.ret  # skips a wrapper
 
@@ -112,15 +110,9 @@ class _Loop:
     def __init__(self, f: ca.Function):
         from arvcas.build import codegen
 
-        lib_f = codegen.build(f, extra_c=codegen.batch_loop_c(f))
-        self.keep = lib_f  # the library stays loaded while this object lives
-        self.lib = ctypes.CDLL(codegen.artifact_of(lib_f)["path"])  # the file CasADi loaded: the same handle
-        fn = getattr(self.lib, f"{f.name()}_arvcas_batch")
-        vp = ctypes.c_void_p
-        fn.argtypes = [ctypes.c_longlong, vp, vp, vp, vp, vp, vp]
-        fn.restype = ctypes.c_int
-        self.fn = fn
-        self.sz_iw, self.sz_w = max(1, int(f.sz_iw())), max(1, int(f.sz_w()))
+        self.keep = codegen.build(f, extra_c=codegen.batch_loop_c(f))  # the library stays loaded with this object
+        self.fn = calls.batch_loop(self.keep)
+        self.sz_iw, self.sz_w = int(f.sz_iw()), int(f.sz_w())
 
 
 def _loop(name: str, opts, params=None) -> _Loop:
@@ -147,13 +139,6 @@ def _readonly(v) -> np.ndarray:
     v = np.ascontiguousarray(v, dtype=float)
     v.setflags(write=False)
     return v
-
-
-def _pool(n: int) -> ThreadPoolExecutor:
-    with _LOCK:
-        if n not in _POOLS:
-            _POOLS[n] = ThreadPoolExecutor(n, thread_name_prefix=f"arvcas-dyn{n}")
-        return _POOLS[n]
 
 
 def _usable_cpus() -> int:
@@ -377,52 +362,19 @@ class Dynamics:
         for i, a in enumerate(list(arrs) + [parr]):
             m = self.input_sizes[i]
             c = np.ascontiguousarray(a.reshape(n, m) if i in rows else a.reshape(-1), dtype=float)
-            keep.append(c)  # alive, in place, until the calls below return
+            keep.append(c)  # alive, in place, until the loop returns
             base.append(c.ctypes.data)
             stride.append(m if i in rows else 0)
         out_sizes = [int(np.prod(s)) for s in self.output_shapes]
         outs = [np.empty(n * w) for w in out_sizes]
-        obase = [o.ctypes.data for o in outs]
-        sa = (ctypes.c_longlong * len(stride))(*stride)
-        sr = (ctypes.c_longlong * len(out_sizes))(*out_sizes)
         if n_threads is None:
             n_threads = _usable_cpus() if n >= THREAD_MIN_BATCH else 1
         nt = max(1, min(n_threads, n))
-        if nt == 1:
-            blocks = [(0, n)]
-        else:
-            size = -(-n // (nt * BLOCKS_PER_THREAD))
-            blocks = [(s0, min(size, n - s0)) for s0 in range(0, n, size)]
-        todo = iter(blocks)
-        lock = threading.Lock()
-        errors: list[str] = []
-
-        def work():
-            iw = np.empty(lp.sz_iw, dtype=np.int64)
-            w = np.empty(lp.sz_w)
-            a_ptr = (ctypes.c_void_p * len(base))()
-            r_ptr = (ctypes.c_void_p * len(obase))()
-            while True:
-                with lock:
-                    blk = next(todo, None)
-                if blk is None or errors:
-                    return
-                s0, sz = blk
-                for k, (b0, st) in enumerate(zip(base, stride)):
-                    a_ptr[k] = b0 + 8 * s0 * st
-                for k, (b0, wk) in enumerate(zip(obase, out_sizes)):
-                    r_ptr[k] = b0 + 8 * s0 * wk
-                if lp.fn(sz, a_ptr, sa, r_ptr, sr, iw.ctypes.data, w.ctypes.data) != 0:
-                    errors.append(f"{self.name}: evaluation of rows {s0}..{s0 + sz - 1} failed")
-
-        if nt == 1:
-            work()
-        else:
-            futs = [_pool(nt).submit(work) for _ in range(min(nt, len(blocks)))]
-            for fu in futs:
-                fu.result()
-        if errors:
-            raise RuntimeError(errors[0])
+        chunk = n if nt == 1 else -(-n // (nt * BLOCKS_PER_THREAD))
+        failed = calls.run_loop(lp.fn, n, base, stride, [o.ctypes.data for o in outs], out_sizes, lp.sz_iw, lp.sz_w,
+                                nt, chunk=chunk, keep=(keep, outs), on_caller=True)
+        if failed is not None:
+            raise RuntimeError(f"{self.name}: evaluation of row {failed} failed")
         res = []
         for o, s in zip(outs, self.output_shapes):
             if len(s) == 2:  # each evaluation's matrix is column-major
