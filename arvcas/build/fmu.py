@@ -31,8 +31,8 @@ import uuid
 import zipfile
 from importlib import resources
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
+from arvcas.build.text import xml_attr
 from arvcas.io import files
 
 import casadi as ca
@@ -260,9 +260,9 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
     desc = (f"{what}, exactly coupled (arvcas uvms_rhs, "
             f"docs/model.md); inputs: {'body wrench tau' if inputs == 'wrench' else 'thruster commands u'}, "
             "q, qd, qdd, payload")
-    L.append(f'<fmiModelDescription fmiVersion="2.0" modelName="arvcas_uvms" guid={quoteattr(guid)} '
-             f'description={quoteattr(desc)} version={quoteattr(__version__)} '
-             f'generationTool={quoteattr("arvcas " + __version__)} generationDateAndTime="{stamp}" '
+    L.append(f'<fmiModelDescription fmiVersion="2.0" modelName="arvcas_uvms" guid={xml_attr(guid)} '
+             f'description={xml_attr(desc)} version={xml_attr(__version__)} '
+             f'generationTool={xml_attr("arvcas " + __version__)} generationDateAndTime="{stamp}" '
              'variableNamingConvention="structured" numberOfEventIndicators="0">')
     src = f'<SourceFiles><File name="{_WRAPPER_C}"/></SourceFiles>'
     L.append(f'  <ModelExchange modelIdentifier="{MODEL_IDENTIFIER}" needsExecutionTool="false" '
@@ -276,28 +276,28 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
              f'canSerializeFMUstate="true" providesDirectionalDerivative="false">{src}</CoSimulation>')
     L.append("  <UnitDefinitions>")
     for u in used:
-        base = "".join(f' {k}="{e}"' for k, e in bases[u].items())
+        base = "".join(f" {k}={xml_attr(e)}" for k, e in bases[u].items())
         disp = ""
         if u in _DISPLAY:
             dn, fac = _DISPLAY[u]
             disp = f'<DisplayUnit name="{dn}" factor="{_fmt(fac)}"/>'
-        L.append(f'    <Unit name="{u}"><BaseUnit{base}/>{disp}</Unit>')
+        L.append(f"    <Unit name={xml_attr(u)}><BaseUnit{base}/>{disp}</Unit>")
     L.append("  </UnitDefinitions>")
     L.append('  <LogCategories><Category name="logStatusError" description="errors"/>'
              '<Category name="logAll" description="everything"/></LogCategories>')
     L.append('  <DefaultExperiment startTime="0.0" stopTime="100.0" tolerance="1e-08" stepSize="0.01"/>')
     L.append("  <ModelVariables>")
     for i, v in enumerate(V):
-        attrs = [f"name={quoteattr(v['name'])}", f'valueReference="{i}"',
-                 f"description={quoteattr(v['description'])}", f'causality="{v["causality"]}"',
+        attrs = [f"name={xml_attr(v['name'])}", f'valueReference="{i}"',
+                 f"description={xml_attr(v['description'])}", f'causality="{v["causality"]}"',
                  f'variability="{v["variability"]}"']
         if v["initial"]:
             attrs.append(f'initial="{v["initial"]}"')
         real = []
         if v["unit"]:
-            real.append(f'unit="{v["unit"]}"')
+            real.append(f"unit={xml_attr(v['unit'])}")
         if v.get("display"):
-            real.append(f'displayUnit="{v["display"]}"')
+            real.append(f"displayUnit={xml_attr(v['display'])}")
         if v["start"] is not None:
             real.append(f'start="{_fmt(v["start"])}"')
         if v.get("derivative"):
