@@ -146,9 +146,9 @@ def _add_export_c(p: argparse.ArgumentParser) -> None:
 
 
 def _export_c_outputs(a: argparse.Namespace) -> list:
-    from arvcas.build.export import default_prefix, files
+    from arvcas.build.export import KIND, default_prefix, files
 
-    return [(f"DIR {a.dir}", a.dir / n) for n in files(a.prefix or default_prefix(a.params))]
+    return [(f"DIR {a.dir}", a.dir / n, KIND, a.dir) for n in files(a.prefix or default_prefix(a.params))]
 
 
 def _run_export_c(a: argparse.Namespace) -> int:
@@ -313,7 +313,8 @@ def _add_knees(p: argparse.ArgumentParser) -> None:
 def _knees_outputs(a):
     from arvcas.experiments.knees import knee_fronts, output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out, [f.parent.name for f in knee_fronts(a.study_dir)])]
+    return _kinds([(f"--out {a.out}", p) for p in output_files(a.out, [f.parent.name for f in knee_fronts(a.study_dir)])],
+                  _RESULT)
 
 
 def _run_knees(a: argparse.Namespace) -> int:
@@ -473,18 +474,30 @@ def _run_bench(a: argparse.Namespace) -> int:
 # ---- declared outputs -------------------------------------------------------------------------------------
 
 
-def _out_file(dest: str, label: str | None = None) -> Paths:
+def _kinds(outs, formats: dict[str, str]) -> list:
+    """``(label, path)`` outputs with the kind (:mod:`arvcas.io.files`) each will be written as, by suffix:
+    ``formats`` maps ``h5`` or ``mat`` to the arvcas format written there (others: by suffix)."""
+    from arvcas.io.matfile import mat_kind
+
+    kinds = {"h5": formats.get("h5"), "mat": mat_kind(formats["mat"]) if "mat" in formats else None}
+    return [(lab, p, kinds.get(p.suffix.lower().lstrip("."))) for lab, p in outs]
+
+
+def _out_file(dest: str, label: str | None = None, **formats: str) -> Paths:
     def outs(a):
         p = getattr(a, dest)
-        return [] if p is None else [(label or f"--{dest.replace('_', '-')}", Path(p))]
+        return [] if p is None else _kinds([(label or f"--{dest.replace('_', '-')}", Path(p))], formats)
 
     return outs
+
+
+_RESULT = {"h5": "arvcas-result", "mat": "arvcas-result"}  # io.results.FORMAT, io.matfile's "arvcas-result"
 
 
 def _paper_outputs(a):
     from arvcas.experiments.paper import output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out)]
+    return _kinds([(f"--out {a.out}", p) for p in output_files(a.out)], _RESULT)
 
 
 def _bench_outputs(a):
@@ -509,7 +522,7 @@ def _table() -> tuple[Command, ...]:
                 _add_demo, _run_demo, inputs=(("params", "system"),)),
         Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
                 _add_simulate, _run_simulate, inputs=(("config", "file"), ("params", "system"), ("from_front", "front")),
-                outputs=_out_file("out"), check=_check_simulate),
+                outputs=_out_file("out", **_RESULT), check=_check_simulate),
         Command("paper", "the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
                 _add_paper, _run_paper, outputs=_paper_outputs),
         Command("bench", "measure plant, closed-loop and compile speed; write bench.json and bench.md",
@@ -517,7 +530,7 @@ def _table() -> tuple[Command, ...]:
         Command("tune", "NSGA-II on the CHAT/RMSE front from a study file (resumable, local or Dask)",
                 t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune),
         Command("front export", "the front as CSV or JSON (stdout, or --out FILE), or a MATLAB .mat file",
-                t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out"),
+                t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out", mat="arvcas-front"),
                 check=t.check_front_export),
         Command("front plot", "plot the front, Table 2 on the same draws and the knee point (PNG)", t.add_front_plot,
                 t.run_front_plot, inputs=(("file", "front"),), outputs=t.front_plot_outputs),
@@ -620,7 +633,7 @@ def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
     if cmd.outputs is not None:
         outs = cmd.outputs(a)
         files.check_outputs(outs, inputs, force=a.force)
-        for d in {p.parent if str(p.parent) else Path(".") for _, p in outs}:
+        for d in {o[1].parent if str(o[1].parent) else Path(".") for o in outs}:
             if d.is_dir():
                 files.remove_stale_temps(d)
 

@@ -24,6 +24,9 @@ from fmpy.validation import validate_fmu  # noqa: E402
 
 from arvcas.build import fmu as fmu_mod  # noqa: E402
 from arvcas.build.codegen import compiled  # noqa: E402
+from arvcas.io import files  # noqa: E402
+
+from trust_helpers import bounded  # noqa: E402
 from arvcas.sim import scenario  # noqa: E402
 
 H = 0.01  # the FMU's default RK4 step (the scenario's former plant step, docs/model.md §4)
@@ -437,9 +440,14 @@ def test_foreign_file_refused_then_forced(tmp_path, fmu_path):
     with pytest.raises(fmu_mod.FMUError, match="not an FMU written by arvcas"):
         fmu_mod.export_fmu(other)
     assert other.read_bytes() == before
-    # an FMU arvcas wrote may be replaced; nothing is compiled to decide that
+    # an FMU arvcas wrote (recorded in the directory's manifest) may be replaced; nothing is compiled or
+    # unpacked to decide that; a copy made by someone else is not arvcas's, whatever it says inside
     mine = tmp_path / "mine.fmu"
     shutil.copyfile(fmu_path, mine)
+    with pytest.raises(fmu_mod.FMUError, match="not an FMU written by arvcas"):
+        fmu_mod._check_path(mine, force=False)
+    mine.unlink()
+    files.atomic_write(mine, lambda t: shutil.copyfile(fmu_path, t), kind=fmu_mod.KIND)
     assert fmu_mod._check_path(mine, force=False) == mine
     # a symbolic link is not replaced, even one to an FMU arvcas wrote
     link = tmp_path / "link.fmu"

@@ -12,6 +12,24 @@ from arvcas import cli
 from arvcas.io.files import TMP_MARK
 
 
+def bounded(fn, timeout: float = 120.0):
+    """``fn()`` in a thread that must end within ``timeout`` s (a hang fails the test, not the run); returns
+    the exception it raised, or None."""
+    box = {}
+
+    def target():
+        try:
+            fn()
+        except BaseException as e:  # noqa: BLE001 - returned
+            box["e"] = e
+
+    t = threading.Thread(target=target, daemon=True)
+    t.start()
+    t.join(timeout)
+    assert not t.is_alive(), f"did not return within {timeout} s"
+    return box.get("e")
+
+
 def run(argv, capsys, timeout: float = 300.0):
     """``cli.main(argv)`` in a thread that must end within ``timeout``; returns (exit code, stderr)."""
     rc, _out, err = run3(argv, capsys, timeout)

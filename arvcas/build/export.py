@@ -20,9 +20,11 @@ arvcas itself):
   through ``find_package``) and Python ctypes (``example.py``), printing the same lines.
 * ``README.md`` and ``arvcas-export.json``, the manifest: every file written with its sha256.
 
-A file in DIR is only replaced if the manifest lists it with its current sha256 (arvcas wrote it and
-nobody changed it since); anything else is refused with a one-line :class:`ExportError` unless
-``force``.
+The one output policy of :mod:`arvcas.io.files` decides what may be replaced: a file in DIR is only
+replaced if the directory's ``.arvcas-manifest.json`` records it as written by export-c with its
+current sha256 (arvcas wrote it, as an export, and nobody changed it since); anything else is refused
+with a one-line :class:`ExportError` unless ``force``. ``consumer/`` is never a symbolic link (refused
+even with ``force``: nothing is written out of DIR).
 """
 
 from __future__ import annotations
@@ -192,49 +194,27 @@ def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def _read_manifest(out: Path, force: bool) -> dict[str, str]:
-    """{relative path: sha256} of the files a previous export wrote ({} if none)."""
-    path = out / MANIFEST
-    if not os.path.lexists(path):
-        return {}
-    try:
-        if path.is_symlink() or not path.is_file():
-            raise ValueError("not a regular file")
-        m = json.loads(path.read_text(encoding="utf-8"))
-        if not isinstance(m, dict) or m.get("format") != MANIFEST_FORMAT or not isinstance(m.get("files"), dict):
-            raise ValueError("not an arvcas export manifest")
-        return {str(k): str(v) for k, v in m["files"].items()}
-    except (OSError, ValueError) as e:
-        if force:
-            return {}
-        raise ExportError(f"export-c: {path} is not a manifest arvcas wrote ({e}); move it away or pass --force") from None
+def _check_overwrite(out: Path, names, force: bool) -> None:
+    """The one output policy (:func:`arvcas.io.files.check_outputs`, kind :data:`KIND`): a file there is
+    replaced only if arvcas's export-c wrote it and nobody changed it since (the directory's manifest),
+    or with ``force``; a subdirectory that is a symbolic link is refused even with ``force``."""
+    from arvcas.io import files as _files
+
+    _files.check_outputs([(f"export-c: DIR {out}", out / n, KIND, out) for n in names], force=force, error=ExportError)
 
 
-def _check_overwrite(out: Path, names, manifest: dict[str, str], force: bool) -> None:
-    """Refuse to replace a file arvcas did not write, or one changed since it wrote it."""
-    if force:
-        return
-    for name in names:
-        path = out / name
-        if name == MANIFEST or not os.path.lexists(path):
-            continue
-        if name not in manifest:
-            raise ExportError(f"export-c: {path} exists and was not written by arvcas export-c (not in {MANIFEST});"
-                              f" move it away or pass --force")
-        if path.is_symlink() or not path.is_file() or _sha256(path.read_bytes()) != manifest[name]:
-            raise ExportError(f"export-c: {path} was changed since arvcas export-c wrote it (sha256 differs from"
-                              f" {MANIFEST}); move it away or pass --force")
+KIND = "export-c"  # the kind of every file export-c writes (arvcas.io.files)
 
 
 def _write(out: Path, name: str, data: bytes) -> None:
-    """Through the one atomic writer (:mod:`arvcas.io.files`); the export's own manifest check
-    (:func:`_check_overwrite`) has already decided that this file may be replaced."""
+    """Through the one atomic writer (:mod:`arvcas.io.files`), which applies the output policy again
+    (and :func:`_check_overwrite`'s --force permissions); a subdirectory is never a symbolic link."""
     from arvcas.io import files
 
     path = out / name
-    path.parent.mkdir(exist_ok=True)
-    files.permit_replace([path])
-    files.atomic_write(path, lambda tmp: tmp.write_bytes(data), ExportError)
+    if path.parent != out:
+        files.subdir(out, path.parent.relative_to(out).as_posix(), ExportError)
+    files.atomic_write(path, lambda tmp: tmp.write_bytes(data), ExportError, KIND)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -846,9 +826,8 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, forc
     if not isinstance(opts, ModelOptions):
         raise ExportError(f"export-c: opts must be arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
     names = files(prefix)
-    manifest = _read_manifest(out, force) if out.exists() else {}
     if out.exists():
-        _check_overwrite(out, names, manifest, force)
+        _check_overwrite(out, names, force)
 
     plant = plant_functions(opts, P.layout)  # sized by the system
     fns = {n: plant[n] for n in PUBLIC_FUNCTIONS}

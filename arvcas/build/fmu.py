@@ -25,7 +25,6 @@ import os
 import re
 import shutil
 import sys
-import tempfile
 import time
 import uuid
 import zipfile
@@ -383,16 +382,17 @@ def _compile(src_dir: Path, out: Path) -> None:
 # the output file
 
 
-def _written_by_arvcas(path: Path) -> bool:
-    """True if ``path`` is a zip whose modelDescription.xml says generationTool="arvcas ..."."""
-    import xml.etree.ElementTree as ET
+KIND = "fmu"  # the kind of the file in the directory's manifest (arvcas.io.files)
 
-    try:
-        with zipfile.ZipFile(path) as zf:
-            root = ET.fromstring(zf.read("modelDescription.xml"))
-    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError, ValueError):
-        return False
-    return root.tag == "fmiModelDescription" and root.get("generationTool", "").startswith("arvcas ")
+
+def _refuse_replacing(p: Path) -> None:
+    """The output policy of :mod:`arvcas.io.files` for an existing ``p``, by the directory's manifest
+    (never by what the file claims inside, so a foreign file is not even opened)."""
+    kind = files.kind_of(p)
+    if kind is None:
+        raise FMUError(f"path: {p} exists and is not an FMU written by arvcas; pass force=True (--force) to replace it")
+    if kind and kind != KIND:
+        raise FMUError(f"path: {p} is an arvcas file of another kind ({kind}); pass force=True (--force) to replace it")
 
 
 def _check_path(path, force: bool) -> Path:
@@ -410,15 +410,16 @@ def _check_path(path, force: bool) -> Path:
             raise FMUError(f"path: {p} is a symbolic link; pass force=True (--force) to replace the link")
         if p.is_dir() or (p.exists() and not p.is_file()):
             raise FMUError(f"path: {p} exists and is not a regular file")
-        if not force and not _written_by_arvcas(p):
-            raise FMUError(f"path: {p} exists and is not an FMU written by arvcas; pass force=True (--force) to replace it")
+        if not force:
+            _refuse_replacing(p)
     return p
 
 
 def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = "wrench") -> Path:
     """Write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm to ``path``.
 
-    ``path`` must end in ``.fmu``; an existing file is replaced only if it is an FMU arvcas wrote, or
+    ``path`` must end in ``.fmu``; an existing file is replaced only if arvcas recorded it as an FMU it
+    wrote (the directory's manifest, :mod:`arvcas.io.files`; nothing inside the file is trusted), or
     with ``force=True``. ``params``, the system (its :class:`arvcas.params.Params` or
     :class:`arvcas.system.System`, a system file, or None for Haidou-1), sizes the FMU (:func:`layout`)
     and sets the parameters' start values; every one stays settable in the FMU. ``opts`` is
@@ -464,7 +465,8 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
     assert not re.search(r"@[A-Z_]+@", wrapper), "an unfilled field in fmu_wrapper.c"
     md = _model_description(V, deps, guid, inputs, P)
 
-    work = Path(tempfile.mkdtemp(prefix=".arvcas-fmu-", dir=out.parent))
+    files.remove_stale_temps(out.parent)  # those of killed exports (and of every other writer)
+    work = files.temp_dir(out)
     try:
         src = work / "sources"
         src.mkdir()
@@ -481,11 +483,11 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
                 for f in sorted(src.iterdir()):
                     zf.write(f, f"sources/{f.name}")
 
-        if out.exists() and not force and not _written_by_arvcas(out):  # appeared meanwhile
-            raise FMUError(f"path: {out} exists and is not an FMU written by arvcas; pass force=True (--force) to replace it")
+        if out.exists() and not force:  # appeared meanwhile
+            _refuse_replacing(out)
         if os.path.lexists(out):  # checked above: an FMU arvcas wrote, or force
             files.permit_replace([out])
-        files.atomic_write(out, fill, FMUError)  # the one writer: recorded in the directory's manifest
+        files.atomic_write(out, fill, FMUError, KIND)  # the one writer: recorded in the directory's manifest
     finally:
-        shutil.rmtree(work, ignore_errors=True)
+        files.release_temp(work)
     return out

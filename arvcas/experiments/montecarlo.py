@@ -245,7 +245,7 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
             f["phase"].attrs["units"] = "rad"
             f["t_fail"].attrs["units"] = "s (NaN when the run completed)"
 
-    return _io.atomic_write(path, fill)
+    return _io.atomic_write(path, fill, FORMAT)
 
 
 def is_montecarlo_file(path) -> bool:

@@ -229,7 +229,7 @@ def write_robust(rf: RobustFront, path) -> Path:
             f.create_dataset("robust_nd", data=st["robust_nd"])
             f.create_dataset("certainly_dominated", data=st["certainly_dominated"])
 
-    return _io.atomic_write(path, fill)
+    return _io.atomic_write(path, fill, FORMAT)
 
 
 def read_robust(path) -> RobustFront:

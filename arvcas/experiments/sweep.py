@@ -232,7 +232,7 @@ def write_sweep(sw: Sweep, path) -> Path:
                     ds = f.create_dataset(f"k1/{c}/{j}", data=k1, compression="gzip", shuffle=True)
                     ds.attrs["h"] = sw.hs[j]
 
-    return _io.atomic_write(path, fill)
+    return _io.atomic_write(path, fill, FORMAT)
 
 
 def read_sweep(path) -> Sweep:

@@ -108,6 +108,11 @@ def front_variables(front) -> tuple[dict, dict, dict, dict]:
     return var, units, desc, cols
 
 
+def mat_kind(fmt: str) -> str:
+    """The kind (:mod:`arvcas.io.files`) of a .mat file of format ``fmt`` (``arvcas-result``, ``arvcas-front``)."""
+    return f"{fmt} (.mat)"
+
+
 def _write(path, fmt: str, parts) -> Path:
     from scipy.io import savemat
 
@@ -126,7 +131,7 @@ def _write(path, fmt: str, parts) -> Path:
         with open(tmp, "wb") as f:
             savemat(f, doc, long_field_names=True, do_compression=True, oned_as="row")
 
-    return atomic_write(path, fill)
+    return atomic_write(path, fill, mat_kind(fmt))
 
 
 def write_result_mat(result, path) -> Path:

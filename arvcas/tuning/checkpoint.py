@@ -358,7 +358,7 @@ def write_checkpoint(c: Checkpoint, path: Path) -> Path:
     if not c.created:
         c.created = c.updated
     try:
-        return files.atomic_write(path, lambda tmp: _write_file(tmp, c), CheckpointError)
+        return files.atomic_write(path, lambda tmp: _write_file(tmp, c), CheckpointError, FORMAT)
     except CheckpointError as e:
         raise CheckpointError(f"{e}; the previous one is kept") from None
 
