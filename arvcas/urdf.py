@@ -59,29 +59,92 @@ def _si(entry: Any, key: str, dim: str, n: int | None, where: str, error) -> Any
     return np.array(v, dtype=float) * fac
 
 
+def parse_xml(text: str, where: str, error) -> ET.Element:
+    """The root element of the XML ``text``, parsed with no DTD: a ``<!DOCTYPE>`` (and with it every entity
+    declaration, internal or external) is refused before any tree is built, so no entity is ever
+    expanded (the "billion laughs" and external-entity attacks; defusedxml's ``forbid_dtd``). URDF
+    files have no DTD."""
+    import xml.parsers.expat as expat
+
+    class _DTD(Exception):
+        pass
+
+    def refuse(*_args):
+        raise _DTD
+
+    scan = expat.ParserCreate()
+    scan.StartDoctypeDeclHandler = refuse
+    scan.EntityDeclHandler = refuse
+    scan.ExternalEntityRefHandler = refuse
+    try:
+        scan.Parse(text, True)
+    except _DTD:
+        raise error(f"{where}: has a document type declaration (<!DOCTYPE ...>); a URDF has none, and arvcas "
+                    f"does not expand XML entities") from None
+    except expat.ExpatError as e:
+        raise error(f"{where}: malformed XML: {e}") from None
+    try:
+        return ET.fromstring(text)
+    except ET.ParseError as e:
+        raise error(f"{where}: malformed XML: {e}") from None
+
+
+def _link_of(joint: ET.Element, tag: str, where: str, error) -> str:
+    """The link a joint's ``<parent>`` or ``<child>`` names (one line naming the joint if it has none)."""
+    e = joint.find(tag)
+    name = e.get("link") if e is not None else None
+    if not name:
+        raise error(f"{where}: joint '{joint.get('name')}' has no <{tag} link=\"...\"/>: every joint needs a "
+                    f"parent and a child link")
+    return name
+
+
+def _check_tree(by_child: dict[str, ET.Element], where: str, error) -> None:
+    """Refuse a loop of joints anywhere in the URDF (child -> parent links; each link walked up once)."""
+    done: set[str] = set()
+    for start in by_child:
+        trail: list[str] = []
+        on_trail: set[str] = set()
+        cur = start
+        while cur in by_child and cur not in done:
+            if cur in on_trail:
+                raise error(f"{where}: the joints form a loop through link '{cur}' (joint "
+                            f"'{by_child[cur].get('name')}'): a URDF is a tree")
+            trail.append(cur)
+            on_trail.add(cur)
+            cur = by_child[cur].find("parent").get("link")
+        done.update(trail)
+
+
 def _chain(root: ET.Element, base: str, tool: str, where: str, error) -> list[ET.Element]:
-    """The joints from ``base`` to ``tool``, in order; the URDF checked along the way."""
+    """The joints from ``base`` to ``tool``, in order; the URDF checked along the way (every joint has a
+    parent and a child, no link is the child of two joints, the walk from ``tool`` up meets no loop)."""
     links = {e.get("name"): e for e in root.findall("link")}
     for name in (base, tool):
         if name not in links:
             raise error(f"{where}: link '{name}' is not in the URDF (links: {', '.join(list(links)[:12])})")
-    by_child = {}
-    for j in root.findall("joint"):
-        c = j.find("child")
-        if c is not None:
-            by_child[c.get("link")] = j
+    joints = root.findall("joint")
+    by_child: dict[str, ET.Element] = {}
+    for j in joints:
+        child = _link_of(j, "child", where, error)
+        _link_of(j, "parent", where, error)
+        if child in by_child:
+            raise error(f"{where}: link '{child}' is the child of two joints ('{by_child[child].get('name')}', "
+                        f"'{j.get('name')}'): a URDF is a tree")
+        by_child[child] = j
+    _check_tree(by_child, where, error)
     path = []
     cur = tool
-    while cur != base:
+    while cur != base:  # ends: the parent links form a tree (no loop), so every step goes up
         j = by_child.get(cur)
         if j is None:
             raise error(f"{where}: link '{tool}' is not below '{base}' (no joint leads to '{cur}')")
         path.append(j)
-        cur = j.find("parent").get("link")
+        cur = _link_of(j, "parent", where, error)
     path.reverse()
-    on_chain = {base} | {j.find("child").get("link") for j in path}
-    for j in root.findall("joint"):
-        parent = j.find("parent").get("link")
+    on_chain = {base} | {_link_of(j, "child", where, error) for j in path}
+    for j in joints:
+        parent = _link_of(j, "parent", where, error)
         kind = j.get("type")
         if kind not in SUPPORTED_JOINTS:
             if parent in on_chain or j in path:
@@ -95,7 +158,9 @@ def _chain(root: ET.Element, base: str, tool: str, where: str, error) -> list[ET
         raise error(f"{where}: {len(moving)} revolute joints from {base} to {tool}, at most "
                     f"{systemfile.MAX_JOINTS} are supported")
     for j in moving:
-        child = j.find("child").get("link")
+        child = _link_of(j, "child", where, error)
+        if child not in links:
+            raise error(f"{where}: joint '{j.get('name')}' moves link '{child}', which is not in the URDF")
         if links[child].find("inertial") is None:
             raise error(f"{where}: link '{child}' (moved by joint '{j.get('name')}') has no <inertial>: every "
                         f"moving link needs its mass and inertia")
@@ -118,10 +183,7 @@ def convert(doc: dict, path: Path, error) -> dict:
     from arvcas.io.files import read_text
 
     text = read_text(upath, "URDF file", error)
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as e:
-        raise error(f"{uwhere}: malformed XML: {e}") from None
+    root = parse_xml(text, uwhere, error)
     if root.tag != "robot":
         raise error(f"{uwhere}: the root element is <{root.tag}>, a URDF has <robot>")
     base, tool = arm["base_link"], arm["tool_link"]

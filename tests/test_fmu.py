@@ -405,6 +405,24 @@ def test_wrong_guid_and_parameters_after_init_refused(fmu_path, md):
             m.setReal([m.vr["env.rho"]], [0.0])
 
 
+def test_do_step_is_bounded_and_checks_the_communication_point(fmu_path, md, capsys):
+    """A huge communication step or a tiny h_rk4 (1e10+ RK4 steps) is refused before any work, one logged
+    message; so is a currentCommunicationPoint that is not the instance's time."""
+    from fmpy.fmi1 import FMICallException
+
+    cases = [(None, 0.0, 1e9, "more than 1000000 RK4 steps"), ({"h_rk4": 1e-12}, 0.0, 0.01, "more than 1000000"),
+             (None, 5.0, 0.01, "currentCommunicationPoint is not the instance's current time")]
+    for values, tc, H, message in cases:
+        with _instance(fmu_path, md, "cs", cls=FMU2Slave, values=values) as sl:
+            capsys.readouterr()
+            e = bounded(lambda: sl.doStep(currentCommunicationPoint=tc, communicationStepSize=H))
+            assert isinstance(e, FMICallException), repr(e)
+            assert message in capsys.readouterr().out
+            if values is None:  # the instance goes on with a step it can take
+                sl.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.01)
+                sl.doStep(currentCommunicationPoint=0.01, communicationStepSize=0.01)
+
+
 # ---------------------------------------------------------------------------------------------
 # arguments and files
 

@@ -39,6 +39,7 @@ from arvcas.sim.scenario import ScenarioConfig
 __all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS"]
 
 MAX_RUNS = 10_000_000  # runs in one batch call (the outputs alone take 100 bytes a run)
+_OUT_BYTES = 2 * 8 * (6 + 6 + 1 + 1)  # a run's outputs (chat, rmse, ok, t_fail) and their returned copies
 
 
 class SimulationError(ValueError):
@@ -232,10 +233,12 @@ class CompiledRun:
         ``gains``: (n_gains,) or (n, n_gains); ``seeds``: (n,) non-negative integers; ``uncertainty``:
         None, (4,) or (n, 4); ``phase``: None, (6,) or (n, 6). Returns ``(chat, rmse, ok, t_fail)``.
         """
-        seeds = np.asarray(seeds)
+        seeds = calls.integer_array(seeds, "seeds", SimulationError, max_size=MAX_RUNS)
         if seeds.ndim != 1 or seeds.size == 0:
             raise SimulationError(f"seeds: expected a non-empty 1-D sequence of integers, got shape {seeds.shape}")
         n = seeds.size
+        if n > MAX_RUNS:
+            raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
         g = self._gains(gains, batch=True)
         if g.shape[0] not in (1, n):
             raise SimulationError(f"gains: {g.shape[0]} gain sets for {n} seeds (give 1 or {n})")
@@ -252,7 +255,15 @@ class CompiledRun:
 
         U = rows(uncertainty, unc0, 4, "uncertainty")
         PH = rows(phase, ph0, 6, "phase")
-        noise = np.hstack([scenario.noise_sequence(self.cfg, int(sd)) for sd in seeds])
+        first = scenario.noise_sequence(self.cfg, int(seeds[0]))  # every draw's noise block has its shape
+        k = first.shape[1]
+        # bounded before allocating: n noise blocks, the per-run inputs, the outputs (and their copies)
+        calls.check_memory(f"many: {n} runs", n * (first.nbytes + 8 * (G.shape[1] + 4 + 6) + _OUT_BYTES),
+                           error=SimulationError)
+        noise = np.empty((first.shape[0], n * k), order="F")  # as call_named reads it: no copy
+        noise[:, :k] = first
+        for i in range(1, n):
+            noise[:, i * k:(i + 1) * k] = scenario.noise_sequence(self.cfg, int(seeds[i]))
         return self._evaluate(n, {"gains": G.T, "noise": noise, "unc": U.T, "phase": PH.T},
                               {"gains", "noise", "unc", "phase"}, n_threads)
 
@@ -261,6 +272,7 @@ class CompiledRun:
         the others and the time table are shared. NaN metrics for a diverged run."""
         if n > MAX_RUNS:
             raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
+        calls.check_memory(f"runs: {n}", n * _OUT_BYTES, error=SimulationError)
         fn = self.function(trace=False)
         out = calls.call_named(fn, {**varying, **self._shared()}, n=n, per_run=per_run,
                                n_threads=_n_threads(n_threads))

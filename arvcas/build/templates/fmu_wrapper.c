@@ -35,6 +35,9 @@
 #define NVR (VR_P + NP)
 #define GUID "@GUID@"
 
+#define MAX_RK4_STEPS 1000000.0  /* per fmi2DoStep: about 4e6 model evaluations, a few seconds */
+#define MAX_RK4_STEPS_TEXT "1000000"
+
 #define RHS @RHS@
 #define RHS_WORK @RHS@_work
 
@@ -516,6 +519,13 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real tc, fmi2Real H, fmi2Boolean n
     CHECK_CS(c, "fmi2DoStep");
     if (c->mode != S_STEP) return fail(c, "fmi2DoStep", "not initialized");
     if (!(H > 0.0) || !isfinite(H)) return fail(c, "fmi2DoStep", "communicationStepSize must be a finite number > 0");
+    if (!isfinite(tc) || fabs(tc - c->t) > 1e-9 * (1.0 + fabs(c->t)))
+        return fail(c, "fmi2DoStep", "currentCommunicationPoint is not the instance's current time "
+                                     "(the end of its last step, or the start time)");
+    /* bounded before any work: H / h_rk4 RK4 steps, at most MAX_RK4_STEPS in one call */
+    if (!(ceil(H / c->r[VR_H] - 1e-9) <= MAX_RK4_STEPS))
+        return fail(c, "fmi2DoStep", "communicationStepSize / h_rk4 asks for more than " MAX_RK4_STEPS_TEXT
+                                     " RK4 steps in one fmi2DoStep; use a smaller communication step or a larger h_rk4");
     n = (long)ceil(H / c->r[VR_H] - 1e-9);
     if (n < 1) n = 1;
     dt = H / (double)n;
