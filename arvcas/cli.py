@@ -391,7 +391,8 @@ def _run_simulate(a: argparse.Namespace) -> int:
     if a.from_front is not None and changed:
         r.meta["model_change_allowed"] = changed
         print(f"note: replayed under another model than the study's ({changed}), as allowed by --allow-model-change")
-    status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s"
+    status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s" + (
+        f": {r.meta['failure']}" if r.meta.get("failure") else "")
     print(f"{controller}: seed {r.seed}, {r.t[-1]:g} s, {status}")
     print(_metrics_table(r.chat, r.rmse))
     if a.out is not None and a.out.suffix == ".mat":

@@ -14,7 +14,9 @@ with ``cc`` and loaded with :func:`casadi.external`. Builds are cached between p
   ``os.replace`` publishes the ``.so`` and, last, the manifest.
 * **locked**: an ``fcntl.flock`` lock file per key (exclusive to build, shared to verify and load),
   so two processes building the same function at once compile it once and both succeed. Waiting is
-  bounded: on timeout the function is built privately in a temporary directory and not published.
+  bounded: on timeout, and in a cache that cannot be written (read-only), the function is built
+  privately in a directory of this process outside the cache (:func:`arvcas.io.files.private_dir`,
+  in the system's temporary directory) and not published.
 
 Generating C for ``uvms_rhs`` (6-9k instructions) takes 15-40 ms: a few per cent of compiling it
 (0.3 s at -O0, 1-2 s at -O2) and less than building its SX graph, which a cache hit in a new process
@@ -460,7 +462,10 @@ def _publish(plan: _Plan, d: Path, so: Path, man: Path) -> dict:
 
 
 def _build_private(plan: _Plan, d: Path) -> ca.Function:
-    work = Path(tempfile.mkdtemp(prefix=".private-", dir=d))
+    """Build in a directory of this process outside the cache ``d`` (which may be read-only)."""
+    from arvcas.io.files import private_dir
+
+    work = private_dir("build")
     with _LOCK:
         if not _PRIVATE_DIRS:
             atexit.register(_remove_private_dirs)
@@ -772,7 +777,9 @@ def preload(b: dict) -> int:
         todo = [it for it in b["items"] if it["ident"] not in _PRELOADED]
         if not todo:
             return 0
-        d = Path(tempfile.mkdtemp(prefix="arvcas-shipped-"))
+        from arvcas.io.files import private_dir
+
+        d = private_dir("shipped")
         if not _PRIVATE_DIRS:
             atexit.register(_remove_private_dirs)
         _PRIVATE_DIRS.append(d)

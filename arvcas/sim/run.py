@@ -196,6 +196,8 @@ class CompiledRun:
             i += w
         ok_b = bool(out["ok"].item() > 0.5)
         meta = self._meta(fn) | ({"noise_scale": float(noise_scale)} if noise_scale != 1.0 else {})
+        if not ok_b:
+            meta["failure"] = self._failure(series, float(out["t_fail"].item()))
         return Result(
             controller=self.controller.name, gains=np.asarray(g, dtype=float), seed=int(seed),
             chat=out["chat"].ravel(), rmse=out["rmse"].ravel(), ok=ok_b,
@@ -203,6 +205,26 @@ class CompiledRun:
             config_text=self.cfg.to_toml(), params_vector=self._pv.copy(), uncertainty=unc, phase=ph, h=self.cfg.time_h,
             meta=meta, signals=self.signals, series=series,
         )
+
+    def _failure(self, series: dict, t_fail: float) -> str:
+        """Why a traced run stopped at ``t_fail`` (the closed loop's checks, in docs/model.md §6's order):
+        the tracking error beyond the scenario's limits, a controller command that is not finite (or
+        above 1e12), or else the plant's state that the step from ``t_fail`` made non-finite (or >= 1e6)."""
+        cfg = self.cfg
+        k = min(int(round(t_fail / cfg.time_h)), len(series["eta"]) - 1)
+        e = np.abs(series["eta"][k] - series["eta_ref"][k])
+        lim = np.array([cfg.limits_e_position] * 3 + [cfg.limits_e_attitude] * 3)
+        dofs = "x y z phi theta psi".split()
+        bad = [i for i in range(6) if not e[i] < lim[i]]
+        if bad and np.isfinite(e[bad[0]]):
+            i = bad[0]
+            return (f"tracking error of {dofs[i]} {e[i]:.3g} {'m' if i < 3 else 'rad'} reached "
+                    f"limits.{'e_position' if i < 3 else 'e_attitude'} ({lim[i]:g})")
+        tau = series["tau_cmd"][k]
+        if not (np.isfinite(tau).all() and np.abs(tau).max() < 1e12):
+            return "the controller's command is not finite or above 1e12 (gains or controller state)"
+        return (f"the plant's state became non-finite (NaN or inf) or reached 1e6 in the step after t = "
+                f"{t_fail:g} s: the model gives no finite motion there (check the system's numbers and inputs)")
 
     def _meta(self, fn: ca.Function) -> dict:
         art = codegen.artifact_of(fn) or {}
