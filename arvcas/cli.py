@@ -232,7 +232,19 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
     from arvcas.params import default_layout, load, view
 
     params = load(params_path)
+    if params.structure.n_joints == 0:
+        raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) has no arm: there is no coupling "
+                         f"wrench to show")
     p = params.vector()
+    cfg = None
+    if params.structure != default_layout().structure:
+        from arvcas.sim import scenario
+
+        if params.default("scenario") is None:
+            raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) names no default scenario "
+                             f"([defaults] scenario): the demo follows its arm motion")
+        cfg = scenario.load_scenario(params.default("scenario"))
+        scenario.check_joint_limits(cfg, params)
     f = compiled("arm_wrench", _model_options(n_quad), system=params)
     z6 = np.zeros(6)
     if params.structure == default_layout().structure:
@@ -243,7 +255,6 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
         from arvcas.model.manipulator import stow_pose
         from arvcas.sim import scenario
 
-        cfg = scenario.load_scenario(params.default("scenario"))
         ts = ca.SX.sym("t")
         fq = ca.Function("q", [ts], list(scenario.joint_trajectory(cfg, stow_pose(view(p, params.layout)), ts)))
         traj = lambda t: [np.array(x).ravel() for x in fq(t)]  # noqa: E731

@@ -4,7 +4,6 @@ error within the timeout, and the last checkpoint is intact."""
 from __future__ import annotations
 
 import dataclasses
-import threading
 
 import numpy as np
 import pytest
@@ -14,6 +13,7 @@ from arvcas.tuning import load_study, run_study
 from arvcas.tuning.engines import DaskEngine, EngineError
 
 from test_tuning_study import write_tiny
+from trust_helpers import bounded
 
 distributed = pytest.importorskip("distributed")
 
@@ -31,19 +31,7 @@ def test_losing_every_worker_ends_the_study_with_the_checkpoint_kept(tmp_path):
                 saved["bytes"] = (out / "front.h5").read_bytes()
                 cluster.scale(0)
 
-        box = {}
-
-        def target():
-            try:
-                run_study(study.with_engine(eng), out, say=say)
-            except BaseException as e:  # noqa: BLE001
-                box["exc"] = e
-
-        t = threading.Thread(target=target, daemon=True)
-        t.start()
-        t.join(300)
-        assert not t.is_alive(), "the study waited forever for a worker"
-    e = box.get("exc")
+        e = bounded(lambda: run_study(study.with_engine(eng), out, say=say), timeout=300)
     assert isinstance(e, EngineError), e
     msg = str(e)
     assert "every worker was lost and none came back within 3 s" in msg and "\n" not in msg
@@ -90,21 +78,10 @@ def test_losing_a_worker_and_the_shipped_libraries_keeps_the_study_going(tmp_pat
 
         DaskEngine.prepare = prepare
         try:
-            box = {}
-
-            def target():
-                try:
-                    run_study(study.with_engine(eng), out, say=say)
-                except BaseException as e:  # noqa: BLE001
-                    box["exc"] = e
-
-            t = threading.Thread(target=target, daemon=True)
-            t.start()
-            t.join(300)
-            assert not t.is_alive(), "the study did not end"
+            e = bounded(lambda: run_study(study.with_engine(eng), out, say=say), timeout=300)
         finally:
             DaskEngine.prepare = real
-    assert "exc" not in box, box.get("exc")
+    assert e is None, e
     got = ck.read_checkpoint(out / "front.h5")
     assert got.n_gen == 3
     for k in ("X", "F", "chat", "rmse"):

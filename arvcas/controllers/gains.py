@@ -94,9 +94,14 @@ def default_gains(controller, system=None) -> np.ndarray:
         return g.copy()
     path = None
     if system is not None:
+        from arvcas.params import default_layout
         from arvcas.system import resolve
 
-        path = resolve(system).params.default("gains")
+        sysm = resolve(system)
+        path = sysm.params.default("gains")
+        if path is None and sysm.structure != default_layout().structure:  # Haidou-1's gains would fit nothing
+            raise GainError(f"system '{sysm.name}' ({sysm.path}) names no gain table ([defaults] gains, "
+                            f"docs/system-file.md): give controller {c.name} its gains, or the system a gain table")
     where = str(path) if path is not None else "arvcas/data/gains.toml"
     block = _table(path).get(c.defaults_block)
     if block is None:

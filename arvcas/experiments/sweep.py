@@ -199,7 +199,7 @@ def write_sweep(sw: Sweep, path) -> Path:
     path = _io.target(path, str(path))
 
     def fill(tmp: Path) -> None:
-        with h5py.File(tmp, "w") as f:
+        with _io.files.new_hdf5(tmp) as f:
             a = f.attrs
             a["format"], a["format_version"] = FORMAT, FORMAT_VERSION
             a["hs"] = np.array(sw.hs)

@@ -49,6 +49,7 @@ Output policy (:func:`check_outputs`)
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import fcntl
 import hashlib
@@ -65,7 +66,7 @@ __all__ = [
     "FileError", "Terminated", "MAX_TEXT_BYTES", "TMP_MARK", "MANIFEST", "check_input", "read_bytes", "read_text",
     "check_dir", "prepare_dir", "target", "atomic_write", "write_text", "write_figure", "remove_stale_temps",
     "install_signal_handlers", "written_by_arvcas", "hdf5_format", "permit_replace", "check_outputs", "same_file",
-    "kind_of", "default_kind", "subdir", "temp_dir", "release_temp", "private_dir",
+    "kind_of", "default_kind", "subdir", "temp_dir", "release_temp", "private_dir", "new_hdf5",
 ]
 
 MAX_TEXT_BYTES = 16 * 1024 * 1024  # parameter, scenario and study files are a few KiB
@@ -416,6 +417,25 @@ def atomic_write(path, write: Callable[[Path], None], error: type[ValueError] = 
         except OSError as e:
             raise error(f"{path}: written, but recording it in {path.parent / MANIFEST} failed ({e.strerror})") from None
     return path
+
+
+@contextlib.contextmanager
+def new_hdf5(tmp: Path):
+    """An HDF5 file built in memory and written to ``tmp`` (an :func:`atomic_write` temporary) by plain
+    file I/O when the block ends: the HDF5 library itself never writes to the disk, so a full disk is
+    one ``OSError`` (ENOSPC) here instead of HDF5's failed writes, which h5py reports as RuntimeErrors
+    while closing the file (and which have crashed the process)."""
+    import h5py
+
+    f = h5py.File(f"arvcas-image-{os.getpid()}-{id(tmp)}.h5", "w", driver="core", backing_store=False)
+    try:
+        yield f
+        f.flush()
+        image = f.id.get_file_image()
+    finally:
+        f.close()
+    with open(tmp, "wb") as fh:
+        fh.write(image)
 
 
 def write_text(path, text: str, error: type[ValueError] = FileError, kind: str | None = None) -> Path:

@@ -184,7 +184,7 @@ def write_result(result: Result, path) -> Path:
     data, attrs = _collect(result)
 
     def fill(tmp: Path) -> None:
-        with h5py.File(tmp, "w") as f:
+        with files.new_hdf5(tmp) as f:
             for k, v in attrs.items():
                 f.attrs[k] = v
             for name, (arr, sig) in data.items():
