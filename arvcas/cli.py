@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ["main", "TABLE", "COMMANDS", "Command", "seed_arg", "count_arg", "seconds_arg", "check_memory",
-           "MAX_SEED", "refuse"]
+           "MAX_SEED", "refuse", "FIGURE_FORMATS", "add_figure_format", "figure_file"]
 
 Paths = Callable[[argparse.Namespace], list]
 
@@ -119,6 +119,23 @@ def refuse(a: argparse.Namespace, names, why: str) -> None:
         v = getattr(a, n, None)
         if v is not None and v is not False:
             raise ValueError(f"--{n.replace('_', '-')}: {why}")
+
+
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+
+def add_figure_format(p: argparse.ArgumentParser, what: str = "the figures") -> None:
+    """``--format png|pdf|svg`` of a command that writes figures (dest ``format``, default None)."""
+    p.add_argument("--format", choices=FIGURE_FORMATS, default=None,
+                   help=f"format of {what}: png, pdf or svg (default: the file name's suffix, else png)")
+
+
+def figure_file(path: Path, fmt: str | None, what: str) -> str:
+    """The format a figure file ``path`` is written in (``fmt`` or its suffix); ValueError (one line)
+    for a format arvcas does not write or a suffix that contradicts ``--format``."""
+    from arvcas.io.style import figure_format
+
+    return figure_format(path, fmt, what)
 
 
 def _model_options(n_quad: int):
@@ -306,14 +323,16 @@ def _run_systems(a: argparse.Namespace) -> int:
 
 
 def _add_knees(p: argparse.ArgumentParser) -> None:
-    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR", help="the --out directory of arvcas tune")
+    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR",
+                   help="the --out directory of arvcas tune (one front, or one per controller), or a front.h5")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="where to write (created if missing)")
+    add_figure_format(p)
 
 
 def _knees_outputs(a):
-    from arvcas.experiments.knees import knee_fronts, output_files
+    from arvcas.experiments.knees import front_controllers, output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out, [f.parent.name for f in knee_fronts(a.study_dir)])]
+    return [(f"--out {a.out}", p) for p in output_files(a.out, front_controllers(a.study_dir), a.format or "png")]
 
 
 def _run_knees(a: argparse.Namespace) -> int:
@@ -321,7 +340,7 @@ def _run_knees(a: argparse.Namespace) -> int:
     from arvcas.io import files
 
     files.prepare_dir(a.out, f"--out {a.out}")
-    replay_knees(a.study_dir, a.out)
+    replay_knees(a.study_dir, a.out, fmt=a.format or "png")
     return 0
 
 
@@ -414,12 +433,13 @@ def _run_simulate(a: argparse.Namespace) -> int:
 def _add_paper(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     p.add_argument("--seed", type=seed_arg, default=0, help="sensor-noise seed shared by the runs (default 0)")
+    add_figure_format(p, "Figures 5-11")
 
 
 def _run_paper(a: argparse.Namespace) -> int:
     from arvcas.experiments.paper import run_paper
 
-    out = run_paper(a.out, seed=a.seed)
+    out = run_paper(a.out, seed=a.seed, fmt=a.format or "png")
     print((a.out / "table3.md").read_text())
     # the job succeeded when every run completed; whether the paper's comparison reproduces is
     # a finding, reported in table3.md, not an error
@@ -484,7 +504,7 @@ def _out_file(dest: str, label: str | None = None) -> Paths:
 def _paper_outputs(a):
     from arvcas.experiments.paper import output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out)]
+    return [(f"--out {a.out}", p) for p in output_files(a.out, fmt=a.format or "png")]
 
 
 def _bench_outputs(a):
@@ -524,9 +544,9 @@ def _table() -> tuple[Command, ...]:
         Command("front robust", "re-evaluate every front member under Monte Carlo; mark the robust non-dominated "
                 "ones (robust.h5, robust.md, robust.png)", x.add_robust, x.run_robust, inputs=(("file", "front"),),
                 outputs=x.robust_outputs, check=x.check_robust),
-        Command("compare", "hypervolumes of two fronts against one reference point, and who dominates where; or two "
-                "Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
-                "(front robust)", x.add_compare, x.run_compare, inputs=(("a", "front"), ("b", "front")),
+        Command("compare", "hypervolumes of two or more fronts against one reference point, and who dominates where; "
+                "or two Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
+                "(front robust)", x.add_compare, x.run_compare, inputs=(("fronts", "front"),),
                 outputs=x.compare_outputs, check=x.check_compare),
         Command("sweep", "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 "
                 "(table, plot)", x.add_sweep, x.run_sweep,
@@ -580,35 +600,44 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _inputs(cmd: Command, a: argparse.Namespace) -> list[tuple[str, Path]]:
-    """Apply the input policy to the declared inputs; returns them as (label, path of the file)."""
-    from arvcas.io import files
-
+    """Apply the input policy to the declared inputs (an argument may hold a list); returns them as
+    (label, path of the file)."""
     out = []
     for dest, kind, *what in cmd.inputs:
-        p = getattr(a, dest, None)
-        if p is None:
-            continue
-        label = dest if dest in ("file", "study", "a", "b", "study_dir") else f"--{dest.replace('_', '-')}"
-        if kind == "system":
-            from arvcas.system import shipped
-
-            label = "--system"
-            if str(p) in shipped():
-                p = shipped()[str(p)]
-                setattr(a, dest, p)
-            elif not p.exists() and p.suffix.lower() != ".toml":
-                from arvcas.config import closest
-
-                raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
-                                 f"file{closest(str(p), shipped(), 0.3)}")
-        p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
-        if kind == "front" and p.is_dir():
-            p = p / "front.h5"
-            if not p.exists():
-                continue  # the handler names what the directory holds
-            files.check_input(p)
-        out.append((label, p))
+        value = getattr(a, dest, None)
+        for p in value if isinstance(value, list) else [value]:
+            item = _input(dest, kind, what, p, a)
+            if item is not None:
+                out.append(item)
     return out
+
+
+def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[str, Path] | None:
+    """The input policy for one input ``p`` of argument ``dest``: (label, path of the file) or None."""
+    from arvcas.io import files
+
+    if p is None:
+        return None
+    label = "front" if dest == "fronts" else dest if dest in ("file", "study", "study_dir") else f"--{dest.replace('_', '-')}"
+    if kind == "system":
+        from arvcas.system import shipped
+
+        label = "--system"
+        if str(p) in shipped():
+            p = shipped()[str(p)]
+            setattr(a, dest, p)
+        elif not p.exists() and p.suffix.lower() != ".toml":
+            from arvcas.config import closest
+
+            raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
+                             f"file{closest(str(p), shipped(), 0.3)}")
+    p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
+    if kind == "front" and p.is_dir():
+        p = p / "front.h5"
+        if not p.exists():
+            return None  # the handler names what the directory holds
+        files.check_input(p)
+    return label, p
 
 
 def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
