@@ -14,8 +14,9 @@ before calling ``run``:
 * bounds: counts, seeds and timeouts are checked by their argparse types (:func:`seed_arg`,
   :func:`count_arg`, :func:`seconds_arg`) and the memory a request would take by the command's check.
 
-Errors (ValueError and subclasses, OSError) are printed as one line ``arvcas: error: ...`` with exit
-code 2, usage errors likewise (``arvcas: error: CMD: argument ...``); SIGTERM and SIGHUP end the
+A compile that takes more than a second prints a progress line on standard error
+(:func:`arvcas.build.codegen.report_progress`). Errors (ValueError and subclasses, OSError) are printed
+as one line ``arvcas: error: ...`` with exit code 2, usage errors likewise (``arvcas: error: CMD: argument ...``); SIGTERM and SIGHUP end the
 command like Ctrl-C (temporary files removed), exit 128 + signal.
 """
 
@@ -672,9 +673,12 @@ def main(argv: list[str] | None = None) -> int:
     old = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP)}
     files.install_signal_handlers()
     try:
+        from arvcas.build.codegen import report_progress
+
         cmd = COMMANDS[a._command]
         _apply_policies(cmd, a)
-        return cmd.run(a)
+        with report_progress(sys.stderr):  # a build of more than a second says so on standard error
+            return cmd.run(a)
     except (ValueError, OSError) as e:
         msg = " ".join(str(e).split()) or type(e).__name__
         print(f"arvcas: error: {msg}", file=sys.stderr)
