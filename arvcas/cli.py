@@ -540,8 +540,12 @@ def _table() -> tuple[Command, ...]:
         Command("front export", "the front as CSV or JSON (stdout, or --out FILE), or a MATLAB .mat file",
                 t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out"),
                 check=t.check_front_export),
-        Command("front plot", "plot the front, Table 2 on the same draws and the knee point (PNG)", t.add_front_plot,
+        Command("front plot", "plot the front, the default gains (Haidou-1: Table 2) on the same draws and the knee "
+                "point (PNG, PDF or SVG)", t.add_front_plot,
                 t.run_front_plot, inputs=(("file", "front"),), outputs=t.front_plot_outputs),
+        Command("front explore", "one self-contained HTML page of every front: hover a member for its gains and "
+                "metrics, click it for its time response", x.add_explore, x.run_explore, inputs=(("fronts", "front"),),
+                outputs=x.explore_outputs, check=x.check_explore),
         Command("front robust", "re-evaluate every front member under Monte Carlo; mark the robust non-dominated "
                 "ones (robust.h5, robust.md, robust.png)", x.add_robust, x.run_robust, inputs=(("file", "front"),),
                 outputs=x.robust_outputs, check=x.check_robust),

@@ -14,7 +14,8 @@ from pathlib import Path
 
 __all__ = ["add_sweep", "check_sweep", "run_sweep", "sweep_outputs", "add_montecarlo", "check_montecarlo",
            "run_montecarlo", "montecarlo_outputs", "add_robust", "check_robust", "run_robust", "robust_outputs",
-           "add_compare", "check_compare", "run_compare", "compare_outputs", "MAX_RUNS", "MAX_SEEDS"]
+           "add_compare", "check_compare", "run_compare", "compare_outputs", "add_explore", "check_explore", "run_explore", "explore_outputs",
+           "MAX_RUNS", "MAX_SEEDS"]
 
 MAX_RUNS = 1_000_000  # Monte Carlo draws per study (or per front member)
 MAX_SEEDS = 10_000  # noise seeds of a sweep
@@ -320,6 +321,58 @@ def run_robust(a: argparse.Namespace) -> int:
     print(robust_markdown(rf))
     for p in files.values():
         print(f"wrote {p}")
+    return 0
+
+
+# ---- front explore -----------------------------------------------------------------------------------
+
+
+def _members(text: str):
+    t = text.strip().lower()
+    if t in ("all", "knee"):
+        return t
+    from arvcas.cli import count_arg
+
+    return count_arg(1, 1_000_000, "--members")(text)
+
+
+def add_explore(p: argparse.ArgumentParser) -> None:
+    from arvcas.cli import count_arg
+
+    p.add_argument("fronts", type=Path, nargs="+", metavar="DIR",
+                   help="study output directories (every front in them) or front.h5 files, of one system")
+    p.add_argument("--out", type=Path, required=True, metavar="FILE.html", help="the page (self-contained HTML)")
+    p.add_argument("--members", type=_members, default="all", metavar="all|knee|N",
+                   help="whose time responses the page stores: every member (default), the knee, or N members "
+                        "spread along each front and its knee")
+    p.add_argument("--samples", type=count_arg(2, 100_000, "--samples"), default=None, metavar="N",
+                   help="samples kept of each time response (default 300: every k-th controller sample)")
+    p.add_argument("--allow-model-change", action="store_true",
+                   help="write the page even if the model code or parameters changed since the studies (the page "
+                        "says whether the replays still reproduce the stored metrics)")
+
+
+def check_explore(a: argparse.Namespace) -> None:
+    if a.out.suffix.lower() not in (".html", ".htm"):
+        raise ValueError(f"--out {a.out}: the page is HTML; name it FILE.html")
+    try:
+        import plotly  # noqa: F401
+    except ImportError:
+        raise ValueError("front explore: needs the plotly package (pip install 'arvcas[explore]')") from None
+
+
+def explore_outputs(a: argparse.Namespace) -> list:
+    return [("--out", a.out)]
+
+
+def run_explore(a: argparse.Namespace) -> int:
+    from arvcas.experiments import _io
+    from arvcas.experiments.explore import DEFAULT_SAMPLES, write_page
+
+    _io.target(a.out, f"--out {a.out}")
+    out = write_page(a.fronts, a.out, members=a.members, samples=a.samples or DEFAULT_SAMPLES,
+                     allow_model_change=a.allow_model_change, say=_say)
+    print(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB)")
     return 0
 
 

@@ -16,30 +16,16 @@ import numpy as np
 
 from arvcas.controllers.gains import DOFS
 
-__all__ = ["knee_fronts", "replay_knees", "output_files"]
-
-
-def knee_fronts(study_dir: str | Path) -> list[Path]:
-    """The ``front.h5`` of every controller in a study's output directory (sorted by name): the
-    ``<controller>/front.h5`` of a study of several controllers, or the ``front.h5`` of a study of one
-    (the directory itself, or that file)."""
-    d = Path(study_dir)
-    if d.is_file():
-        return [d]
-    fronts = sorted(d.glob("*/front.h5"))
-    if not fronts and (d / "front.h5").is_file():
-        return [d / "front.h5"]
-    if not fronts:
-        raise ValueError(f"{d}: no front.h5 and no <controller>/front.h5 in this directory (the --out of arvcas tune)")
-    return fronts
+__all__ = ["front_controllers", "replay_knees", "output_files"]
 
 
 def front_controllers(study_dir: str | Path) -> list[str]:
-    """The controller of each of :func:`knee_fronts` (read from the files: a one-controller study's
-    directory is named by the user)."""
+    """The controller of each front of a study directory (:func:`arvcas.tuning.front.front_paths`; read from
+    the files: a one-controller study's directory is named by the user)."""
     from arvcas.tuning import checkpoint as ck
+    from arvcas.tuning.front import front_paths
 
-    return [ck.read_checkpoint(f).controller for f in knee_fronts(study_dir)]
+    return [ck.read_checkpoint(f).controller for f in front_paths(study_dir)]
 
 
 def output_files(out: str | Path, controllers, fmt: str = "png") -> list[Path]:
@@ -58,12 +44,12 @@ def replay_knees(study_dir: str | Path, out: str | Path, say=print, fmt: str = "
     from arvcas.sim.scenario import loads_scenario
     from arvcas.sim.simulation import simulate
     from arvcas.tuning import checkpoint as ck
-    from arvcas.tuning.front import member_gains, read_front, system_params
+    from arvcas.tuning.front import front_paths, member_gains, read_front, system_params
 
     out = Path(out)
     rows, runs = [], []
     system = None
-    for path in knee_fronts(study_dir):
+    for path in front_paths(study_dir):
         fr = read_front(path)
         k = fr.knee()
         c = ck.read_checkpoint(path)

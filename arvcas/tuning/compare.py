@@ -104,10 +104,9 @@ def compare_fronts(*fronts, ref=None) -> Comparison:
     ref = np.asarray(ref, dtype=float)
     if ref.shape != (2,) or not np.isfinite(ref).all():
         raise ValueError(f"--ref: expected two finite numbers, got {ref}")
-    labels = [f.controller for f in frs]
-    for i, f in enumerate(frs):  # the same controller twice: add its directory
-        if labels.count(f.controller) > 1:
-            labels[i] = f"{f.controller} ({f.path.parent.name})"
+    names = [f.controller for f in frs]
+    labels = [f"{n} ({f.path.parent.name})" if names.count(n) > 1 else n for n, f in zip(names, frs)]
+    labels = [f"{lab} [{k}]" if labels.count(lab) > 1 else lab for lab, k in zip(labels, _letters(len(frs)))]
     return Comparison(
         labels=tuple(labels), reference_point=ref, hv=tuple(hypervolume(f.F, f.G, ref) for f in frs),
         sizes=tuple(f.size for f in frs),

@@ -26,7 +26,7 @@ from arvcas.metrics import DOFS, table3
 from arvcas.tuning import checkpoint as ck
 
 __all__ = ["Front", "read_front", "knee_index", "export_front", "plot_front", "plot_fronts", "member_gains",
-           "replay", "resolve_front_path", "check_provenance", "check_same_model"]
+           "replay", "resolve_front_path", "front_paths", "check_provenance", "check_same_model", "system_params"]
 
 
 def resolve_front_path(p: str | Path) -> Path:
@@ -42,6 +42,22 @@ def resolve_front_path(p: str | Path) -> Path:
                                      f"give one of {', '.join(str(s) for s in subs)}")
         raise ck.CheckpointError(f"{p}: no {ck.FRONT_NAME} in this directory")
     return p
+
+
+def front_paths(p: str | Path) -> list[Path]:
+    """Every ``front.h5`` of a study output directory (sorted by controller directory): the
+    ``<controller>/front.h5`` of a study of several controllers, or the ``front.h5`` of a study of one
+    (the directory itself, or that file)."""
+    p = Path(p)
+    if not p.is_dir():
+        return [p]
+    fronts = sorted(p.glob(f"*/{ck.FRONT_NAME}"))
+    if not fronts and (p / ck.FRONT_NAME).is_file():
+        return [p / ck.FRONT_NAME]
+    if not fronts:
+        raise ck.CheckpointError(f"{p}: no {ck.FRONT_NAME} and no <controller>/{ck.FRONT_NAME} in this directory "
+                                 "(the --out of arvcas tune)")
+    return fronts
 
 
 @dataclass(frozen=True)
