@@ -68,7 +68,7 @@ def test_plot(fronts, tmp_path, capsys):
     assert cli.main(["front", "plot", str(fronts["agsta"]), "--out", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "knee: member" in capsys.readouterr().out
-    labels = [t.get_text() for t in read_front(fronts["agsta"]).plot().axes[0].get_legend().get_texts()]
+    labels = [t.get_text() for t in read_front(fronts["agsta"]).plot().legends[0].get_texts()]  # below the axes
     assert any("Table 2" in t for t in labels) and any("knee" in t for t in labels)
 
 

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["COLUMN_WIDTH", "PAGE_WIDTH", "PALETTE", "FORMATS", "PNG_DPI", "RC", "styled", "figure", "color",
-           "trace", "figure_format", "save"]
+           "trace", "log_labels", "figure_format", "save"]
 
 COLUMN_WIDTH = 3.5  # in: one journal column (88-90 mm)
 PAGE_WIDTH = 7.16  # in: the full text width of a two-column page (182 mm)
@@ -109,6 +109,26 @@ def color(c, i: int = 0) -> str:
         if len(c) == 2 and c[0] == "C" and c[1].isdigit():
             return PALETTE[_CYCLE[int(c[1]) % len(_CYCLE)]]
     return c
+
+
+def log_labels(ax) -> None:
+    """Plain numbers on log axes (0.3, 0.5, 1, 2) instead of 3 x 10^-1: the minor ticks at mantissas 2, 3
+    and 5 are labelled only where a decade would otherwise have fewer than two labels."""
+    from matplotlib.ticker import FuncFormatter
+
+    def major(v, _pos):
+        return f"{v:g}"
+
+    def minor(v, _pos):
+        m = v / 10 ** np.floor(np.log10(v)) if v > 0 else 0
+        return f"{v:g}" if any(abs(m - k) < 1e-6 for k in (2, 3, 5)) else ""
+
+    for axis in (ax.xaxis, ax.yaxis):
+        if axis.get_scale() == "log":
+            lo, hi = sorted(axis.get_view_interval())
+            axis.set_major_formatter(FuncFormatter(major))
+            few = lo > 0 and np.log10(hi / lo) < 2.0
+            axis.set_minor_formatter(FuncFormatter(minor) if few else FuncFormatter(lambda v, _p: ""))
 
 
 # ---- dense noisy series --------------------------------------------------------------------------------------

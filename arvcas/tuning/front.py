@@ -247,8 +247,9 @@ def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bo
     def draw(ax):
         from arvcas.io.plots import controller_color
 
-        if ax is None:  # a bare Figure: no pyplot state, no GUI backend
-            fig = style.figure("column", 3.2 + 0.25 * len(fronts))
+        own = ax is None
+        if own:  # a bare Figure: no pyplot state, no GUI backend
+            fig = style.figure("column", 3.0 + 0.35 * len(fronts) + (0.3 if paper else 0.0))
             ax = fig.add_subplot()
         else:
             fig = ax.figure
@@ -263,24 +264,28 @@ def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bo
                 ax.scatter(P[:, 0], P[:, 1], s=4, color=col, alpha=0.25, linewidths=0)
             if fr.size:
                 ax.plot(fr.F[:, 0], fr.F[:, 1], "-o", color=col, ms=2.0, lw=0.8,
-                        label=f"{lab}: front ({fr.size}), HV {fr.hv:.4g}")
+                        label=f"{lab}: {fr.size} members, HV {fr.hv:.4g}")
                 k = fr.knee()
                 ax.plot(fr.F[k, 0], fr.F[k, 1], "D", color=col, ms=5, mec="k", mew=0.6,
                         label=f"{lab}: knee ({fr.F[k, 0]:.3g}, {fr.F[k, 1]:.3g})")
             if np.isfinite(fr.table2_F).all():
                 ax.plot(fr.table2_F[0], fr.table2_F[1], "*", color=col, ms=8, mec="k", mew=0.5,
-                        label=f"{lab}: {dname} gains, same draw(s)")
+                        label=f"{lab}: {dname} gains")
         if paper:
             a, p = _paper_points()
             ax.plot(*a, "s", mfc="none", mec="0.3", ms=5, label="paper Table 3 AGSTA (their simulator)")
             ax.plot(*p, "^", mfc="none", mec="0.3", ms=5, label="paper Table 3 proposed (their simulator)")
-        norm = "paper's AGSTA" if not any(fr.system for fr in fronts) else "AGSTA at the defaults"
-        ax.set_xlabel(f"f_chat: mean CHAT / {norm} CHAT")
-        ax.set_ylabel(f"f_rmse: mean RMSE / {norm} RMSE")
+        norm = "paper's AGSTA" if not any(fr.system for fr in fronts) else "AGSTA at its defaults"
+        ax.set_xlabel(f"f_chat: CHAT / {norm}")
+        ax.set_ylabel(f"f_rmse: RMSE / {norm}")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        style.log_labels(ax)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=6, loc="best")
+        if own:  # below the axes, clear of the fronts
+            fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=2, fontsize=6)
+        else:
+            ax.legend(fontsize=6, loc="best")
         return fig
 
     return draw(ax)
