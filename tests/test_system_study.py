@@ -206,11 +206,14 @@ def test_no_output_for_the_bluerov2_names_a_paper_table(study_dir, page, tmp_pat
         ["front", "plot", str(out / "proposed"), "--out", str(d / "front.svg")],
         ["front", "export", str(out / "proposed"), "--format", "json", "--out", str(d / "front.json")],
         ["front", "export", str(out / "proposed"), "--format", "csv"],
+        ["front", "export", str(out / "proposed"), "--format", "mat", "--out", str(d / "front.mat")],
         ["knees", str(out), "--out", str(d / "knees"), "--format", "svg"],
         ["front", "robust", str(out / "agsta"), "--runs", "2", "--out", str(d / "robust"), "--format", "svg"],
         ["montecarlo", "--from-front", str(out / "proposed"), "--index", "knee", "--runs", "2", "--config",
          str(study_dir / "short.toml"), "--system", "bluerov2_heavy_alpha5", "--out", str(d / "mc.h5")],
         ["tune", str(study_dir / "study.toml"), "--out", str(out), "--resume"],
+        ["sweep", "--system", "bluerov2_heavy_alpha5", "--config", str(study_dir / "short.toml"), "--h", "0.1",
+         "--controllers", "proposed,agsta", "--out", str(d / "sweep"), "--format", "svg"],
     ]
     texts = []
     for argv in runs:
@@ -222,8 +225,14 @@ def test_no_output_for_the_bluerov2_names_a_paper_table(study_dir, page, tmp_pat
     assert (d / "cmp.svg").read_text().lstrip().startswith("<?xml") and "<svg" in (d / "knees" / "knees_thrust.svg").read_text()
     assert ">T8<" in (d / "knees" / "knees_thrust.svg").read_text()  # the system's own thruster names, as text
     texts.append(json.dumps(_page_data(page)))
-    with h5py.File(out / "proposed" / "front.h5", "r") as f:
-        f.visititems(lambda n, o: texts.append(str(o.attrs.get("description", ""))))
+    for h5 in [out / "proposed" / "front.h5", *d.rglob("*.h5")]:  # descriptions in the front and result files
+        with h5py.File(h5, "r") as f:
+            texts += [str(v) for v in f.attrs.values()]
+            f.visititems(lambda n, o: texts.extend(str(v) for v in o.attrs.values()))
+    from scipy.io import loadmat
+
+    mat = loadmat(d / "front.mat", simplify_cells=True)
+    texts += [str(mat[k]) for k in ("units", "description", "arvcas")]
     found = sorted({m.group(0) for t in texts for m in PAPER_NAMES.finditer(t)})
     assert not found, found
     joined = "\n".join(texts)
