@@ -124,12 +124,11 @@ def _front_data(path: Path, checked, members, samples: int, say) -> dict:
     knee = fr.knee() if fr.size else -1
     chosen = member_selection(fr.size, knee, members)
     traces: dict[str, dict] = {}
-    keep = None
+    keep = t = names = None
     worst = 0.0
-    names = None
 
     def replay(key: str, gains, chat_ref, rmse_ref):
-        nonlocal keep, worst, names
+        nonlocal keep, worst, names, t
         r = run.simulate(gains, seed, unc, phase)
         if one_draw and chat_ref is not None and np.all(np.isfinite(chat_ref)):
             d = max(float(np.max(np.abs(r.chat - chat_ref))), float(np.max(np.abs(r.rmse - rmse_ref))))
@@ -140,7 +139,7 @@ def _front_data(path: Path, checked, members, samples: int, say) -> dict:
             worst = max(worst, d)
         if keep is None:
             keep = _keep(len(r.t), samples)
-            names = list(thruster_names(r))
+            names, t = list(thruster_names(r)), np.asarray(r.t)[keep]
         traces[key] = {"e": _pack((r.eta - r.eta_ref)[keep]), "u": _pack(np.asarray(r.thrust)[keep]),
                        "ok": bool(r.ok), "t_fail": None if r.ok else float(r.t_fail)}
 
@@ -149,7 +148,6 @@ def _front_data(path: Path, checked, members, samples: int, say) -> dict:
         replay(str(i), fr.gains[i], fr.chat[0, i], fr.rmse[0, i])
     replay("defaults", fr.table2, c.table2_chat[0] if c.table2_chat is not None else None,
            c.table2_rmse[0] if c.table2_rmse is not None else None)
-    t = np.arange(int(round(cfg.time_duration / cfg.time_h)) + 1) * cfg.time_h
     feas = fr.population_G[:, 0] <= 0
     return {
         "path": str(path), "controller": fr.controller, "label": controller_label(fr.controller),
@@ -162,7 +160,7 @@ def _front_data(path: Path, checked, members, samples: int, say) -> dict:
         "defaults": {"F": [None if not np.isfinite(x) else float(x) for x in fr.table2_F], "gains": _rounded(fr.table2),
                      "chat": _rounded(c.table2_chat.mean(axis=0)) if c.table2_chat is not None else None,
                      "rmse": _rounded(c.table2_rmse.mean(axis=0)) if c.table2_rmse is not None else None},
-        "t": _rounded(t[keep], 9), "k": int(keep[1] - keep[0]) if keep.size > 1 else 1, "h": cfg.time_h,
+        "t": _rounded(t, 9), "k": int(keep[1] - keep[0]) if keep.size > 1 else 1, "h": cfg.time_h,
         "thrusters": names, "traces": traces,
         "replay": {"reproduced": one_draw and worst == 0.0, "max_difference": worst, "model_change": changed},
     }
