@@ -39,6 +39,10 @@ HYDRO_ALIASES = {
     "M_dsds": "M_w_ds2_absw",
 }
 
+# Haidou-1's parametric layout (Appendix B): its six thrusters in the order of B's columns
+# (arvcas.model.thrusters: stern left and right, rotatable; side thrusters at the bow and the stern; verticals)
+HAIDOU1_THRUSTERS = ("T1 stern left", "T2 stern right", "T3 side (bow)", "T4 side (stern)", "T5 vertical (port)",
+                     "T6 vertical (starboard)")
 # element labels of the vector entries: parameter ``<key>.<label>``
 VECTOR_ELEMENTS = {
     "position": ("x", "y", "z"), "direction": ("x", "y", "z"), "axis": ("x", "y", "z"),
@@ -124,10 +128,16 @@ class Structure:
     mount_rpy: bool
     link_drag: tuple[bool, ...]  # chain: the link has a drag segment
     link_cd: tuple[bool, ...]  # chain: the link has its own Cd
+    arm_trim: bool = True  # docs/model.md §3's trim buoyancy for the stowed arm (``[arm] trim = false``: none)
 
     @property
     def n_thrusters(self) -> int:
         return 6 if self.thrusters is None else len(self.thrusters)
+
+    @property
+    def thruster_names(self) -> tuple[str, ...]:
+        """The thrusters' names in allocation order (the columns of B): the list's, or Haidou-1's six."""
+        return HAIDOU1_THRUSTERS if self.thrusters is None else self.thrusters
 
     def key(self) -> str:
         """A stable text of the structure, for compile-cache keys."""
@@ -259,6 +269,9 @@ def _structure(doc: dict, default_name: str) -> Structure:
         raise _Bad(f"arm: {nj} joints, at most {MAX_JOINTS} are supported")
     if nl != nj:
         raise _Bad(f"arm: {nj} joints but {nl} links (each joint moves one link: arm.link1 .. arm.link{nj})")
+    trim = arm.get("trim", True)
+    if not isinstance(trim, bool):
+        raise _Bad(f"arm.trim: expected true or false, got {trim!r}")
     mount = _table(arm, "mount", "arm") if nj else arm.get("mount", {})
     rpy = [k for k in ("roll", "pitch", "yaw") if k in mount]
     if rpy and len(rpy) != 3:
@@ -280,7 +293,7 @@ def _structure(doc: dict, default_name: str) -> Structure:
                 raise _Bad(f"arm.link{i}: a drag segment needs drag_diameter, drag_from and drag_to (or none)")
             drag.append(bool(have))
             cd.append("Cd" in lk)
-    return Structure(*vehicle_only, form, nj, bool(rpy), tuple(drag), tuple(cd))
+    return Structure(*vehicle_only, form, nj, bool(rpy), tuple(drag), tuple(cd), trim)
 
 
 # ---- the schema of one structure ------------------------------------------------------------------------
@@ -457,11 +470,13 @@ def schema_for(s: Structure) -> type:
 
 
 def file_doc(doc: dict) -> dict:
-    """The document as the schema reads it: ``[system]``, ``[defaults]`` and ``hydro.coriolis_added_mass``
-    (not numbers) removed, a thruster list keyed by name."""
+    """The document as the schema reads it: ``[system]``, ``[defaults]``, ``hydro.coriolis_added_mass`` and
+    ``arm.trim`` (not numbers) removed, a thruster list keyed by name."""
     out = {k: v for k, v in doc.items() if k not in ("system", "defaults")}
     if isinstance(out.get("hydro"), dict) and "coriolis_added_mass" in out["hydro"]:
         out["hydro"] = {k: v for k, v in out["hydro"].items() if k != "coriolis_added_mass"}
+    if isinstance(out.get("arm"), dict) and "trim" in out["arm"]:
+        out["arm"] = {k: v for k, v in out["arm"].items() if k != "trim"}
     thr = out.get("thrusters")
     if isinstance(thr, dict) and isinstance(thr.get("unit"), list):
         out["thrusters"] = {u["name"]: {k: v for k, v in u.items() if k != "name"} for u in thr["unit"]}

@@ -34,9 +34,11 @@ from arvcas.system import SHIPPED, load_system
 RTOL = 1e-12
 
 
-@pytest.fixture(scope="module", params=SHIPPED)
+@pytest.fixture(scope="module", params=SHIPPED[:2])
 def system(request):
-    """Each shipped system in turn (the export fixtures below are per system)."""
+    """Haidou-1 and the BlueROV2 Heavy in turn (the export fixtures below are per system). The third shipped
+    system, hinsdale_bluerov2_alpha5, has the BlueROV2's structure (8-thruster list, 4-joint chain arm),
+    trim off: exporting it would add CI time but no code path (tests/test_hinsdale.py checks it)."""
     return load_system(request.param)
 
 
@@ -74,10 +76,12 @@ def _run(cmd, **kw):
 
 
 @pytest.fixture(scope="module")
-def made(exported):
+def made(exported, prefix):
     if shutil.which("make") is None or shutil.which("c++") is None:
         pytest.skip("make or c++ is not installed")
-    _run(["make", "-C", str(exported)])
+    out = _run(["make", "-C", str(exported)])
+    lib = prefix.rstrip("_")
+    assert re.search(rf"^compiling lib{lib}\.so \.\.\. \d+ s$", out, re.M), out  # make's progress line
     return exported
 
 

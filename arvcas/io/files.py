@@ -30,12 +30,14 @@ What arvcas wrote, and of which kind (:func:`kind_of`, :func:`written_by_arvcas`
     checkpoint is never replaced by a result file, a Monte Carlo file by a front, an FMU or an
     export-c file by a figure. arvcas's HDF5 files are recognised by their own ``format`` attribute,
     which is their kind (``arvcas-result``, ``arvcas.tuning.front``, ``arvcas-montecarlo``, ...).
-    Every other file arvcas writes (CSV, JSON, Markdown, PNG, .mat, .fmu, export-c's sources) is
+    Every other file arvcas writes (CSV, JSON, Markdown, HTML, PNG, PDF, SVG, .mat, .fmu, export-c's
+    sources) is
     recorded, after its rename, in the manifest ``.arvcas-manifest.json`` of its directory (name ->
     size, sha256 of the bytes written and kind; updated under an ``flock`` of the directory): such a
     file counts as arvcas's only while its bytes are still those arvcas wrote; a file edited since is
     the user's. A writer names its kind (``kind=``); by default it is the file's suffix (``md``,
-    ``png``, ...). An entry recorded before kinds were has none (``""``) and is replaced as before. The decision is never taken from a claim inside a file arvcas did not record
+    ``png``, ...). An entry recorded before kinds were has none (``""``) and is replaced as before.
+    The decision is never taken from a claim inside a file arvcas did not record
     (an FMU's ``generationTool``), so no foreign file is opened to decide (no zip is unpacked).
     Directories arvcas creates below an output directory (:func:`subdir`) are never symbolic links,
     with or without ``--force``: nothing is written through a link out of the output directory.
@@ -443,12 +445,16 @@ def write_text(path, text: str, error: type[ValueError] = FileError, kind: str |
     return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"), error, kind)
 
 
-def write_figure(path, fig, dpi: int = 150, error: type[ValueError] = FileError) -> Path:
-    """A matplotlib figure as PNG, written atomically (kind ``png``)."""
-    from arvcas import __version__
+def write_figure(path, fig, fmt: str | None = None, error: type[ValueError] = FileError) -> Path:
+    """A matplotlib figure, written atomically in ``fmt`` (``png``, ``pdf`` or ``svg``; default: from the
+    name's suffix) in the house style's settings (:func:`arvcas.io.style.save`); its kind is ``fmt``."""
+    from arvcas.io import style
 
-    return atomic_write(path, lambda p: fig.savefig(p, format="png", dpi=dpi,
-                                                    metadata={"Software": f"arvcas {__version__}"}), error, "png")
+    try:
+        fmt = style.figure_format(path, fmt)
+    except ValueError as e:
+        raise error(str(e)) from None
+    return atomic_write(path, lambda p: style.save(fig, p, fmt), error, fmt)
 
 
 def remove_stale_temps(d) -> list[Path]:
