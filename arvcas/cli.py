@@ -695,6 +695,17 @@ def main(argv: list[str] | None = None) -> int:
         logging.basicConfig(level=logging.INFO, format="arvcas: %(message)s")
     old = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP)}
     files.install_signal_handlers()
+    import warnings
+
+    shown = warnings.showwarning
+
+    def show(message, category, *args, **kw):  # a system file's implausible number: one line
+        if category.__name__ == "PlausibilityWarning":
+            print(f"arvcas: warning: {' '.join(str(message).split())}", file=sys.stderr)
+        else:
+            shown(message, category, *args, **kw)
+
+    warnings.showwarning = show
     try:
         from arvcas.build.codegen import report_progress
 
@@ -715,6 +726,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         import threading
 
+        warnings.showwarning = shown
         if threading.current_thread() is threading.main_thread():
             for s, h in old.items():
                 if h is not None:

@@ -178,6 +178,19 @@ def _thruster_name(n: Any, i: int) -> str:
     return n
 
 
+_SYSTEM_KEYS = ("name", "description", "accept_implausible")
+
+
+def _check_system_keys(sysd: dict) -> None:
+    """``[system]`` has a name, a description and ``accept_implausible`` (true: the plausibility rules of
+    docs/system-file.md warn instead of refusing; it shapes no code)."""
+    for k in sysd:
+        if k not in _SYSTEM_KEYS:
+            raise _Bad(f"system.{k}: unknown key (allowed: {', '.join(_SYSTEM_KEYS)}){config.closest(k, _SYSTEM_KEYS)}")
+    if not isinstance(sysd.get("accept_implausible", False), bool):
+        raise _Bad(f"system.accept_implausible: expected true or false, got {sysd['accept_implausible']!r}")
+
+
 def structure_of(doc: dict, where: str, error: type[Exception], default_name: str = "") -> Structure:
     """The :class:`Structure` of a parsed system file; ``error`` (one line naming ``where`` and the key)."""
     try:
@@ -188,9 +201,7 @@ def structure_of(doc: dict, where: str, error: type[Exception], default_name: st
 
 def _structure(doc: dict, default_name: str) -> Structure:
     sysd = _table(doc, "system", "", required=False)
-    for k in sysd:
-        if k not in ("name", "description"):
-            raise _Bad(f"system.{k}: unknown key (allowed: name, description){config.closest(k, ['name', 'description'])}")
+    _check_system_keys(sysd)
     if not isinstance(sysd.get("description", ""), str):
         raise _Bad("system.description: expected a string")
     dfl = doc.get("defaults", {})

@@ -11,6 +11,7 @@ sinusoids in every DOF.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import shutil
 import zipfile
 
@@ -421,6 +422,38 @@ def test_do_step_is_bounded_and_checks_the_communication_point(fmu_path, md, cap
             if values is None:  # the instance goes on with a step it can take
                 sl.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.01)
                 sl.doStep(currentCommunicationPoint=0.01, communicationStepSize=0.01)
+
+
+def test_ranges_declared_and_checked_with_a_logged_message(fmu_path, md, capsys):
+    """min/max in the model description; parameters checked at initialization by the loader's rules, NaN
+    states and out-of-range inputs refused by fmi2SetReal / fmi2SetContinuousStates (fmi2Error, logged)."""
+    from fmpy.fmi1 import FMICallException
+
+    var = {v.name: v for v in md.modelVariables}
+    assert (var["payload"].min, var["payload"].max) == ("0.0", "1.0") and var["vehicle.m"].min == "0.0"
+    assert var["h_rk4"].min == "0.0" and var["vehicle.xG"].min is None
+    cases = [({"vehicle.m": -1.0}, "fmi2ExitInitializationMode: vehicle.m = -1: must be > 0"),
+             ({"thrusters.u_min": 500.0}, "thrusters.u_min = 500: must be below its upper limit"),
+             ({"arm.stow.q1": 3.5}, "arm.stow.q1 = 3.5: outside its joint's limits"),
+             ({"env.rho": float("nan")}, "env.rho = nan: not a finite number")]
+    for values, message in cases:
+        with pytest.raises(FMICallException):
+            with _instance(fmu_path, md, "bad", values=values):
+                pass
+        assert message in capsys.readouterr().out
+    with _instance(fmu_path, md, "me") as m:
+        capsys.readouterr()
+        for vr, v, message in ((m.vr["payload"], 1.5, "payload = 1.5: outside [0, 1]"),
+                               (m.vr["tau[3]"], float("inf"), "tau[3] = inf: not a finite number")):
+            with pytest.raises(FMICallException):
+                m.setReal([vr], [v])
+            assert message in capsys.readouterr().out
+        x = np.full(12, 0.1)
+        x[4] = np.nan
+        with pytest.raises(FMICallException):
+            m.setContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 12)
+        assert "fmi2SetContinuousStates: eta[5] = nan: not a finite number" in capsys.readouterr().out
+        m.setReal([m.vr["payload"]], [1.0])  # the instance goes on
 
 
 # ---------------------------------------------------------------------------------------------

@@ -19,6 +19,8 @@ import arvcas
 from arvcas.sim.scenario import ScenarioError, load_scenario
 from arvcas.system import shipped
 
+from trust_helpers import scenario_variant
+
 
 def _neutral_arm(d: Path) -> Path:
     """The shipped BlueROV2 with every arm link of 1 kg and 1 L in fresh water: the arm's static weight in
@@ -55,19 +57,10 @@ def test_a_neutrally_buoyant_arm_has_a_finite_trim(tmp_path):
     assert np.isfinite(r.chat).all() and np.isfinite(r.eta).all()
 
 
-def _scenario(tmp_path, old: str, new: str) -> Path:
-    src = shipped()["bluerov2_heavy_alpha5"].parent / "bluerov2_heavy_alpha5.scenario.toml"
-    text = src.read_text()
-    assert old in text, old
-    p = tmp_path / "s.toml"
-    p.write_text(text.replace(old, new, 1))
-    return p
-
-
 def test_an_arm_motion_shorter_than_the_plant_step_is_refused(tmp_path):
     """A reach of 1 ms (the plant step is 5 ms): between two RK4 stage times, the arm would jump with no
     reaction on the vehicle."""
-    p = _scenario(tmp_path, 't = { value = 19.0, unit = "s"', 't = { value = 5.001, unit = "s"')
+    p = scenario_variant(tmp_path, 't = { value = 19.0, unit = "s"', 't = { value = 5.001, unit = "s"')
     with pytest.raises(ScenarioError, match=r"arm.waypoint\[2\].t: the motion from waypoint 1 takes 0.001 s, less "
                                             r"than the plant step time.h_plant \(0.005 s\)") as e:
         load_scenario(p)

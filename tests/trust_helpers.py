@@ -114,3 +114,15 @@ def synthetic_front(path: Path, *, model_hash: str | None = None, params=None, c
     )
     assert X.shape == (n, m)
     return ck.write_checkpoint(c, path)
+
+
+def scenario_variant(tmp_path: Path, old: str, new: str, name: str = "s.toml") -> Path:
+    """The BlueROV2's shipped scenario with the text ``old`` replaced by ``new`` (once), written to tmp_path."""
+    from arvcas.system import shipped
+
+    src = shipped()["bluerov2_heavy_alpha5"].parent / "bluerov2_heavy_alpha5.scenario.toml"
+    text = src.read_text()
+    assert old in text, old
+    p = tmp_path / name
+    p.write_text(text.replace(old, new, 1))
+    return p

@@ -185,9 +185,10 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
         for j in range(nj):
             add(f"{vec}[{j + 1}]", "input", "continuous", unit, f"{what} of joint {j + 1}", start=starts[j])
     add("payload", "input", "continuous", "1",
-        "payload fraction in [0, 1]: scales payload.mass and payload.volume at the tool point", start=0.0)
+        "payload fraction in [0, 1]: scales payload.mass and payload.volume at the tool point", start=0.0,
+        min=0.0, max=1.0)
     add("h_rk4", "parameter", "fixed", "s", "Co-Simulation only: the RK4 step (each communication step is "
-        "split into ceil(H / h_rk4) equal steps)", start=_H_RK4_DEFAULT, initial="exact")
+        "split into ceil(H / h_rk4) equal steps; > 0)", start=_H_RK4_DEFAULT, initial="exact", min=0.0)
     vals = P.vector()
     for i, name in enumerate(P.names()):  # the system's parameters, units from its layout
         unit, what, base = _parameter_unit(P, name)
@@ -197,7 +198,9 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
         display = None
         if unit in _DISPLAY and file_unit == _DISPLAY[unit][0]:
             display = file_unit
-        add(name, "parameter", "fixed", unit, desc, start=float(vals[i]), initial="exact", display=display,
+        # the loader's sign rule, > 0 (pos) or >= 0 (nonneg): declared, and checked at initialization
+        bounds = {"min": 0.0} if P.layout.rules[i] in ("pos", "nonneg") else {}
+        add(name, "parameter", "fixed", unit, desc, start=float(vals[i]), initial="exact", display=display, **bounds,
             **({"base": base} if base else {}))
     assert len(V) == lay["vr_p"] + len(P)
     return V
@@ -299,6 +302,9 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
             real.append(f"displayUnit={xml_attr(v['display'])}")
         if v["start"] is not None:
             real.append(f'start="{_fmt(v["start"])}"')
+        for k in ("min", "max"):
+            if v.get(k) is not None:
+                real.append(f'{k}="{_fmt(v[k])}"')
         if v.get("derivative"):
             real.append(f'derivative="{v["derivative"]}"')
         L.append(f'    <ScalarVariable {" ".join(attrs)}><Real {" ".join(real)}/></ScalarVariable>'
@@ -344,6 +350,32 @@ def _rhs_function(opts, inputs: str, P) -> ca.Function:
     tau = fns["thrust"](u, p)
     return ca.Function("uvms_rhs_u", [x, u, q, qd, qdd, pl, p], [f(x, tau, q, qd, qdd, pl, p)],
                        ["x", "u", "q", "qd", "qdd", "payload", "p"], ["xdot"])
+
+
+def _check_tables(V: list[dict], lay: dict, P) -> str:
+    """C tables for the wrapper's checks: every variable's name (C string literals made by
+    :func:`arvcas.build.text.c_string`), each parameter's sign rule (the loader's: 0 any, 1 >= 0, 2 > 0),
+    the pairs that must be ordered (``u_min < u_max``, ``qmin < qmax``) and the stow angles within their
+    joint's limits, as value references."""
+    from arvcas.build.text import c_string
+    from arvcas.model.thrusters import limit_prefixes
+
+    vr = {v["name"]: i for i, v in enumerate(V)}
+    rules = {"any": 0, "nonneg": 1, "pos": 2}
+    order = [(vr[p + "u_min"], vr[p + "u_max"]) for p in limit_prefixes(P.structure)]
+    within = []
+    for j in range(1, P.structure.n_joints + 1):
+        order.append((vr[f"arm.joint{j}.qmin"], vr[f"arm.joint{j}.qmax"]))
+        within.append((vr[f"arm.joint{j}.qmin"], vr[f"arm.stow.q{j}"], vr[f"arm.joint{j}.qmax"]))
+    lines = ["static const char *const VNAME[NVR] = {"]
+    lines += [f"    {c_string(v['name'])}," for v in V]
+    lines += ["};", "static const signed char PRULE[NP] = {"]
+    lines += ["    " + ", ".join(str(rules[r]) for r in P.layout.rules[k:k + 32]) + "," for k in range(0, len(P), 32)]
+    lines += ["};", f"#define NORDER {len(order)}", f"#define NWITHIN {len(within)}",
+              "static const int PORDER[NORDER + 1][2] = {" + "".join(f"{{{a}, {b}}}, " for a, b in order) + "{-1, -1}};",
+              "static const int PWITHIN[NWITHIN + 1][3] = {" + "".join(f"{{{a}, {b}, {c}}}, " for a, b, c in within)
+              + "{-1, -1, -1}};"]
+    return "\n".join(lines)
 
 
 def _c_double(v: float) -> str:
@@ -448,9 +480,10 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
     model_c = cg.dump()
 
     start = ",\n".join("    " + _c_double(v["start"] if v["start"] is not None else 0.0) for v in V)
+    checks = _check_tables(V, lay, P)
     # the GUID: a digest of everything that defines the FMU's interface and behaviour
     h = hashlib.sha256()
-    for part in (model_c, start, repr([(v["name"], v["unit"]) for v in V]), inputs):
+    for part in (model_c, start, repr([(v["name"], v["unit"]) for v in V]), inputs, checks):
         h.update(part.encode())
         h.update(b"\0")
     guid = "{" + str(uuid.UUID(bytes=h.digest()[:16])) + "}"
@@ -459,7 +492,8 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
     fields = {"@MODEL_C@": _MODEL_C, "@NP@": len(V) - lay["vr_p"], "@GUID@": guid, "@RHS@": fn.name(),
               "@START@": start, "@IN@": "tau" if inputs == "wrench" else "u", "@NU@": lay["n_u"],
               "@NIN@": lay["n_in"], "@NJ@": lay["n_joints"], "@VR_H@": lay["vr_h"], "@VR_P@": lay["vr_p"],
-              "@U_Q@": lay["q"], "@U_QD@": lay["qd"], "@U_QDD@": lay["qdd"], "@U_PAYLOAD@": lay["payload"]}
+              "@U_Q@": lay["q"], "@U_QD@": lay["qd"], "@U_QDD@": lay["qdd"], "@U_PAYLOAD@": lay["payload"],
+              "@CHECKS@": checks}
     for k, v in fields.items():
         wrapper = wrapper.replace(k, str(v))
     assert not re.search(r"@[A-Z_]+@", wrapper), "an unfilled field in fmu_wrapper.c"

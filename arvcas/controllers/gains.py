@@ -129,8 +129,10 @@ def check_gains(controller, gains, h: float | None = None, where: str = "gains")
     Every gain must be finite and > 0 (section 3: arbitrary positive constants) and below the limit
     a gain declares for the sampling period ``h`` (e.g. the explicit RESO: ``h * omega < 2``).
     """
+    from arvcas.build.calls import real_array
+
     c = get(controller)
-    g = np.asarray(gains, dtype=float)
+    g = real_array(gains, where, GainError)  # complex, bool, str, masked: refused by name
     n = n_gains(c)
     if g.ndim not in (1, 2) or g.shape[-1] != n:
         raise GainError(f"{where}: controller '{c.name}' takes {n} gains per set, got shape {g.shape}")

@@ -159,8 +159,8 @@ class CompiledRun:
         return g
 
     def _unc_phase(self, uncertainty, phase):
-        unc = self.cfg.uncertainty if uncertainty is None else np.asarray(uncertainty, dtype=float)
-        ph = np.array(self.cfg.disturbance_phase) if phase is None else np.asarray(phase, dtype=float)
+        unc = self.cfg.uncertainty if uncertainty is None else calls.real_array(uncertainty, "uncertainty", SimulationError)
+        ph = np.array(self.cfg.disturbance_phase) if phase is None else calls.real_array(phase, "phase", SimulationError)
         if unc.shape != (4,) or not np.isfinite(unc).all():
             raise SimulationError(f"uncertainty: expected 4 finite factors [C, D, g, arm], got {unc}")
         if ph.shape != (6,) or not np.isfinite(ph).all():
@@ -181,7 +181,8 @@ class CompiledRun:
         from arvcas.sim.simulation import Result
 
         g = self._gains(gains, batch=False)
-        if not (isinstance(noise_scale, (int, float)) and np.isfinite(noise_scale) and noise_scale >= 0):
+        if isinstance(noise_scale, bool) or not (isinstance(noise_scale, (int, float)) and np.isfinite(noise_scale)
+                                                 and noise_scale >= 0):
             raise SimulationError(f"noise_scale: must be a finite number >= 0, got {noise_scale!r}")
         noise = scenario.noise_sequence(self.cfg, seed) * float(noise_scale)
         unc, ph = self._unc_phase(uncertainty, phase)
@@ -269,7 +270,7 @@ class CompiledRun:
         unc0, ph0 = self._unc_phase(None, None)
 
         def rows(v, default, k, name):
-            a = np.asarray(default if v is None else v, dtype=float)
+            a = calls.real_array(default if v is None else v, name, SimulationError)
             if a.shape == (k,):
                 a = np.broadcast_to(a, (n, k))
             if a.shape != (n, k) or not np.isfinite(a).all():
