@@ -678,6 +678,29 @@ def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
                 files.remove_stale_temps(d)
 
 
+def _choose_numpy_mode() -> int | None:
+    """CasADi 3.8's NumPy mode (issue #2959) for this command: -1, the legacy behaviour without its notice.
+    arvcas's own code calls no NumPy function on a CasADi value, so its numbers are the same in every mode
+    (tests/test_trust_casadi_mode.py); -1 also keeps the libraries the commands use (pymoo, matplotlib)
+    on the behaviour they were tested with. The previous mode is returned, to be restored (a caller in the
+    same process keeps its own)."""
+    import casadi as ca
+
+    get = getattr(ca.GlobalOptions, "getNumpyMode", None)
+    if get is None:  # pragma: no cover - CasADi before 3.8
+        return None
+    before = get()
+    ca.GlobalOptions.setNumpyMode(-1)
+    return before
+
+
+def _restore_numpy_mode(before: int | None) -> None:
+    if before is not None:
+        import casadi as ca
+
+        ca.GlobalOptions.setNumpyMode(before)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the ``arvcas`` command line; returns the exit code (0 ok, 2 usage or library error)."""
     import signal
@@ -706,6 +729,7 @@ def main(argv: list[str] | None = None) -> int:
             shown(message, category, *args, **kw)
 
     warnings.showwarning = show
+    numpy_mode = _choose_numpy_mode()
     try:
         from arvcas.build.codegen import report_progress
 
@@ -727,6 +751,7 @@ def main(argv: list[str] | None = None) -> int:
         import threading
 
         warnings.showwarning = shown
+        _restore_numpy_mode(numpy_mode)
         if threading.current_thread() is threading.main_thread():
             for s, h in old.items():
                 if h is not None:
