@@ -153,7 +153,7 @@ def _export_c_outputs(a: argparse.Namespace) -> list:
 
 def _run_export_c(a: argparse.Namespace) -> int:
     from arvcas.build.export import export_c
-    from arvcas.params import load
+    from arvcas.system.params import load
 
     paths = export_c(a.dir, opts=_model_options(a.n_quad), params=load(a.params), prefix=a.prefix, force=a.force)
     for path in paths:
@@ -235,7 +235,7 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
     import numpy as np
 
     from arvcas.build.codegen import compiled
-    from arvcas.params import default_layout, load, view
+    from arvcas.system.params import default_layout, load, view
 
     params = load(params_path)
     p = params.vector()
@@ -267,7 +267,7 @@ def _add_demo(p: argparse.ArgumentParser) -> None:
 
 
 def _run_demo(a: argparse.Namespace) -> int:
-    from arvcas.params import load
+    from arvcas.system.params import load
 
     rows = demo_table(a.params, a.n_quad)
     params = load(a.params)
@@ -364,7 +364,7 @@ def _metrics_table(chat, rmse) -> str:
 def _run_simulate(a: argparse.Namespace) -> int:
     from arvcas.io import results
     from arvcas.sim import scenario
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.sim.simulation import simulate
 
     if a.out is not None:
@@ -597,7 +597,7 @@ def _inputs(cmd: Command, a: argparse.Namespace) -> list[tuple[str, Path]]:
                 p = shipped()[str(p)]
                 setattr(a, dest, p)
             elif not p.exists() and p.suffix.lower() != ".toml":
-                from arvcas.config import closest
+                from arvcas.system.config import closest
 
                 raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
                                  f"file{closest(str(p), shipped(), 0.3)}")

@@ -68,7 +68,7 @@ from arvcas.build import dynamics as dynamics_mod
 from arvcas.sim import closedloop, scenario, schedule, simulation
 from arvcas.controllers import gains as gains_mod
 from arvcas.model import uvms
-from arvcas.params import load as load_params
+from arvcas.system.params import load as load_params
 from arvcas.sim.run import Run
 
 __all__ = ["BenchError", "Settings", "run", "write", "render_markdown", "REQUIRED_KEYS"]
@@ -494,7 +494,7 @@ def _numpy_vehicle_rhs(P):
     code on numbers; the state-dependent terms (J(eta) nu, C_RB(nu) nu, D(nu) nu, g(eta)) are NumPy on
     every call. Takes x (12,) and tau (6,), or (n, 12) and (n, 6)."""
     from arvcas.model import vehicle
-    from arvcas.params import view
+    from arvcas.system.params import view
 
     Pv = view(ca.DM(P.vector()))
     Minv_T = np.linalg.inv(np.array(vehicle.M(Pv))).T
@@ -852,7 +852,7 @@ _BATCH_CHILD = """
 import dataclasses, json
 import numpy as np
 from arvcas.controllers import gains as gains_mod
-from arvcas.params import load
+from arvcas.system.params import load
 from arvcas.sim import scenario, schedule, simulation
 cfg = dataclasses.replace(scenario.load_scenario(), time_h_plant={hp!r})
 g = gains_mod.default_gains({controller!r})

@@ -130,7 +130,7 @@ def _report_check(path, diff: list[str], compared: str) -> int:
 
 def run_sweep(a: argparse.Namespace) -> int:
     from arvcas.sim import scenario
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.experiments import _io
     from arvcas.experiments.sweep import CONTROLLERS, reproduce_sweep, run_sweep, sweep_markdown, write_sweep_dir
 
@@ -211,7 +211,7 @@ def montecarlo_outputs(a: argparse.Namespace) -> list:
 
 def run_montecarlo(a: argparse.Namespace) -> int:
     from arvcas.sim import scenario
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.experiments import _io
     from arvcas.experiments.montecarlo import read_montecarlo, reproduce, run_montecarlo, summary_markdown, write_montecarlo
 
@@ -300,7 +300,7 @@ def check_robust(a: argparse.Namespace) -> None:
 def run_robust(a: argparse.Namespace) -> int:
     from arvcas.experiments import _io
     from arvcas.experiments.robust import robust_front, robust_markdown, write_robust_dir
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.tuning.front import check_provenance
 
     out = _robust_dir(a)

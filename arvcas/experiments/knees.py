@@ -39,7 +39,7 @@ def replay_knees(study_dir: str | Path, out: str | Path, say=print) -> dict:
     from arvcas.io import files, results
     from arvcas.io.plots import plot_errors, plot_states
     from arvcas.model import thrusters
-    from arvcas.params import view
+    from arvcas.system.params import view
     from arvcas.sim.scenario import loads_scenario
     from arvcas.sim.simulation import simulate
     from arvcas.tuning import checkpoint as ck

@@ -36,7 +36,7 @@ from matplotlib.figure import Figure
 from arvcas.controllers import gains as gains_mod
 from arvcas import metrics
 from arvcas.sim import scenario
-from arvcas.params import SCHEMA as PARAM_SCHEMA, load as load_params
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA, load as load_params
 from arvcas.sim.simulation import simulate_many
 from arvcas.experiments import _io
 from arvcas.experiments.montecarlo import CHUNK, DRAW_RULE, Draws, draw

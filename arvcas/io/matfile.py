@@ -32,7 +32,7 @@ import numpy as np
 
 from arvcas import __version__
 from arvcas.controllers import gains as gains_mod
-from arvcas.params import SCHEMA as PARAM_SCHEMA
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA
 
 __all__ = ["write_result_mat", "write_front_mat", "result_variables", "front_variables", "MatError"]
 

@@ -30,8 +30,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from arvcas.controllers import gains as gains_mod
-from arvcas.params import SCHEMA as PARAM_SCHEMA
-from arvcas.params import load as load_params
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA
+from arvcas.system.params import load as load_params
 
 __all__ = [
     "plot_states", "plot_errors", "plot_thrusts", "plot_sliding", "plot_gains", "plot_zigzag",

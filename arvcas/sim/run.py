@@ -32,7 +32,7 @@ from arvcas.build import calls, codegen
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model.uvms import ModelOptions
-from arvcas.params import Params, default_layout, system_tag
+from arvcas.system.params import Params, default_layout, system_tag
 from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
 from arvcas.sim.scenario import ScenarioConfig
 
@@ -51,7 +51,7 @@ class Run:
 
     ``controller``: a registered name or a :class:`~arvcas.controllers.Controller`; ``scenario``: a
     :class:`~arvcas.sim.scenario.ScenarioConfig`, a scenario file, or None (the system's default);
-    ``params``: the system: :class:`~arvcas.params.Params`, an :class:`arvcas.system.System`, a shipped
+    ``params``: the system: :class:`~arvcas.system.params.Params`, an :class:`arvcas.system.System`, a shipped
     system's name (``arvcas systems``), a system file, or None (Haidou-1);
     ``options``: :class:`~arvcas.model.uvms.ModelOptions`.
     """

@@ -14,7 +14,7 @@ import numpy as np
 from arvcas import __version__
 from arvcas.controllers import gains as gains_mod
 from arvcas.model.uvms import ModelOptions
-from arvcas.params import Params
+from arvcas.system.params import Params
 from arvcas.sim import signals as signals_mod
 from arvcas.sim.run import CompiledRun, Run, SimulationError
 from arvcas.sim.scenario import ScenarioConfig
@@ -98,7 +98,7 @@ def compiled_run(controller, params: Params | None = None, cfg: ScenarioConfig |
                  opts: ModelOptions = ModelOptions()) -> CompiledRun:
     """``Run(controller, cfg, params, opts).compile()``, memoised per process (the wrappers' path)."""
     if params is not None and not isinstance(params, Params):
-        raise SimulationError(f"params: expected arvcas.params.Params, got {type(params).__name__}")
+        raise SimulationError(f"params: expected arvcas.system.params.Params, got {type(params).__name__}")
     key = (gains_mod.get(controller), cfg, params, opts)
     run = _COMPILED.get(key)
     if run is None:
