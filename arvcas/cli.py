@@ -11,8 +11,8 @@ before calling ``run``:
 * output policy (:func:`arvcas.io.files.check_outputs`): no output is an input or another output,
   none is a special file, an existing file arvcas did not write is refused without ``--force``
   (added to every command that writes); stale temporary files of killed runs are removed;
-* bounds: counts, seeds and timeouts are checked by their argparse types (:func:`seed_arg`,
-  :func:`count_arg`, :func:`seconds_arg`) and the memory a request would take by the command's check.
+* bounds: counts, seeds and timeouts are checked by their argparse types (:mod:`arvcas.io.cliargs`:
+  ``seed_arg``, ``count_arg``, ``seconds_arg``) and the memory a request would take by the command's check.
 
 Errors (ValueError and subclasses, OSError) are printed as one line ``arvcas: error: ...`` with exit
 code 2, usage errors likewise (``arvcas: error: CMD: argument ...``); SIGTERM and SIGHUP end the
@@ -28,8 +28,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["main", "TABLE", "COMMANDS", "Command", "seed_arg", "count_arg", "seconds_arg", "check_memory",
-           "MAX_SEED", "refuse"]
+from arvcas.io.cliargs import count_arg, refuse, seed_arg
+
+__all__ = ["main", "TABLE", "COMMANDS", "Command"]
 
 Paths = Callable[[argparse.Namespace], list]
 
@@ -50,75 +51,6 @@ class Command:
     inputs: tuple = ()
     outputs: Paths | None = None
     check: Callable[[argparse.Namespace], None] | None = None
-
-
-# ---- bounds (argparse types: refused at parse time, before any work) ------------------------------------
-
-MAX_SEED = 2**63  # seeds are stored as int64 and fed to numpy's SeedSequence
-
-
-def seed_arg(text: str) -> int:
-    """A seed: an integer with 0 <= seed < 2**63."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer seed, got {text!r}") from None
-    if not 0 <= v < MAX_SEED:
-        raise argparse.ArgumentTypeError(f"{text} is out of range (allowed: 0 <= seed < 2**63)")
-    return v
-
-
-def count_arg(lo: int, hi: int, what: str = "count"):
-    """An argparse type: an integer ``lo <= n <= hi``."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"{v} is out of range (allowed: {lo}..{hi})")
-        return v
-
-    parse.__name__ = what
-    return parse
-
-
-def seconds_arg(text: str) -> float:
-    """A duration in seconds: finite and positive (not nan, inf, 0 or negative)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"{text}: must be a finite number of seconds > 0")
-    return v
-
-
-def _total_memory() -> int | None:
-    import os
-
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError):  # pragma: no cover
-        return None
-
-
-def check_memory(what: str, n_bytes: float, share: float = 0.5) -> None:
-    """Refuse a request whose results would take more than ``share`` of this machine's memory."""
-    total = _total_memory()
-    if total is None:  # pragma: no cover
-        return
-    if n_bytes > share * total:
-        raise ValueError(f"{what}: would need about {n_bytes / 2**30:.3g} GiB for its results, more than "
-                         f"{share:.0%} of this machine's {total / 2**30:.3g} GiB; ask for less")
-
-
-def refuse(a: argparse.Namespace, names, why: str) -> None:
-    """ValueError if any of the options ``names`` (dest names) was given (is not None/False)."""
-    for n in names:
-        v = getattr(a, n, None)
-        if v is not None and v is not False:
-            raise ValueError(f"--{n.replace('_', '-')}: {why}")
 
 
 def _model_options(n_quad: int):

@@ -31,7 +31,7 @@ def _floats(text: str) -> list[float]:
 def _seeds(text: str) -> list[int]:
     """Seeds ``S1,S2,...`` or ``A..B`` (inclusive): each 0 <= s < 2**63, at most MAX_SEEDS (checked before
     the list is built)."""
-    from arvcas.cli import MAX_SEED
+    from arvcas.io.cliargs import MAX_SEED
 
     try:
         if ".." in text:  # a range A..B (inclusive)
@@ -52,13 +52,13 @@ def _seeds(text: str) -> list[int]:
 
 
 def _runs(text: str) -> int:
-    from arvcas.cli import count_arg
+    from arvcas.io.cliargs import count_arg
 
     return count_arg(1, MAX_RUNS, "--runs")(text)
 
 
 def _seed(text: str) -> int:
-    from arvcas.cli import seed_arg
+    from arvcas.io.cliargs import seed_arg
 
     return seed_arg(text)
 
@@ -92,7 +92,7 @@ def add_sweep(p: argparse.ArgumentParser) -> None:
 
 
 def check_sweep(a: argparse.Namespace) -> None:
-    from arvcas.cli import check_memory, refuse
+    from arvcas.io.cliargs import check_memory, refuse
 
     if a.check is not None:
         refuse(a, ("h", "out", "controllers", "seeds", "noise_scale", "config", "params", "force"),
@@ -181,7 +181,7 @@ _MC_BYTES_PER_RUN = (6 + 6 + 4 + 6 + 1) * 8 + 8  # chat, rmse, factors, phase, t
 
 
 def check_montecarlo(a: argparse.Namespace) -> None:
-    from arvcas.cli import check_memory, refuse
+    from arvcas.io.cliargs import check_memory, refuse
 
     if a.check is not None:
         refuse(a, ("controller", "runs", "out", "seed", "spread", "config", "params", "from_front", "index",
@@ -287,7 +287,7 @@ def robust_outputs(a: argparse.Namespace) -> list:
 
 
 def check_robust(a: argparse.Namespace) -> None:
-    from arvcas.cli import check_memory
+    from arvcas.io.cliargs import check_memory
 
     from arvcas.tuning.checkpoint import read_checkpoint
     from arvcas.tuning.front import resolve_front_path
@@ -368,7 +368,7 @@ def _kind(a: argparse.Namespace) -> str:
 
 
 def check_compare(a: argparse.Namespace) -> None:
-    from arvcas.cli import refuse
+    from arvcas.io.cliargs import refuse
 
     if a.plot is None:
         refuse(a, ("paper",), "only with --plot")

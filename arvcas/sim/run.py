@@ -34,6 +34,7 @@ from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model.uvms import ModelOptions
 from arvcas.system.params import Params, default_layout, system_tag
 from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
+from arvcas.sim.result import Result
 from arvcas.sim.scenario import ScenarioConfig
 
 __all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS"]
@@ -176,8 +177,6 @@ class CompiledRun:
         ``noise_scale`` multiplies the drawn sensor noise (0: perfect measurements) while the EKF keeps
         the nominal sensor covariance: an analysis knob for how much noise reaches the thrusters.
         """
-        from arvcas.sim.simulation import Result
-
         g = self._gains(gains, batch=False)
         if not (isinstance(noise_scale, (int, float)) and np.isfinite(noise_scale) and noise_scale >= 0):
             raise SimulationError(f"noise_scale: must be a finite number >= 0, got {noise_scale!r}")

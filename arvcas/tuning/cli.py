@@ -19,7 +19,7 @@ __all__ = ["add_tune", "check_tune", "run_tune", "add_front_export", "run_front_
 
 
 def add_tune(p: argparse.ArgumentParser) -> None:
-    from arvcas.cli import count_arg, seconds_arg
+    from arvcas.io.cliargs import count_arg, seconds_arg
 
     p.add_argument("study", type=Path, help="study file (TOML), e.g. studies/quick.toml")
     p.add_argument("--out", type=Path, required=True, metavar="DIR",
@@ -45,7 +45,7 @@ def add_tune(p: argparse.ArgumentParser) -> None:
 
 def check_tune(a: argparse.Namespace) -> None:
     """Options that do not apply (the study's engine is checked in :func:`run_tune`, once it is read)."""
-    from arvcas.cli import refuse
+    from arvcas.io.cliargs import refuse
 
     if not a.resume:
         refuse(a, ("allow_model_change",), "only with --resume")
