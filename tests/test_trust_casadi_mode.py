@@ -21,7 +21,7 @@ def _numbers() -> dict[str, np.ndarray]:
     from arvcas import cli
     from arvcas.build import fmu
     from arvcas.model import manipulator
-    from arvcas.params import view
+    from arvcas.system.params import view
     from arvcas.sim import scenario
 
     out = {}

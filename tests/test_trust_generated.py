@@ -203,7 +203,7 @@ def test_system_file_strings_load_or_refuse_in_one_line(name, thruster, descript
     identifier) or is refused with one line naming the file."""
     import json
 
-    from arvcas.params import ParamsError, load
+    from arvcas.system.params import ParamsError, load
     from arvcas.system import shipped
 
     body = shipped()["bluerov2_heavy_alpha5"].read_text(encoding="utf-8")

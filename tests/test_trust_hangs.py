@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from arvcas.params import ParamsError
+from arvcas.system.params import ParamsError
 from arvcas.system import load_system
 
 from trust_helpers import assert_refused, bounded

@@ -12,7 +12,7 @@ import warnings
 
 import pytest
 
-from arvcas.params import ParamsError, PlausibilityWarning, load
+from arvcas.system.params import ParamsError, PlausibilityWarning, load
 from arvcas.sim.scenario import ScenarioError, load_scenario
 from arvcas.system import SHIPPED, shipped
 

@@ -39,7 +39,7 @@ def _neutral_arm(d: Path) -> Path:
 
 def test_a_neutrally_buoyant_arm_has_a_finite_trim(tmp_path):
     from arvcas.model import manipulator
-    from arvcas.params import load, view
+    from arvcas.system.params import load, view
 
     path = _neutral_arm(tmp_path)
     P = load(path)
@@ -112,7 +112,7 @@ def test_a_cold_build_beside_a_read_only_cache_builds_outside_it(tmp_path, monke
 
 
 def test_a_run_that_stops_names_why(capsys):
-    from arvcas.params import load
+    from arvcas.system.params import load
 
     P = load().replace({"env.rho": 1e300})  # no finite motion: Params.replace skips the physical checks
     r = arvcas.Run("pid", params=P).compile().simulate(seed=0)

@@ -38,7 +38,7 @@ def _table(path=None) -> dict:
             with resources.files("arvcas").joinpath("data/gains.toml").open("rb") as f:
                 t = tomllib.load(f)
         else:
-            from arvcas import tomlfile
+            from arvcas.system import tomlfile
 
             t = tomlfile.parse(tomlfile.read_text(path, GainError, "gain table"), str(path), GainError)
         _TABLES[key] = t
@@ -94,7 +94,7 @@ def default_gains(controller, system=None) -> np.ndarray:
         return g.copy()
     path = None
     if system is not None:
-        from arvcas.params import default_layout
+        from arvcas.system.params import default_layout
         from arvcas.system import resolve
 
         sysm = resolve(system)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arvcas.params import Params
+from arvcas.system.params import Params
 from arvcas.sim.scenario import ScenarioConfig
 
 log = logging.getLogger(__name__)
