@@ -297,15 +297,13 @@ class _Plan:
         return f"{self.name}-{self.key[:20]}"
 
 
-def _plan(fn: ca.Function, cmd_flags: list[str], extra_c: str = "", with_jacobian: bool = False) -> _Plan:
+def _plan(fn: ca.Function, cmd_flags: list[str], extra_c: str = "") -> _Plan:
     name = fn.name()
     if not name.isidentifier() or not name.isascii():
         raise ValueError(f"function name {name!r} is not a C identifier")
     t0 = time.perf_counter()
     cg = ca.CodeGenerator(name, _CODEGEN_OPTS)  # CASADI_PREFIX(ID) = <name>_ID: symbols prefixed by name
     cg.add(fn)
-    if with_jacobian:  # jac_<name>: what casadi.external differentiates the loaded function with
-        cg.add(fn.jacobian())
     text = cg.dump() + extra_c
     codegen_s = time.perf_counter() - t0
     try:
@@ -595,7 +593,6 @@ def build_described(
     flags: tuple[str, ...] = (),
     lock_timeout: float = LOCK_TIMEOUT_S,
     batch_loop: bool = False,
-    with_jacobian: bool = False,
 ) -> ca.Function:
     """The compiled function ``name`` described by ``description``, built by ``make()`` only on a miss.
 
@@ -606,8 +603,6 @@ def build_described(
     options, scenario fields, a user controller's own source). ``make()`` must return a Function
     called ``name``. Memoized per process. ``batch_loop``: the library also holds
     :func:`batch_loop_c`'s loops (part of the key), which :func:`arvcas.build.calls.call_many` uses.
-    ``with_jacobian``: the library also holds ``jac_<name>`` (``Function.jacobian()``), so that CasADi
-    differentiates the loaded function with compiled code (part of the key).
     """
     from arvcas.build.provenance import model_hash
 
@@ -616,8 +611,6 @@ def build_described(
         raise ValueError(f"function name {name!r} is not a C identifier")
     if batch_loop:
         description = description + " +batch_loop"
-    if with_jacobian:
-        description = description + " +jacobian"
     ident = _ident(name, description, cmd_flags)
     with _LOCK:
         f = _PRELOADED.get(ident)  # shipped by a client (a Dask worker): no compiler needed
@@ -637,7 +630,7 @@ def build_described(
             fn = make()
             if not isinstance(fn, ca.Function) or fn.name() != name:
                 raise TypeError(f"build_described: make() must return a casadi.Function named {name!r}")
-            p = _plan(fn, cmd_flags, batch_loop_c(fn) if batch_loop else "", with_jacobian)
+            p = _plan(fn, cmd_flags, batch_loop_c(fn) if batch_loop else "")
             return _Plan(p.name, p.n_instructions, p.c_text, p.codegen_s, p.compiler, p.cmd_flags, key)
 
         f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout)
