@@ -6,7 +6,7 @@ A log's samples are ``dt = 1 / rate`` apart; the plant takes ``m`` RK4 steps of 
 * the body wrench held over the sample: ``tau = B_T(p) u + w`` from the logged thrust ``u`` (N, per
   thruster; zero for a passive vehicle) and a logged body wrench ``w``;
 * the joints prescribed (docs/model.md §3, the exact coupling of ``uvms.coupled_terms``): ``q, qd, qdd``
-  from the log's smoothing splines at every RK4 stage time ``t_k + j h / 2``, ``j = 0 .. 2m``;
+  from the log's smoothing splines at every RK4 stage time (t, t + h/2, t + h of each step);
 * the payload fraction held over the sample;
 * no trim buoyancy by default: a real vehicle's ballast for its arm is in its own mass, centre of
   gravity and buoyancy, not in the trim that arvcas's scenarios add (docs/model.md §3); ``trim=True``
@@ -15,7 +15,7 @@ A log's samples are ``dt = 1 / rate`` apart; the plant takes ``m`` RK4 steps of 
 Parameters: ``p = p0 + E theta``: the ``free`` entries of the parameter vector are the slots of ``theta`` (an
 input; ``E`` selects them, so one library serves any choice of up to ``n_slots`` free parameters), and the
 identification differentiates with respect to ``x0`` and ``theta``. Everything is a runtime input; a compiled block serves every log and parameter value
-of the same (system structure, m, free names, block length).
+of the same system structure, number of free slots and block length (K m steps).
 """
 
 from __future__ import annotations
@@ -51,10 +51,6 @@ class LogPlant:
         return self.system.layout
 
     @property
-    def n_stages(self) -> int:
-        return 2 * self.m + 1
-
-    @property
     def n_slots(self) -> int:
         """Free-parameter slots of the compiled code: len(free) rounded up to a multiple of 4 (0 stays 0), so
         that one library serves every choice of up to that many free parameters."""
@@ -68,16 +64,19 @@ class LogPlant:
         return E
 
     def _tag(self) -> str:
-        return f"ident m{self.m} trim{int(self.trim)} slots{self.n_slots} {self.opts!r}{system_tag(self.layout.structure)}"
+        return f"ident trim{int(self.trim)} slots{self.n_slots} {self.opts!r}{system_tag(self.layout.structure)}"
 
-    def sample_fn(self) -> ca.Function:
-        """``ident_sample(x, u, w, Q, QD, QDD, payload, h, theta, E, p0) -> x_next``: one log sample, p = p0 + E theta."""
+    def step_fn(self) -> ca.Function:
+        """``ident_step(x, u, w, Q, QD, QDD, payload, h, theta, E, p0) -> x_next``: one RK4 step, p = p0 + E theta.
+
+        ``Q, QD, QDD`` (n_joints x 3): the joints at the step's stage times t, t + h/2, t + h.
+        """
         lay = self.layout
         st = lay.structure
-        nj, nt, S = st.n_joints, st.n_thrusters, self.n_stages
+        nj, nt = st.n_joints, st.n_thrusters
         x = ca.SX.sym("x", 12)
         u, w = ca.SX.sym("u", nt), ca.SX.sym("w", 6)
-        Q, QD, QDD = ca.SX.sym("Q", nj, S), ca.SX.sym("QD", nj, S), ca.SX.sym("QDD", nj, S)
+        Q, QD, QDD = ca.SX.sym("Q", nj, 3), ca.SX.sym("QD", nj, 3), ca.SX.sym("QDD", nj, 3)
         pl, h = ca.SX.sym("payload"), ca.SX.sym("h")
         nf = self.n_slots
         theta, E, p0 = ca.SX.sym("theta", nf), ca.SX.sym("E", len(lay), nf), ca.SX.sym("p0", len(lay))
@@ -93,20 +92,18 @@ class LogPlant:
                 nud, _ = coupled_terms(P, eta, nu, tau, Q[:, j], QD[:, j], QDD[:, j], pl, extra, self.opts)
             return ca.vertcat(ca.mtimes(J(eta), nu), nud)
 
-        xk = x
-        for i in range(self.m):
-            k1 = f(xk, 2 * i)
-            k2 = f(xk + 0.5 * h * k1, 2 * i + 1)
-            k3 = f(xk + 0.5 * h * k2, 2 * i + 1)
-            k4 = f(xk + h * k3, 2 * i + 2)
-            xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return ca.Function("ident_sample", [x, u, w, Q, QD, QDD, pl, h, theta, E, p0], [ca.cse(xk)], _IN, ["x_next"])
+        k1 = f(x, 0)
+        k2 = f(x + 0.5 * h * k1, 1)
+        k3 = f(x + 0.5 * h * k2, 1)
+        k4 = f(x + h * k3, 2)
+        xn = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return ca.Function("ident_step", [x, u, w, Q, QD, QDD, pl, h, theta, E, p0], [ca.cse(xn)], _IN, ["x_next"])
 
-    def _accumulated(self, name: str, K: int, sens: bool) -> ca.Function:
-        """K samples chained (``mapaccum``): the state after each, and with ``sens`` its sensitivities."""
+    def _accumulated(self, name: str, n: int, sens: bool) -> ca.Function:
+        """n RK4 steps chained (``mapaccum``): the state after each, and with ``sens`` its sensitivities."""
         lay = self.layout
-        nj, nt, S, nf = lay.structure.n_joints, lay.structure.n_thrusters, self.n_stages, self.n_slots
-        f = self.sample_fn()
+        nj, nt, nf = lay.structure.n_joints, lay.structure.n_thrusters, self.n_slots
+        f = self.step_fn()
         if sens:  # forward sensitivities: S_next = A S + [0 B], with z = [x0; theta]
             ins = f.sx_in()
             xn = f(*ins)
@@ -114,17 +111,19 @@ class LogPlant:
             B = ca.jacobian(xn, ins[8]) if nf else ca.SX(12, 0)
             Sx = ca.SX.sym("S", 12, 12 + nf)
             Sn = ca.mtimes(A, Sx) + ca.horzcat(ca.SX(12, 12), B)
-            f = ca.Function("ident_sens", [ins[0], Sx, *ins[1:]], [xn, ca.cse(Sn)], ["x", "S", *_IN[1:]], ["x_next", "S_next"])
-            acc = f.mapaccum("acc", K, [0, 1], [0, 1])
+            f = ca.Function("ident_sens", [ins[0], Sx, *ins[1:]], [xn, ca.cse(Sn)], ["x", "S", *_IN[1:]],
+                            ["x_next", "S_next"])
+            acc = f.mapaccum("acc", n, [0, 1], [0, 1])
         else:
-            acc = f.mapaccum("acc", K, [0], [0])
+            acc = f.mapaccum("acc", n, [0], [0])
         x0 = ca.MX.sym("x0", 12)
         S0 = ca.MX.sym("S0", 12, 12 + nf)
-        U, W = ca.MX.sym("U", nt, K), ca.MX.sym("W", 6, K)
-        Q, QD, QDD = (ca.MX.sym(n, nj, K * S) for n in ("Q", "QD", "QDD"))
-        pl, h = ca.MX.sym("payload", 1, K), ca.MX.sym("h")
+        U, W = ca.MX.sym("U", nt, n), ca.MX.sym("W", 6, n)
+        Q, QD, QDD = (ca.MX.sym(k, nj, 3 * n) for k in ("Q", "QD", "QDD"))
+        pl, h = ca.MX.sym("payload", 1, n), ca.MX.sym("h")
         theta, E, p0 = ca.MX.sym("theta", nf), ca.MX.sym("E", len(lay), nf), ca.MX.sym("p0", len(lay))
-        rest = [U, W, Q, QD, QDD, pl, ca.repmat(h, 1, K), ca.repmat(theta, 1, K), ca.repmat(E, 1, K), ca.repmat(p0, 1, K)]
+        rest = [U, W, Q, QD, QDD, pl, ca.repmat(h, 1, n), ca.repmat(theta, 1, n), ca.repmat(E, 1, n),
+                ca.repmat(p0, 1, n)]
         if sens:
             X, SS = acc(x0, S0, *rest)
             return ca.Function(name, [x0, S0, U, W, Q, QD, QDD, pl, h, theta, E, p0], [X, SS],
@@ -133,26 +132,28 @@ class LogPlant:
         return ca.Function(name, [x0, U, W, Q, QD, QDD, pl, h, theta, E, p0], [X], ["x0", *_BLOCK_IN], ["X"])
 
     def block_fn(self, K: int = DEFAULT_BLOCK) -> ca.Function:
-        """``ident_block(x0, U, W, Q, QD, QDD, payload, h, theta, E, p0) -> X``: K samples, compiled.
+        """``ident_block(x0, U, W, Q, QD, QDD, payload, h, theta, E, p0) -> X``: K log samples (K m RK4 steps).
 
-        ``U`` (n_thrusters x K), ``W`` (6 x K), ``Q, QD, QDD`` (n_joints x K S: the stage values of sample k in
-        columns k S .. k S + S - 1), ``payload`` (1 x K); ``X`` (12 x K) the state after each sample.
+        Per step: ``U`` (n_thrusters), ``W`` (6), ``Q, QD, QDD`` (n_joints x 3: the stage times t, t + h/2,
+        t + h), ``payload``; ``X`` (12 x K m) the state after each step. Compiled once per (structure, K m).
         """
         _check_K(K)
-        return codegen.build_described("ident_block", f"{self._tag()} K={K}",
-                                       lambda: self._accumulated("ident_block", K, False))
+        n = K * self.m
+        return codegen.build_described("ident_block", f"{self._tag()} n={n}",
+                                       lambda: self._accumulated("ident_block", n, False))
 
     def sens_fn(self, K: int = DEFAULT_BLOCK) -> ca.Function:
         """``ident_sens_block(x0, S0, ...) -> (X, S)``: as :meth:`block_fn` with the forward sensitivities.
 
-        ``S0`` (12 x (12 + n_slots)): d x0 / d z for z = [x at the trial's start; theta]; ``S`` (12 x K (12 +
-        n_slots)): d x_k / d z after each sample, block k in columns k (12 + n_slots) ... The Jacobians are
-        built by CasADi's algorithmic differentiation of the same sample graph and compiled at -O1 (a
-        fraction of the -O2 build time for large Jacobians; the code runs about as fast here).
+        ``S0`` (12 x (12 + n_slots)): d x0 / d z for z = [x at the trial's start; theta]; ``S`` (12 x K m (12 +
+        n_slots)): d x / d z after each step, step k in columns k (12 + n_slots) ... The Jacobians are built
+        by CasADi's algorithmic differentiation of the same step graph, compiled at -O1 (the -O2 build of a
+        large Jacobian takes several times longer for code about as fast).
         """
         _check_K(K)
-        return codegen.build_described("ident_sens_block", f"{self._tag()} K={K} sens",
-                                       lambda: self._accumulated("ident_sens_block", K, True), opt_level="-O1")
+        n = K * self.m
+        return codegen.build_described("ident_sens_block", f"{self._tag()} n={n} sens",
+                                       lambda: self._accumulated("ident_sens_block", n, True), opt_level="-O1")
 
 
 _IN = ["x", "u", "w", "Q", "QD", "QDD", "payload", "h", "theta", "E", "p0"]
@@ -165,33 +166,35 @@ def _check_K(K) -> None:
 
 
 def sample_inputs(log, system, m: int, thrust_names=None) -> dict[str, np.ndarray]:
-    """The block inputs of every sample of ``log`` (N - 1 samples: from t_0 to t_{N-1}).
+    """The block inputs of every RK4 step over ``log`` (m steps per sample, (N - 1) m steps in all).
 
-    ``U`` (n_thrusters x N-1, N; zero where not logged), ``W`` (6 x N-1), ``Q, QD, QDD`` (n_joints x (N-1) S),
-    ``payload`` (1 x N-1), ``h`` = dt / m.
+    ``U`` (n_thrusters x steps; zero where not logged) and ``W`` (6 x steps), held over each sample;
+    ``Q, QD, QDD`` (n_joints x 3 steps): the joint splines at each step's stage times; ``payload`` (1 x steps);
+    ``h`` = dt / m.
     """
     st = system.layout.structure
     nj, nt = st.n_joints, st.n_thrusters
     names = thrust_names if thrust_names is not None else tuple(st.thrusters or ())
     n = len(log.t) - 1
-    dt = log.dt
-    h = dt / m
+    h = log.dt / m
     U = np.zeros((nt, n))
     for i, tn in enumerate(names):
         if tn in log.thrust:
             U[i] = log.thrust[tn][:-1]
     W = np.zeros((6, n)) if log.wrench is None else np.ascontiguousarray(log.wrench[:-1].T)
-    S = 2 * m + 1
-    ts = (log.t[:-1, None] + np.arange(S)[None, :] * (0.5 * h)).reshape(-1)  # sample-major, stage-minor
+    pl = np.zeros((1, n)) if log.payload is None else log.payload[None, :-1]
+    t_step = (log.t[:-1, None] + np.arange(m)[None, :] * h).reshape(-1)
+    ts = (t_step[:, None] + np.array([0.0, 0.5, 1.0])[None, :] * h).reshape(-1)  # step-major, stage-minor
     if nj:
         if log.joints is None:
             raise ValueError(f"{log.path}: the system has {nj} joints but the log maps none")
         q, qd, qdd = log.joints(ts)
         Q, QD, QDD = q.T, qd.T, qdd.T
     else:
-        Q = QD = QDD = np.zeros((0, n * S))
-    pl = np.zeros((1, n)) if log.payload is None else log.payload[None, :-1]
-    return {"U": U, "W": W, "Q": Q, "QD": QD, "QDD": QDD, "payload": pl, "h": np.array([[h]])}
+        Q = QD = QDD = np.zeros((0, 3 * n * m))
+    rep = lambda a: np.repeat(a, m, axis=1)  # noqa: E731
+    return {"U": rep(U), "W": rep(W), "Q": Q, "QD": QD, "QDD": QDD, "payload": rep(pl), "h": np.array([[h]]),
+            "m": m}
 
 
 def _theta(plant: LogPlant, theta) -> np.ndarray:
@@ -217,19 +220,20 @@ def simulate(plant: LogPlant, log, x0: np.ndarray, p: np.ndarray, theta=None, K:
     """
     f = plant.block_fn(K)
     d = data if data is not None else sample_inputs(log, plant.system, plant.m)
-    th = _theta(plant, theta if theta is not None else [p[plant.layout.index[n]] for n in plant.free])
+    th = _theta(plant, theta if theta is not None else [p[plant.layout.index[nm]] for nm in plant.free])
     E, p0 = plant.E(), _p0(plant, p)
+    m, nb = plant.m, K * plant.m
     n = d["U"].shape[1]
-    out = np.empty((n + 1, 12))
-    out[0] = x0
+    Xs = np.empty((n + 1, 12))
+    Xs[0] = x0
     x = np.asarray(x0, dtype=float).reshape(12, 1)
-    for b in range(0, n, K):
-        e = min(b + K, n)
-        c = _pad(d, b, e, K, plant.n_stages)
+    for b in range(0, n, nb):
+        e = min(b + nb, n)
+        c = _pad(d, b, e, nb)
         X = calls.call(f, x, c["U"], c["W"], c["Q"], c["QD"], c["QDD"], c["payload"], d["h"], th, E, p0)[0]
-        out[b + 1:e + 1] = X[:, : e - b].T
+        Xs[b + 1:e + 1] = X[:, : e - b].T
         x = X[:, e - b - 1: e - b]
-    return out
+    return Xs[::m]
 
 
 def simulate_sens(plant: LogPlant, log, x0: np.ndarray, p: np.ndarray, theta, K: int = DEFAULT_BLOCK,
@@ -239,35 +243,38 @@ def simulate_sens(plant: LogPlant, log, x0: np.ndarray, p: np.ndarray, theta, K:
     d = data if data is not None else sample_inputs(log, plant.system, plant.m)
     th, E, p0 = _theta(plant, theta), plant.E(), _p0(plant, p)
     nz = 12 + plant.n_slots
+    m, nb = plant.m, K * plant.m
     n = d["U"].shape[1]
-    X = np.empty((n + 1, 12))
-    dX = np.empty((n + 1, 12, nz))
+    N = n // m + 1
+    X = np.empty((N, 12))
+    dX = np.empty((N, 12, nz))
     X[0] = x0
     dX[0] = np.eye(12, nz)
     x = np.asarray(x0, dtype=float).reshape(12, 1)
     Sk = np.asfortranarray(np.eye(12, nz))
-    for b in range(0, n, K):
-        e = min(b + K, n)
-        c = _pad(d, b, e, K, plant.n_stages)
+    for b in range(0, n, nb):  # blocks start on a sample (nb is a multiple of m)
+        e = min(b + nb, n)
+        c = _pad(d, b, e, nb)
         Xb, Sb = calls.call(f, x, Sk, c["U"], c["W"], c["Q"], c["QD"], c["QDD"], c["payload"], d["h"], th, E, p0)
         k = e - b
-        X[b + 1:e + 1] = Xb[:, :k].T
-        dX[b + 1:e + 1] = Sb[:, : k * nz].reshape(12, nz, k, order="F").transpose(2, 0, 1)
+        rows = slice(b // m + 1, e // m + 1)
+        X[rows] = Xb[:, m - 1:k:m].T
+        dX[rows] = Sb[:, : k * nz].reshape(12, nz, k, order="F")[:, :, m - 1::m].transpose(2, 0, 1)
         x = Xb[:, k - 1:k]
         Sk = np.asfortranarray(Sb[:, (k - 1) * nz: k * nz])
     return X, dX[:, :, : 12 + len(plant.free)]
 
 
-def _pad(d: dict, b: int, e: int, K: int, S: int) -> dict:
-    """The block inputs of samples b..e-1, the last repeated up to K samples (their outputs are dropped)."""
+def _pad(d: dict, b: int, e: int, nb: int) -> dict:
+    """The block inputs of steps b..e-1, the last repeated up to nb steps (their outputs are dropped)."""
     out = {}
-    for k in ("U", "W", "payload"):
-        a = d[k][:, b:e]
-        out[k] = np.concatenate([a, np.repeat(a[:, -1:], K - (e - b), axis=1)], axis=1) if e - b < K else a
-    for k in ("Q", "QD", "QDD"):
-        a = d[k][:, b * S:e * S]
-        if e - b < K:
-            a = np.concatenate([a, np.repeat(a[:, -S:], K - (e - b), axis=1)], axis=1) if a.shape[0] else \
-                np.zeros((0, K * S))
-        out[k] = a
+    k = e - b
+    for key in ("U", "W", "payload"):
+        a = d[key][:, b:e]
+        out[key] = np.concatenate([a, np.repeat(a[:, -1:], nb - k, axis=1)], axis=1) if k < nb else a
+    for key in ("Q", "QD", "QDD"):
+        a = d[key][:, 3 * b:3 * e]
+        if k < nb:
+            a = np.concatenate([a, np.tile(a[:, -3:], (1, nb - k))], axis=1) if a.shape[0] else np.zeros((0, 3 * nb))
+        out[key] = a
     return out
