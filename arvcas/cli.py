@@ -493,6 +493,7 @@ def _bench_outputs(a):
 
 def _table() -> tuple[Command, ...]:
     from arvcas.experiments import cli as x
+    from arvcas.experiments import validation as v
     from arvcas.tuning import cli as t
 
     return (
@@ -532,6 +533,12 @@ def _table() -> tuple[Command, ...]:
                 "(table, plot)", x.add_sweep, x.run_sweep,
                 inputs=(("config", "file"), ("params", "system"), ("check", "file")),
                 outputs=x.sweep_outputs, check=x.check_sweep),
+        Command("validate", "simulate a system open loop over logged trials (*.log.toml) and compare: RMSE, NRMSE, "
+                "R^2 per signal, figures", v.add_validate, v.run_validate,
+                inputs=(("system", "system"),), outputs=v.validate_outputs),
+        Command("identify", "estimate named parameters of a system from logged trials (IPOPT, 95 percent "
+                "intervals): writes the identified system file", v.add_identify, v.run_identify,
+                inputs=(("system", "system"),), outputs=v.identify_outputs, check=v.check_identify),
         Command("montecarlo", "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance "
                 "phases: CIs, failure rate", x.add_montecarlo, x.run_montecarlo,
                 inputs=(("config", "file"), ("params", "system"), ("from_front", "front"), ("check", "file")),

@@ -36,7 +36,7 @@ import numpy as np
 
 from arvcas.ident import plant as plant_mod
 from arvcas.ident.logs import SIGNALS, Log
-from arvcas.ident.validate import default_step, initial_state, substeps
+from arvcas.ident.validate import initial_state, substeps
 from arvcas.systemfile import parse_term
 
 __all__ = ["IdentifyError", "Estimate", "identify", "bounds", "noise_floor", "RANK_TOL", "CORR_WARN", "Z95"]
@@ -151,9 +151,9 @@ class Estimate:
 class _Problem:
     """Residuals and their Jacobian over every trial, memoised by the decision vector."""
 
-    def __init__(self, system, logs, free, signals, sigma, m, trim, K, threads):
+    def __init__(self, system, logs, free, signals, sigma, m, K, threads):
         self.system, self.logs, self.free, self.K = system, logs, tuple(free), K
-        self.plant = plant_mod.LogPlant(system, m=m, free=self.free, trim=trim)
+        self.plant = plant_mod.LogPlant(system, m=m, free=self.free)
         lay = system.layout
         self.p = system.params.vector()
         self.theta0 = np.array([self.p[lay.index[n]] for n in self.free])
@@ -386,13 +386,13 @@ def _directions(F: np.ndarray, names: tuple[str, ...]) -> tuple[np.ndarray, list
 
 
 def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None = None, h_max: float | None = None,
-             trim: bool = False, max_iter: int = 100, tol: float = 1e-8, threads: int = 2, K: int = 50,
+             max_iter: int = 100, tol: float = 1e-8, threads: int = 2, K: int = 50,
              progress=None) -> Estimate:
     """Estimate the parameters ``free`` (names of ``system.params``) from ``logs`` (module docstring).
 
     ``signals``: the measured signals fitted (default every vehicle signal the logs measure, of
     :data:`arvcas.ident.logs.SIGNALS`); ``sigma``: noise per signal (SI), else the logs' stated ``std``,
-    else :func:`noise_floor`; ``h_max``: the plant step (default the system's, :func:`default_step`);
+    else :func:`noise_floor`; ``h_max``: the largest plant step (default the logs' sample time);
     ``progress(k, cost)``: called every IPOPT iteration. SIGINT (Ctrl-C) stops after the current
     iteration and returns the best iterate (status "interrupted").
     """
@@ -435,9 +435,8 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
                                                                             if s in lg.signals]))
         if not (math.isfinite(sig[s]) and sig[s] > 0):
             sig[s] = 1e-6  # a noiseless signal: weighted as a very precise one
-    h_max = default_step(system) if h_max is None else float(h_max)
-    m = substeps(logs[0].dt, h_max)
-    prob = _Problem(system, logs, free, signals, sig, m, trim, K, threads)
+    m = substeps(logs[0].dt, logs[0].dt if h_max is None else float(h_max))
+    prob = _Problem(system, logs, free, signals, sig, m, K, threads)
     lo = np.full(prob.nz, -np.inf)
     hi = np.full(prob.nz, np.inf)
     for k, n in enumerate(free):

@@ -23,6 +23,8 @@ Frames: ``world = "ned" | "enu" | "nwu"`` (ROS's ENU; NWU is any z-up frame with
 axis, turned to NED by a half turn about x) and ``body = "frd" | "flu"`` (ROS's base_link). A quaternion
 is the body's attitude in the world frame (it maps body vectors to world vectors), in the column order
 ``quaternion_order``. ``point`` is where on the body (FRD, m, from the body origin) a position is measured.
+``depth`` is the vertical coordinate alone (a pressure sensor, or a pose whose horizontal frame differs
+from the attitude's), in the stream's world frame: a z-up height becomes NED's z = -height.
 """
 
 from __future__ import annotations
@@ -589,9 +591,9 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
                 signals[nm] = pv[:, k]
                 if s_p is not None:
                     std[nm] = s_p
-        if sm.depth is not None:
+        if sm.depth is not None:  # the vertical coordinate alone, in the stream's world frame (z down in NED)
             dv, s_d = cols("depth")
-            signals["z"] = _interp(grid, tb.time, dv[:, 0])
+            signals["z"] = _interp(grid, tb.time, Cw[2, 2] * dv[:, 0])
             if s_d is not None:
                 std["z"] = s_d
         for k_map, nms in (("velocity", ("u", "v", "w")), ("angular_velocity", ("p", "q", "r"))):

@@ -8,9 +8,9 @@ A log's samples are ``dt = 1 / rate`` apart; the plant takes ``m`` RK4 steps of 
 * the joints prescribed (docs/model.md §3, the exact coupling of ``uvms.coupled_terms``): ``q, qd, qdd``
   from the log's smoothing splines at every RK4 stage time (t, t + h/2, t + h of each step);
 * the payload fraction held over the sample;
-* no trim buoyancy by default: a real vehicle's ballast for its arm is in its own mass, centre of
-  gravity and buoyancy, not in the trim that arvcas's scenarios add (docs/model.md §3); ``trim=True``
-  adds it (a system whose vehicle numbers exclude the ballast).
+* the trim buoyancy of docs/model.md §3 exactly as the system file says: a vehicle described as tested
+  carries its ballast in its own numbers and says ``[arm] trim = false`` (the Hinsdale vehicle); a system
+  whose vehicle numbers exclude the ballast for its arm keeps the trim, as ``uvms_rhs`` does.
 
 Parameters: ``p = p0 + E theta``: the ``free`` entries of the parameter vector are the slots of ``theta`` (an
 input; ``E`` selects them, so one library serves any choice of up to ``n_slots`` free parameters), and the
@@ -43,7 +43,6 @@ class LogPlant:
     system: object  # arvcas.system.System
     m: int = 1
     free: tuple[str, ...] = ()
-    trim: bool = False
     opts: ModelOptions = ModelOptions()
 
     @property
@@ -64,7 +63,7 @@ class LogPlant:
         return E
 
     def _tag(self) -> str:
-        return f"ident trim{int(self.trim)} slots{self.n_slots} {self.opts!r}{system_tag(self.layout.structure)}"
+        return f"ident slots{self.n_slots} {self.opts!r}{system_tag(self.layout.structure)}"
 
     def step_fn(self) -> ca.Function:
         """``ident_step(x, u, w, Q, QD, QDD, payload, h, theta, E, p0) -> x_next``: one RK4 step, p = p0 + E theta.
@@ -88,7 +87,7 @@ class LogPlant:
             if nj == 0:
                 nud = ca.solve(vehicle.M(P), tau - vehicle.forces(P, eta, nu))
             else:
-                extra = manipulator.trim_wrench(P, eta, self.opts.n_quad) if self.trim else ca.DM.zeros(6)
+                extra = manipulator.trim_wrench(P, eta, self.opts.n_quad)
                 nud, _ = coupled_terms(P, eta, nu, tau, Q[:, j], QD[:, j], QDD[:, j], pl, extra, self.opts)
             return ca.vertcat(ca.mtimes(J(eta), nu), nud)
 

@@ -28,10 +28,9 @@ from arvcas.ident import plant as plant_mod
 from arvcas.ident.logs import SIGNALS, Log
 from arvcas.model.spatial import J
 
-__all__ = ["FIT_WINDOW_S", "TrialResult", "initial_state", "metrics", "validate_log", "default_step", "substeps"]
+__all__ = ["FIT_WINDOW_S", "TrialResult", "initial_state", "metrics", "validate_log", "substeps"]
 
 FIT_WINDOW_S = 0.5
-DEFAULT_STEP_S = 0.01  # the plant step for a system that names no scenario
 
 
 @dataclass(frozen=True)
@@ -88,16 +87,6 @@ def metrics(y: np.ndarray, yhat: np.ndarray) -> dict[str, float]:
             "r2": 1.0 - float(np.sum(e ** 2)) / sst if sst > 0 else -math.inf, "max_error": float(np.max(np.abs(e)))}
 
 
-def default_step(system) -> float:
-    """The plant step of the system's default scenario (results/step's accuracy-matched step), else 0.01 s."""
-    path = system.params.default("scenario")
-    if path is None:
-        return DEFAULT_STEP_S
-    from arvcas.sim.scenario import load_scenario
-
-    return float(load_scenario(path).time_h_plant)
-
-
 def substeps(dt: float, h_max: float) -> int:
     """RK4 steps per log sample so that each is at most ``h_max``."""
     return max(1, int(math.ceil(dt / h_max - 1e-9)))
@@ -119,12 +108,14 @@ def compare(log: Log, X: np.ndarray) -> tuple[dict, dict, dict]:
     return meas, sim, out
 
 
-def validate_log(system, log: Log, *, h_max: float | None = None, trim: bool = False,
-                 p: np.ndarray | None = None, x0: np.ndarray | None = None) -> TrialResult:
-    """Simulate ``system`` open loop over ``log`` from its initial state and compare every measured signal."""
-    h_max = default_step(system) if h_max is None else float(h_max)
-    m = substeps(log.dt, h_max)
-    pl = plant_mod.LogPlant(system, m=m, trim=trim)
+def validate_log(system, log: Log, *, h_max: float | None = None, p: np.ndarray | None = None,
+                 x0: np.ndarray | None = None) -> TrialResult:
+    """Simulate ``system`` open loop over ``log`` from its initial state and compare every measured signal.
+
+    ``h_max``: the largest RK4 step (default the log's sample time: the passive dynamics of a vehicle are
+    slow next to it; results/validation measures the difference to a four times finer step)."""
+    m = substeps(log.dt, log.dt if h_max is None else float(h_max))
+    pl = plant_mod.LogPlant(system, m=m)
     x0 = initial_state(log) if x0 is None else np.asarray(x0, dtype=float)
     p = system.params.vector() if p is None else np.asarray(p, dtype=float)
     X = plant_mod.simulate(pl, log, x0, p)
