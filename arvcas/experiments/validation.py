@@ -154,7 +154,7 @@ def _readme(doc: dict, results, logs, system, seconds: float) -> str:
     lines += ["", "Figures: " + ", ".join(f"[{r.name}]({r.name}.png)" for r in results), ""]
     joints = [lg for lg in logs if lg.joints is not None]
     if joints:
-        lines.append(f"The joints follow the logged trajectory (smoothing splines, half-power frequency "
+        lines.append(f"The joints follow the logged trajectory (smoothing splines that halve amplitudes at "
                      f"{joints[0].joints.cutoff:g} Hz); their error in `validation.json` is the smoothing's against "
                      f"the raw samples, not a model error.")
     return "\n".join(lines) + "\n"

@@ -2,21 +2,32 @@
 
 The estimator minimises the simulation error of every trial at once (docs/identification.md):
 
-    min over theta, x_0^(1..T)   1/2 sum_trials sum_samples sum_signals ((y - y_hat(theta, x_0)) / sigma)^2
+    min over theta, x_0^(1..T)   sum_signals  [ 1/2 SSE_k / sigma_k^2   or   N_k / 2 log(SSE_k / N_k) ]
+
+    SSE_k = sum over the trials' samples of (y_hat_k(theta, x_0) - y_k)^2
 
 * ``theta``: the free parameters (any entries of the system's parameter vector, by name), scaled by their
   starting values; ``x_0^(j)``: each trial's initial state (12), free too, started from the log
   (:func:`arvcas.ident.validate.initial_state`);
 * ``y_hat``: the same compiled plant as validation (:mod:`arvcas.ident.plant`), open loop over the whole
   trial, its Jacobian with respect to ``[x_0; theta]`` by forward sensitivities of the same CasADi graph;
-* ``sigma``: each signal's noise, stated by the log mapping (``std``) or estimated from the log itself
-  (:func:`noise_floor`);
-* solved by IPOPT (CasADi's ``nlpsol``) with the Gauss-Newton Hessian ``J' J`` and bounds that keep the model
-  physical (:func:`bounds`); every trial is simulated on its own thread.
+* ``sigma``: each signal's noise, stated by the log mapping (``std``); for a signal whose noise no log
+  states, the term is the maximum-likelihood one of an unknown noise level, ``N_k / 2 log(SSE_k / N_k)``,
+  whose gradient weights the signal by its own mean square error (so a signal the model cannot follow,
+  e.g. a drift, does not swamp the others);
+* solved by IPOPT (CasADi's ``nlpsol``) with the Gauss-Newton Hessian ``J' W J`` and bounds that keep the
+  model physical (:func:`bounds`), stopped when the objective changes by less than ``tol`` (default 0.1)
+  over :data:`STALL_ITER` iterations: the objective is a negative log-likelihood, and a change of 0.5
+  moves the estimate by about one standard error, so 0.1 is well inside the intervals (a tail of slow
+  creeping, 1e-5 of the objective in 20 iterations on the Hinsdale trials, is cut); every trial is
+  simulated on its own thread.
 
-At the optimum the Gauss-Newton information ``F = J' J`` (trials' initial states eliminated by the Schur
+At the optimum the Gauss-Newton information ``F = J' W J`` (trials' initial states eliminated by the Schur
 complement) gives the covariance ``s^2 F^-1`` with ``s^2`` the weighted residual sum over its degrees of
-freedom, so intervals widen when the model cannot follow the data. Directions of ``F`` whose eigenvalue
+freedom: with stated noise levels, intervals widen when the model cannot follow the data; with estimated
+ones, the weights are the errors themselves (s^2 = 1 + nz / dof). The residuals are treated as independent
+from sample to sample: where the model error is coloured (a real vehicle), the intervals are too narrow,
+and the report says so. Directions of ``F`` whose eigenvalue
 is below :data:`RANK_TOL` of the largest (in parameters scaled by their values) are reported as
 unidentifiable, with the parameters that make them, and no interval is printed for those parameters;
 pairs correlated beyond :data:`CORR_WARN` are named.
@@ -39,9 +50,10 @@ from arvcas.ident.logs import SIGNALS, Log
 from arvcas.ident.validate import initial_state, substeps
 from arvcas.systemfile import parse_term
 
-__all__ = ["IdentifyError", "Estimate", "identify", "bounds", "noise_floor", "RANK_TOL", "CORR_WARN", "Z95"]
+__all__ = ["IdentifyError", "Estimate", "identify", "bounds", "RANK_TOL", "CORR_WARN", "Z95"]
 
 RANK_TOL = 1e-8
+STALL_ITER = 3  # iterations over which a relative objective change below ``tol`` ends the solve
 CORR_WARN = 0.95
 Z95 = 1.959963984540054  # the normal distribution's 97.5 % point
 MAX_FREE = 64
@@ -71,16 +83,6 @@ def bounds(layout, name: str) -> tuple[float, float]:
     return lo, hi
 
 
-def noise_floor(y: np.ndarray) -> float:
-    """A signal's white-noise level, from its second differences: for smooth motion sampled fast the second
-    difference is noise, with variance 6 sigma^2 (median absolute deviation, robust to jumps)."""
-    d2 = np.diff(y, 2)
-    if d2.size < 3:
-        return float("nan")
-    mad = float(np.median(np.abs(d2 - np.median(d2))))
-    return 1.4826 * mad / math.sqrt(6.0)
-
-
 @dataclass(frozen=True)
 class Estimate:
     """The result of :func:`identify`: values, intervals, what the data could not identify."""
@@ -108,6 +110,9 @@ class Estimate:
     h: float
     at_bound: tuple[str, ...] = ()
     history: tuple[float, ...] = field(default=(), repr=False)
+    rms0: dict = field(default_factory=dict)  # unweighted RMS error per fitted signal, at the start
+    rms: dict = field(default_factory=dict)  # and at the estimate
+    stated: tuple[str, ...] = ()  # the signals whose noise the logs state (the others are estimated)
 
     @property
     def intervals(self) -> np.ndarray:
@@ -137,9 +142,12 @@ class Estimate:
                 f"({self.n_residuals} residuals)", "",
                 f"{'parameter':28s} {'initial':>12s} {'estimate':>12s} {'95 % interval':>27s}  unit"]
         for n, a, b, s, ok, u in zip(self.free, self.initial, self.values, self.std, self.identifiable, units):
-            iv = f"[{b - Z95 * s:.5g}, {b + Z95 * s:.5g}]" if ok else "not identifiable"
+            iv = f"[{_num(b - Z95 * s, s)}, {_num(b + Z95 * s, s)}]" if ok else "not identifiable"
             flag = "  (at its bound)" if n in self.at_bound else ""
             rows.append(f"{n:28s} {a:12.5g} {b:12.5g} {iv:>27s}  {u}{flag}")
+        rows += ["", "The intervals assume errors independent from sample to sample; where the model cannot follow the",
+                 "vehicle (errors that persist over seconds), they are too narrow: compare the estimates between",
+                 "subsets of trials, and validate on trials held out of the fit."]
         if self.unidentifiable:
             rows += ["", "directions the data do not determine:"] + [f"  {u}" for u in self.unidentifiable]
         if self.correlated:
@@ -148,27 +156,45 @@ class Estimate:
         return "\n".join(rows)
 
 
-class _Problem:
-    """Residuals and their Jacobian over every trial, memoised by the decision vector."""
+def _num(x: float, width: float) -> str:
+    """``x`` with enough digits to show a difference of ``width``."""
+    if not (math.isfinite(x) and math.isfinite(width)) or width <= 0 or x == 0:
+        return f"{x:.5g}"
+    d = max(4, int(math.ceil(math.log10(abs(x) / width))) + 2)
+    return f"{x:.{min(d, 15)}g}"
 
-    def __init__(self, system, logs, free, signals, sigma, m, K, threads):
+
+class _Problem:
+    """The objective over every trial (module docstring), its gradient and Gauss-Newton Hessian, memoised by z.
+
+    Residuals are unweighted (simulated - measured, SI); signal k's weight is 1 / sigma_k^2 for a stated noise
+    level, and N_k / SSE_k (its own mean square error) for an unstated one, whose term of the objective is
+    the maximum-likelihood ``N_k / 2 log(SSE_k / N_k)``: its gradient is the weighted least-squares one.
+    """
+
+    def __init__(self, system, logs, free, signals, stated, m, K, threads):
         self.system, self.logs, self.free, self.K = system, logs, tuple(free), K
         self.plant = plant_mod.LogPlant(system, m=m, free=self.free)
         lay = system.layout
         self.p = system.params.vector()
-        self.theta0 = np.array([self.p[lay.index[n]] for n in self.free])
+        self.idx = np.array([lay.index[n] for n in self.free], dtype=int)
+        self.theta0 = self.p[self.idx]
         self.scale = np.where(np.abs(self.theta0) > 0, np.abs(self.theta0), 0.1)
         self.nt = len(self.free)
         self.data = [plant_mod.sample_inputs(lg, system, m) for lg in logs]
-        self.sel = []  # per log: (state indices, measured (N x k), weights 1/sigma)
+        self.signals = tuple(signals)
+        self.stated = dict(stated)
+        self.sel = []  # per log: (state indices, measured (N x k))
+        ids = []
         for lg in logs:
             sig = [s for s in signals if s in lg.signals]
-            idx = np.array([SIGNALS.index(s) for s in sig], dtype=int)
-            Y = np.stack([lg.signals[s] for s in sig], axis=1)
-            w = np.array([1.0 / sigma[s] for s in sig])
-            self.sel.append((idx, Y, w))
+            self.sel.append((np.array([SIGNALS.index(s) for s in sig], dtype=int),
+                             np.stack([lg.signals[s] for s in sig], axis=1)))
+            ids.append(np.tile([self.signals.index(s) for s in sig], len(lg.t)))
+        self.sig_id = np.concatenate(ids)  # the fitted signal of each residual
+        self.n_sig = np.bincount(self.sig_id, minlength=len(self.signals))
         self.nz = self.nt + 12 * len(logs)
-        self.n_res = sum(Y.size for _, Y, _ in self.sel)
+        self.n_res = self.sig_id.size
         self.pool = ThreadPoolExecutor(max(1, threads)) if threads > 1 and len(logs) > 1 else None
         self._last: tuple | None = None
         self._lock = threading.Lock()
@@ -181,22 +207,22 @@ class _Problem:
 
     def _one(self, j: int, z: np.ndarray, sens: bool):
         lg, d = self.logs[j], self.data[j]
-        idx, Y, w = self.sel[j]
+        idx, Y = self.sel[j]
         th = self.theta(z)
+        pv = self.p.copy()
+        pv[self.idx] = th
         if sens:
-            X, dX = plant_mod.simulate_sens(self.plant, lg, self.x0(z, j), self.p, th, self.K, d)
+            X, dX = plant_mod.simulate_sens(self.plant, lg, self.x0(z, j), pv, th, self.K, d)
         else:
-            X, dX = plant_mod.simulate(self.plant, lg, self.x0(z, j), self.p, th, self.K, d), None
-        r = ((X[:, idx] - Y) * w).reshape(-1)
+            X, dX = plant_mod.simulate(self.plant, lg, self.x0(z, j), pv, self.K, d), None
+        r = (X[:, idx] - Y).reshape(-1)
         if dX is None:
             return r, None
-        Jr = dX[:, idx, :] * w[None, :, None]  # (N, k, 12 + nt)
-        Jr = Jr.reshape(-1, 12 + self.nt)
-        Jt = Jr[:, 12:] * self.scale[None, :]
-        return r, (Jr[:, :12], Jt)
+        Jr = dX[:, idx, :].reshape(-1, 12 + self.nt)
+        return r, (Jr[:, :12], Jr[:, 12:] * self.scale[None, :])
 
     def evaluate(self, z: np.ndarray, sens: bool):
-        """(r, J) with J (n_res x nz) if ``sens``; memoised on the last ``z``."""
+        """(r, J): unweighted residuals and, if ``sens``, their Jacobian (n_res x nz); memoised on the last z."""
         z = np.asarray(z, dtype=float).reshape(-1)
         with self._lock:
             last = self._last
@@ -218,14 +244,47 @@ class _Problem:
             self._last = (z.copy(), r, Jm)
         return r, Jm
 
+    def sse(self, r: np.ndarray) -> np.ndarray:
+        return np.bincount(self.sig_id, weights=r * r, minlength=len(self.signals))
+
+    def weights(self, r: np.ndarray) -> np.ndarray:
+        """1 / sigma_k^2 per signal: stated, or N_k / SSE_k."""
+        sse = self.sse(r)
+        return np.array([1.0 / self.stated[s] ** 2 if s in self.stated else self.n_sig[k] / max(sse[k], 1e-300)
+                         for k, s in enumerate(self.signals)])
+
     def cost(self, z) -> float:
         r, _ = self.evaluate(z, False)
-        c = 0.5 * float(r @ r)
-        return c if math.isfinite(c) else math.inf
+        if not np.all(np.isfinite(r)):
+            return math.inf
+        sse = self.sse(r)
+        c = 0.0
+        for k, s in enumerate(self.signals):
+            if s in self.stated:
+                c += 0.5 * sse[k] / self.stated[s] ** 2
+            else:
+                c += 0.5 * self.n_sig[k] * math.log(max(sse[k], 1e-300) / self.n_sig[k])
+        return c
+
+    def gradient(self, z) -> np.ndarray:
+        r, Jm = self.evaluate(z, True)
+        w = self.weights(r)[self.sig_id]
+        return Jm.T @ (w * r)
+
+    def gauss_newton(self, z) -> np.ndarray:
+        r, Jm = self.evaluate(z, True)
+        w = self.weights(r)[self.sig_id]
+        return Jm.T @ (Jm * w[:, None])
+
+    def rms(self, z) -> dict[str, float]:
+        """The RMS error of each fitted signal over every trial at ``z`` (SI)."""
+        r, _ = self.evaluate(z, False)
+        sse = self.sse(r)
+        return {s: math.sqrt(sse[k] / self.n_sig[k]) for k, s in enumerate(self.signals)}
 
 
 class _F(ca.Callback):
-    """f(z) = 1/2 r'r, with its gradient J'r (for IPOPT through CasADi's nlpsol)."""
+    """The objective f(z), with its gradient (for IPOPT through CasADi's nlpsol)."""
 
     def __init__(self, prob: _Problem, name: str = "ident_f"):
         ca.Callback.__init__(self)
@@ -276,13 +335,11 @@ class _Grad(ca.Callback):
         return ca.Sparsity.dense(1, self.prob.nz)
 
     def eval(self, arg):
-        z = np.array(arg[0]).reshape(-1)
-        r, Jm = self.prob.evaluate(z, True)
-        return [(Jm.T @ r).reshape(1, -1)]
+        return [self.prob.gradient(np.array(arg[0]).reshape(-1)).reshape(1, -1)]
 
 
 class _GN(ca.Callback):
-    """The Gauss-Newton Hessian J'J (its upper triangle is what nlpsol passes IPOPT)."""
+    """The Gauss-Newton Hessian J' W J (its upper triangle is what nlpsol passes IPOPT)."""
 
     def __init__(self, prob: _Problem, name: str = "ident_gn"):
         ca.Callback.__init__(self)
@@ -302,17 +359,16 @@ class _GN(ca.Callback):
         return ca.Sparsity.dense(self.prob.nz, self.prob.nz)
 
     def eval(self, arg):
-        z = np.array(arg[0]).reshape(-1)
-        _, Jm = self.prob.evaluate(z, True)
-        return [Jm.T @ Jm]
+        return [self.prob.gauss_newton(np.array(arg[0]).reshape(-1))]
 
 
 class _Progress(ca.Callback):
     """IPOPT's iteration callback: one line per iteration, the best iterate kept, a stop flag honoured."""
 
-    def __init__(self, nz: int, ng: int, report, stop: threading.Event):
+    def __init__(self, nz: int, ng: int, report, stop: threading.Event, ftol: float):
         ca.Callback.__init__(self)
-        self.nz, self.ng, self.report, self.stop = nz, ng, report, stop
+        self.nz, self.ng, self.report, self.stop, self.ftol = nz, ng, report, stop, ftol
+        self.converged = False
         self.k = 0
         self.best: tuple[float, np.ndarray] | None = None
         self.history: list[float] = []
@@ -349,7 +405,33 @@ class _Progress(ca.Callback):
         if self.report is not None:
             self.report(self.k, f)
         self.k += 1
-        return [1 if self.stop.is_set() else 0]
+        h = self.history
+        if len(h) > STALL_ITER and all(math.isfinite(v) for v in h[-STALL_ITER - 1:]):
+            self.converged = max(h[-STALL_ITER - 1:]) - min(h[-STALL_ITER - 1:]) <= self.ftol
+        return [1 if self.stop.is_set() or self.converged else 0]
+
+
+def _solve(prob: _Problem, z0, lo, hi, max_iter, tol, progress, stop):
+    """One IPOPT solve with the Gauss-Newton Hessian from ``z0``: (z, status, iterations, cost history)."""
+    z = ca.MX.sym("z", prob.nz)
+    fcb, gncb = _F(prob), _GN(prob)
+    lam_f = ca.MX.sym("lam_f")
+    hess = ca.Function("hess_gn", [z, ca.MX(0, 1), lam_f, ca.MX(0, 1)], [lam_f * ca.triu(gncb(z))],
+                       ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+    prog = _Progress(prob.nz, 0, progress, stop, tol)
+    opts = {"hess_lag": hess, "iteration_callback": prog, "print_time": False,
+            "ipopt": {"print_level": 0, "max_iter": int(max_iter), "tol": 1e-8, "sb": "yes",
+                      "mu_strategy": "adaptive"}}
+    solver = ca.nlpsol("ident", "ipopt", {"x": z, "f": fcb(z)}, opts)
+    sol = solver(x0=z0, lbx=lo, ubx=hi)
+    zs = np.array(sol["x"]).reshape(-1)
+    stats = solver.stats()
+    if prog.best is not None and prog.best[0] < prob.cost(zs):
+        zs = prog.best[1]
+    status = str(stats.get("return_status", "?"))
+    if prog.converged:
+        status = f"converged (objective changed by less than {tol:g} over {STALL_ITER} iterations)"
+    return zs, status, int(stats.get("iter_count", prog.k)), list(prog.history)
 
 
 def _fisher(Jm: np.ndarray, nt: int) -> np.ndarray:
@@ -386,13 +468,13 @@ def _directions(F: np.ndarray, names: tuple[str, ...]) -> tuple[np.ndarray, list
 
 
 def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None = None, h_max: float | None = None,
-             max_iter: int = 100, tol: float = 1e-8, threads: int = 2, K: int = 50,
+             max_iter: int = 100, tol: float = 0.1, threads: int = 2, K: int = 50,
              progress=None) -> Estimate:
     """Estimate the parameters ``free`` (names of ``system.params``) from ``logs`` (module docstring).
 
     ``signals``: the measured signals fitted (default every vehicle signal the logs measure, of
     :data:`arvcas.ident.logs.SIGNALS`); ``sigma``: noise per signal (SI), else the logs' stated ``std``,
-    else :func:`noise_floor`; ``h_max``: the largest plant step (default the logs' sample time);
+    else estimated (module docstring); ``h_max``: the largest plant step (default the logs' sample time);
     ``progress(k, cost)``: called every IPOPT iteration. SIGINT (Ctrl-C) stops after the current
     iteration and returns the best iterate (status "interrupted").
     """
@@ -425,18 +507,24 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
     dts = {round(lg.dt, 12) for lg in logs}
     if len(dts) > 1:
         raise IdentifyError(f"logs: the trials have different sample times {sorted(dts)} s: give them one [log] rate")
-    sig = {}
+    stated: dict[str, float] = {}
     for s in signals:
         if sigma and s in sigma:
-            sig[s] = float(sigma[s])
+            stated[s] = float(sigma[s])
         else:
-            stated = [lg.std[s] for lg in logs if s in lg.std]
-            sig[s] = float(np.mean(stated)) if stated else float(np.median([noise_floor(lg.signals[s]) for lg in logs
-                                                                            if s in lg.signals]))
-        if not (math.isfinite(sig[s]) and sig[s] > 0):
-            sig[s] = 1e-6  # a noiseless signal: weighted as a very precise one
+            given = [lg.std[s] for lg in logs if s in lg.std]
+            if given:
+                stated[s] = float(np.mean(given))
+    for s, v in stated.items():
+        if not (math.isfinite(v) and v > 0):
+            raise IdentifyError(f"sigma: {s}: expected a positive noise level, got {v!r}")
     m = substeps(logs[0].dt, logs[0].dt if h_max is None else float(h_max))
-    prob = _Problem(system, logs, free, signals, sig, m, K, threads)
+    z0 = np.concatenate([np.zeros(len(free))] + [initial_state(lg) for lg in logs])
+    prob = _Problem(system, logs, free, signals, stated, m, K, threads)
+    rms0 = prob.rms(z0)
+    if not all(math.isfinite(v) for v in rms0.values()):
+        raise IdentifyError(f"the simulation from the starting parameters is not finite on some trial "
+                            f"({', '.join(lg.name for lg in logs)})")
     lo = np.full(prob.nz, -np.inf)
     hi = np.full(prob.nz, np.inf)
     for k, n in enumerate(free):
@@ -445,44 +533,28 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
         hi[k] = (b - prob.theta0[k]) / prob.scale[k]
         if lo[k] > 0 or hi[k] < 0:
             raise IdentifyError(f"free: {n} starts at {prob.theta0[k]:g}, outside its physical bounds [{a:g}, {b:g}]")
-    z0 = np.concatenate([np.zeros(len(free))] + [initial_state(lg) for lg in logs])
     cost0 = prob.cost(z0)
-    if not math.isfinite(cost0):
-        raise IdentifyError(f"the simulation from the starting parameters is not finite on some trial "
-                            f"({', '.join(lg.name for lg in logs)})")
-    z = ca.MX.sym("z", prob.nz)
-    fcb, gncb = _F(prob), _GN(prob)
-    lam_f = ca.MX.sym("lam_f")
-    hess = ca.Function("hess_gn", [z, ca.MX(0, 1), lam_f, ca.MX(0, 1)], [lam_f * ca.triu(gncb(z))],
-                       ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
     stop = threading.Event()
-    prog = _Progress(prob.nz, 0, progress, stop)
-    opts = {"hess_lag": hess, "iteration_callback": prog, "print_time": False,
-            "ipopt": {"print_level": 0, "max_iter": int(max_iter), "tol": float(tol), "sb": "yes",
-                      "hessian_approximation": "exact", "mu_strategy": "adaptive"}}
-    solver = ca.nlpsol("ident", "ipopt", {"x": z, "f": fcb(z)}, opts)
     old = None
     if threading.current_thread() is threading.main_thread():
         old = signal.signal(signal.SIGINT, lambda *a: stop.set())
     try:
-        sol = solver(x0=z0, lbx=lo, ubx=hi)
-        zs = np.array(sol["x"]).reshape(-1)
-        status = solver.stats().get("return_status", "?")
-        iters = int(solver.stats().get("iter_count", prog.k))
+        zs, status, iters, history = _solve(prob, z0, lo, hi, max_iter, tol, progress, stop)
     finally:
         if old is not None:
             signal.signal(signal.SIGINT, old)
     if stop.is_set():
         status = "interrupted"
-    if prog.best is not None and prog.best[0] < prob.cost(zs):
-        zs = prog.best[1]
     r, Jm = prob.evaluate(zs, True)
     if prob.pool is not None:
         prob.pool.shutdown()
-    cost = 0.5 * float(r @ r)
+    cost = prob.cost(zs)
+    w = prob.weights(r)
+    sig = {s: 1.0 / math.sqrt(w[k]) for k, s in enumerate(signals)}
+    wr = w[prob.sig_id]
     dof = max(prob.n_res - prob.nz, 1)
-    s2 = 2.0 * cost / dof
-    F = _fisher(Jm, prob.nt)
+    s2 = float(r @ (wr * r)) / dof  # 1 + nz / dof for signals whose noise is estimated
+    F = _fisher(Jm * np.sqrt(wr)[:, None], prob.nt)
     ident, lines = _directions(F, free)
     std = np.full(len(free), np.nan)
     corr = np.full((len(free), len(free)), np.nan)
@@ -506,7 +578,8 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
                     x0={lg.name: prob.x0(zs, j).copy() for j, lg in enumerate(logs)}, cost0=cost0, cost=cost, s2=s2,
                     n_residuals=prob.n_res, status=status, iterations=iters,
                     seconds=time.perf_counter() - t_start, h=logs[0].dt / m, at_bound=at_bound,
-                    history=tuple(prog.history))
+                    history=tuple(history), rms0=rms0, rms=prob.rms(zs), stated=tuple(stated))
+
 
 
 # ---- the identified system file ---------------------------------------------------------------------------
@@ -587,7 +660,8 @@ def _system_text(est: Estimate, out_path, date: str | None) -> str:
             entry["value"][el] = float(f"{est.values[k] / f:.10g}")
         if est.identifiable[k]:
             lo, hi = (est.values[k] - Z95 * est.std[k]) / f, (est.values[k] + Z95 * est.std[k]) / f
-            what = f"95 % interval [{lo:.6g}, {hi:.6g}] {unit}"
+            w = Z95 * est.std[k] / f
+            what = f"95 % interval [{_num(lo, w)}, {_num(hi, w)}] {unit}"
         else:
             what = "not identifiable from these trials alone (a combination is; see the report): value of the joint fit"
         entry["source"] = (f"identified by arvcas identify on {date} from trials {trials} ({what}; Gauss-Newton, "

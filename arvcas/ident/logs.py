@@ -14,7 +14,7 @@ not match) and returns a :class:`Log`:
 * the joints as one smoothing spline per joint (:func:`scipy.interpolate.make_smoothing_spline`):
   positions, rates and accelerations at any time. The smoothing is stated as a frequency: minimising
   ``sum (q_i - s(t_i))^2 + lam int s''(t)^2 dt`` over samples ``dt`` apart filters a sinusoid of angular
-  frequency ``w`` by ``1 / (1 + lam dt w^4)``, so ``lam = 1 / (dt (2 pi f_c)^4)`` halves the power at
+  frequency ``w`` by ``1 / (1 + lam dt w^4)``, so ``lam = 1 / (dt (2 pi f_c)^4)`` halves the amplitude at
   ``f_c = [log] joint_cutoff`` (default 2 Hz: an arm's quintic moves of a second or more pass, encoder
   noise is removed before it is differentiated twice). Generalised cross-validation was measured at 1.1 s
   per joint of 2,000 samples and is not used.
@@ -145,7 +145,7 @@ class LogInfo:
     t_start: float = quantity("time", ge(0), default=0.0, unit="s")  # after the common start
     t_end: float | None = quantity("time", gt(0), default=None, unit="s")
     passive: bool = setting(default=False)  # no thrust logged: the thrusters were off (zero thrust)
-    joint_cutoff: float = quantity("1", gt(0), default=2.0)  # Hz: the joint splines' half-power frequency
+    joint_cutoff: float = quantity("1", gt(0), default=2.0)  # Hz: where the joint splines halve an amplitude
 
     def _config_check(self, given):
         if self.t_end is not None and self.t_end <= self.t_start:
@@ -170,7 +170,7 @@ class JointTrajectory:
     names: tuple[str, ...]
     splines: tuple[Any, ...]  # scipy BSpline, degree 3 (natural cubic smoothing spline)
     smoothing: tuple[float, ...]  # the penalty lam each spline was fitted with
-    cutoff: float  # Hz: the half-power frequency that lam was chosen for
+    cutoff: float  # Hz: the frequency whose amplitude lam halves
     raw_t: tuple[np.ndarray, ...]
     raw_q: tuple[np.ndarray, ...]
 
@@ -475,7 +475,7 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     # the mapping's own rules, before reading any stream
     seen: dict[str, str] = {}
     for i, sm in enumerate(m.stream):
-        key = f"stream[{i}]"
+        key = f"stream[{i + 1}]"  # 1-based, as arvcas.config numbers [[tables]]
         try:
             _columns_of(sm)
         except Invalid as e:
@@ -540,7 +540,7 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     wrench = payload = None
     jt_names, jt_t, jt_q, jt_std = [], [], [], {}
     for i, (sm, tb) in enumerate(zip(m.stream, tabs)):
-        key = f"stream[{i}]"
+        key = f"stream[{i + 1}]"  # 1-based, as arvcas.config numbers [[tables]]
         Cw, Cb = WORLD_FRAMES[sm.world], BODY_FRAMES[sm.body]
 
         def cols(k, sm=sm, tb=tb, key=key):

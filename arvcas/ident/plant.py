@@ -12,10 +12,11 @@ A log's samples are ``dt = 1 / rate`` apart; the plant takes ``m`` RK4 steps of 
   carries its ballast in its own numbers and says ``[arm] trim = false`` (the Hinsdale vehicle); a system
   whose vehicle numbers exclude the ballast for its arm keeps the trim, as ``uvms_rhs`` does.
 
-Parameters: ``p = p0 + E theta``: the ``free`` entries of the parameter vector are the slots of ``theta`` (an
-input; ``E`` selects them, so one library serves any choice of up to ``n_slots`` free parameters), and the
-identification differentiates with respect to ``x0`` and ``theta``. Everything is a runtime input; a compiled block serves every log and parameter value
-of the same system structure, number of free slots and block length (K m steps).
+Every parameter is a runtime input (``p``): one compiled block serves every log and parameter value of
+the same system structure and block length (K m steps). The identification's sensitivities are compiled
+for its choice of free parameters, whose entries of ``p`` are replaced by the input ``theta``: derivatives
+flow through those entries only (a symbolic selection of any parameter made every derivative go through
+all of them: 2.3 ms a sample instead of about 0.1 ms).
 """
 
 from __future__ import annotations
@@ -49,26 +50,15 @@ class LogPlant:
     def layout(self):
         return self.system.layout
 
-    @property
-    def n_slots(self) -> int:
-        """Free-parameter slots of the compiled code: len(free) rounded up to a multiple of 4 (0 stays 0), so
-        that one library serves every choice of up to that many free parameters."""
-        return -(-len(self.free) // 4) * 4
+    def _tag(self, free: tuple[str, ...] = ()) -> str:
+        return f"ident {self.opts!r}{system_tag(self.layout.structure)}" + (f" free={','.join(free)}" if free else "")
 
-    def E(self) -> np.ndarray:
-        """(n_params x n_slots) selection: p = p0 + E theta puts slot k's value on parameter free[k]."""
-        E = np.zeros((len(self.layout), self.n_slots))
-        for k, n in enumerate(self.free):
-            E[self.layout.index[n], k] = 1.0
-        return E
+    def step_fn(self, free: tuple[str, ...] = ()) -> ca.Function:
+        """``ident_step(x, u, w, Q, QD, QDD, payload, h, theta, p) -> x_next``: one RK4 step.
 
-    def _tag(self) -> str:
-        return f"ident slots{self.n_slots} {self.opts!r}{system_tag(self.layout.structure)}"
-
-    def step_fn(self) -> ca.Function:
-        """``ident_step(x, u, w, Q, QD, QDD, payload, h, theta, E, p0) -> x_next``: one RK4 step, p = p0 + E theta.
-
-        ``Q, QD, QDD`` (n_joints x 3): the joints at the step's stage times t, t + h/2, t + h.
+        ``Q, QD, QDD`` (n_joints x 3): the joints at the step's stage times t, t + h/2, t + h. The parameters
+        are ``p`` with the entries ``free`` replaced by ``theta`` (one each), so that derivatives with respect to
+        ``theta`` go through those entries only.
         """
         lay = self.layout
         st = lay.structure
@@ -77,9 +67,11 @@ class LogPlant:
         u, w = ca.SX.sym("u", nt), ca.SX.sym("w", 6)
         Q, QD, QDD = ca.SX.sym("Q", nj, 3), ca.SX.sym("QD", nj, 3), ca.SX.sym("QDD", nj, 3)
         pl, h = ca.SX.sym("payload"), ca.SX.sym("h")
-        nf = self.n_slots
-        theta, E, p0 = ca.SX.sym("theta", nf), ca.SX.sym("E", len(lay), nf), ca.SX.sym("p0", len(lay))
-        P = view(p0 + ca.mtimes(E, theta) if nf else p0, lay)
+        theta, p0 = ca.SX.sym("theta", len(free)), ca.SX.sym("p", len(lay))
+        pv = [p0[i] for i in range(len(lay))]
+        for k, n in enumerate(free):
+            pv[lay.index[n]] = theta[k]
+        P = view(ca.vertcat(*pv), lay)
         tau = ca.mtimes(thrusters.B_T(P), u) + w
 
         def f(xx, j):
@@ -96,18 +88,20 @@ class LogPlant:
         k3 = f(x + 0.5 * h * k2, 1)
         k4 = f(x + h * k3, 2)
         xn = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return ca.Function("ident_step", [x, u, w, Q, QD, QDD, pl, h, theta, E, p0], [ca.cse(xn)], _IN, ["x_next"])
+        return ca.Function("ident_step", [x, u, w, Q, QD, QDD, pl, h, theta, p0], [ca.cse(xn)], _IN, ["x_next"])
 
-    def _accumulated(self, name: str, n: int, sens: bool) -> ca.Function:
-        """n RK4 steps chained (``mapaccum``): the state after each, and with ``sens`` its sensitivities."""
+    def _accumulated(self, name: str, n: int, free: tuple[str, ...] | None) -> ca.Function:
+        """n RK4 steps chained (``mapaccum``): the state after each, and with ``free`` (not None) its
+        sensitivities to [x0; theta]."""
         lay = self.layout
-        nj, nt, nf = lay.structure.n_joints, lay.structure.n_thrusters, self.n_slots
-        f = self.step_fn()
-        if sens:  # forward sensitivities: S_next = A S + [0 B], with z = [x0; theta]
+        nj, nt = lay.structure.n_joints, lay.structure.n_thrusters
+        f = self.step_fn(free or ())
+        nf = len(free or ())
+        if free is not None:  # forward sensitivities: S_next = A S + [0 B], with z = [x0; theta]
             ins = f.sx_in()
             xn = f(*ins)
             A = ca.jacobian(xn, ins[0])
-            B = ca.jacobian(xn, ins[8]) if nf else ca.SX(12, 0)
+            B = ca.jacobian(xn, ins[8])
             Sx = ca.SX.sym("S", 12, 12 + nf)
             Sn = ca.mtimes(A, Sx) + ca.horzcat(ca.SX(12, 12), B)
             f = ca.Function("ident_sens", [ins[0], Sx, *ins[1:]], [xn, ca.cse(Sn)], ["x", "S", *_IN[1:]],
@@ -120,43 +114,44 @@ class LogPlant:
         U, W = ca.MX.sym("U", nt, n), ca.MX.sym("W", 6, n)
         Q, QD, QDD = (ca.MX.sym(k, nj, 3 * n) for k in ("Q", "QD", "QDD"))
         pl, h = ca.MX.sym("payload", 1, n), ca.MX.sym("h")
-        theta, E, p0 = ca.MX.sym("theta", nf), ca.MX.sym("E", len(lay), nf), ca.MX.sym("p0", len(lay))
-        rest = [U, W, Q, QD, QDD, pl, ca.repmat(h, 1, n), ca.repmat(theta, 1, n), ca.repmat(E, 1, n),
-                ca.repmat(p0, 1, n)]
-        if sens:
+        theta, p0 = ca.MX.sym("theta", nf), ca.MX.sym("p", len(lay))
+        rest = [U, W, Q, QD, QDD, pl, ca.repmat(h, 1, n), ca.repmat(theta, 1, n), ca.repmat(p0, 1, n)]
+        if free is not None:
             X, SS = acc(x0, S0, *rest)
-            return ca.Function(name, [x0, S0, U, W, Q, QD, QDD, pl, h, theta, E, p0], [X, SS],
+            return ca.Function(name, [x0, S0, U, W, Q, QD, QDD, pl, h, theta, p0], [X, SS],
                                ["x0", "S0", *_BLOCK_IN], ["X", "S"])
         X = acc(x0, *rest)
-        return ca.Function(name, [x0, U, W, Q, QD, QDD, pl, h, theta, E, p0], [X], ["x0", *_BLOCK_IN], ["X"])
+        return ca.Function(name, [x0, U, W, Q, QD, QDD, pl, h, theta, p0], [X], ["x0", *_BLOCK_IN], ["X"])
 
     def block_fn(self, K: int = DEFAULT_BLOCK) -> ca.Function:
-        """``ident_block(x0, U, W, Q, QD, QDD, payload, h, theta, E, p0) -> X``: K log samples (K m RK4 steps).
+        """``ident_block(x0, U, W, Q, QD, QDD, payload, h, theta, p) -> X``: K log samples (K m RK4 steps).
 
         Per step: ``U`` (n_thrusters), ``W`` (6), ``Q, QD, QDD`` (n_joints x 3: the stage times t, t + h/2,
-        t + h), ``payload``; ``X`` (12 x K m) the state after each step. Compiled once per (structure, K m).
+        t + h), ``payload``; ``X`` (12 x K m) the state after each step; ``theta`` is empty (every parameter
+        comes from ``p``). One library per system structure and block length serves every parameter value.
         """
         _check_K(K)
         n = K * self.m
         return codegen.build_described("ident_block", f"{self._tag()} n={n}",
-                                       lambda: self._accumulated("ident_block", n, False))
+                                       lambda: self._accumulated("ident_block", n, None))
 
     def sens_fn(self, K: int = DEFAULT_BLOCK) -> ca.Function:
-        """``ident_sens_block(x0, S0, ...) -> (X, S)``: as :meth:`block_fn` with the forward sensitivities.
+        """``ident_sens_block(x0, S0, ..., theta, p) -> (X, S)``: as :meth:`block_fn` with the sensitivities.
 
-        ``S0`` (12 x (12 + n_slots)): d x0 / d z for z = [x at the trial's start; theta]; ``S`` (12 x K m (12 +
-        n_slots)): d x / d z after each step, step k in columns k (12 + n_slots) ... The Jacobians are built
-        by CasADi's algorithmic differentiation of the same step graph, compiled at -O1 (the -O2 build of a
-        large Jacobian takes several times longer for code about as fast).
+        ``theta``: the values of :attr:`free`; ``S0`` (12 x (12 + len(free))): d x0 / d z for z = [x at the
+        trial's start; theta]; ``S`` (12 x K m (12 + len(free))): d x / d z after each step, step k in columns
+        k (12 + len(free)) ... By CasADi's algorithmic differentiation of the same step graph, compiled at
+        -O1 (the -O2 build of a large Jacobian takes several times longer for code about as fast), one
+        library per choice of free parameters.
         """
         _check_K(K)
         n = K * self.m
-        return codegen.build_described("ident_sens_block", f"{self._tag()} n={n} sens",
-                                       lambda: self._accumulated("ident_sens_block", n, True), opt_level="-O1")
+        return codegen.build_described("ident_sens_block", f"{self._tag(self.free)} n={n} sens",
+                                       lambda: self._accumulated("ident_sens_block", n, self.free), opt_level="-O1")
 
 
-_IN = ["x", "u", "w", "Q", "QD", "QDD", "payload", "h", "theta", "E", "p0"]
-_BLOCK_IN = ["U", "W", "Q", "QD", "QDD", "payload", "h", "theta", "E", "p0"]
+_IN = ["x", "u", "w", "Q", "QD", "QDD", "payload", "h", "theta", "p"]
+_BLOCK_IN = ["U", "W", "Q", "QD", "QDD", "payload", "h", "theta", "p"]
 
 
 def _check_K(K) -> None:
@@ -196,40 +191,23 @@ def sample_inputs(log, system, m: int, thrust_names=None) -> dict[str, np.ndarra
             "m": m}
 
 
-def _theta(plant: LogPlant, theta) -> np.ndarray:
-    th = np.zeros(plant.n_slots)
-    if theta is not None:
-        th[: len(plant.free)] = np.asarray(theta, dtype=float)
-    return th.reshape(-1, 1)
-
-
-def _p0(plant: LogPlant, p: np.ndarray) -> np.ndarray:
-    """The base vector: ``p`` with the free entries zeroed (their values come from theta)."""
-    p0 = np.array(p, dtype=float).reshape(-1)
-    for n in plant.free:
-        p0[plant.layout.index[n]] = 0.0
-    return p0.reshape(-1, 1)
-
-
-def simulate(plant: LogPlant, log, x0: np.ndarray, p: np.ndarray, theta=None, K: int = DEFAULT_BLOCK,
+def simulate(plant: LogPlant, log, x0: np.ndarray, p: np.ndarray, K: int = DEFAULT_BLOCK,
              data: dict | None = None) -> np.ndarray:
-    """The open-loop state (N x 12) on the log's time base from ``x0`` at t_0 (simulation error, not prediction).
-
-    ``p``: the parameter vector; with ``theta`` (len(plant.free) values) its free entries are replaced.
-    """
+    """The open-loop state (N x 12) on the log's time base from ``x0`` at t_0 (simulation error, not
+    prediction), with the parameter vector ``p``."""
     f = plant.block_fn(K)
     d = data if data is not None else sample_inputs(log, plant.system, plant.m)
-    th = _theta(plant, theta if theta is not None else [p[plant.layout.index[nm]] for nm in plant.free])
-    E, p0 = plant.E(), _p0(plant, p)
+    pv = np.asarray(p, dtype=float).reshape(-1, 1)
     m, nb = plant.m, K * plant.m
     n = d["U"].shape[1]
     Xs = np.empty((n + 1, 12))
     Xs[0] = x0
     x = np.asarray(x0, dtype=float).reshape(12, 1)
+    empty = np.zeros((0, 1))
     for b in range(0, n, nb):
         e = min(b + nb, n)
         c = _pad(d, b, e, nb)
-        X = calls.call(f, x, c["U"], c["W"], c["Q"], c["QD"], c["QDD"], c["payload"], d["h"], th, E, p0)[0]
+        X = calls.call(f, x, c["U"], c["W"], c["Q"], c["QD"], c["QDD"], c["payload"], d["h"], empty, pv)[0]
         Xs[b + 1:e + 1] = X[:, : e - b].T
         x = X[:, e - b - 1: e - b]
     return Xs[::m]
@@ -237,11 +215,13 @@ def simulate(plant: LogPlant, log, x0: np.ndarray, p: np.ndarray, theta=None, K:
 
 def simulate_sens(plant: LogPlant, log, x0: np.ndarray, p: np.ndarray, theta, K: int = DEFAULT_BLOCK,
                   data: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(X (N x 12), dX (N x 12 x (12 + len(free)))): the state and its derivative with respect to [x0; theta]."""
+    """(X (N x 12), dX (N x 12 x (12 + len(free)))): the state and its derivative with respect to [x0; theta],
+    with ``p`` whose :attr:`LogPlant.free` entries are ``theta``."""
     f = plant.sens_fn(K)
     d = data if data is not None else sample_inputs(log, plant.system, plant.m)
-    th, E, p0 = _theta(plant, theta), plant.E(), _p0(plant, p)
-    nz = 12 + plant.n_slots
+    th = np.asarray(theta, dtype=float).reshape(-1, 1)
+    pv = np.asarray(p, dtype=float).reshape(-1, 1)
+    nz = 12 + len(plant.free)
     m, nb = plant.m, K * plant.m
     n = d["U"].shape[1]
     N = n // m + 1
@@ -254,14 +234,14 @@ def simulate_sens(plant: LogPlant, log, x0: np.ndarray, p: np.ndarray, theta, K:
     for b in range(0, n, nb):  # blocks start on a sample (nb is a multiple of m)
         e = min(b + nb, n)
         c = _pad(d, b, e, nb)
-        Xb, Sb = calls.call(f, x, Sk, c["U"], c["W"], c["Q"], c["QD"], c["QDD"], c["payload"], d["h"], th, E, p0)
+        Xb, Sb = calls.call(f, x, Sk, c["U"], c["W"], c["Q"], c["QD"], c["QDD"], c["payload"], d["h"], th, pv)
         k = e - b
         rows = slice(b // m + 1, e // m + 1)
         X[rows] = Xb[:, m - 1:k:m].T
         dX[rows] = Sb[:, : k * nz].reshape(12, nz, k, order="F")[:, :, m - 1::m].transpose(2, 0, 1)
         x = Xb[:, k - 1:k]
         Sk = np.asfortranarray(Sb[:, (k - 1) * nz: k * nz])
-    return X, dX[:, :, : 12 + len(plant.free)]
+    return X, dX
 
 
 def _pad(d: dict, b: int, e: int, nb: int) -> dict:
