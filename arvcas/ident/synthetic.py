@@ -6,8 +6,11 @@ like the sensors of a pool vehicle and written as CSV files with a mapping file 
 reading them back runs the whole pipeline of a real log (alignment, frames, joint splines):
 
 * ``pose.csv``: motion capture, position (m) and attitude quaternion (x, y, z, w) in NED/FRD, 100 Hz;
-* ``imu.csv``: body angular velocity (rad/s), 100 Hz, on its own clock offset by half a sample;
-* ``joints.csv``: joint angles (rad), 50 Hz.
+* ``imu.csv``: body angular velocity (rad/s), 100 Hz;
+* ``joints.csv``: joint angles (rad), 50 Hz (none for a vehicle without an arm).
+
+The streams' samples fall on the log's 50 Hz time base, so the noise the identification sees is the white
+noise written (interpolating between noisy samples would average it); tests/test_logs.py checks alignment.
 
 :data:`NOISE` gives the white noise of each (a mocap system's millimetres and tenths of a degree, a MEMS
 gyro's noise, an encoder's resolution); each mapping file states it as the signal's ``std``.
@@ -117,7 +120,7 @@ def write_trial(directory, name: str, system, duration: float = 20.0, seed: int 
     nz = dict(NOISE, **(noise or {}))
     rng = np.random.default_rng(10_000 + seed)
     x0 = np.zeros(12)
-    x0[3:6] = rng.uniform(-0.05, 0.05, 3)  # released slightly off its rest attitude
+    x0[3:6] = rng.uniform(-0.15, 0.15, 3)  # released off its rest attitude: it rocks back
     t, X, jm = truth(system, duration + 0.5, seed, p, x0)
 
     def at(hz, offset=0.0):
@@ -129,13 +132,22 @@ def write_trial(directory, name: str, system, duration: float = 20.0, seed: int 
     pos = Xp[:, 0:3] + rng.normal(0, nz["position"], (len(tp), 3))
     qv = _quat(e)
     _csv(d / f"{name}_pose.csv", ["t", "x", "y", "z", "qx", "qy", "qz", "qw"], [tp, *pos.T, *qv.T])
-    ti, Xi = at(_IMU_HZ, 0.5 / _IMU_HZ)
+    ti, Xi = at(_IMU_HZ)
     w = Xi[:, 9:12] + rng.normal(0, nz["rate"], (len(ti), 3))
     _csv(d / f"{name}_imu.csv", ["t", "wx", "wy", "wz"], [ti, *w.T])
-    tj = np.arange(0.0, duration + 0.25, 1.0 / _JOINT_HZ)
-    qj = jm(tj)[0] + rng.normal(0, nz["joint"], (len(tj), system.n_joints))
-    _csv(d / f"{name}_joints.csv", ["t", *jm.names], [tj, *qj.T])
-    joints = "\n".join(f'{n} = {{ column = "{n}", std = {nz["joint"]!r} }}' for n in jm.names)
+    joints = ""
+    if system.n_joints:
+        tj = np.arange(0.0, duration + 0.25, 1.0 / _JOINT_HZ)
+        qj = jm(tj)[0] + rng.normal(0, nz["joint"], (len(tj), system.n_joints))
+        _csv(d / f"{name}_joints.csv", ["t", *jm.names], [tj, *qj.T])
+        rows = "\n".join(f'{n} = {{ column = "{n}", std = {nz["joint"]!r} }}' for n in jm.names)
+        joints = f"""
+[[stream]]
+file = "{name}_joints.csv"
+time = "t"
+[stream.joints]
+{rows}
+"""
     text = f'''# A synthetic trial of {system.name} (arvcas.ident.synthetic, seed {seed}): passive vehicle, arm moves.
 [log]
 name = "{name}"
@@ -143,7 +155,6 @@ system = "{system.name}"
 source = "arvcas.ident.synthetic.write_trial(seed={seed}, duration={duration!r})"
 passive = true
 rate = {rate!r}
-t_start = 0.1
 
 [[stream]]
 file = "{name}_pose.csv"
@@ -155,13 +166,7 @@ quaternion = {{ columns = ["qx", "qy", "qz", "qw"], std = {nz["attitude"]!r} }}
 file = "{name}_imu.csv"
 time = "t"
 angular_velocity = {{ columns = ["wx", "wy", "wz"], unit = "rad/s", std = {nz["rate"]!r} }}
-
-[[stream]]
-file = "{name}_joints.csv"
-time = "t"
-[stream.joints]
-{joints}
-'''
+{joints}'''
     path = d / f"{name}.log.toml"
     path.write_text(text, encoding="utf-8")
     return path
