@@ -27,6 +27,17 @@ UNITS = {"x": "m", "y": "m", "z": "m", "roll": "rad", "pitch": "rad", "yaw": "ra
 _ANGLES = ("roll", "pitch", "yaw")
 
 
+def _shown(path) -> str:
+    """A path as a user would write it: relative to the working directory when it lies below it."""
+    import os
+
+    p = Path(path).resolve()
+    try:
+        return p.relative_to(Path.cwd().resolve()).as_posix()
+    except ValueError:
+        return os.fspath(path)
+
+
 def _unit(sig: str) -> str:
     return UNITS.get(sig, "rad")  # joints: rad
 
@@ -85,11 +96,11 @@ def validation_doc(system, results, logs, h_max) -> dict:
         trials[r.name] = {
             "rmse": r.metrics["rmse"], "nrmse": r.metrics["nrmse"], "r2": r.metrics["r2"],
             "max_error": r.metrics["max_error"],
-            "log": lg.path, "duration_s": lg.duration, "samples": len(lg.t), "plant_step_s": r.h,
+            "log": _shown(lg.path), "duration_s": lg.duration, "samples": len(lg.t), "plant_step_s": r.h,
             "simulation_finite": r.ok, "x0": [float(v) for v in r.x0],
             "joint_cutoff_hz": None if lg.joints is None else lg.joints.cutoff,
         }
-    return {"format": "arvcas-validation-1", "system": system.name, "system_file": system.path,
+    return {"format": "arvcas-validation-1", "system": system.name, "system_file": _shown(system.path),
             "units": {s: _unit(s) for r in results for s in r.metrics["rmse"]},
             "definitions": {"rmse": "root mean square of simulated - measured on the log's time base",
                             "nrmse": "rmse / (max - min of the measured signal)",
@@ -136,7 +147,7 @@ def _readme(doc: dict, results, logs, system, seconds: float) -> str:
     lines = [f"# Validation of `{system.name}` on {len(results)} trials",
              "", f"Written by `arvcas validate` ({time.strftime('%Y-%m-%d')}): each trial simulated open loop from its "
              f"logged initial state, driven by the logged inputs, over the whole trial (simulation error, not "
-             f"one-step prediction). System file: `{system.path}`. Metrics in `validation.json` (SI); here angles "
+             f"one-step prediction). System file: `{_shown(system.path)}`. Metrics in `validation.json` (SI); here angles "
              f"and rates in degrees. {seconds:.1f} s for all trials.", "",
              "| trial | s | roll RMSE (deg) | pitch RMSE (deg) | yaw RMSE (deg) | z RMSE (m) | p, q, r RMSE (deg/s) | "
              "roll / pitch R^2 |", "|---|---|---|---|---|---|---|---|"]

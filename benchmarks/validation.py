@@ -1,0 +1,201 @@
+"""The Hinsdale pool trials against arvcas, before and after identification, and the synthetic-truth study.
+
+    python benchmarks/validation.py                      # everything: writes results/validation/
+    python benchmarks/validation.py --only synthetic     # one part: sourced, identify, identified, step, synthetic
+
+Parts (each writes under ``--out``, default ``results/validation``):
+
+* ``sourced``: ``arvcas validate`` of the shipped ``hinsdale_bluerov2_alpha5`` (every number from its sources)
+  on all twelve shipped trials -> ``sourced/``;
+* ``identify``: ``arvcas identify`` of :data:`FREE` on the six identification trials (:data:`FIT`) ->
+  ``hinsdale_bluerov2_alpha5_identified.toml`` (its report in its header) and ``identify.log``;
+* ``identified``: ``arvcas validate`` of the identified file on all twelve -> ``identified/`` (the three
+  held-out trials and the three baselines were not fitted);
+* ``step``: the plant step: every trial validated at the log's 0.02 s and at 0.005 s, the largest
+  difference of the simulated roll and pitch -> ``step.json``;
+* ``synthetic``: identification of :data:`SYN_FREE` of the Hinsdale system (arm included) from trials
+  simulated with known parameters and stated sensor noise, :data:`SYN_SEEDS` noise seeds: estimates, 95 %
+  intervals, their coverage of the truth -> ``synthetic/synthetic.json`` and ``synthetic/README.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+TRIALS = ROOT / "studies" / "validation" / "hinsdale2023"
+SYSTEM = "hinsdale_bluerov2_alpha5"
+FIT = ("traj003-0", "traj005-0", "traj012-1", "traj019-2", "traj024-1", "traj030-0")
+HELD_OUT = ("traj006-3", "traj014-2", "traj024-2")
+BASELINES = ("baseline1", "baseline2", "baseline3")
+FREE = ("vehicle.xB", "vehicle.yB", "vehicle.zB", "vehicle.volume", "vehicle.Ixx", "vehicle.Iyy", "hydro.K_p",
+        "hydro.M_q", "hydro.K_p_absp", "hydro.M_q_absq")
+SIGNALS = ("roll", "pitch", "z", "p", "q")
+SYN_FREE = ("vehicle.zB", "vehicle.Ixx", "vehicle.Iyy", "hydro.K_p", "hydro.M_q", "hydro.K_p_absp",
+            "thrusters.T1.u_max")  # the last: the thrusters are off, so it cannot be identified
+SYN_TRUTH = {"vehicle.zB": -0.011, "vehicle.Ixx": 0.50, "vehicle.Iyy": 0.55, "hydro.K_p": -0.2, "hydro.M_q": -0.15,
+             "hydro.K_p_absp": -2.0}
+SYN_SEEDS = 20
+SYN_DURATION = 20.0
+
+
+def _all():
+    return [TRIALS / f"{t}.log.toml" for t in FIT + HELD_OUT + BASELINES]
+
+
+def _cli(args: list[str]) -> None:
+    from arvcas.cli import main
+
+    print("arvcas " + " ".join(args), flush=True)
+    rc = main(args)
+    if rc != 0:
+        sys.exit(f"arvcas {args[0]} failed with exit code {rc}")
+
+
+def sourced(out: Path) -> None:
+    _cli(["validate", "--system", SYSTEM, *map(str, _all()), "--out", str(out / "sourced"), "--force"])
+
+
+def identify(out: Path) -> None:
+    import contextlib
+    import io
+
+    buf = io.StringIO()
+    t0 = time.perf_counter()
+    with contextlib.redirect_stdout(buf):
+        _cli(["identify", "--system", SYSTEM, "--free", ",".join(FREE), "--signals", ",".join(SIGNALS),
+              *[str(TRIALS / f"{t}.log.toml") for t in FIT], "--out", str(out / f"{SYSTEM}_identified.toml"),
+              "--force"])
+    text = buf.getvalue() + f"wall time {time.perf_counter() - t0:.1f} s\n"
+    print(text)
+    from arvcas.io import files
+
+    files.write_text(out / "identify.log", text)
+
+
+def identified(out: Path) -> None:
+    _cli(["validate", "--system", str(out / f"{SYSTEM}_identified.toml"), *map(str, _all()), "--out",
+          str(out / "identified"), "--force"])
+
+
+def step(out: Path) -> None:
+    """The validation's plant step: 0.02 s (the logs' sample time) against 0.005 s."""
+    import arvcas
+    from arvcas.ident import logs, validate
+    from arvcas.io import files
+
+    system = arvcas.load_system(SYSTEM)
+    rows = {}
+    for p in _all():
+        lg = logs.load_log(p, system.n_joints)
+        a = validate.validate_log(system, lg)
+        b = validate.validate_log(system, lg, h_max=0.005)
+        rows[lg.name] = {s: float(np.max(np.abs(a.simulated[s] - b.simulated[s]))) for s in ("roll", "pitch", "z")}
+        print(lg.name, rows[lg.name])
+    worst = {s: max(r[s] for r in rows.values()) for s in ("roll", "pitch", "z")}
+    doc = {"what": "max |simulated(h = log sample time 0.02 s) - simulated(h = 0.005 s)| per trial (rad, m)",
+           "trials": rows, "worst": worst}
+    files.write_text(out / "step.json", json.dumps(doc, indent=1) + "\n")
+
+
+def synthetic(out: Path, seeds: int = SYN_SEEDS) -> None:
+    """Identification from simulated trials with known parameters: recovery, coverage, the unidentifiable one."""
+    import arvcas
+    from arvcas.ident import identify as ident
+    from arvcas.ident import logs
+    from arvcas.ident import synthetic as syn
+    from arvcas.io import files
+    from arvcas.system import System
+
+    model = arvcas.load_system(SYSTEM)
+    truth = System(model.params.replace(SYN_TRUTH))
+    d = out / "synthetic"
+    files.prepare_dir(d, "synthetic")
+    work = d / "trials"  # the simulated logs, regenerated by this script (not committed)
+    tv = np.array([truth.params[n] for n in SYN_FREE])
+    rows = []
+    for seed in range(seeds):
+        paths = [syn.write_trial(work / f"seed{seed}", f"syn{k}", truth, duration=SYN_DURATION, seed=1000 * seed + k,
+                                 p=truth.params.vector()) for k in range(2)]
+        lgs = logs.load_logs(paths, model.n_joints)
+        t0 = time.perf_counter()
+        est = ident.identify(model, lgs, SYN_FREE)
+        dt = time.perf_counter() - t0
+        rows.append({"seed": seed, "seconds": dt, "iterations": est.iterations, "s2": est.s2,
+                     "values": list(map(float, est.values)), "std": [float(v) for v in est.std],
+                     "identifiable": [bool(v) for v in est.identifiable], "unidentifiable": list(est.unidentifiable)})
+        print(f"seed {seed}: {dt:.1f} s, {est.iterations} iterations, s2 {est.s2:.3f}", flush=True)
+    vals = np.array([r["values"] for r in rows])
+    sd = np.array([r["std"] for r in rows])
+    ok = np.array([r["identifiable"] for r in rows])
+    z = (vals - tv) / sd
+    cover = np.abs(z) <= ident.Z95
+    per = {}
+    for k, n in enumerate(SYN_FREE):
+        if ok[:, k].all():
+            per[n] = {"truth": float(tv[k]), "start": float(model.params[n]), "mean": float(vals[:, k].mean()),
+                      "sd_of_estimates": float(vals[:, k].std(ddof=1)), "mean_stated_sd": float(sd[:, k].mean()),
+                      "coverage": float(cover[:, k].mean()), "z_mean": float(z[:, k].mean()),
+                      "z_sd": float(z[:, k].std(ddof=1))}
+        else:
+            per[n] = {"truth": float(tv[k]), "identifiable_in": int(ok[:, k].sum()), "of": len(rows)}
+    idk = ok.all(axis=0)
+    doc = {"system": SYSTEM, "free": list(SYN_FREE), "truth": SYN_TRUTH, "seeds": seeds, "duration_s": SYN_DURATION,
+           "trials_per_seed": 2, "noise": syn.NOISE, "per_parameter": per,
+           "coverage_all": float(cover[:, idk].mean()), "n_intervals": int(cover[:, idk].size), "runs": rows}
+    files.write_text(d / "synthetic.json", json.dumps(doc, indent=1) + "\n")
+    lines = [f"# Identification from synthetic trials of `{SYSTEM}` (known parameters)", "",
+             f"`python benchmarks/validation.py --only synthetic`: {seeds} noise seeds, each two passive trials of "
+             f"{SYN_DURATION:g} s (arm moving between random poses, vehicle released off its rest attitude) "
+             f"simulated with the parameters below at a 0.0025 s RK4 step and written as logs with white sensor noise "
+             f"stated in their mapping files (motion capture {syn.NOISE['position'] * 1e3:g} mm and "
+             f"{math.degrees(syn.NOISE['attitude']):g} deg, gyro {syn.NOISE['rate']:g} rad/s, encoders "
+             f"{syn.NOISE['joint']:g} rad); the identification starts from the shipped values.", "",
+             "| parameter | start | truth | mean estimate | sd of estimates | mean stated sd | 95 % coverage | "
+             "z mean, sd |", "|---|---|---|---|---|---|---|---|"]
+    for n, v in per.items():
+        if "coverage" in v:
+            lines.append(f"| {n} | {v['start']:.5g} | {v['truth']:.5g} | {v['mean']:.5g} | {v['sd_of_estimates']:.3g} | "
+                         f"{v['mean_stated_sd']:.3g} | {v['coverage']:.0%} | {v['z_mean']:+.2f}, {v['z_sd']:.2f} |")
+        else:
+            lines.append(f"| {n} | {model.params[n]:.5g} | {v['truth']:.5g} | reported unidentifiable in "
+                         f"{v['of'] - v['identifiable_in']} of {v['of']} seeds | | | | |")
+    lines += ["", f"All identifiable parameters together: {doc['coverage_all']:.1%} of {doc['n_intervals']} intervals "
+                  f"cover the truth (95 % expected; the binomial 95 % range for this many is about "
+                  f"{_binom_range(doc['n_intervals'])})."]
+    files.write_text(d / "README.md", "\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def _binom_range(n: int) -> str:
+    sd = math.sqrt(0.95 * 0.05 / n)
+    return f"{max(0.0, 0.95 - 1.96 * sd):.1%}-{min(1.0, 0.95 + 1.96 * sd):.1%}"
+
+
+PARTS = {"sourced": sourced, "identify": identify, "identified": identified, "step": step, "synthetic": synthetic}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=ROOT / "results" / "validation")
+    ap.add_argument("--only", choices=tuple(PARTS), action="append")
+    a = ap.parse_args(argv)
+    from arvcas.io import files
+
+    files.prepare_dir(a.out, "--out")
+    for name in a.only or PARTS:
+        t0 = time.perf_counter()
+        PARTS[name](a.out)
+        print(f"[{name}: {time.perf_counter() - t0:.1f} s]", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
