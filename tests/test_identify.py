@@ -188,3 +188,35 @@ def test_log_plant_against_scipy_on_a_real_trial():
     # quarter of the step, 1/16 of the error; measured 13x)
     assert errs[0] / errs[1] > 8, errs
     assert np.max(np.abs(ref[:, 3:5] - ref[0, 3:5])) > 0.01  # the trial did move the vehicle
+
+
+def test_ctrl_c_keeps_the_best_iterate(vehicle, tmp_path):
+    """SIGINT during `arvcas identify`: it stops after the current iteration and writes the best iterate."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    model, truth = vehicle
+    start = tmp_path / "start.toml"
+    start.write_text(open(model.path, encoding="utf-8").read())
+    paths = _trials(tmp_path / "logs", truth, [7, 8], duration=8.0)
+    out = tmp_path / "id.toml"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(__import__("pathlib").Path(arvcas.__file__).parents[1]),
+                                                       os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.Popen([sys.executable, "-m", "arvcas.cli", "identify", "--system", str(start), "--free",
+                             ",".join(FREE), *map(str, paths), "--out", str(out), "--threads", "1", "--max-iter", "500"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("iteration   1"):
+            proc.send_signal(signal.SIGINT)
+            break
+    rest, err = proc.communicate(timeout=300)
+    text = "".join(lines) + rest
+    assert proc.returncode == 130, (text, err)
+    assert "interrupted" in text and out.exists()
+    ident = arvcas.load_system(out)
+    assert ident.params["vehicle.zB"] != model.params["vehicle.zB"]  # the best iterate, not the start
