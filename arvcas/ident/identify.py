@@ -534,6 +534,13 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
         if lo[k] > 0 or hi[k] < 0:
             raise IdentifyError(f"free: {n} starts at {prob.theta0[k]:g}, outside its physical bounds [{a:g}, {b:g}]")
     cost0 = prob.cost(z0)
+    # a parameter that moves no fitted signal at the start (zero column of the Jacobian: e.g. a thruster's limit
+    # in a passive trial, a coefficient the system's structure does not use) is held at its value: the solver
+    # would otherwise wander along it
+    _, J0 = prob.evaluate(z0, True)
+    dead = [k for k in range(len(free)) if not np.any(J0[:, k])]
+    for k in dead:
+        lo[k] = hi[k] = 0.0
     stop = threading.Event()
     old = None
     if threading.current_thread() is threading.main_thread():
@@ -545,6 +552,7 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
             signal.signal(signal.SIGINT, old)
     if stop.is_set():
         status = "interrupted"
+    zs[: prob.nt] = np.clip(zs[: prob.nt], lo[: prob.nt], hi[: prob.nt])  # IPOPT relaxes bounds by 1e-8
     r, Jm = prob.evaluate(zs, True)
     if prob.pool is not None:
         prob.pool.shutdown()
@@ -570,8 +578,8 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
             if ident[i] and ident[j] and abs(corr[i, j]) > CORR_WARN:
                 pairs.append((free[i], free[j], float(corr[i, j])))
     theta = prob.theta(zs)
-    at_bound = tuple(n for k, n in enumerate(free)
-                     if (math.isfinite(lo[k]) and zs[k] - lo[k] < 1e-6) or (math.isfinite(hi[k]) and hi[k] - zs[k] < 1e-6))
+    at_bound = tuple(n for k, n in enumerate(free) if k not in dead and
+                     ((math.isfinite(lo[k]) and zs[k] - lo[k] < 1e-6) or (math.isfinite(hi[k]) and hi[k] - zs[k] < 1e-6)))
     return Estimate(system=system, free=free, initial=prob.theta0, values=theta, std=std, correlation=corr,
                     identifiable=ident, unidentifiable=tuple(lines), correlated=tuple(pairs),
                     trials=tuple(lg.name for lg in logs), signals=signals, sigma=sig,
