@@ -237,6 +237,7 @@ def summary(out: Path) -> None:
                   f"time) differs from 0.005 s by at most {math.degrees(st['worst']['roll']):.1e} deg in roll and "
                   f"{math.degrees(st['worst']['pitch']):.1e} deg in pitch on any trial (`step.json`).", "",
               "## The identification", "", "```", "identification of" + head.rstrip(), "```", "",
+              *_where(out, a, b),
               "## Synthetic truth", "",
               f"`synthetic/`: {syn['seeds']} noise seeds of two simulated {syn['duration_s']:g} s trials each, the "
               f"Hinsdale vehicle and arm with known parameters: {syn['coverage_all']:.1%} of {syn['n_intervals']} "
@@ -244,6 +245,53 @@ def summary(out: Path) -> None:
               f"(synthetic/README.md)."]
     files.write_text(out / "README.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+def _where(out: Path, a: dict, b: dict) -> list[str]:
+    """Where the model cannot follow the vehicle, with the measured figures that show it."""
+    import arvcas
+    from arvcas.ident import logs
+
+    system = arvcas.load_system(SYSTEM)
+    rise, drift, wmax = {}, {}, 0.0
+    for t in FIT + HELD_OUT + BASELINES:
+        lg = logs.load_log(TRIALS / f"{t}.log.toml", system.n_joints)
+        wmax = max(wmax, math.degrees(float(np.max(np.abs(np.stack([lg.signals["p"], lg.signals["q"]]))))))
+        rise[t] = -float(np.polyfit(lg.t, lg.signals["z"], 1)[0]) * 1e3  # mm/s, up
+        drift[t] = (math.degrees(lg.signals["roll"][-1] - lg.signals["roll"][0]),
+                    math.degrees(lg.signals["pitch"][-1] - lg.signals["pitch"][0]))
+    fast = [v for t, v in rise.items() if v > 10]
+    slow = {t: v for t, v in rise.items() if v <= 10}
+    ident = arvcas.load_system(out / f"{SYSTEM}_identified.toml")
+    base = arvcas.load_system(SYSTEM)
+    ratio = {k: ident.params[f"vehicle.{k}"] / base.params[f"vehicle.{k}"] for k in ("Ixx", "Iyy")}
+    return [
+        "## Where the model cannot follow the vehicle", "",
+        f"* **Depth.** The vehicle rises through every trial, but not at one rate: {min(fast):.0f}-{max(fast):.0f} mm/s "
+        f"in {len(fast)} trials and " + ", ".join(f"{v:.0f} mm/s in {t}" for t, v in slow.items()) + " (a linear fit "
+        "of the measured depth). One net buoyancy cannot give both; the tether, paid out by hand and with its own "
+        "weight and drag, is the likely difference. Depth is therefore validated, not fitted (depth RMSE "
+        f"{min(r['rmse']['z'] for r in b.values()):.2f}-{max(r['rmse']['z'] for r in b.values()):.2f} m over the "
+        "trials); the model has no tether (issue 22).",
+        "* **Slow attitude drift.** With the arm still, the baselines' roll and pitch drift as the vehicle rises ("
+        + ", ".join(f"{t}: roll {drift[t][0]:+.2f}, pitch {drift[t][1]:+.2f} deg" for t in BASELINES) + ") while the "
+        "model holds one equilibrium: a load that changes with depth (the tether again) rather than a parameter.",
+        "* **Damping form.** The model starts each trial at the logged attitude, which is not its own equilibrium, and "
+        "rocks about it with little damping (the figures of `identified/baseline*.png`), where the vehicle settles "
+        "at once. " + (("The fit drives the quadratic pitch damping to its bound (zero) and keeps a small linear one: "
+                        "the vehicle's damping at these small angular rates (at most "
+                        f"{wmax:.1f} deg/s in any trial) is not the quadratic form of the BlueROV2 literature.")
+                       if ident.params["hydro.M_q_absq"] == 0.0 else
+                       f"Roll and pitch rates stay below {wmax:.1f} deg/s, where quadratic damping is small."),
+        f"* **Inertia.** The identified roll and pitch inertias are {ratio['Ixx']:.1f} and {ratio['Iyy']:.1f} times "
+        "the sources' (which already include an added inertia): the arm's and the tether's added mass, and the "
+        "sources' added inertia, are the candidates; the trials do not separate them.",
+        "* **Intervals.** The residuals persist over seconds (model error, not sensor noise), so the printed 95 % "
+        "intervals are far too narrow: the held-out trials, not the intervals, measure the model. On synthetic "
+        "trials, where the model is exact, the same intervals cover the truth at their stated rate (below).",
+        "* **Heading, x, y.** Not mapped: the IMU's heading is arbitrary and the motion capture's horizontal frame is "
+        "the pool's; the yaw of `validation.json` is compared from the logged start and drifts with the tether.", "",
+    ]
 
 
 PARTS = {"sourced": sourced, "identify": identify, "identified": identified, "step": step, "synthetic": synthetic,
