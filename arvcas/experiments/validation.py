@@ -67,13 +67,17 @@ def _h_arg(text: str) -> float:
 # ---- validate --------------------------------------------------------------------------------------------
 
 
-def add_validate(p: argparse.ArgumentParser) -> None:
+def _add_common(p: argparse.ArgumentParser, system_help: str, out_meta: str, out_help: str) -> None:
     p.add_argument("--system", required=True, type=Path, metavar="NAME|FILE",
-                   help="a shipped system (arvcas systems) or a system file")
+                   help=f"a shipped system (arvcas systems) or a system file{system_help}")
     p.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="log mapping files (*.log.toml, docs/logs.md)")
-    p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output directory")
+    p.add_argument("--out", required=True, type=Path, metavar=out_meta, help=out_help)
     p.add_argument("--h-max", type=_h_arg, default=None, metavar="S",
-                   help="largest plant RK4 step, s (default: the log's sample time)")
+                   help="largest plant RK4 step, s (default: the logs' sample time)")
+
+
+def add_validate(p: argparse.ArgumentParser) -> None:
+    _add_common(p, "", "DIR", "output directory")
 
 
 def validate_outputs(a) -> list:
@@ -212,16 +216,11 @@ def _names(text: str) -> tuple[str, ...]:
 
 
 def add_identify(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--system", required=True, type=Path, metavar="NAME|FILE",
-                   help="a shipped system (arvcas systems) or a system file: the model and the starting values")
+    _add_common(p, ": the model and the starting values", "FILE.toml", "the identified system file")
     p.add_argument("--free", required=True, type=_names, metavar="NAME,...",
                    help="the parameters to estimate, by their names in the system (e.g. vehicle.zB,hydro.K_p)")
-    p.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="log mapping files (*.log.toml)")
-    p.add_argument("--out", required=True, type=Path, metavar="FILE.toml", help="the identified system file")
     p.add_argument("--signals", type=_names, default=None, metavar="NAME,...",
                    help="the measured signals to fit (default: every vehicle signal the logs give)")
-    p.add_argument("--h-max", type=_h_arg, default=None, metavar="S",
-                   help="largest plant RK4 step, s (default: the logs' sample time)")
     p.add_argument("--max-iter", type=int, default=100, metavar="N", help="IPOPT iterations (default 100)")
     p.add_argument("--threads", type=int, default=2, metavar="N", help="trials simulated at once (default 2)")
 

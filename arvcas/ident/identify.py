@@ -283,83 +283,48 @@ class _Problem:
         return {s: math.sqrt(sse[k] / self.n_sig[k]) for k, s in enumerate(self.signals)}
 
 
-class _F(ca.Callback):
-    """The objective f(z), with its gradient (for IPOPT through CasADi's nlpsol)."""
+class _Fn(ca.Callback):
+    """A function of z (dense, ``nz``) computed in Python, as a CasADi Function; with ``jac``, its Jacobian.
 
-    def __init__(self, prob: _Problem, name: str = "ident_f"):
+    The objective (1 x 1) with its gradient (1 x nz), and the Gauss-Newton Hessian (nz x nz), for IPOPT through
+    CasADi's nlpsol. CasADi keeps no Python reference to a callback: each is held by its owner.
+    """
+
+    def __init__(self, name: str, nz: int, out: tuple[int, int], fn, jac=None, f_out: tuple[int, int] | None = None):
         ca.Callback.__init__(self)
-        self.prob = prob
+        self.nz, self.out, self.fn, self.jac, self.f_out = nz, out, fn, jac, f_out
         self.construct(name, {"enable_fd": False})
 
     def get_n_in(self):
-        return 1
+        return 1 if self.f_out is None else 2  # a Jacobian also takes the function's output
 
     def get_n_out(self):
         return 1
 
     def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.prob.nz, 1)
+        return ca.Sparsity.dense(self.nz, 1) if i == 0 else ca.Sparsity.dense(*self.f_out)
 
     def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, 1)
+        return ca.Sparsity.dense(*self.out)
 
     def eval(self, arg):
-        z = np.array(arg[0]).reshape(-1)
-        c = self.prob.cost(z)
-        return [c if math.isfinite(c) else float("nan")]
+        return [self.fn(np.array(arg[0]).reshape(-1))]
 
     def has_jacobian(self):
-        return True
+        return self.jac is not None
 
-    def get_jacobian(self, name, inames, onames, opts):
-        self._grad = _Grad(self.prob, name)  # CasADi keeps no Python reference: a callback must stay alive
-        return self._grad
-
-
-class _Grad(ca.Callback):
-    def __init__(self, prob: _Problem, name: str):
-        ca.Callback.__init__(self)
-        self.prob = prob
-        self.construct(name, {"enable_fd": False})
-
-    def get_n_in(self):
-        return 2
-
-    def get_n_out(self):
-        return 1
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.prob.nz, 1) if i == 0 else ca.Sparsity.dense(1, 1)
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, self.prob.nz)
-
-    def eval(self, arg):
-        return [self.prob.gradient(np.array(arg[0]).reshape(-1)).reshape(1, -1)]
+    def get_jacobian(self, name, inames, onames, opts):  # inputs: z and f's output; output: d f / d z
+        self._jacobian = _Fn(name, self.nz, (self.out[0], self.nz), self.jac, f_out=self.out)
+        return self._jacobian
 
 
-class _GN(ca.Callback):
-    """The Gauss-Newton Hessian J' W J (its upper triangle is what nlpsol passes IPOPT)."""
+def _callbacks(prob: _Problem) -> tuple[_Fn, _Fn]:
+    def f(z):
+        c = prob.cost(z)
+        return c if math.isfinite(c) else float("nan")
 
-    def __init__(self, prob: _Problem, name: str = "ident_gn"):
-        ca.Callback.__init__(self)
-        self.prob = prob
-        self.construct(name, {"enable_fd": False})
-
-    def get_n_in(self):
-        return 1
-
-    def get_n_out(self):
-        return 1
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.prob.nz, 1)
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(self.prob.nz, self.prob.nz)
-
-    def eval(self, arg):
-        return [self.prob.gauss_newton(np.array(arg[0]).reshape(-1))]
+    return (_Fn("ident_f", prob.nz, (1, 1), f, lambda z: prob.gradient(z).reshape(1, -1)),
+            _Fn("ident_gn", prob.nz, (prob.nz, prob.nz), prob.gauss_newton))
 
 
 class _Progress(ca.Callback):
@@ -414,7 +379,7 @@ class _Progress(ca.Callback):
 def _solve(prob: _Problem, z0, lo, hi, max_iter, tol, progress, stop):
     """One IPOPT solve with the Gauss-Newton Hessian from ``z0``: (z, status, iterations, cost history)."""
     z = ca.MX.sym("z", prob.nz)
-    fcb, gncb = _F(prob), _GN(prob)
+    fcb, gncb = _callbacks(prob)
     lam_f = ca.MX.sym("lam_f")
     hess = ca.Function("hess_gn", [z, ca.MX(0, 1), lam_f, ca.MX(0, 1)], [lam_f * ca.triu(gncb(z))],
                        ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
