@@ -11,11 +11,12 @@ before calling ``run``:
 * output policy (:func:`arvcas.io.files.check_outputs`): no output is an input or another output,
   none is a special file, an existing file arvcas did not write is refused without ``--force``
   (added to every command that writes); stale temporary files of killed runs are removed;
-* bounds: counts, seeds and timeouts are checked by their argparse types (:func:`seed_arg`,
-  :func:`count_arg`, :func:`seconds_arg`) and the memory a request would take by the command's check.
+* bounds: counts, seeds and timeouts are checked by their argparse types (:mod:`arvcas.io.cliargs`:
+  ``seed_arg``, ``count_arg``, ``seconds_arg``) and the memory a request would take by the command's check.
 
-Errors (ValueError and subclasses, OSError) are printed as one line ``arvcas: error: ...`` with exit
-code 2, usage errors likewise (``arvcas: error: CMD: argument ...``); SIGTERM and SIGHUP end the
+A compile that takes more than a second prints a progress line on standard error
+(:func:`arvcas.build.codegen.report_progress`). Errors (ValueError and subclasses, OSError) are printed
+as one line ``arvcas: error: ...`` with exit code 2, usage errors likewise (``arvcas: error: CMD: argument ...``); SIGTERM and SIGHUP end the
 command like Ctrl-C (temporary files removed), exit 128 + signal.
 """
 
@@ -28,8 +29,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["main", "TABLE", "COMMANDS", "Command", "seed_arg", "count_arg", "seconds_arg", "check_memory",
-           "MAX_SEED", "refuse"]
+from arvcas.io.cliargs import add_figure_format, count_arg, refuse, seed_arg
+
+__all__ = ["main", "TABLE", "COMMANDS", "Command"]
 
 Paths = Callable[[argparse.Namespace], list]
 
@@ -50,75 +52,6 @@ class Command:
     inputs: tuple = ()
     outputs: Paths | None = None
     check: Callable[[argparse.Namespace], None] | None = None
-
-
-# ---- bounds (argparse types: refused at parse time, before any work) ------------------------------------
-
-MAX_SEED = 2**63  # seeds are stored as int64 and fed to numpy's SeedSequence
-
-
-def seed_arg(text: str) -> int:
-    """A seed: an integer with 0 <= seed < 2**63."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer seed, got {text!r}") from None
-    if not 0 <= v < MAX_SEED:
-        raise argparse.ArgumentTypeError(f"{text} is out of range (allowed: 0 <= seed < 2**63)")
-    return v
-
-
-def count_arg(lo: int, hi: int, what: str = "count"):
-    """An argparse type: an integer ``lo <= n <= hi``."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"{v} is out of range (allowed: {lo}..{hi})")
-        return v
-
-    parse.__name__ = what
-    return parse
-
-
-def seconds_arg(text: str) -> float:
-    """A duration in seconds: finite and positive (not nan, inf, 0 or negative)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"{text}: must be a finite number of seconds > 0")
-    return v
-
-
-def _total_memory() -> int | None:
-    import os
-
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError):  # pragma: no cover
-        return None
-
-
-def check_memory(what: str, n_bytes: float, share: float = 0.5) -> None:
-    """Refuse a request whose results would take more than ``share`` of this machine's memory."""
-    total = _total_memory()
-    if total is None:  # pragma: no cover
-        return
-    if n_bytes > share * total:
-        raise ValueError(f"{what}: would need about {n_bytes / 2**30:.3g} GiB for its results, more than "
-                         f"{share:.0%} of this machine's {total / 2**30:.3g} GiB; ask for less")
-
-
-def refuse(a: argparse.Namespace, names, why: str) -> None:
-    """ValueError if any of the options ``names`` (dest names) was given (is not None/False)."""
-    for n in names:
-        v = getattr(a, n, None)
-        if v is not None and v is not False:
-            raise ValueError(f"--{n.replace('_', '-')}: {why}")
 
 
 def _model_options(n_quad: int):
@@ -153,7 +86,7 @@ def _export_c_outputs(a: argparse.Namespace) -> list:
 
 def _run_export_c(a: argparse.Namespace) -> int:
     from arvcas.build.export import export_c
-    from arvcas.params import load
+    from arvcas.system.params import load
 
     paths = export_c(a.dir, opts=_model_options(a.n_quad), params=load(a.params), prefix=a.prefix, force=a.force)
     for path in paths:
@@ -235,7 +168,7 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
     import numpy as np
 
     from arvcas.build.codegen import compiled
-    from arvcas.params import default_layout, load, view
+    from arvcas.system.params import default_layout, load, view
 
     params = load(params_path)
     p = params.vector()
@@ -267,7 +200,7 @@ def _add_demo(p: argparse.ArgumentParser) -> None:
 
 
 def _run_demo(a: argparse.Namespace) -> int:
-    from arvcas.params import load
+    from arvcas.system.params import load
 
     rows = demo_table(a.params, a.n_quad)
     params = load(a.params)
@@ -306,14 +239,16 @@ def _run_systems(a: argparse.Namespace) -> int:
 
 
 def _add_knees(p: argparse.ArgumentParser) -> None:
-    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR", help="the --out directory of arvcas tune")
+    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR",
+                   help="the --out directory of arvcas tune (one front, or one per controller), or a front.h5")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="where to write (created if missing)")
+    add_figure_format(p)
 
 
 def _knees_outputs(a):
-    from arvcas.experiments.knees import knee_fronts, output_files
+    from arvcas.experiments.knees import front_controllers, output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out, [f.parent.name for f in knee_fronts(a.study_dir)])]
+    return [(f"--out {a.out}", p) for p in output_files(a.out, front_controllers(a.study_dir), a.format or "png")]
 
 
 def _run_knees(a: argparse.Namespace) -> int:
@@ -321,7 +256,7 @@ def _run_knees(a: argparse.Namespace) -> int:
     from arvcas.io import files
 
     files.prepare_dir(a.out, f"--out {a.out}")
-    replay_knees(a.study_dir, a.out)
+    replay_knees(a.study_dir, a.out, fmt=a.format or "png")
     return 0
 
 
@@ -364,7 +299,7 @@ def _metrics_table(chat, rmse) -> str:
 def _run_simulate(a: argparse.Namespace) -> int:
     from arvcas.io import results
     from arvcas.sim import scenario
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.sim.simulation import simulate
 
     if a.out is not None:
@@ -414,12 +349,13 @@ def _run_simulate(a: argparse.Namespace) -> int:
 def _add_paper(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     p.add_argument("--seed", type=seed_arg, default=0, help="sensor-noise seed shared by the runs (default 0)")
+    add_figure_format(p, "Figures 5-11")
 
 
 def _run_paper(a: argparse.Namespace) -> int:
     from arvcas.experiments.paper import run_paper
 
-    out = run_paper(a.out, seed=a.seed)
+    out = run_paper(a.out, seed=a.seed, fmt=a.format or "png")
     print((a.out / "table3.md").read_text())
     # the job succeeded when every run completed; whether the paper's comparison reproduces is
     # a finding, reported in table3.md, not an error
@@ -449,12 +385,12 @@ def _load_arg(text: str) -> float:
 
 
 def bench_module():
-    """``benchmarks/bench.py`` of the source checkout this package runs from (not part of the package)."""
+    """The package ``benchmarks/bench/`` of the source checkout this package runs from (not part of the package)."""
     import importlib
 
     root = Path(__file__).resolve().parents[1]
-    if not (root / "benchmarks" / "bench.py").is_file():
-        raise ValueError(f"bench: needs a source checkout of arvcas ({root / 'benchmarks' / 'bench.py'} not found)")
+    if not (root / "benchmarks" / "bench" / "__init__.py").is_file():
+        raise ValueError(f"bench: needs a source checkout of arvcas ({root / 'benchmarks' / 'bench'} not found)")
     if str(root) not in sys.path:
         sys.path.insert(0, str(root))
     return importlib.import_module("benchmarks.bench")
@@ -484,7 +420,7 @@ def _out_file(dest: str, label: str | None = None) -> Paths:
 def _paper_outputs(a):
     from arvcas.experiments.paper import output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out)]
+    return [(f"--out {a.out}", p) for p in output_files(a.out, fmt=a.format or "png")]
 
 
 def _bench_outputs(a):
@@ -520,14 +456,18 @@ def _table() -> tuple[Command, ...]:
         Command("front export", "the front as CSV or JSON (stdout, or --out FILE), or a MATLAB .mat file",
                 t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out"),
                 check=t.check_front_export),
-        Command("front plot", "plot the front, Table 2 on the same draws and the knee point (PNG)", t.add_front_plot,
+        Command("front plot", "plot the front, the default gains (Haidou-1: Table 2) on the same draws and the knee "
+                "point (PNG, PDF or SVG)", t.add_front_plot,
                 t.run_front_plot, inputs=(("file", "front"),), outputs=t.front_plot_outputs),
+        Command("front explore", "one self-contained HTML page of every front: hover a member for its gains and "
+                "metrics, click it for its time response", x.add_explore, x.run_explore, inputs=(("fronts", "front"),),
+                outputs=x.explore_outputs, check=x.check_explore),
         Command("front robust", "re-evaluate every front member under Monte Carlo; mark the robust non-dominated "
                 "ones (robust.h5, robust.md, robust.png)", x.add_robust, x.run_robust, inputs=(("file", "front"),),
                 outputs=x.robust_outputs, check=x.check_robust),
-        Command("compare", "hypervolumes of two fronts against one reference point, and who dominates where; or two "
-                "Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
-                "(front robust)", x.add_compare, x.run_compare, inputs=(("a", "front"), ("b", "front")),
+        Command("compare", "hypervolumes of two or more fronts against one reference point, and who dominates where; "
+                "or two Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
+                "(front robust)", x.add_compare, x.run_compare, inputs=(("fronts", "front"),),
                 outputs=x.compare_outputs, check=x.check_compare),
         Command("sweep", "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 "
                 "(table, plot)", x.add_sweep, x.run_sweep,
@@ -587,35 +527,44 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _inputs(cmd: Command, a: argparse.Namespace) -> list[tuple[str, Path]]:
-    """Apply the input policy to the declared inputs; returns them as (label, path of the file)."""
-    from arvcas.io import files
-
+    """Apply the input policy to the declared inputs (an argument may hold a list); returns them as
+    (label, path of the file)."""
     out = []
     for dest, kind, *what in cmd.inputs:
-        p = getattr(a, dest, None)
-        if p is None:
-            continue
-        label = dest if dest in ("file", "study", "a", "b", "study_dir") else f"--{dest.replace('_', '-')}"
-        if kind == "system":
-            from arvcas.system import shipped
-
-            label = "--system"
-            if str(p) in shipped():
-                p = shipped()[str(p)]
-                setattr(a, dest, p)
-            elif not p.exists() and p.suffix.lower() != ".toml":
-                from arvcas.config import closest
-
-                raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
-                                 f"file{closest(str(p), shipped(), 0.3)}")
-        p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
-        if kind == "front" and p.is_dir():
-            p = p / "front.h5"
-            if not p.exists():
-                continue  # the handler names what the directory holds
-            files.check_input(p)
-        out.append((label, p))
+        value = getattr(a, dest, None)
+        for p in value if isinstance(value, list) else [value]:
+            item = _input(dest, kind, what, p, a)
+            if item is not None:
+                out.append(item)
     return out
+
+
+def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[str, Path] | None:
+    """The input policy for one input ``p`` of argument ``dest``: (label, path of the file) or None."""
+    from arvcas.io import files
+
+    if p is None:
+        return None
+    label = "front" if dest == "fronts" else dest if dest in ("file", "study", "study_dir") else f"--{dest.replace('_', '-')}"
+    if kind == "system":
+        from arvcas.system import shipped
+
+        label = "--system"
+        if str(p) in shipped():
+            p = shipped()[str(p)]
+            setattr(a, dest, p)
+        elif not p.exists() and p.suffix.lower() != ".toml":
+            from arvcas.system.config import closest
+
+            raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
+                             f"file{closest(str(p), shipped(), 0.3)}")
+    p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
+    if kind == "front" and p.is_dir():
+        p = p / "front.h5"
+        if not p.exists():
+            return None  # the handler names what the directory holds
+        files.check_input(p)
+    return label, p
 
 
 def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
@@ -650,9 +599,12 @@ def main(argv: list[str] | None = None) -> int:
     old = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP)}
     files.install_signal_handlers()
     try:
+        from arvcas.build.codegen import report_progress
+
         cmd = COMMANDS[a._command]
         _apply_policies(cmd, a)
-        return cmd.run(a)
+        with report_progress(sys.stderr):  # a build of more than a second says so on standard error
+            return cmd.run(a)
     except (ValueError, OSError) as e:
         msg = " ".join(str(e).split()) or type(e).__name__
         print(f"arvcas: error: {msg}", file=sys.stderr)

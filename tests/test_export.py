@@ -28,7 +28,7 @@ from arvcas.build.dynamics import NAMES, jacobian_functions
 from arvcas.build.export import (DEFAULT_PREFIX, MANIFEST, ExportError, _check_reentrant, default_prefix,
                                  example_inputs, export_c, files)
 from arvcas.model import uvms
-from arvcas.params import load
+from arvcas.system.params import load
 from arvcas.system import SHIPPED, load_system
 
 RTOL = 1e-12
@@ -76,10 +76,12 @@ def _run(cmd, **kw):
 
 
 @pytest.fixture(scope="module")
-def made(exported):
+def made(exported, prefix):
     if shutil.which("make") is None or shutil.which("c++") is None:
         pytest.skip("make or c++ is not installed")
-    _run(["make", "-C", str(exported)])
+    out = _run(["make", "-C", str(exported)])
+    lib = prefix.rstrip("_")
+    assert re.search(rf"^compiling lib{lib}\.so \.\.\. \d+ s$", out, re.M), out  # make's progress line
     return exported
 
 

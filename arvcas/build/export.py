@@ -650,8 +650,11 @@ LDLIBS = {' '.join(libs)}
 
 all: lib{lib}.so example example_cpp
 
+# the library is the slow part (seconds at -O2): one progress line, "compiling lib{lib}.so ... 9 s"
 lib{lib}.so: {lib}.c
-\t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_LIBFLAGS) $(CFLAGS) -o $@ {lib}.c $(LDLIBS)
+\t@printf 'compiling lib{lib}.so ...\\n'; t0=$$(date +%s); \\
+\t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_LIBFLAGS) $(CFLAGS) -o $@ {lib}.c $(LDLIBS) && \\
+\tprintf 'compiling lib{lib}.so ... %s s\\n' $$(( $$(date +%s) - t0 ))
 
 example: example.c {lib}.h {lib}_params.h lib{lib}.so
 \t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_PIC) $(CFLAGS) -o $@ example.c -L. -l{lib} -Wl,-rpath,'$$ORIGIN' $(LDLIBS)
@@ -797,7 +800,7 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, forc
     """Write the C library, headers, build files, examples and README into ``out_dir``.
 
     ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``params``: the
-    system, a :class:`arvcas.params.Params` (or a :class:`arvcas.system.System`): its layout sizes the
+    system, a :class:`arvcas.system.params.Params` (or a :class:`arvcas.system.System`): its layout sizes the
     functions (``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``) and its numbers are the defaults
     in ``<lib>_params.h`` (default: Haidou-1); ``prefix``: of every symbol (a C identifier ending in
     ``_``; the library is ``lib<prefix without the last _>.so``; default :func:`default_prefix`,
@@ -807,14 +810,14 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, forc
     """
     from arvcas.build.dynamics import jacobian_functions
     from arvcas.model.uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
-    from arvcas.params import Params, load
+    from arvcas.system.params import Params, load
     from arvcas.system import System
 
     P = load() if params is None else params
     if isinstance(P, System):
         P = P.params
     if not isinstance(P, Params):
-        raise ExportError(f"export-c: params must be arvcas.params.Params, got {type(P).__name__}")
+        raise ExportError(f"export-c: params must be arvcas.system.params.Params, got {type(P).__name__}")
     if prefix is None:
         prefix = default_prefix(P)
     if not isinstance(prefix, str) or not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*_", prefix) or "__" in prefix:

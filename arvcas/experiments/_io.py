@@ -24,17 +24,20 @@ def write_text(path: Path, text: str) -> Path:
     return files.write_text(path, text, ResultsError)
 
 
-def write_figure(path: Path, fig, dpi: int) -> Path:
-    return files.write_figure(path, fig, dpi, ResultsError)
+def write_figure(path: Path, fig, fmt: str | None = None) -> Path:
+    from arvcas.io import style
+
+    return style.write_figure(path, fig, fmt, ResultsError)
 
 
-def write_result_dir(out_dir, stem: str, result, write_h5, markdown, plot, dpi: int) -> dict[str, Path]:
+def write_result_dir(out_dir, stem: str, result, write_h5, markdown, plot, fmt: str = "png") -> dict[str, Path]:
     """``out_dir/<stem>.h5`` (``write_h5(result, path)``), ``<stem>.md`` (``markdown(result)``) and
-    ``<stem>.png`` (``plot(result)`` at ``dpi``), each written atomically; ``out_dir`` is created if missing."""
+    ``<stem>.<fmt>`` (``plot(result)``; png, pdf or svg), each written atomically; ``out_dir`` is created if
+    missing. The figure's key in the returned dict is ``"figure"``."""
     out = prepare_dir(out_dir, f"--out {out_dir}")
     written = {"h5": write_h5(result, out / f"{stem}.h5"), "md": write_text(out / f"{stem}.md", markdown(result))}
     fig = plot(result)
-    written["png"] = write_figure(out / f"{stem}.png", fig, dpi)
+    written["figure"] = write_figure(out / f"{stem}.{fmt}", fig, fmt)
     return written
 
 
@@ -45,7 +48,7 @@ def stored_inputs(path, config_text: str, params_vector, error: type[ValueError]
     the system's parameters (``error`` is raised when they do not fit); ``system``: the stored system
     (a shipped name or a system file; "" for Haidou-1). Returns ``(cfg, params)``.
     """
-    from arvcas.params import load as load_params
+    from arvcas.system.params import load as load_params
     from arvcas.sim import scenario
     from arvcas.system import load_system
 
@@ -60,7 +63,7 @@ def stored_inputs(path, config_text: str, params_vector, error: type[ValueError]
 
 def system_ref(params) -> str:
     """How a result file names the system of ``params``: "" for Haidou-1, a shipped name, or the file."""
-    from arvcas.params import default_layout
+    from arvcas.system.params import default_layout
     from arvcas.system import shipped
 
     st = params.structure

@@ -245,7 +245,7 @@ def run_identify(a) -> int:
     system = _system(a)
     for n in a.free:
         if n not in system.layout.index:
-            from arvcas.config import closest
+            from arvcas.system.config import closest
 
             raise ValueError(f"--free: {system.name} has no parameter {n!r}{closest(n, system.layout.names)}")
     writable(system, a.free)

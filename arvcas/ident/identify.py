@@ -48,7 +48,7 @@ import numpy as np
 from arvcas.ident import plant as plant_mod
 from arvcas.ident.logs import SIGNALS, Log
 from arvcas.ident.validate import initial_state, substeps
-from arvcas.systemfile import parse_term
+from arvcas.system.systemfile import parse_term
 
 __all__ = ["IdentifyError", "Estimate", "identify", "bounds", "RANK_TOL", "CORR_WARN", "Z95"]
 
@@ -123,7 +123,7 @@ class Estimate:
         return dict(zip(self.free, map(float, self.values)))
 
     def params(self):
-        """The system's :class:`arvcas.params.Params` with the estimates."""
+        """The system's :class:`arvcas.system.params.Params` with the estimates."""
         return self.system.params.replace(self.as_dict())
 
     def system_text(self, out_path, date: str | None = None) -> str:
@@ -452,7 +452,7 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
         raise IdentifyError(f"free: at most {MAX_FREE} parameters, got {len(free)}")
     for n in free:
         if n not in lay.index:
-            from arvcas.config import closest
+            from arvcas.system.config import closest
 
             raise IdentifyError(f"free: {system.name} has no parameter {n!r}{closest(n, lay.names)}")
     dup = [n for n in free if free.count(n) > 1]
@@ -590,7 +590,7 @@ def writable(system, names) -> None:
 
 
 def _si_factor(unit: str, k: int) -> float:
-    from arvcas import config
+    from arvcas.system import config
 
     units = [u.strip() for u in unit.split(",")]
     u = units[k] if len(units) > 1 else units[0]
@@ -606,7 +606,7 @@ def _system_text(est: Estimate, out_path, date: str | None) -> str:
 
     import tomlkit
 
-    from arvcas.systemfile import VECTOR_ELEMENTS
+    from arvcas.system.systemfile import VECTOR_ELEMENTS
 
     src = Path(est.system.path)
     from arvcas.io.files import read_text

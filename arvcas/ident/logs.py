@@ -40,8 +40,8 @@ from typing import Any
 
 import numpy as np
 
-from arvcas import config
-from arvcas.config import Choices, Count, Invalid, Unique, ge, gt, le, quantity, setting
+from arvcas.system import config
+from arvcas.system.config import Choices, Count, Invalid, Unique, ge, gt, le, quantity, setting
 
 __all__ = ["LogError", "Log", "JointTrajectory", "load_log", "load_logs", "MAPPING_SUFFIX", "SIGNALS",
            "euler_from_R", "R_from_euler", "WORLD_FRAMES", "BODY_FRAMES"]
@@ -70,7 +70,7 @@ class LogError(ValueError):
     """One line naming the mapping or stream file, the key or column, and the reason."""
 
 
-# ---- the mapping file's schema (arvcas.config: each rule beside its field) ------------------------------
+# ---- the mapping file's schema (arvcas.system.config: each rule beside its field) ------------------------------
 
 
 @dataclass(frozen=True)
@@ -475,7 +475,7 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     # the mapping's own rules, before reading any stream
     seen: dict[str, str] = {}
     for i, sm in enumerate(m.stream):
-        key = f"stream[{i + 1}]"  # 1-based, as arvcas.config numbers [[tables]]
+        key = f"stream[{i + 1}]"  # 1-based, as arvcas.system.config numbers [[tables]]
         try:
             _columns_of(sm)
         except Invalid as e:
@@ -540,7 +540,7 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     wrench = payload = None
     jt_names, jt_t, jt_q, jt_std = [], [], [], {}
     for i, (sm, tb) in enumerate(zip(m.stream, tabs)):
-        key = f"stream[{i + 1}]"  # 1-based, as arvcas.config numbers [[tables]]
+        key = f"stream[{i + 1}]"  # 1-based, as arvcas.system.config numbers [[tables]]
         Cw, Cb = WORLD_FRAMES[sm.world], BODY_FRAMES[sm.body]
 
         def cols(k, sm=sm, tb=tb, key=key):

@@ -30,7 +30,7 @@ from arvcas.build import calls, codegen
 from arvcas.model import manipulator, thrusters, vehicle
 from arvcas.model.spatial import J
 from arvcas.model.uvms import ModelOptions, coupled_terms
-from arvcas.params import system_tag, view
+from arvcas.system.params import system_tag, view
 
 __all__ = ["LogPlant", "sample_inputs", "DEFAULT_BLOCK"]
 

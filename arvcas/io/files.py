@@ -11,7 +11,7 @@ Output directories (:func:`check_dir`, :func:`prepare_dir`, :func:`target`)
     An output directory must exist (or be creatable in an existing parent) and be writable; a
     directory without any write permission bit counts as read-only also for root.
 
-Writing (:func:`atomic_write`, :func:`write_text`, :func:`write_figure`)
+Writing (:func:`atomic_write`, :func:`write_text`; figures: :func:`arvcas.io.style.write_figure`)
     A file is built under a temporary name ``.<name>.arvcas-tmp-<pid>-<random>`` in its
     directory, fsync'ed and renamed over the final name (``os.replace``): an interrupted or failed
     write leaves the previous file untouched and no partial file under the final name. The temporary
@@ -24,7 +24,7 @@ What arvcas wrote (:func:`written_by_arvcas`)
     An existing file is replaced only if arvcas wrote it, unless the caller allowed it
     (:func:`permit_replace`; the command line's ``--force``). arvcas's HDF5 files are recognised by
     their own ``format`` attribute (``arvcas-result``, ``arvcas.tuning.front``, ``arvcas-montecarlo``,
-    ...). Every other file arvcas writes (CSV, JSON, Markdown, PNG) is recorded, after its rename, in
+    ...). Every other file arvcas writes (CSV, JSON, Markdown, HTML, PNG, PDF, SVG) is recorded, after its rename, in
     the manifest ``.arvcas-manifest.json`` of its directory (name -> size and sha256 of the bytes
     written; updated under an ``flock`` of the directory): such a file counts as arvcas's only while
     its bytes are still those arvcas wrote; a file edited since is the user's.
@@ -52,7 +52,7 @@ from pathlib import Path
 
 __all__ = [
     "FileError", "Terminated", "MAX_TEXT_BYTES", "TMP_MARK", "MANIFEST", "check_input", "read_bytes", "read_text",
-    "check_dir", "prepare_dir", "target", "atomic_write", "write_text", "write_figure", "remove_stale_temps",
+    "check_dir", "prepare_dir", "target", "atomic_write", "write_text", "remove_stale_temps",
     "install_signal_handlers", "written_by_arvcas", "hdf5_format", "permit_replace", "check_outputs", "same_file",
 ]
 
@@ -369,14 +369,6 @@ def atomic_write(path, write: Callable[[Path], None], error: type[ValueError] = 
 def write_text(path, text: str, error: type[ValueError] = FileError) -> Path:
     """UTF-8 text, written atomically."""
     return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"), error)
-
-
-def write_figure(path, fig, dpi: int = 150, error: type[ValueError] = FileError) -> Path:
-    """A matplotlib figure as PNG, written atomically."""
-    from arvcas import __version__
-
-    return atomic_write(path, lambda p: fig.savefig(p, format="png", dpi=dpi,
-                                                    metadata={"Software": f"arvcas {__version__}"}), error)
 
 
 def remove_stale_temps(d) -> list[Path]:

@@ -3,7 +3,7 @@
 A system file describes one vehicle, its thrusters and its arm. Its *structure* (which hydrodynamic
 terms, how many thrusters and joints, which arm form) decides the shape of the compiled code; its
 *numbers* are runtime parameters. :func:`structure_of` reads the structure from the parsed document
-and :func:`schema_for` builds the strict schema (:mod:`arvcas.config` dataclasses) of exactly that
+and :func:`schema_for` builds the strict schema (:mod:`arvcas.system.config` dataclasses) of exactly that
 structure, so the numbers load with the one configuration loader: units, rules, closest-name hints.
 """
 
@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from arvcas import config
-from arvcas.config import ge, gt, quantity
+from arvcas.system import config
+from arvcas.system.config import ge, gt, quantity
 
 __all__ = [
     "HydroTerm", "Structure", "parse_term", "structure_of", "schema_for", "MAX_JOINTS", "VECTOR_ELEMENTS",
@@ -38,6 +38,10 @@ HYDRO_ALIASES = {
     "M_dsds": "M_w_ds2_absw",
 }
 
+# Haidou-1's parametric layout (Appendix B): its six thrusters in the order of B's columns
+# (arvcas.model.thrusters: stern left and right, rotatable; side thrusters at the bow and the stern; verticals)
+HAIDOU1_THRUSTERS = ("T1 stern left", "T2 stern right", "T3 side (bow)", "T4 side (stern)", "T5 vertical (port)",
+                     "T6 vertical (starboard)")
 # element labels of the vector entries: parameter ``<key>.<label>``
 VECTOR_ELEMENTS = {
     "position": ("x", "y", "z"), "direction": ("x", "y", "z"), "axis": ("x", "y", "z"),
@@ -128,6 +132,11 @@ class Structure:
     @property
     def n_thrusters(self) -> int:
         return 6 if self.thrusters is None else len(self.thrusters)
+
+    @property
+    def thruster_names(self) -> tuple[str, ...]:
+        """The thrusters' names in allocation order (the columns of B): the list's, or Haidou-1's six."""
+        return HAIDOU1_THRUSTERS if self.thrusters is None else self.thrusters
 
     def key(self) -> str:
         """A stable text of the structure, for compile-cache keys."""
