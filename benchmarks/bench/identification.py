@@ -28,6 +28,7 @@ FREE = ("vehicle.xB", "vehicle.yB", "vehicle.zB", "vehicle.Ixx", "vehicle.Iyy", 
 TRUTH = {"vehicle.zB": -0.011, "vehicle.Ixx": 0.50, "vehicle.Iyy": 0.55, "vehicle.Izz": 0.60, "hydro.K_p": -0.2,
          "hydro.M_q": -0.15, "hydro.N_r": -0.3, "hydro.K_p_absp": -2.0}
 N_TRIALS, DURATION = 10, 20.0
+QUICK = {"free": ("vehicle.zB", "hydro.K_p"), "trials": 2, "duration": 4.0}  # --quick: the vehicle without its arm
 
 
 def _bench_identification(s, log) -> dict:
@@ -77,30 +78,41 @@ def _bench_identification(s, log) -> dict:
                          "validate_s": _stat(t_val), "simulate_s": _stat(t_sim), "simulate_vm_s": _stat(t_vm),
                          "vm_over_compiled": float(np.median(t_vm) / np.median(t_sim)),
                          "total_s": float(np.median(t_read) + np.median(t_val))}
-    # -- identification of 10 parameters on 10 trials of 20 s
+    # -- identification of 10 parameters on 10 trials of 20 s (--quick: 2 parameters of the vehicle alone)
     log("identification: synthetic trials ...")
-    truth = System(system.params.replace(TRUTH))
     work = Path(tempfile.mkdtemp(prefix="arvcas-bench-ident-"))
+    free, n_trials, duration = FREE, N_TRIALS, DURATION
+    if s.mode == "quick":
+        import tomlkit
+
+        doc = tomlkit.parse(Path(system.path).read_text(encoding="utf-8"))
+        for k in ("arm", "payload", "defaults"):
+            doc.pop(k, None)
+        doc["system"]["name"] = "hinsdale_vehicle_bench"
+        (work / "vehicle.toml").write_text(tomlkit.dumps(doc), encoding="utf-8")
+        system = arvcas.load_system(work / "vehicle.toml")
+        free, n_trials, duration = QUICK["free"], QUICK["trials"], QUICK["duration"]
+    truth = System(system.params.replace({k: v for k, v in TRUTH.items() if k in free}))
     try:
-        paths = [synthetic.write_trial(work, f"b{k}", truth, duration=DURATION, seed=500 + k, p=truth.params.vector())
-                 for k in range(N_TRIALS)]
+        paths = [synthetic.write_trial(work, f"b{k}", truth, duration=duration, seed=500 + k, p=truth.params.vector())
+                 for k in range(n_trials)]
         lgs = logs.load_logs(paths, system.n_joints)
         log("identification: compiling (or loading from the cache) ...")
         from arvcas.build import codegen
 
         n_compiles = codegen.stats()["compile"]
         t0 = time.perf_counter()
-        prob_plant = plant.LogPlant(system, m=1, free=FREE)
+        prob_plant = plant.LogPlant(system, m=1, free=free)
         prob_plant.sens_fn()
         prob_plant.block_fn()
         build_s = time.perf_counter() - t0
         cold = codegen.stats()["compile"] > n_compiles
-        log("identification: 10 parameters, 10 trials ...")
+        log(f"identification: {len(free)} parameters, {n_trials} trials ...")
         t0 = time.perf_counter()
-        est = ident.identify(system, lgs, FREE, threads=2)
+        est = ident.identify(system, lgs, free, threads=2)
         wall = time.perf_counter() - t0
-        prob = ident._Problem(system, lgs, FREE, est.signals, {}, 1, plant.DEFAULT_BLOCK, 2)
-        z = np.concatenate([np.zeros(len(FREE))] + [validate.initial_state(x) for x in lgs])
+        prob = ident._Problem(system, lgs, free, est.signals, {}, 1, plant.DEFAULT_BLOCK, 2)
+        z = np.concatenate([np.zeros(len(free))] + [validate.initial_state(x) for x in lgs])
         t_sens, t_plain = [], []
         for k in range(3):
             zz = z + 1e-9 * (k + 1)  # a new point each time: no memo
@@ -111,9 +123,9 @@ def _bench_identification(s, log) -> dict:
             prob.evaluate(zz + 1e-9, False)
             t_plain.append(time.perf_counter() - t1)
         prob.pool.shutdown()
-        tv = np.array([truth.params[n] for n in FREE])
+        tv = np.array([truth.params[n] for n in free])
         out["identify"] = {
-            "system": SYSTEM, "free": list(FREE), "trials": N_TRIALS, "duration_s": DURATION,
+            "system": system.name, "free": list(free), "trials": n_trials, "duration_s": duration,
             "samples": int(sum(len(x.t) for x in lgs)), "wall_s": wall, "iterations": est.iterations,
             "status": est.status, "build_s": build_s, "build_cold": cold, "sens_eval_s": _stat(t_sens), "plain_eval_s": _stat(t_plain),
             "sens_per_sample_us": float(np.median(t_sens)) / sum(len(x.t) for x in lgs) * 1e6 * 2,

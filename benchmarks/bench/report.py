@@ -305,7 +305,7 @@ def _identification_markdown(r: dict | None) -> list[str]:
         f"**{_g(v['total_s'])} s** together (target 1 s: {_verdict(v['total_s'], 1.0, False)}). The simulation alone "
         f"{_g(_m(v['simulate_s']))} s compiled, {_g(_m(v['simulate_vm_s']))} s in CasADi's VM "
         f"({v['vm_over_compiled']:.0f}x).", "",
-        f"Identification of {len(i['free'])} parameters of {i['system']} (vehicle and arm) on {i['trials']} synthetic "
+        f"Identification of {len(i['free'])} parameters of {i['system']} on {i['trials']} synthetic "
         f"trials of {i['duration_s']:g} s ({i['samples']} samples), 2 threads, compiled code "
         f"{'built in this run' if i['build_cold'] else 'from the cache'} ({_g(i['build_s'])} s, not counted): "
         f"**{_g(i['wall_s'])} s**, {i['iterations']} IPOPT iterations ({i['status']}); target 60 s: "
