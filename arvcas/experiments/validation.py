@@ -19,6 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from arvcas.io import style
+from arvcas.io.cliargs import add_figure_format
+
 __all__ = ["add_validate", "run_validate", "validate_outputs", "add_identify", "run_identify", "identify_outputs",
            "validation_doc", "plot_trial", "UNITS"]
 
@@ -78,12 +81,13 @@ def _add_common(p: argparse.ArgumentParser, system_help: str, out_meta: str, out
 
 def add_validate(p: argparse.ArgumentParser) -> None:
     _add_common(p, "", "DIR", "output directory")
+    add_figure_format(p, "the trials' figures")
 
 
 def validate_outputs(a) -> list:
     names = [_trial_name(p) for p in a.logs]
     out = [("--out", a.out / "validation.json"), ("--out", a.out / "README.md")]
-    return out + [("--out", a.out / f"{n}.png") for n in names]
+    return out + [("--out", a.out / f"{n}.{a.format or 'png'}") for n in names]
 
 
 def _trial_name(p: Path) -> str:
@@ -112,42 +116,40 @@ def validation_doc(system, results, logs, h_max) -> dict:
             "h_max_s": h_max, "trials": trials}
 
 
+@style.styled
 def plot_trial(r, title: str):
-    """Measured (solid) and simulated (dashed) signals of one trial; angles in degrees."""
-    from matplotlib.figure import Figure
-
+    """Measured (solid) and simulated (dashed) signals of one trial; angles in degrees (the house style)."""
     sigs = [s for s in ("roll", "pitch", "yaw", "z", "p", "q", "r", "x", "y", "u", "v", "w") if s in r.measured]
     joints = [s for s in r.measured if s not in UNITS]
     n = len(sigs) + (1 if joints else 0)
     cols = 2
     rows = -(-n // cols)
-    fig = Figure(figsize=(10, 2.2 * rows + 0.6))
+    fig = style.figure("page", 1.5 * rows + 0.4)
     axs = fig.subplots(rows, cols, sharex=True, squeeze=False).reshape(-1)
     for ax, s in zip(axs, sigs):
         k = 180.0 / math.pi if s in _ANGLES or s in ("p", "q", "r") else 1.0
         u = {"rad": "deg", "rad/s": "deg/s"}.get(_unit(s), _unit(s))
-        ax.plot(r.t, k * r.measured[s], lw=1.0, color="#0072B2", label="measured")
-        ax.plot(r.t, k * r.simulated[s], lw=1.2, ls="--", color="#D55E00", label="simulated")
+        ax.plot(r.t, k * r.measured[s], color=style.color("blue"), label="measured")
+        ax.plot(r.t, k * r.simulated[s], ls="--", color=style.color("vermillion"), label="simulated")
         ax.set_ylabel(f"{s} ({u})")
         rm = r.metrics["rmse"][s] * k
-        ax.set_title(f"{s}: RMSE {rm:.3g} {u}, R$^2$ {r.metrics['r2'][s]:.2f}", fontsize=9)
+        ax.set_title(f"{s}: RMSE {rm:.3g} {u}, R$^2$ {r.metrics['r2'][s]:.2f}")
     if joints:
         ax = axs[len(sigs)]
         for j in joints:
-            ax.plot(r.t, np.degrees(r.measured[j]), lw=1.0, label=f"{j}")
+            ax.plot(r.t, np.degrees(r.measured[j]), label=f"{j}")
         ax.set_ylabel("joints (deg, prescribed)")
-        ax.legend(fontsize=7, ncol=len(joints))
+        ax.legend(ncol=len(joints))
     for ax in axs[n:]:
         ax.set_visible(False)
-    axs[0].legend(fontsize=8)
+    axs[0].legend()
     for ax in axs[max(0, n - cols):n]:
         ax.set_xlabel("t (s)")
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    fig.suptitle(title)
     return fig
 
 
-def _readme(doc: dict, results, logs, system, seconds: float) -> str:
+def _readme(doc: dict, results, logs, system, seconds: float, fmt: str = "png") -> str:
     lines = [f"# Validation of `{system.name}` on {len(results)} trials",
              "", f"Written by `arvcas validate` ({time.strftime('%Y-%m-%d')}): each trial simulated open loop from its "
              f"logged initial state, driven by the logged inputs, over the whole trial (simulation error, not "
@@ -166,7 +168,7 @@ def _readme(doc: dict, results, logs, system, seconds: float) -> str:
         z = f"{m['z']:.3f}" if "z" in m else "-"
         lines.append(f"| {r.name} | {lg.duration:.1f} | {deg('roll')} | {deg('pitch')} | {deg('yaw')} | {z} | "
                      f"{rates} | {r2} |")
-    lines += ["", "Figures: " + ", ".join(f"[{r.name}]({r.name}.png)" for r in results), ""]
+    lines += ["", "Figures: " + ", ".join(f"[{r.name}]({r.name}.{fmt})" for r in results), ""]
     joints = [lg for lg in logs if lg.joints is not None]
     if joints:
         lines.append(f"The joints follow the logged trajectory (smoothing splines that halve amplitudes at "
@@ -199,8 +201,8 @@ def run_validate(a) -> int:
     doc = validation_doc(system, results, logs, a.h_max)
     files.write_text(a.out / "validation.json", json.dumps(doc, indent=1, allow_nan=True) + "\n")
     for r in results:
-        files.write_figure(a.out / f"{r.name}.png", plot_trial(r, f"{system.name}: trial {r.name}"))
-    files.write_text(a.out / "README.md", _readme(doc, results, logs, system, seconds))
+        style.write_figure(a.out / f"{r.name}.{a.format or 'png'}", plot_trial(r, f"{system.name}: trial {r.name}"))
+    files.write_text(a.out / "README.md", _readme(doc, results, logs, system, seconds, a.format or "png"))
     print(f"wrote {a.out / 'validation.json'}, README.md and {len(results)} figures")
     return 0
 
