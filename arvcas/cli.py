@@ -254,14 +254,14 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
 
 
 def _export_controller_outputs(a: argparse.Namespace) -> list:
-    from arvcas.sim.export_controller import default_prefix, files
+    from arvcas.io.export_controller import default_prefix, files
 
     d = _export_controller_design(a)
     return [(f"DIR {a.dir}", a.dir / n) for n in files(a.prefix or default_prefix(d["params"], d["controller"]))]
 
 
 def _run_export_controller(a: argparse.Namespace) -> int:
-    from arvcas.sim.export_controller import export_controller
+    from arvcas.io.export_controller import export_controller
 
     d = _export_controller_design(a)
     paths = export_controller(a.dir, d["controller"], gains=d["gains"], params=d["params"], scenario=d["cfg"],

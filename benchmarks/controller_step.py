@@ -100,7 +100,7 @@ def _measurements(system: str, law: str) -> np.ndarray:
 def bench_controller_step(reps: int = 7, steps: int = 200_000, systems=None, laws=LAWS, log=print) -> dict:
     """``{system: {law: {"ns_per_step": stat, "init_ns", "state_bytes", "n_steps"}}}`` (see the module docstring)."""
     from arvcas.build import codegen
-    from arvcas.sim.export_controller import default_prefix, export_controller
+    from arvcas.io.export_controller import default_prefix, export_controller
     from arvcas.system import SHIPPED
 
     out: dict = {}

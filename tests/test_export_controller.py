@@ -25,7 +25,7 @@ import arvcas
 from arvcas import cli
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim import scenario
-from arvcas.sim.export_controller import close_loop, default_prefix, files, load_binding
+from arvcas.io.export_controller import close_loop, default_prefix, files, load_binding
 from arvcas.system import SHIPPED, load_system
 from arvcas.tuning.front import read_front
 

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from arvcas.controllers import atd
+from arvcas.controllers import atd, gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model import manipulator, thrusters, vehicle
 from arvcas.sim import scenario, schedule, signals as signals_mod
@@ -41,7 +41,8 @@ from arvcas.model.spatial import J, J_dot, J_inv
 from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
 
 __all__ = ["Layout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "nominal_inertia",
-           "controller_memory", "controller_sample", "ControllerSample", "arm_truth", "INPUTS"]
+           "controller_memory", "controller_sample", "ControllerSample", "arm_truth", "controller_functions",
+           "controller_diagnostics", "controller_sizes", "ControllerSizes", "controller_reads", "INPUTS"]
 
 _PSYM = [(i, j) for i in range(12) for j in range(i, 12)]  # the EKF covariance's upper triangle, row by row
 _PSYM_INDEX = {ij: k for k, ij in enumerate(_PSYM)}
@@ -274,7 +275,7 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
     """One sample of the controller, from the measurement to the thrust: steps 2-5 of the module docstring.
 
     The one definition of the controller: the run's sample (:func:`_controller_part`) and the exported
-    controller (:mod:`arvcas.sim.export_controller`) both build their graphs with it, so they perform
+    controller (:mod:`arvcas.io.export_controller`) both build their graphs with it, so they perform
     the same operations in the same order. ``y``: the measurement ``[eta; nu] + noise`` (12);
     ``tk``: t_k (s); ``first``: 1 at sample 0 (a constant: its branches fold away), when the EKF
     starts from ``y`` and the reference and the law's state start; ``memory``: the controller's memory
@@ -323,6 +324,118 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
                    **{f"c_{name}": xc_next[name] for name, _ in law.state}}
     assert list(memory_next) == [name for name, _ in controller_memory(law)]
     return ControllerSample(ctx, tau_v, u_cmd, u_sat, memory_next)
+
+
+# ---- the controller alone (arvcas export-controller: arvcas.io.export_controller) ------------------------
+
+_BY_NAME = {s.name: s for s in signals_mod.COMMON}
+_DIAG_COMMON = (
+    _BY_NAME["eta_hat"],
+    signals_mod.Signal("nu_hat", 6, signals_mod.RATE_UNITS, "{b}", "u, v, w, p, q, r", "EKF estimate of nu (body velocity about the COB)",
+           lambda c: c.nu_hat),
+    _BY_NAME["eta_ref"],
+    signals_mod.Signal("eta_ref_dot", 6, signals_mod.RATE_UNITS, "{n}", "x, y, z, phi, theta, psi",
+           "reference rate y2 of the adaptive tracking differentiator (eq. 12-13)", lambda c: c.eta_ref_dot),
+    _BY_NAME["tau_cmd"],
+)
+
+
+def controller_diagnostics(law: Controller) -> tuple:
+    """The signals the controller alone gives after a sample (an exported controller's diagnostics), in
+    order: the estimate, the reference, the commanded wrench, then the law's own traced signals (the
+    run's signals of the same names)."""
+    return _DIAG_COMMON + tuple(law.signals)
+
+
+
+
+@dataclass(frozen=True)
+class ControllerSizes:
+    """Sizes of the controller alone (:func:`controller_functions`): its parameters' fields (gains, nominal
+    factors, EKF tuning, set point, model parameters), its memory, thrusters and diagnostics."""
+
+    n_gains: int
+    n_p: int
+    n_u: int
+    n_mem: int
+    n_diag: int
+
+    @property
+    def params(self) -> dict[str, int]:
+        return {"gains": self.n_gains, "unc": 4, "ekf": 5, "eta_d": 6, "p": self.n_p}
+
+    @property
+    def n_k(self) -> int:  # the params, then Mhat
+        return sum(self.params.values()) + 6
+
+
+def controller_sizes(law: Controller, layout) -> ControllerSizes:
+    return ControllerSizes(n_gains=gains_mod.n_gains(law), n_p=len(layout), n_u=layout.structure.n_thrusters,
+                 n_mem=sum(n for _, n in controller_memory(law)),
+                 n_diag=sum(s.n(layout.structure.n_thrusters, layout.structure.n_joints) for s in controller_diagnostics(law)))
+
+
+def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> dict[str, ca.Function]:
+    """The controller alone as CasADi functions (names carry ``prefix``), for ``arvcas export-controller``:
+
+    * ``mhat(p) -> Mhat``: :func:`arvcas.sim.closedloop.nominal_inertia`, once per init (the run's
+      ``derived_constants``);
+    * ``prep0(k) -> kp0``, ``prep(k) -> kp``: the terms of sample 0's and sample k's step that depend on
+      ``k`` alone (the allocation's inverse, products of gains...), once per init;
+    * ``step0(mem, k, kp0, y, t, tau_arm)`` and ``step(mem, k, kp, y, t, tau_arm) -> (mem_next, u,
+      diag)``: one controller sample (:func:`controller_sample`); ``k`` = the parameters
+      (:attr:`ControllerSizes.params`) then Mhat; ``u`` the saturated thrust per thruster (N);
+      ``diag`` the signals of :func:`controller_diagnostics`.
+
+    Built with :func:`controller_sample`, as the run's sample: the same operations in the same order;
+    the terms of ``k`` alone are taken out (:func:`casadi.extract_parametric`), not changed.
+    """
+    law = get_controller(law)
+    sz = controller_sizes(law, layout)
+    p = ca.SX.sym("p", sz.n_p)
+    fns = {"mhat": ca.Function(prefix + "mhat", [p], [nominal_inertia(view(p, layout))], ["p"], ["Mhat"])}
+    for first in (True, False):
+        mem, k = ca.SX.sym("mem", sz.n_mem), ca.SX.sym("k", sz.n_k)
+        y, t, tau_arm = ca.SX.sym("y", 12), ca.SX.sym("t"), ca.SX.sym("tau_arm", 6)
+        f, i = {}, 0
+        for name, n in (*sz.params.items(), ("Mhat", 6)):
+            f[name] = k[i:i + n]
+            i += n
+        memory, i = {}, 0
+        for name, n in controller_memory(law):
+            memory[name] = mem[i:i + n]
+            i += n
+        cs = controller_sample(law, cfg, view(f["p"], layout), y, t, ca.SX(1.0 if first else 0.0), memory,
+                               f["gains"], f["unc"], f["ekf"], f["Mhat"], f["eta_d"], tau_arm)
+        ctx = cs.ctx
+        ctx.__dict__.update(tau_v=cs.tau_v, u_sat=cs.u_sat)
+        try:
+            diag = [sig.value(ctx) for sig in controller_diagnostics(law)]
+        except (AttributeError, KeyError) as e:
+            raise ExportError(f"{WHAT}: controller {law.name}: a traced signal needs the plant's truth ({e}); "
+                              f"only signals of the controller's own quantities can be exported") from None
+        outs = ca.cse([ca.vertcat(*cs.memory.values()), cs.u_sat, ca.vertcat(*diag)])
+        whole, syms, vals = ca.extract_parametric(ca.vertcat(*outs), k, {"prefix": "kp_"})
+        kp = ca.SX.sym("kp", 0) if not syms else ca.vertcat(*syms)
+        parts = ca.vertsplit(whole, list(np.cumsum([0] + [o.shape[0] for o in outs])))
+        tag = "0" if first else ""
+        fns["prep" + tag] = ca.Function(prefix + "prep" + tag, [k], [ca.vertcat(*vals) if vals else ca.SX(0, 1)],
+                                        ["k"], ["kp" + tag])
+        fns["step" + tag] = ca.Function(prefix + "step" + tag, [mem, k, kp, y, t, tau_arm], parts,
+                                        ["mem", "k", "kp" + tag, "y", "t", "tau_arm"], ["mem_next", "u", "diag"])
+    return fns
+
+
+def controller_reads(fns: dict[str, ca.Function], name: str) -> bool:
+    """Whether the controller's command or memory depends on the step input ``name`` (``tau_arm``, ``t``)
+    of :func:`controller_functions`."""
+    out = []
+    for key in ("step0", "step"):
+        f = fns[key]
+        sym = f.sx_in()
+        res = f.call(sym)
+        out.append(ca.depends_on(ca.vertcat(res[0], res[1]), sym[f.index_in(name)]))
+    return any(out)
 
 
 def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: bool) -> ca.Function:

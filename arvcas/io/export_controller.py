@@ -2,7 +2,8 @@
 
 The controller is everything of a controller sample that is not the plant: the EKF on the measured
 ``[eta; nu]``, the ATD reference, the law (its own state, e.g. the RESO or the PID integral) and the
-allocation with saturation (docs/architecture.md, "One controller sample"). Its graph is built by
+allocation with saturation (docs/architecture.md, "One controller sample"). Its graph is
+:func:`arvcas.sim.closedloop.controller_functions`, built by
 :func:`arvcas.sim.closedloop.controller_sample`, the function the run's own sample is built with, so
 the exported code performs the same operations in the same order as the compiled run: closed around
 the plant over the run's scenario it gives the run's trace and metrics (tests/test_export_controller.py
@@ -43,36 +44,14 @@ import numpy as np
 from arvcas.build import export as ex
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import DOFS, Controller, get as get_controller
-from arvcas.sim.closedloop import RunSpec, arm_truth, controller_memory, controller_sample, nominal_inertia
+from arvcas.sim.closedloop import (RunSpec, arm_truth, controller_diagnostics, controller_functions, controller_reads,
+                                   controller_sizes)
 from arvcas.sim.scenario import ScenarioConfig
-from arvcas.sim.signals import COMMON, POSE_UNITS, RATE_UNITS, Signal
 
-__all__ = ["ExportError", "export_controller", "controller_functions", "diagnostics", "default_prefix", "files",
-           "load_binding", "close_loop", "PARAM_FIELDS"]
+__all__ = ["ExportError", "export_controller", "default_prefix", "files", "load_binding", "close_loop"]
 
 ExportError = ex.ExportError
 WHAT = "export-controller"
-
-# the parameters of the exported controller, in the order of <prefix>params and of the step's k
-# (which ends with Mhat, computed by init): name -> (width or None for the law's / the system's, meaning)
-PARAM_FIELDS = ("gains", "unc", "ekf", "eta_d", "p")
-
-_BY_NAME = {s.name: s for s in COMMON}
-_DIAG_COMMON = (
-    _BY_NAME["eta_hat"],
-    Signal("nu_hat", 6, RATE_UNITS, "{b}", "u, v, w, p, q, r", "EKF estimate of nu (body velocity about the COB)",
-           lambda c: c.nu_hat),
-    _BY_NAME["eta_ref"],
-    Signal("eta_ref_dot", 6, RATE_UNITS, "{n}", "x, y, z, phi, theta, psi",
-           "reference rate y2 of the adaptive tracking differentiator (eq. 12-13)", lambda c: c.eta_ref_dot),
-    _BY_NAME["tau_cmd"],
-)
-
-
-def diagnostics(law: Controller) -> tuple[Signal, ...]:
-    """What ``<prefix>diagnostics`` holds after a step, in order: the estimate, the reference, the
-    commanded wrench, then the law's own traced signals (the run's signals of the same names)."""
-    return _DIAG_COMMON + tuple(law.signals)
 
 
 def default_prefix(system, controller) -> str:
@@ -86,95 +65,6 @@ def files(prefix: str) -> tuple[str, ...]:
     lib = prefix.rstrip("_")
     plant = ex.files(prefix)  # export-c's set: sources, header, params header, examples, build files, README
     return plant[:3] + (f"{lib}.py",) + plant[3:]
-
-
-# ---------------------------------------------------------------------------------------------
-# the graph
-
-
-@dataclass(frozen=True)
-class Sizes:
-    """Sizes of the exported controller: the params' fields, the step's inputs and outputs."""
-
-    n_gains: int
-    n_p: int
-    n_u: int
-    n_mem: int
-    n_diag: int
-
-    @property
-    def params(self) -> dict[str, int]:
-        return {"gains": self.n_gains, "unc": 4, "ekf": 5, "eta_d": 6, "p": self.n_p}
-
-    @property
-    def n_k(self) -> int:  # the params, then Mhat
-        return sum(self.params.values()) + 6
-
-
-def sizes(law: Controller, layout) -> Sizes:
-    return Sizes(n_gains=gains_mod.n_gains(law), n_p=len(layout), n_u=layout.structure.n_thrusters,
-                 n_mem=sum(n for _, n in controller_memory(law)),
-                 n_diag=sum(s.n(layout.structure.n_thrusters, layout.structure.n_joints) for s in diagnostics(law)))
-
-
-def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> dict[str, ca.Function]:
-    """The exported controller as CasADi functions (names carry ``prefix``):
-
-    * ``mhat(p) -> Mhat``: :func:`arvcas.sim.closedloop.nominal_inertia`, once per init (the run's
-      ``derived_constants``);
-    * ``prep0(k) -> kp0``, ``prep(k) -> kp``: the terms of sample 0's and sample k's step that depend on
-      ``k`` alone (the allocation's inverse, products of gains...), once per init;
-    * ``step0(mem, k, kp0, y, t, tau_arm)`` and ``step(mem, k, kp, y, t, tau_arm) -> (mem_next, u,
-      diag)``: one controller sample (:func:`arvcas.sim.closedloop.controller_sample`); ``k`` = the
-      params (:data:`PARAM_FIELDS`) then Mhat; ``u`` the saturated thrust per thruster (N).
-    """
-    law = get_controller(law)
-    from arvcas.params import view
-
-    sz = sizes(law, layout)
-    p = ca.SX.sym("p", sz.n_p)
-    fns = {"mhat": ca.Function(prefix + "mhat", [p], [nominal_inertia(view(p, layout))], ["p"], ["Mhat"])}
-    for first in (True, False):
-        mem, k = ca.SX.sym("mem", sz.n_mem), ca.SX.sym("k", sz.n_k)
-        y, t, tau_arm = ca.SX.sym("y", 12), ca.SX.sym("t"), ca.SX.sym("tau_arm", 6)
-        f, i = {}, 0
-        for name, n in (*sz.params.items(), ("Mhat", 6)):
-            f[name] = k[i:i + n]
-            i += n
-        memory, i = {}, 0
-        for name, n in controller_memory(law):
-            memory[name] = mem[i:i + n]
-            i += n
-        cs = controller_sample(law, cfg, view(f["p"], layout), y, t, ca.SX(1.0 if first else 0.0), memory,
-                               f["gains"], f["unc"], f["ekf"], f["Mhat"], f["eta_d"], tau_arm)
-        ctx = cs.ctx
-        ctx.__dict__.update(tau_v=cs.tau_v, u_sat=cs.u_sat)
-        try:
-            diag = [sig.value(ctx) for sig in diagnostics(law)]
-        except (AttributeError, KeyError) as e:
-            raise ExportError(f"{WHAT}: controller {law.name}: a traced signal needs the plant's truth ({e}); "
-                              f"only signals of the controller's own quantities can be exported") from None
-        outs = ca.cse([ca.vertcat(*cs.memory.values()), cs.u_sat, ca.vertcat(*diag)])
-        whole, syms, vals = ca.extract_parametric(ca.vertcat(*outs), k, {"prefix": "kp_"})
-        kp = ca.SX.sym("kp", 0) if not syms else ca.vertcat(*syms)
-        parts = ca.vertsplit(whole, list(np.cumsum([0] + [o.shape[0] for o in outs])))
-        tag = "0" if first else ""
-        fns["prep" + tag] = ca.Function(prefix + "prep" + tag, [k], [ca.vertcat(*vals) if vals else ca.SX(0, 1)],
-                                        ["k"], ["kp" + tag])
-        fns["step" + tag] = ca.Function(prefix + "step" + tag, [mem, k, kp, y, t, tau_arm], parts,
-                                        ["mem", "k", "kp" + tag, "y", "t", "tau_arm"], ["mem_next", "u", "diag"])
-    return fns
-
-
-def reads(fns: dict[str, ca.Function], name: str) -> bool:
-    """Whether the controller's output depends on the step input ``name`` (``tau_arm``, ``t``)."""
-    out = []
-    for key in ("step0", "step"):
-        f = fns[key]
-        sym = f.sx_in()
-        res = f.call(sym)
-        out.append(ca.depends_on(ca.vertcat(res[0], res[1]), sym[f.index_in(name)]))
-    return any(out)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -234,7 +124,10 @@ def export_controller(out_dir, controller="proposed", gains=None, params=None, s
     ex.check_replaceable(out, names, force, WHAT)
 
     d = _Design(law, np.asarray(g, dtype=float).copy(), gains_source, cfg, P, prefix)
-    fns = controller_functions(law, cfg, P.layout, prefix + "cas_")
+    try:
+        fns = controller_functions(law, cfg, P.layout, prefix + "cas_")
+    except ValueError as e:
+        raise ExportError(f"{WHAT}: {e}") from None
     cg = ca.CodeGenerator(d.lib, {"with_header": False, "casadi_real": "double", "casadi_int": "long long int"})
     for f in fns.values():
         cg.add(f)
@@ -265,25 +158,25 @@ class _Info:
     def __init__(self, d: _Design, fns: dict[str, ca.Function], work: dict[str, dict[str, int]]):
         self.d, self.fns, self.work = d, fns, work
         P, law = d.params, d.law
-        self.sz = sizes(law, P.layout)
+        self.sz = controller_sizes(law, P.layout)
         self.n_kp0 = fns["prep0"].numel_out(0)
         self.n_kp = fns["prep"].numel_out(0)
         self.sz_w = max(w["sz_w"] for w in work.values())
         self.sz_iw = max(w["sz_iw"] for w in work.values())
         self.sz_arg = max(w["sz_arg"] for w in work.values())
         self.sz_res = max(w["sz_res"] for w in work.values())
-        self.uses_tau_arm = reads(fns, "tau_arm")
-        self.uses_t = reads(fns, "t")
+        self.uses_tau_arm = controller_reads(fns, "tau_arm")
+        self.uses_t = controller_reads(fns, "t")
         st = P.structure
-        self.thrusters = list(st.thrusters) if st.thrusters is not None else [
-            "stern-left", "stern-right", "side (bow)", "side (stern)", "vertical (bow)", "vertical (stern)"]
+        self.thrusters = list(st.thrusters) if st.thrusters is not None else [f"T{j + 1}" for j in range(st.n_thrusters)]
+        self.thrust_text = ex._glossary(P)["u"]  # export-c's words: "thrust per thruster (N): <names>"
         self.upper = gains_mod.upper_limits(law, d.cfg.time_h)
         self.gain_names = gains_mod.gain_names(law)
         self.gain_units = gains_mod.gain_units(law)
         n_t, n_j = st.n_thrusters, st.n_joints
         self.diag = []  # (signal, offset, width)
         i = 0
-        for s in diagnostics(law):
+        for s in controller_diagnostics(law):
             w = s.n(n_t, n_j)
             self.diag.append((s, i, w))
             i += w
@@ -309,7 +202,7 @@ _UNITS_FRAMES = [
 ]
 
 _PARAM_DOC = {
-    "gains": "the law's gains, DOF by DOF (x .. psi), each DOF in the column order below",
+    "gains": "the law's gains, DOF by DOF (x .. psi), each DOF in the law's column order",
     "unc": "nominal-model factors [C, D, g, arm] (1): the fraction of each term a nominal model knows",
     "ekf": "EKF tuning [q_eta (m^2, rad^2), q_nu (m^2/s^2, rad^2/s^2): process noise per sample; var_position "
            "(m^2), var_attitude (rad^2), var_velocity (m^2/s^2, rad^2/s^2): the sensor variances R assumes]",
@@ -334,7 +227,7 @@ def _header(I: _Info) -> str:
     guard = f"{d.lib.upper()}_H"
     cols = law.columns()
     L = [
-        f"/* {d.lib}.h: the {law.name} controller of arvcas ({law.description}) for the system",
+        f"/* {d.lib}.h: the {law.label or law.name} controller of arvcas ({law.description}) for the system",
         f" * {P.structure.name}, as a standalone C library: EKF on the measured [eta; nu], the adaptive tracking",
         " * differentiator's reference, the law, thrust allocation and saturation: one call per sample.",
         " *",
@@ -347,8 +240,8 @@ def _header(I: _Info) -> str:
         *_UNITS_FRAMES,
         " *",
         f" * SAMPLING: call {pre}step once every {up}SAMPLE_TIME = {cfg.time_h:g} s (the period the law and its",
-        " * gains were designed and discretised for; the reference and every integrator advance by H per",
-        " * call). Time t is passed to the law" + (" and read by it." if I.uses_t else "; this law does not read it."),
+        " * gains were designed and discretised for; the reference and every integrator advance by that",
+        " * much per call). Time t is passed to the law" + (" and read by it." if I.uses_t else "; this law does not read it."),
         " *",
         " * USE (no heap allocation, no global or static writable data; the state is the caller's):",
         f" *   {pre}params prm;  {pre}state s;  double y[12], u[{up}N_U];",
@@ -381,7 +274,7 @@ def _header(I: _Info) -> str:
         f"#define {up}SAMPLE_TIME {ex._c_double(cfg.time_h)}  /* sampling period (s) */",
         f"#define {up}USES_TAU_ARM {int(I.uses_tau_arm)}  /* 1: step reads tau_arm */",
         "",
-        "/* thrusters, the order of u (thrust in N, after saturation to each thruster's limits):",
+        f"/* u: {I.thrust_text}, after saturation to each thruster's limits:",
         *[f" *   u[{j}]  {n}" for j, n in enumerate(I.thrusters)],
         " * (a thruster command map, thrust -> the unit the thrusters take, comes with issue 22) */",
         "",
@@ -802,7 +695,7 @@ class Controller:
         return {{name: list(getattr(p, name)) for name, _ in _FIELDS}}
 
     def init(self, **fields):
-        """Set any of {", ".join(PARAM_FIELDS)} (sequences), check them, and reset."""
+        """Set any of {", ".join(sz.params)} (sequences), check them, and reset."""
         for name, values in fields.items():
             if name not in dict(_FIELDS):
                 raise ControllerError(f"init: unknown field {{name!r}} (allowed: {{', '.join(n for n, _ in _FIELDS)}})")
@@ -850,12 +743,12 @@ def _readme(I: _Info) -> str:
     d, sz, pre, up = I.d, I.sz, I.d.prefix, I.up
     lib = d.lib
     L = [
-        f"# lib{lib}: the {d.law.name} controller of arvcas in C",
+        f"# lib{lib}: the {d.law.label or d.law.name} controller of arvcas in C",
         "",
         f"Generated by arvcas {__version__} with CasADi {ca.__version__} for the system `{d.params.structure.name}`"
         f" (`{d.params.path}`) and the scenario `{d.cfg.path or '(given in code)'}`; gains: {d.gains_source}.",
         "",
-        f"{d.law.description}. One call of `{pre}step` per sample (every {d.cfg.time_h:g} s) runs the EKF on the "
+        f"{d.law.description[:1].upper() + d.law.description[1:]}. One call of `{pre}step` per sample (every {d.cfg.time_h:g} s) runs the EKF on the "
         "measured `[eta; nu]`, the reference of the adaptive tracking differentiator, the law, thrust allocation and "
         "saturation, and returns the thrust per thruster. It performs the same operations in the same order as the "
         "controller inside arvcas's compiled run.",
@@ -883,7 +776,7 @@ def _readme(I: _Info) -> str:
         "| `tau_arm` | 6 | N, N m ({b}, about the COB) | " + (
             "the arm's wrench on the vehicle plus the trim; this law's nominal model uses the fraction `unc[3]`"
             if I.uses_tau_arm else "not read by this law (NULL)") + " |",
-        f"| `u` | {sz.n_u} | N | thrust per thruster after saturation: {', '.join(I.thrusters)} |",
+        f"| `u` | {sz.n_u} | N | {I.thrust_text}, after saturation |",
         "",
         "Parameters (`" + pre + "params`):",
         "",
