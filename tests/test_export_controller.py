@@ -123,6 +123,10 @@ def test_symbols_carry_the_prefix_and_no_heap(case):
     assert syms and all(s.startswith(prefix) for s in syms), [s for s in syms if not s.startswith(prefix)]
     und = _run(["nm", "-D", "--undefined-only", str(out / f"lib{prefix.rstrip('_')}.so")])
     assert not any(f in und.split() for f in ("malloc", "calloc", "realloc", "free"))
+    # no writable data of its own (the toolchain's start-up objects have some: _DYNAMIC, completed.0, ...)
+    every = _run(["nm", "--defined-only", str(out / f"lib{prefix.rstrip('_')}.so")])
+    data = [ln.split()[-1] for ln in every.splitlines() if len(ln.split()) == 3 and ln.split()[1] in "dDbB"]
+    assert data and not [d for d in data if d.startswith((prefix, "casadi"))]
 
 
 def test_gains_as_inputs_reset_and_errors(case):
