@@ -158,6 +158,12 @@ def test_gains_as_inputs_reset_and_errors(case):
         ctl.init(gains=g, ekf=[1e-6, 1e-6, 0.0, 1e-4, 1e-4])
     with pytest.raises(mod.ControllerError, match="init: eta_d: expected 6 values"):
         ctl.init(eta_d=[0.0])
+    ctl.step(y, 0.0)  # the refused inits changed nothing: still initialised with g
+    assert list(ctl.params.gains) == list(g)
+    with pytest.raises(mod.ControllerError, match="not finite.*: derived terms$"):
+        ctl.init(p=[0.0] * len(ctl.params.p))  # no thruster matrix to invert
+    with pytest.raises(mod.ControllerError, match="not initialised"):
+        ctl.step(y, 0.0)
     ctl.init(**ctl.defaults())
     a = [ctl.step(y, 0.0), ctl.step(y, 0.1)]
     ctl.reset()

@@ -308,8 +308,9 @@ def _header(I: _Info) -> str:
           f"}} {pre}state;", "",
           f"/* the exported defaults (gains: {d.gains_source}); see {d.lib}_params.h */",
           f"void {pre}default_params({pre}params* prm);",
-          "/* check prm, compute its derived terms, then reset; returns 0, or E_GAIN / E_PARAM (bad_index says",
-          " * which entry; the state is then unusable until an init succeeds) */",
+          "/* check prm, compute its derived terms, then reset; returns 0, or E_GAIN / E_PARAM: a refused entry",
+          " * (bad_index says which) leaves the state as it was; derived terms that are not finite (e.g. a",
+          " * singular thruster matrix; bad_index -1) leave it uninitialised */",
           f"int {pre}init({pre}state* s, const {pre}params* prm);",
           "/* forget the memory (EKF, reference, law state): the next step is a first step; params unchanged */",
           f"void {pre}reset({pre}state* s);",
@@ -384,28 +385,33 @@ static int {cas}call(int (*f)(const double**, double**, long long*, double*, int
 int {pre}init({pre}state* s, const {pre}params* prm) {{
   const double* arg[{I.sz_arg}];
   double* res[{I.sz_res}];
-  int i;
+  int i, bad = -1, rc = 0;
+  /* the checks first: a refused prm leaves the state as it was (but for bad_index) */
+  for (i = 0; i < {sz.n_gains} && bad < 0; ++i)
+    if (!(prm->gains[i] > 0.0 && prm->gains[i] < {cas}upper[i])) {{ bad = {off['gains']} + i; rc = {up}E_GAIN; }}
+  if (bad < 0 && (i = {cas}finite(prm->unc, 4)) >= 0) {{ bad = {off['unc']} + i; rc = {up}E_PARAM; }}
+  for (i = 0; i < 5 && bad < 0; ++i)
+    if (!(prm->ekf[i] - prm->ekf[i] == 0.0) || (i < 2 ? prm->ekf[i] < 0.0 : prm->ekf[i] <= 0.0)) {{
+      bad = {off['ekf']} + i; rc = {up}E_PARAM;
+    }}
+  if (bad < 0 && (i = {cas}finite(prm->eta_d, 6)) >= 0) {{ bad = {off['eta_d']} + i; rc = {up}E_PARAM; }}
+  if (bad < 0 && (i = {cas}finite(prm->p, {sz.n_p})) >= 0) {{ bad = {off['p']} + i; rc = {up}E_PARAM; }}
+  s->bad_index = bad;
+  if (rc) return rc;
   memset(s, 0, sizeof *s);
   s->bad_index = -1;
-  for (i = 0; i < {sz.n_gains}; ++i)
-    if (!(prm->gains[i] > 0.0 && prm->gains[i] < {cas}upper[i])) {{ s->bad_index = {off['gains']} + i; return {up}E_GAIN; }}
-  if ((i = {cas}finite(prm->unc, 4)) >= 0) {{ s->bad_index = {off['unc']} + i; return {up}E_PARAM; }}
-  for (i = 0; i < 5; ++i)
-    if (!(prm->ekf[i] - prm->ekf[i] == 0.0) || (i < 2 ? prm->ekf[i] < 0.0 : prm->ekf[i] <= 0.0)) {{
-      s->bad_index = {off['ekf']} + i; return {up}E_PARAM;
-    }}
-  if ((i = {cas}finite(prm->eta_d, 6)) >= 0) {{ s->bad_index = {off['eta_d']} + i; return {up}E_PARAM; }}
-  if ((i = {cas}finite(prm->p, {sz.n_p})) >= 0) {{ s->bad_index = {off['p']} + i; return {up}E_PARAM; }}
 {copy_params}
   arg[0] = prm->p;
   res[0] = s->k + {sz.n_k - 6};
-  if ({cas}call({cas}mhat, arg, res, s)) return {up}E_PARAM;
+  rc |= {cas}call({cas}mhat, arg, res, s);
   arg[0] = s->k;
   res[0] = s->kp0;
-  if ({cas}call({cas}prep0, arg, res, s)) return {up}E_PARAM;
+  rc |= {cas}call({cas}prep0, arg, res, s);
   res[0] = s->kp;
-  if ({cas}call({cas}prep, arg, res, s)) return {up}E_PARAM;
-  if ({cas}finite(s->k, {sz.n_k}) >= 0 || {cas}finite(s->kp0, {I.n_kp0}) >= 0 || {cas}finite(s->kp, {I.n_kp}) >= 0)
+  rc |= {cas}call({cas}prep, arg, res, s);
+  /* terms of p alone that are not finite (e.g. a singular thruster matrix): not initialised */
+  if (rc || {cas}finite(s->k, {sz.n_k}) >= 0 || {cas}finite(s->kp0, {I.n_kp0}) >= 0 ||
+      {cas}finite(s->kp, {I.n_kp}) >= 0)
     return {up}E_PARAM;
   s->initialized = 1;
   {pre}reset(s);
@@ -695,22 +701,27 @@ class Controller:
         return {{name: list(getattr(p, name)) for name, _ in _FIELDS}}
 
     def init(self, **fields):
-        """Set any of {", ".join(sz.params)} (sequences), check them, and reset."""
+        """Change any of {", ".join(sz.params)} (sequences), check them, and reset; refused: nothing changes."""
+        new = Params()
+        ctypes.memmove(ctypes.byref(new), ctypes.byref(self.params), ctypes.sizeof(Params))
         for name, values in fields.items():
             if name not in dict(_FIELDS):
                 raise ControllerError(f"init: unknown field {{name!r}} (allowed: {{', '.join(n for n, _ in _FIELDS)}})")
             values = [float(v) for v in values]
             if len(values) != dict(_FIELDS)[name]:
                 raise ControllerError(f"init: {{name}}: expected {{dict(_FIELDS)[name]}} values, got {{len(values)}}")
-            getattr(self.params, name)[:] = values
-        rc = self._fn["init"](self.state, ctypes.byref(self.params))
+            getattr(new, name)[:] = values
+        rc = self._fn["init"](self.state, ctypes.byref(new))
         if rc:
             i = self._fn["bad_index"](self.state)
+            where = "derived terms"
             for name, n in _FIELDS:
-                if i < n:
+                if 0 <= i < n:
+                    where = f"{{name}}[{{i}}]"
                     break
                 i -= n
-            raise ControllerError(f"{{self._fn['error'](rc).decode()}}: {{name}}[{{i}}]")
+            raise ControllerError(f"{{self._fn['error'](rc).decode()}}: {{where}}")
+        self.params = new
 
     def reset(self):
         self._fn["reset"](self.state)
