@@ -123,6 +123,7 @@ class Structure:
     mount_rpy: bool
     link_drag: tuple[bool, ...]  # chain: the link has a drag segment
     link_cd: tuple[bool, ...]  # chain: the link has its own Cd
+    arm_trim: bool = True  # docs/model.md §3's trim buoyancy for the stowed arm (``[arm] trim = false``: none)
 
     @property
     def n_thrusters(self) -> int:
@@ -249,6 +250,9 @@ def _structure(doc: dict, default_name: str) -> Structure:
         raise _Bad(f"arm: {nj} joints, at most {MAX_JOINTS} are supported")
     if nl != nj:
         raise _Bad(f"arm: {nj} joints but {nl} links (each joint moves one link: arm.link1 .. arm.link{nj})")
+    trim = arm.get("trim", True)
+    if not isinstance(trim, bool):
+        raise _Bad(f"arm.trim: expected true or false, got {trim!r}")
     mount = _table(arm, "mount", "arm") if nj else arm.get("mount", {})
     rpy = [k for k in ("roll", "pitch", "yaw") if k in mount]
     if rpy and len(rpy) != 3:
@@ -270,7 +274,7 @@ def _structure(doc: dict, default_name: str) -> Structure:
                 raise _Bad(f"arm.link{i}: a drag segment needs drag_diameter, drag_from and drag_to (or none)")
             drag.append(bool(have))
             cd.append("Cd" in lk)
-    return Structure(*vehicle_only, form, nj, bool(rpy), tuple(drag), tuple(cd))
+    return Structure(*vehicle_only, form, nj, bool(rpy), tuple(drag), tuple(cd), trim)
 
 
 # ---- the schema of one structure ------------------------------------------------------------------------
@@ -447,11 +451,13 @@ def schema_for(s: Structure) -> type:
 
 
 def file_doc(doc: dict) -> dict:
-    """The document as the schema reads it: ``[system]``, ``[defaults]`` and ``hydro.coriolis_added_mass``
-    (not numbers) removed, a thruster list keyed by name."""
+    """The document as the schema reads it: ``[system]``, ``[defaults]``, ``hydro.coriolis_added_mass`` and
+    ``arm.trim`` (not numbers) removed, a thruster list keyed by name."""
     out = {k: v for k, v in doc.items() if k not in ("system", "defaults")}
     if isinstance(out.get("hydro"), dict) and "coriolis_added_mass" in out["hydro"]:
         out["hydro"] = {k: v for k, v in out["hydro"].items() if k != "coriolis_added_mass"}
+    if isinstance(out.get("arm"), dict) and "trim" in out["arm"]:
+        out["arm"] = {k: v for k, v in out["arm"].items() if k != "trim"}
     thr = out.get("thrusters")
     if isinstance(thr, dict) and isinstance(thr.get("unit"), list):
         out["thrusters"] = {u["name"]: {k: v for k, v in u.items() if k != "name"} for u in thr["unit"]}
