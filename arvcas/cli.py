@@ -246,8 +246,10 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
         cfg = scenario.load_scenario(a.config)
     elif cfg_text is not None and cfg_text[0]:
         cfg = scenario.loads_scenario(*cfg_text)
-    else:
+    elif params.default("scenario") is not None:
         cfg = scenario.load_scenario(params.default("scenario"))
+    else:
+        cfg = None  # export_controller names what is missing
     design.update(params=params, cfg=cfg)
     a._design = design
     return design

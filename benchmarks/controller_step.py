@@ -101,11 +101,13 @@ def bench_controller_step(reps: int = 7, steps: int = 200_000, systems=None, law
     """``{system: {law: {"ns_per_step": stat, "init_ns", "state_bytes", "n_steps"}}}`` (see the module docstring)."""
     from arvcas.build import codegen
     from arvcas.io.export_controller import default_prefix, export_controller
-    from arvcas.system import SHIPPED
+    from arvcas.system import SHIPPED, load_system
 
     out: dict = {}
     with tempfile.TemporaryDirectory(prefix="arvcas-bench-ctl-") as tmp:
         for system in systems or SHIPPED:
+            if load_system(system).params.default("scenario") is None:  # a system for validation only
+                continue
             out[system] = {}
             for law in laws:
                 d = Path(tmp) / f"{system}_{law}"

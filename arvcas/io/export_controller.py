@@ -105,8 +105,14 @@ def export_controller(out_dir, controller="proposed", gains=None, params=None, s
 
     law = get_controller(controller)
     P = resolve(params).params
+    if scenario is None and P.default("scenario") is None:
+        raise ExportError(f"{WHAT}: system {P.structure.name} names no default scenario ([defaults] scenario in "
+                          f"{P.path}); give one (--config FILE)")
     cfg = scenario if isinstance(scenario, ScenarioConfig) else scenario_mod.load_scenario(
         scenario if scenario is not None else P.default("scenario"))
+    if gains is None and P.default("gains") is None and getattr(law, "defaults", None) is None:
+        raise ExportError(f"{WHAT}: system {P.structure.name} names no gain table ([defaults] gains in {P.path}); "
+                          f"export a tuned member (--front F --member knee|INDEX) or give gains")
     if gains is None:
         g = gains_mod.default_gains(law, P)
         gains_source = gains_source or f"the default gains of {P.structure.name}'s gain table"
