@@ -6,7 +6,8 @@ computer may lack it), and a small C driver generated here links it and calls ``
 measurements of the system's default scenario (a compiled run's true states plus the run's sensor
 noise, seed 0), resetting the controller after each pass over them, so the first-sample branch is
 in the mix once per run as on a vehicle. Reported: ns per step (median, min, max over repetitions),
-the state's size in bytes, and ``init``'s time.
+the CasADi instructions of a step k >= 1 (the machine-independent size of the work), the state's size
+in bytes, and ``init``'s time.
 
 A section of ``arvcas bench`` (:func:`bench_controller_step` returns the JSON part, :func:`markdown`
 the lines of bench.md); ``python -m benchmarks.controller_step`` runs it alone and prints the table.
@@ -101,6 +102,7 @@ def bench_controller_step(reps: int = 7, steps: int = 200_000, systems=None, law
     """``{system: {law: {"ns_per_step": stat, "init_ns", "state_bytes", "n_steps"}}}`` (see the module docstring)."""
     from arvcas.build import codegen
     from arvcas.io.export_controller import default_prefix, export_controller
+    from arvcas.sim import closedloop, scenario
     from arvcas.system import SHIPPED, load_system
 
     out: dict = {}
@@ -129,7 +131,11 @@ def bench_controller_step(reps: int = 7, steps: int = 200_000, systems=None, law
                 ns = [float(ln.split()[1]) for ln in r.stdout.splitlines() if ln.startswith("ns_per_step ")]
                 val = {ln.split()[0]: float(ln.split()[1]) for ln in r.stdout.splitlines()
                        if ln.startswith(("init_ns ", "state_bytes "))}
+                s_ = load_system(system)
+                fn = closedloop.controller_functions(law, scenario.load_scenario(s_.params.default("scenario")),
+                                                     s_.layout)["step"]
                 out[system][law] = {"ns_per_step": _stat(ns), "init_ns": val["init_ns"],
+                                    "instructions_per_step": int(fn.n_instructions()),
                                     "state_bytes": int(val["state_bytes"]), "n_steps": steps, "run_samples": y.shape[0]}
                 log(f"controller step {system} / {law}: {statistics.median(ns):.0f} ns per step "
                     f"(min {min(ns):.0f}), state {int(val['state_bytes'])} bytes")
@@ -143,12 +149,13 @@ def markdown(res: dict) -> list[str]:
          "without `-mavx`), timed by a C driver over the measurements of the default scenario (reset after each "
          "run: the first-sample branch included). One step = EKF, reference, law, allocation and saturation: "
          "the budget on a vehicle's computer.", "",
-         "| system | law | ns per step (median) | min | max | state bytes | init ns |", "|---|---|---|---|---|---|---|"]
+         "| system | law | ns per step (median) | min | max | CasADi instructions per step | state bytes | init ns |",
+         "|---|---|---|---|---|---|---|---|"]
     for system, laws in res.items():
         for law, r in laws.items():
             st = r["ns_per_step"]
             L.append(f"| {system} | {law} | {st['median']:.0f} | {st['min']:.0f} | {st['max']:.0f} | "
-                     f"{r['state_bytes']} | {r['init_ns']:.0f} |")
+                     f"{r['instructions_per_step']:,} | {r['state_bytes']} | {r['init_ns']:.0f} |")
     return L + [""]
 
 
