@@ -114,14 +114,12 @@ def export_controller(out_dir, controller="proposed", gains=None, params=None, s
         raise ExportError(f"{WHAT}: system {P.structure.name} names no gain table ([defaults] gains in {P.path}); "
                           f"export a tuned member (--front F --member knee|INDEX) or give gains")
     if gains is None:
-        g = gains_mod.default_gains(law, P)
         gains_source = gains_source or f"the default gains of {P.structure.name}'s gain table"
-    else:
-        g = gains_mod.check_gains(law, gains, h=cfg.time_h, where=f"{WHAT}: gains")
-        if g.ndim != 1:
-            raise ExportError(f"{WHAT}: gains: one gain vector of {gains_mod.n_gains(law)}, got shape {g.shape}")
-        gains_source = gains_source or "given gains"
-    gains_mod.check_gains(law, g, h=cfg.time_h, where=f"{WHAT}: gains")
+    g = gains_mod.check_gains(law, gains_mod.default_gains(law, P) if gains is None else gains, h=cfg.time_h,
+                              where=f"{WHAT}: gains")
+    if g.ndim != 1:
+        raise ExportError(f"{WHAT}: gains: one gain vector of {gains_mod.n_gains(law)}, got shape {g.shape}")
+    gains_source = gains_source or "given gains"
     prefix = ex.check_prefix(default_prefix(P, law) if prefix is None else prefix, "arvcas_haidou1_proposed_", WHAT)
     if not isinstance(force, bool):
         raise ExportError(f"{WHAT}: force: expected True or False, got {force!r}")
