@@ -14,8 +14,9 @@ before calling ``run``:
 * bounds: counts, seeds and timeouts are checked by their argparse types (:func:`seed_arg`,
   :func:`count_arg`, :func:`seconds_arg`) and the memory a request would take by the command's check.
 
-Errors (ValueError and subclasses, OSError) are printed as one line ``arvcas: error: ...`` with exit
-code 2, usage errors likewise (``arvcas: error: CMD: argument ...``); SIGTERM and SIGHUP end the
+A compile that takes more than a second prints a progress line on standard error
+(:func:`arvcas.build.codegen.report_progress`). Errors (ValueError and subclasses, OSError) are printed
+as one line ``arvcas: error: ...`` with exit code 2, usage errors likewise (``arvcas: error: CMD: argument ...``); SIGTERM and SIGHUP end the
 command like Ctrl-C (temporary files removed), exit 128 + signal.
 """
 
@@ -29,7 +30,7 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ["main", "TABLE", "COMMANDS", "Command", "seed_arg", "count_arg", "seconds_arg", "check_memory",
-           "MAX_SEED", "refuse"]
+           "MAX_SEED", "refuse", "FIGURE_FORMATS", "add_figure_format", "figure_file"]
 
 Paths = Callable[[argparse.Namespace], list]
 
@@ -119,6 +120,23 @@ def refuse(a: argparse.Namespace, names, why: str) -> None:
         v = getattr(a, n, None)
         if v is not None and v is not False:
             raise ValueError(f"--{n.replace('_', '-')}: {why}")
+
+
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+
+def add_figure_format(p: argparse.ArgumentParser, what: str = "the figures") -> None:
+    """``--format png|pdf|svg`` of a command that writes figures (dest ``format``, default None)."""
+    p.add_argument("--format", choices=FIGURE_FORMATS, default=None,
+                   help=f"format of {what}: png, pdf or svg (default: the file name's suffix, else png)")
+
+
+def figure_file(path: Path, fmt: str | None, what: str) -> str:
+    """The format a figure file ``path`` is written in (``fmt`` or its suffix); ValueError (one line)
+    for a format arvcas does not write or a suffix that contradicts ``--format``."""
+    from arvcas.io.style import figure_format
+
+    return figure_format(path, fmt, what)
 
 
 def _model_options(n_quad: int):
@@ -420,14 +438,16 @@ def _run_systems(a: argparse.Namespace) -> int:
 
 
 def _add_knees(p: argparse.ArgumentParser) -> None:
-    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR", help="the --out directory of arvcas tune")
+    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR",
+                   help="the --out directory of arvcas tune (one front, or one per controller), or a front.h5")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="where to write (created if missing)")
+    add_figure_format(p)
 
 
 def _knees_outputs(a):
-    from arvcas.experiments.knees import knee_fronts, output_files
+    from arvcas.experiments.knees import front_controllers, output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out, [f.parent.name for f in knee_fronts(a.study_dir)])]
+    return [(f"--out {a.out}", p) for p in output_files(a.out, front_controllers(a.study_dir), a.format or "png")]
 
 
 def _run_knees(a: argparse.Namespace) -> int:
@@ -435,7 +455,7 @@ def _run_knees(a: argparse.Namespace) -> int:
     from arvcas.io import files
 
     files.prepare_dir(a.out, f"--out {a.out}")
-    replay_knees(a.study_dir, a.out)
+    replay_knees(a.study_dir, a.out, fmt=a.format or "png")
     return 0
 
 
@@ -528,12 +548,13 @@ def _run_simulate(a: argparse.Namespace) -> int:
 def _add_paper(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     p.add_argument("--seed", type=seed_arg, default=0, help="sensor-noise seed shared by the runs (default 0)")
+    add_figure_format(p, "Figures 5-11")
 
 
 def _run_paper(a: argparse.Namespace) -> int:
     from arvcas.experiments.paper import run_paper
 
-    out = run_paper(a.out, seed=a.seed)
+    out = run_paper(a.out, seed=a.seed, fmt=a.format or "png")
     print((a.out / "table3.md").read_text())
     # the job succeeded when every run completed; whether the paper's comparison reproduces is
     # a finding, reported in table3.md, not an error
@@ -598,7 +619,7 @@ def _out_file(dest: str, label: str | None = None) -> Paths:
 def _paper_outputs(a):
     from arvcas.experiments.paper import output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out)]
+    return [(f"--out {a.out}", p) for p in output_files(a.out, fmt=a.format or "png")]
 
 
 def _bench_outputs(a):
@@ -638,14 +659,18 @@ def _table() -> tuple[Command, ...]:
         Command("front export", "the front as CSV or JSON (stdout, or --out FILE), or a MATLAB .mat file",
                 t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out"),
                 check=t.check_front_export),
-        Command("front plot", "plot the front, Table 2 on the same draws and the knee point (PNG)", t.add_front_plot,
+        Command("front plot", "plot the front, the default gains (Haidou-1: Table 2) on the same draws and the knee "
+                "point (PNG, PDF or SVG)", t.add_front_plot,
                 t.run_front_plot, inputs=(("file", "front"),), outputs=t.front_plot_outputs),
+        Command("front explore", "one self-contained HTML page of every front: hover a member for its gains and "
+                "metrics, click it for its time response", x.add_explore, x.run_explore, inputs=(("fronts", "front"),),
+                outputs=x.explore_outputs, check=x.check_explore),
         Command("front robust", "re-evaluate every front member under Monte Carlo; mark the robust non-dominated "
                 "ones (robust.h5, robust.md, robust.png)", x.add_robust, x.run_robust, inputs=(("file", "front"),),
                 outputs=x.robust_outputs, check=x.check_robust),
-        Command("compare", "hypervolumes of two fronts against one reference point, and who dominates where; or two "
-                "Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
-                "(front robust)", x.add_compare, x.run_compare, inputs=(("a", "front"), ("b", "front")),
+        Command("compare", "hypervolumes of two or more fronts against one reference point, and who dominates where; "
+                "or two Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
+                "(front robust)", x.add_compare, x.run_compare, inputs=(("fronts", "front"),),
                 outputs=x.compare_outputs, check=x.check_compare),
         Command("sweep", "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 "
                 "(table, plot)", x.add_sweep, x.run_sweep,
@@ -699,35 +724,44 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _inputs(cmd: Command, a: argparse.Namespace) -> list[tuple[str, Path]]:
-    """Apply the input policy to the declared inputs; returns them as (label, path of the file)."""
-    from arvcas.io import files
-
+    """Apply the input policy to the declared inputs (an argument may hold a list); returns them as
+    (label, path of the file)."""
     out = []
     for dest, kind, *what in cmd.inputs:
-        p = getattr(a, dest, None)
-        if p is None:
-            continue
-        label = dest if dest in ("file", "study", "a", "b", "study_dir") else f"--{dest.replace('_', '-')}"
-        if kind == "system":
-            from arvcas.system import shipped
-
-            label = "--system"
-            if str(p) in shipped():
-                p = shipped()[str(p)]
-                setattr(a, dest, p)
-            elif not p.exists() and p.suffix.lower() != ".toml":
-                from arvcas.config import closest
-
-                raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
-                                 f"file{closest(str(p), shipped(), 0.3)}")
-        p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
-        if kind == "front" and p.is_dir():
-            p = p / "front.h5"
-            if not p.exists():
-                continue  # the handler names what the directory holds
-            files.check_input(p)
-        out.append((label, p))
+        value = getattr(a, dest, None)
+        for p in value if isinstance(value, list) else [value]:
+            item = _input(dest, kind, what, p, a)
+            if item is not None:
+                out.append(item)
     return out
+
+
+def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[str, Path] | None:
+    """The input policy for one input ``p`` of argument ``dest``: (label, path of the file) or None."""
+    from arvcas.io import files
+
+    if p is None:
+        return None
+    label = "front" if dest == "fronts" else dest if dest in ("file", "study", "study_dir") else f"--{dest.replace('_', '-')}"
+    if kind == "system":
+        from arvcas.system import shipped
+
+        label = "--system"
+        if str(p) in shipped():
+            p = shipped()[str(p)]
+            setattr(a, dest, p)
+        elif not p.exists() and p.suffix.lower() != ".toml":
+            from arvcas.config import closest
+
+            raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
+                             f"file{closest(str(p), shipped(), 0.3)}")
+    p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
+    if kind == "front" and p.is_dir():
+        p = p / "front.h5"
+        if not p.exists():
+            return None  # the handler names what the directory holds
+        files.check_input(p)
+    return label, p
 
 
 def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
@@ -762,9 +796,12 @@ def main(argv: list[str] | None = None) -> int:
     old = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP)}
     files.install_signal_handlers()
     try:
+        from arvcas.build.codegen import report_progress
+
         cmd = COMMANDS[a._command]
         _apply_policies(cmd, a)
-        return cmd.run(a)
+        with report_progress(sys.stderr):  # a build of more than a second says so on standard error
+            return cmd.run(a)
     except (ValueError, OSError) as e:
         msg = " ".join(str(e).split()) or type(e).__name__
         print(f"arvcas: error: {msg}", file=sys.stderr)

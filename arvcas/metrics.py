@@ -22,7 +22,8 @@ from importlib import resources
 
 import numpy as np
 
-__all__ = ["chat", "rmse", "Table3", "table3", "normalised_objectives", "DOFS"]
+__all__ = ["chat", "rmse", "Table3", "table3", "normalised_objectives", "reference_values", "defaults_name",
+           "norm_name", "DOFS"]
 
 DOFS = ("x", "y", "z", "phi", "theta", "psi")
 
@@ -131,3 +132,27 @@ def normalised_objectives(chat_values, rmse_values, ref=None):
         return float(np.mean(c / np.asarray(ref[0]))), float(np.mean(r / np.asarray(ref[1])))
     t = table3()
     return float(np.mean(c / t.chat_agsta)), float(np.mean(r / t.rmse_agsta))
+
+
+def reference_values(ref=None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-DOF ``(chat_ref, rmse_ref)`` the objectives divide by: ``ref`` (another system's AGSTA at its
+    default gains), else the paper's Table 3 AGSTA values (Haidou-1)."""
+    if ref is not None:
+        return np.asarray(ref[0], dtype=float), np.asarray(ref[1], dtype=float)
+    t = table3()
+    return t.chat_agsta, t.rmse_agsta
+
+
+# How outputs name the default gains and the objectives' normalisation: the paper's tables for Haidou-1
+# only (``system`` "" is Haidou-1, as fronts and result files record it), the system's own otherwise.
+
+
+def defaults_name(system: str = "") -> str:
+    """``"Table 2 gains"`` for Haidou-1, ``"default gains"`` for another system (its gains file)."""
+    return "Table 2 gains" if not system else "default gains"
+
+
+def norm_name(system: str = "") -> str:
+    """What the objectives divide by: ``"the paper's AGSTA value"`` for Haidou-1 (Table 3), else
+    ``"AGSTA's value at the default gains"`` (docs/model.md §8)."""
+    return "the paper's AGSTA value" if not system else "AGSTA's value at the default gains"

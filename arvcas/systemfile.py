@@ -38,6 +38,10 @@ HYDRO_ALIASES = {
     "M_dsds": "M_w_ds2_absw",
 }
 
+# Haidou-1's parametric layout (Appendix B): its six thrusters in the order of B's columns
+# (arvcas.model.thrusters: stern left and right, rotatable; side thrusters at the bow and the stern; verticals)
+HAIDOU1_THRUSTERS = ("T1 stern left", "T2 stern right", "T3 side (bow)", "T4 side (stern)", "T5 vertical (port)",
+                     "T6 vertical (starboard)")
 # element labels of the vector entries: parameter ``<key>.<label>``
 VECTOR_ELEMENTS = {
     "position": ("x", "y", "z"), "direction": ("x", "y", "z"), "axis": ("x", "y", "z"),
@@ -128,6 +132,11 @@ class Structure:
     @property
     def n_thrusters(self) -> int:
         return 6 if self.thrusters is None else len(self.thrusters)
+
+    @property
+    def thruster_names(self) -> tuple[str, ...]:
+        """The thrusters' names in allocation order (the columns of B): the list's, or Haidou-1's six."""
+        return HAIDOU1_THRUSTERS if self.thrusters is None else self.thrusters
 
     def key(self) -> str:
         """A stable text of the structure, for compile-cache keys."""

@@ -76,10 +76,12 @@ def _run(cmd, **kw):
 
 
 @pytest.fixture(scope="module")
-def made(exported):
+def made(exported, prefix):
     if shutil.which("make") is None or shutil.which("c++") is None:
         pytest.skip("make or c++ is not installed")
-    _run(["make", "-C", str(exported)])
+    out = _run(["make", "-C", str(exported)])
+    lib = prefix.rstrip("_")
+    assert re.search(rf"^compiling lib{lib}\.so \.\.\. \d+ s$", out, re.M), out  # make's progress line
     return exported
 
 

@@ -48,7 +48,7 @@ def test_output_refusals(tmp_path, front, capsys):
         (["montecarlo", "--controller", "agsta", "--runs", "2", "--out", d / "X.md"], "is also the output --out"),
         (["paper", "--out", d / "md"], "was not written by arvcas"),
         (["bench", "--quick", "--out", d / "bench"], "was not written by arvcas"),
-        (["compare", front, front, "--plot", front], "is the input a"),
+        (["compare", front, front, "--plot", front], "is the input front"),
         (["simulate", "--controller", "agsta", "--config", notes, "--out", notes, "--force"], "is the input --config"),
     ]
     for argv, msg in cases:

@@ -21,6 +21,10 @@ Generating C for ``uvms_rhs`` (6-9k instructions) takes 15-40 ms: a few per cent
 pays anyway. So there is no cheaper first-level key; a per-process memo makes a repeated
 :func:`build` of the same Function object cost a dictionary lookup (no disk access, no hashing).
 
+**Progress**: a build (graph, C and compiler) that takes more than :data:`PROGRESS_AFTER_S` writes one
+line to the stream :func:`report_progress` set (the command line sets standard error):
+``arvcas: compiling the run for bluerov2_heavy_alpha5 / proposed ... 6.8 s``. Cache hits are silent.
+
 Besides ``opt_level`` and ``flags``, ``-ffp-contract=off -fno-math-errno`` is always passed: GCC contracts ``a*b+c``
 into FMA by default wherever the target has FMA (aarch64, ``-march=native``), which changes the last
 bits against CasADi's VM and between machines. Flags that change the numbers (``-Ofast``,
@@ -71,6 +75,7 @@ __all__ = [
     "artifact_of",
     "cache_info",
     "stats",
+    "report_progress",
 ]
 
 log = logging.getLogger(__name__)
@@ -138,6 +143,9 @@ class Artifact:
     verified: bool  # manifest present, key consistent, .so sha256 matches
 
 
+PROGRESS_AFTER_S = 1.0  # a build that takes longer says so (report_progress)
+
+
 # ---------------------------------------------------------------------------------------------
 # process state
 
@@ -149,6 +157,63 @@ _PLANT: dict[str, dict[str, ca.Function]] = {}
 _COMPILED: dict[tuple[str, str], ca.Function] = {}
 _STATS: Counter = Counter()
 _PRIVATE_DIRS: list[Path] = []
+_PROGRESS: list = []  # the stream report_progress set (at most one)
+
+
+@contextlib.contextmanager
+def report_progress(stream=None, after: float | None = None) -> Iterator[None]:
+    """Within this block, every build that takes more than ``after`` seconds (default
+    :data:`PROGRESS_AFTER_S`) writes ``arvcas: compiling <what> ...`` to ``stream`` (default standard
+    error) when that time has passed, and the build's duration when it ends, on the same line."""
+    entry = (stream if stream is not None else sys.stderr, PROGRESS_AFTER_S if after is None else float(after))
+    with _LOCK:
+        _PROGRESS.append(entry)
+    try:
+        yield
+    finally:
+        with _LOCK:
+            _PROGRESS.remove(entry)
+
+
+class _Progress:
+    """The progress line of one build (:func:`report_progress`); silent when none was asked for."""
+
+    def __init__(self, what: str):
+        self.what, self.shown, self.timer = what, False, None
+        self.lock = threading.Lock()
+        with _LOCK:
+            self.sink = _PROGRESS[-1] if _PROGRESS else None
+
+    def __enter__(self):
+        self.t0 = time.perf_counter()
+        if self.sink is not None:
+            self.timer = threading.Timer(self.sink[1], self._start)
+            self.timer.daemon = True
+            self.timer.start()
+        return self
+
+    def _start(self) -> None:
+        with self.lock:
+            if self.timer is None:
+                return
+            self.shown = True
+            self._write(f"arvcas: compiling {self.what} ...")
+
+    def _write(self, text: str) -> None:
+        try:
+            self.sink[0].write(text)
+            self.sink[0].flush()
+        except (OSError, ValueError):  # a closed stream: progress is not worth an error
+            pass
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        with self.lock:
+            if self.timer is not None:
+                self.timer.cancel()
+                self.timer = None
+            if self.shown:
+                dt = time.perf_counter() - self.t0
+                self._write(f" {dt:.1f} s\n" if exc_type is None else f" failed after {dt:.1f} s\n")
 
 
 def stats() -> dict[str, int]:
@@ -533,10 +598,11 @@ def build(
 
 def _build(fn: ca.Function, cmd_flags: list[str], d: Path, lock_timeout: float, extra_c: str = "") -> ca.Function:
     plan = _plan(fn, cmd_flags, extra_c)
-    return _lookup_or_publish(plan, lambda: plan, d, lock_timeout)
+    return _lookup_or_publish(plan, lambda: plan, d, lock_timeout, plan.name)
 
 
-def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_timeout: float) -> ca.Function:
+def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_timeout: float,
+                       label: str = "") -> ca.Function:
     """Load the verified artifact of ``look`` (name, key), else build it (``make_plan()``) and publish it.
 
     A cache whose lock files cannot be created (read-only) still serves verified artifacts: the
@@ -550,13 +616,16 @@ def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_tim
             if m is not None:
                 _STATS["disk_hit"] += 1
                 return _load(look, so, m)
+    what = label or look.name
     with _flock(lock, exclusive=True, timeout=lock_timeout) as got:
         if got is None:
             log.info("cache %s is not writable: building %s privately", d, look.name)
-            return _build_private(make_plan(), d)
+            with _Progress(what):
+                return _build_private(make_plan(), d)
         if not got:
             log.warning("lock %s busy for %.0f s: building %s privately", lock, lock_timeout, look.name)
-            return _build_private(make_plan(), d)
+            with _Progress(what):
+                return _build_private(make_plan(), d)
         m, why = _verify(look, so, man)  # another process may have built it meanwhile
         if m is not None:
             _STATS["disk_hit"] += 1
@@ -565,8 +634,9 @@ def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_tim
             _STATS["rejected"] += 1
             log.warning("cached %s rejected (%s): rebuilding", so.name, why)
         _sweep(d)
-        plan = make_plan()
-        m = _publish(plan, d, so, man)
+        with _Progress(what):
+            plan = make_plan()
+            m = _publish(plan, d, so, man)
         return _load(plan, so, m)
 
 
@@ -593,6 +663,7 @@ def build_described(
     flags: tuple[str, ...] = (),
     lock_timeout: float = LOCK_TIMEOUT_S,
     batch_loop: bool = False,
+    label: str = "",
 ) -> ca.Function:
     """The compiled function ``name`` described by ``description``, built by ``make()`` only on a miss.
 
@@ -603,6 +674,7 @@ def build_described(
     options, scenario fields, a user controller's own source). ``make()`` must return a Function
     called ``name``. Memoized per process. ``batch_loop``: the library also holds
     :func:`batch_loop_c`'s loops (part of the key), which :func:`arvcas.build.calls.call_many` uses.
+    ``label``: what the progress line calls the build ("the run for haidou1 / proposed"; default ``name``).
     """
     from arvcas.build.provenance import model_hash
 
@@ -633,7 +705,7 @@ def build_described(
             p = _plan(fn, cmd_flags, batch_loop_c(fn) if batch_loop else "")
             return _Plan(p.name, p.n_instructions, p.c_text, p.codegen_s, p.compiler, p.cmd_flags, key)
 
-        f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout)
+        f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout, label)
         _MANIFESTS[f.__hash__()]["ident"] = ident
         _DESCRIBED[mkey] = f
         return f
@@ -834,7 +906,7 @@ def compiled(name: str, opts=None, system=None) -> ca.Function:
             from arvcas.params import system_tag
 
             desc = f"plant {name} {opts!r}{system_tag(st)}"
-            f = build_described(name, desc, make)
+            f = build_described(name, desc, make, label=f"{name} for {st.name}")
             _COMPILED[mkey] = f
         return f
 

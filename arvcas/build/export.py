@@ -657,8 +657,11 @@ LDLIBS = {' '.join(libs)}
 
 all: lib{lib}.so example example_cpp
 
+# the library is the slow part (seconds at -O2): one progress line, "compiling lib{lib}.so ... 9 s"
 lib{lib}.so: {lib}.c
-\t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_LIBFLAGS) $(CFLAGS) -o $@ {lib}.c $(LDLIBS)
+\t@printf 'compiling lib{lib}.so ...\\n'; t0=$$(date +%s); \\
+\t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_LIBFLAGS) $(CFLAGS) -o $@ {lib}.c $(LDLIBS) && \\
+\tprintf 'compiling lib{lib}.so ... %s s\\n' $$(( $$(date +%s) - t0 ))
 
 example: example.c {lib}.h {lib}_params.h lib{lib}.so
 \t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_PIC) $(CFLAGS) -o $@ example.c -L. -l{lib} -Wl,-rpath,'$$ORIGIN' $(LDLIBS)

@@ -24,17 +24,18 @@ def write_text(path: Path, text: str) -> Path:
     return files.write_text(path, text, ResultsError)
 
 
-def write_figure(path: Path, fig, dpi: int) -> Path:
-    return files.write_figure(path, fig, dpi, ResultsError)
+def write_figure(path: Path, fig, fmt: str | None = None) -> Path:
+    return files.write_figure(path, fig, fmt, ResultsError)
 
 
-def write_result_dir(out_dir, stem: str, result, write_h5, markdown, plot, dpi: int) -> dict[str, Path]:
+def write_result_dir(out_dir, stem: str, result, write_h5, markdown, plot, fmt: str = "png") -> dict[str, Path]:
     """``out_dir/<stem>.h5`` (``write_h5(result, path)``), ``<stem>.md`` (``markdown(result)``) and
-    ``<stem>.png`` (``plot(result)`` at ``dpi``), each written atomically; ``out_dir`` is created if missing."""
+    ``<stem>.<fmt>`` (``plot(result)``; png, pdf or svg), each written atomically; ``out_dir`` is created if
+    missing. The figure's key in the returned dict is ``"figure"``."""
     out = prepare_dir(out_dir, f"--out {out_dir}")
     written = {"h5": write_h5(result, out / f"{stem}.h5"), "md": write_text(out / f"{stem}.md", markdown(result))}
     fig = plot(result)
-    written["png"] = write_figure(out / f"{stem}.png", fig, dpi)
+    written["figure"] = write_figure(out / f"{stem}.{fmt}", fig, fmt)
     return written
 
 

@@ -24,7 +24,7 @@ What arvcas wrote (:func:`written_by_arvcas`)
     An existing file is replaced only if arvcas wrote it, unless the caller allowed it
     (:func:`permit_replace`; the command line's ``--force``). arvcas's HDF5 files are recognised by
     their own ``format`` attribute (``arvcas-result``, ``arvcas.tuning.front``, ``arvcas-montecarlo``,
-    ...). Every other file arvcas writes (CSV, JSON, Markdown, PNG) is recorded, after its rename, in
+    ...). Every other file arvcas writes (CSV, JSON, Markdown, HTML, PNG, PDF, SVG) is recorded, after its rename, in
     the manifest ``.arvcas-manifest.json`` of its directory (name -> size and sha256 of the bytes
     written; updated under an ``flock`` of the directory): such a file counts as arvcas's only while
     its bytes are still those arvcas wrote; a file edited since is the user's.
@@ -371,12 +371,16 @@ def write_text(path, text: str, error: type[ValueError] = FileError) -> Path:
     return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"), error)
 
 
-def write_figure(path, fig, dpi: int = 150, error: type[ValueError] = FileError) -> Path:
-    """A matplotlib figure as PNG, written atomically."""
-    from arvcas import __version__
+def write_figure(path, fig, fmt: str | None = None, error: type[ValueError] = FileError) -> Path:
+    """A matplotlib figure, written atomically in ``fmt`` (``png``, ``pdf`` or ``svg``; default: from the
+    name's suffix) in the house style's settings (:func:`arvcas.io.style.save`)."""
+    from arvcas.io import style
 
-    return atomic_write(path, lambda p: fig.savefig(p, format="png", dpi=dpi,
-                                                    metadata={"Software": f"arvcas {__version__}"}), error)
+    try:
+        fmt = style.figure_format(path, fmt)
+    except ValueError as e:
+        raise error(str(e)) from None
+    return atomic_write(path, lambda p: style.save(fig, p, fmt), error)
 
 
 def remove_stale_temps(d) -> list[Path]:

@@ -94,7 +94,9 @@ def front_variables(front) -> tuple[dict, dict, dict, dict]:
            "table2_F": _row(front.table2_F), "reference_point": _row(front.reference_point),
            "hypervolume": float(front.hv), "controller": str(front.controller), "study": str(front.study_name),
            "seed": float(front.seed), "draw_seeds": _row(front.draw_seeds)}
-    units = {"F": "1 (normalised by the paper's AGSTA values)", "G": "1", "gains": "gain units (see gain_names)",
+    from arvcas.metrics import defaults_name, norm_name
+
+    units = {"F": f"1 (normalised by {norm_name(front.system)})", "G": "1", "gains": "gain units (see gain_names)",
              "X": "log10 of gain units", "chat": "N or N m per controller sample", "rmse": "m or rad",
              "table2_F": "1", "reference_point": "1", "hypervolume": "1"}
     desc = {"F": "objectives (f_chat, f_rmse) of each front member, docs/model.md §7",
@@ -102,7 +104,7 @@ def front_variables(front) -> tuple[dict, dict, dict, dict]:
             "gains": "each member's gains", "X": "each member's decision variables: log10 of its gains",
             "chat": "per member, DOF and draw: CHAT (eq. 42)", "rmse": "per member, DOF and draw: RMSE (eq. 43)",
             "knee": "1-based index of the knee member (pymoo PseudoWeights 0.5, 0.5)",
-            "table2_F": "objectives of the default gains (Table 2) on the same draws",
+            "table2_F": f"objectives of the {defaults_name(front.system)} on the same draws",
             "reference_point": "the study's hypervolume reference point", "hypervolume": "of F against reference_point"}
     cols = {"F": _cell(["f_chat", "f_rmse"]), "gains": _cell(front.names), "X": _cell(front.names)}
     return var, units, desc, cols

@@ -120,8 +120,9 @@ class CompiledRun:
             name = f"run_{self.controller.name}" + ("_trace" if trace else "")
             fn = _FUNCTIONS.get((name, self.description(trace)))
             if fn is None:
+                what = f"the run for {self.params.structure.name} / {self.controller.name}" + (" (traced)" if trace else "")
                 fn = codegen.build_described(name, self.description(trace), lambda: closedloop.build_run(spec, trace),
-                                             batch_loop=True)
+                                             batch_loop=True, label=what)
                 _FUNCTIONS[(name, self.description(trace))] = fn
             self._fns[trace] = fn
         return fn

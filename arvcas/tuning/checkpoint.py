@@ -254,7 +254,7 @@ _POP = ("X", "gains", "F", "G", "rank", "crowding", "chat", "rmse", "ok", "t_fai
 _T2 = ("F", "G", "chat", "rmse", "ok", "t_fail")
 
 
-_GAIN_UNITS = "gain units of each variable (Table 2; see variables/names)"
+_GAIN_UNITS = "gain units of each variable (see variables/names and the controller's gain table)"
 _OBJ = "f_chat, f_rmse: mean over the 6 DOF of CHAT and RMSE / the paper's AGSTA values (dimensionless)"
 _CHAT_UNITS = "N (x, y, z), N m (phi, theta, psi)"
 _RMSE_UNITS = "m (x, y, z), rad (phi, theta, psi)"
@@ -291,15 +291,21 @@ DATASET_DOC: dict[str, tuple[str, str]] = {
 }
 
 
-def _doc(ds: h5py.Dataset) -> None:
-    """``units`` and ``description`` of a dataset, from :data:`DATASET_DOC`."""
+def _doc(ds: h5py.Dataset, system: str = "") -> None:
+    """``units`` and ``description`` of a dataset, from :data:`DATASET_DOC`; for another system than
+    Haidou-1 (``system``) the paper's tables are named as that system's defaults and normalisation."""
+    from arvcas.metrics import defaults_name, norm_name
+
     name = ds.name.lstrip("/")
     group, _, leaf = name.rpartition("/")
     units, desc = DATASET_DOC[name] if name in DATASET_DOC else DATASET_DOC[leaf]
+    if system:
+        desc = (desc.replace("the paper's Table 2 gains", "the system's default gains")
+                .replace("the paper's AGSTA values", norm_name(system).replace("value", "values")))
     if group == "front":
         desc = "front members only: " + desc
     elif group == "table2":
-        desc = "the Table 2 gains on the same draws: " + desc
+        desc = f"the {defaults_name(system)} on the same draws: " + desc
     ds.attrs["units"] = units
     ds.attrs["description"] = desc
 
@@ -345,7 +351,7 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
         t = f.create_group("table2")
         for k in _T2:
             t.create_dataset(k, data=np.asarray(getattr(c, f"table2_{k}")))
-    f.visititems(lambda name, obj: _doc(obj) if isinstance(obj, h5py.Dataset) else None)
+    f.visititems(lambda name, obj: _doc(obj, c.system) if isinstance(obj, h5py.Dataset) else None)
 
 
 def write_checkpoint(c: Checkpoint, path: Path) -> Path:

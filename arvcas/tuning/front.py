@@ -25,8 +25,9 @@ import numpy as np
 from arvcas.metrics import DOFS, table3
 from arvcas.tuning import checkpoint as ck
 
-__all__ = ["Front", "read_front", "knee_index", "export_front", "plot_front", "plot_fronts", "member_gains", "member_index",
-           "replay", "resolve_front_path", "check_provenance", "check_same_model"]
+__all__ = ["Front", "read_front", "knee_index", "export_front", "plot_front", "plot_fronts", "member_gains",
+           "member_index", "replay", "resolve_front_path", "front_paths", "check_provenance", "check_same_model",
+           "system_params"]
 
 
 def resolve_front_path(p: str | Path) -> Path:
@@ -42,6 +43,22 @@ def resolve_front_path(p: str | Path) -> Path:
                                      f"give one of {', '.join(str(s) for s in subs)}")
         raise ck.CheckpointError(f"{p}: no {ck.FRONT_NAME} in this directory")
     return p
+
+
+def front_paths(p: str | Path) -> list[Path]:
+    """Every ``front.h5`` of a study output directory (sorted by controller directory): the
+    ``<controller>/front.h5`` of a study of several controllers, or the ``front.h5`` of a study of one
+    (the directory itself, or that file)."""
+    p = Path(p)
+    if not p.is_dir():
+        return [p]
+    fronts = sorted(p.glob(f"*/{ck.FRONT_NAME}"))
+    if not fronts and (p / ck.FRONT_NAME).is_file():
+        return [p / ck.FRONT_NAME]
+    if not fronts:
+        raise ck.CheckpointError(f"{p}: no {ck.FRONT_NAME} and no <controller>/{ck.FRONT_NAME} in this directory "
+                                 "(the --out of arvcas tune)")
+    return fronts
 
 
 @dataclass(frozen=True)
@@ -213,54 +230,74 @@ def _paper_points():
 
 
 def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bool = False):
-    """Several fronts in one axes (f_chat vs f_rmse): fronts, Table 2 on the same draws, knees.
+    """Several fronts in one axes (f_chat vs f_rmse): fronts, the default gains on the same draws (Table 2
+    for Haidou-1), knees; in the house style (:mod:`arvcas.io.style`), column width.
 
     ``population``: the feasible members of the last population, faint; ``paper``: the paper's
-    Table 3 points (AGSTA = (1, 1) by construction, and the proposed controller), from its simulator.
+    Table 3 points (AGSTA = (1, 1) by construction, and the proposed controller), from its simulator
+    (Haidou-1's fronts only: the paper's table is of Haidou-1).
     """
-    if ax is None:  # a bare Figure: no pyplot state, no GUI backend (save with fig.savefig)
-        from matplotlib.figure import Figure
+    from arvcas.io import style
 
-        fig = Figure(figsize=(7.0, 5.2), layout="constrained")
-        ax = fig.add_subplot()
-    else:
-        fig = ax.figure
-    colors = ["tab:blue", "tab:orange", "tab:green", "tab:purple"]
-    for j, fr in enumerate(fronts):
-        col = colors[j % len(colors)]
-        lab = labels[j] if labels else fr.controller
-        if population:
-            feas = fr.population_G[:, 0] <= 0
-            P = fr.population_F[feas]
-            ax.scatter(P[:, 0], P[:, 1], s=8, color=col, alpha=0.25, linewidths=0)
-        if fr.size:
-            ax.plot(fr.F[:, 0], fr.F[:, 1], "-o", color=col, ms=3.5, lw=1.2,
-                    label=f"{lab}: front ({fr.size}), HV {fr.hv:.4g}")
-            k = fr.knee()
-            ax.plot(fr.F[k, 0], fr.F[k, 1], "D", color=col, ms=9, mec="k", mew=1.0,
-                    label=f"{lab}: knee ({fr.F[k, 0]:.3g}, {fr.F[k, 1]:.3g})")
-        if np.isfinite(fr.table2_F).all():
-            ax.plot(fr.table2_F[0], fr.table2_F[1], "*", color=col, ms=15, mec="k", mew=0.8,
-                    label=f"{lab}: {'default' if fr.system else 'Table 2'} gains, same draw(s)")
-    if paper:
-        a, p = _paper_points()
-        ax.plot(*a, "s", mfc="none", mec="0.3", ms=8, label="paper Table 3 AGSTA (their simulator)")
-        ax.plot(*p, "^", mfc="none", mec="0.3", ms=8, label="paper Table 3 proposed (their simulator)")
-    norm = "paper's AGSTA" if not any(fr.system for fr in fronts) else "AGSTA at the system's default gains"
-    ax.set_xlabel(f"f_chat: mean CHAT / {norm} CHAT")
-    ax.set_ylabel(f"f_rmse: mean RMSE / {norm} RMSE")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
-    return fig
+    fronts = list(fronts)
+    if paper and any(fr.system for fr in fronts):
+        raise ValueError("--paper: the paper's Table 3 points are Haidou-1's; these fronts are of "
+                         f"{', '.join(sorted({fr.system for fr in fronts if fr.system}))}")
+
+    @style.styled
+    def draw(ax):
+        from arvcas.io.plots import controller_color
+
+        own = ax is None
+        if own:  # a bare Figure: no pyplot state, no GUI backend
+            fig = style.figure("column", 3.0 + 0.35 * len(fronts) + (0.3 if paper else 0.0))
+            ax = fig.add_subplot()
+        else:
+            fig = ax.figure
+        distinct = len({fr.controller for fr in fronts}) == len(fronts)
+        dname = "default" if any(fr.system for fr in fronts) else "Table 2"
+        for j, fr in enumerate(fronts):
+            col = controller_color(fr.controller, j) if distinct else style.color("", j)
+            lab = labels[j] if labels else fr.controller
+            if population:
+                feas = fr.population_G[:, 0] <= 0
+                P = fr.population_F[feas]
+                ax.scatter(P[:, 0], P[:, 1], s=4, color=col, alpha=0.25, linewidths=0)
+            if fr.size:
+                ax.plot(fr.F[:, 0], fr.F[:, 1], "-o", color=col, ms=2.0, lw=0.8,
+                        label=f"{lab}: {fr.size} members, HV {fr.hv:.4g}")
+                k = fr.knee()
+                ax.plot(fr.F[k, 0], fr.F[k, 1], "D", color=col, ms=5, mec="k", mew=0.6,
+                        label=f"{lab}: knee ({fr.F[k, 0]:.3g}, {fr.F[k, 1]:.3g})")
+            if np.isfinite(fr.table2_F).all():
+                ax.plot(fr.table2_F[0], fr.table2_F[1], "*", color=col, ms=8, mec="k", mew=0.5,
+                        label=f"{lab}: {dname} gains")
+        if paper:
+            a, p = _paper_points()
+            ax.plot(*a, "s", mfc="none", mec="0.3", ms=5, label="paper Table 3 AGSTA (their simulator)")
+            ax.plot(*p, "^", mfc="none", mec="0.3", ms=5, label="paper Table 3 proposed (their simulator)")
+        norm = "paper's AGSTA" if not any(fr.system for fr in fronts) else "AGSTA at its defaults"
+        ax.set_xlabel(f"f_chat: CHAT / {norm}")
+        ax.set_ylabel(f"f_rmse: RMSE / {norm}")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        style.log_labels(ax)
+        ax.grid(True, which="both", alpha=0.3)
+        if own:  # below the axes, clear of the fronts
+            fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=2, fontsize=6)
+        else:
+            ax.legend(fontsize=6, loc="best")
+        return fig
+
+    return draw(ax)
 
 
 def plot_front(front: Front | str | Path, ax=None, **kw):
-    """One front: population (light), front, knee (diamond), Table 2 on the same draws (star)."""
+    """One front: population (light), front, knee (diamond), the default gains on the same draws (star)."""
     fr = front if isinstance(front, Front) else read_front(front)
     fig = plot_fronts([fr], ax=ax, **kw)
-    fig.axes[0].set_title(f"{fr.controller}: {fr.study_name}, {fr.n_gen} generations, {fr.n_eval} runs", fontsize=9)
+    fig.axes[0].set_title(f"{fr.controller}: {fr.study_name}, {fr.n_gen} generations, {fr.n_eval} runs",
+                          fontsize=7)
     return fig
 
 

@@ -340,7 +340,7 @@ def _variables(sec: _VariablesSection, controllers: tuple[str, ...], cfg, where:
         w = f"{where}: variables.bounds.{key}"
         if key not in valid:
             raise StudyError(f"{where}: unknown key 'variables.bounds.{key}'{config.closest(key, valid, 0.5)} "
-                             f"(a Table 2 column such as 'c' or a gain such as 'x.c' of {', '.join(controllers)})")
+                             f"(a gain column such as 'c' or a gain such as 'x.c' of {', '.join(controllers)})")
         if a <= 0:
             raise StudyError(f"{w}: lower bound must be > 0 (the search is on a log scale), got {a}")
         if a >= b:
@@ -353,8 +353,9 @@ def _variables(sec: _VariablesSection, controllers: tuple[str, ...], cfg, where:
             if not lo[i] <= g0[i] <= hi[i]:
                 col = n.split(".", 1)[1]
                 key = n if any(k == n for k, _, _ in bounds) else col
+                which = "Table 2" if params is None else "the default gains"
                 raise StudyError(f"{where}: variables.bounds.{key}: [{lo[i]:g}, {hi[i]:g}] does not contain "
-                                 f"Table 2's {c} {n} = {g0[i]:g} (bounds must contain Table 2)")
+                                 f"{which}'s {c} {n} = {g0[i]:g} (bounds must contain {which})")
         lims = gains_mod.upper_limits(c, cfg.time_h)  # the limits the controller's gains declare for h
         for i, n in enumerate(names):
             if hi[i] >= lims[i]:
