@@ -11,8 +11,8 @@ before calling ``run``:
 * output policy (:func:`arvcas.io.files.check_outputs`): no output is an input or another output,
   none is a special file, an existing file arvcas did not write is refused without ``--force``
   (added to every command that writes); stale temporary files of killed runs are removed;
-* bounds: counts, seeds and timeouts are checked by their argparse types (:func:`seed_arg`,
-  :func:`count_arg`, :func:`seconds_arg`) and the memory a request would take by the command's check.
+* bounds: counts, seeds and timeouts are checked by their argparse types (:mod:`arvcas.io.cliargs`:
+  ``seed_arg``, ``count_arg``, ``seconds_arg``) and the memory a request would take by the command's check.
 
 A compile that takes more than a second prints a progress line on standard error
 (:func:`arvcas.build.codegen.report_progress`). Errors (ValueError and subclasses, OSError) are printed
@@ -29,8 +29,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["main", "TABLE", "COMMANDS", "Command", "seed_arg", "count_arg", "seconds_arg", "check_memory",
-           "MAX_SEED", "refuse", "FIGURE_FORMATS", "add_figure_format", "figure_file"]
+from arvcas.io.cliargs import add_figure_format, count_arg, refuse, seed_arg
+
+__all__ = ["main", "TABLE", "COMMANDS", "Command"]
 
 Paths = Callable[[argparse.Namespace], list]
 
@@ -51,92 +52,6 @@ class Command:
     inputs: tuple = ()
     outputs: Paths | None = None
     check: Callable[[argparse.Namespace], None] | None = None
-
-
-# ---- bounds (argparse types: refused at parse time, before any work) ------------------------------------
-
-MAX_SEED = 2**63  # seeds are stored as int64 and fed to numpy's SeedSequence
-
-
-def seed_arg(text: str) -> int:
-    """A seed: an integer with 0 <= seed < 2**63."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer seed, got {text!r}") from None
-    if not 0 <= v < MAX_SEED:
-        raise argparse.ArgumentTypeError(f"{text} is out of range (allowed: 0 <= seed < 2**63)")
-    return v
-
-
-def count_arg(lo: int, hi: int, what: str = "count"):
-    """An argparse type: an integer ``lo <= n <= hi``."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"{v} is out of range (allowed: {lo}..{hi})")
-        return v
-
-    parse.__name__ = what
-    return parse
-
-
-def seconds_arg(text: str) -> float:
-    """A duration in seconds: finite and positive (not nan, inf, 0 or negative)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"{text}: must be a finite number of seconds > 0")
-    return v
-
-
-def _total_memory() -> int | None:
-    import os
-
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError):  # pragma: no cover
-        return None
-
-
-def check_memory(what: str, n_bytes: float, share: float = 0.5) -> None:
-    """Refuse a request whose results would take more than ``share`` of this machine's memory."""
-    total = _total_memory()
-    if total is None:  # pragma: no cover
-        return
-    if n_bytes > share * total:
-        raise ValueError(f"{what}: would need about {n_bytes / 2**30:.3g} GiB for its results, more than "
-                         f"{share:.0%} of this machine's {total / 2**30:.3g} GiB; ask for less")
-
-
-def refuse(a: argparse.Namespace, names, why: str) -> None:
-    """ValueError if any of the options ``names`` (dest names) was given (is not None/False)."""
-    for n in names:
-        v = getattr(a, n, None)
-        if v is not None and v is not False:
-            raise ValueError(f"--{n.replace('_', '-')}: {why}")
-
-
-FIGURE_FORMATS = ("png", "pdf", "svg")
-
-
-def add_figure_format(p: argparse.ArgumentParser, what: str = "the figures") -> None:
-    """``--format png|pdf|svg`` of a command that writes figures (dest ``format``, default None)."""
-    p.add_argument("--format", choices=FIGURE_FORMATS, default=None,
-                   help=f"format of {what}: png, pdf or svg (default: the file name's suffix, else png)")
-
-
-def figure_file(path: Path, fmt: str | None, what: str) -> str:
-    """The format a figure file ``path`` is written in (``fmt`` or its suffix); ValueError (one line)
-    for a format arvcas does not write or a suffix that contradicts ``--format``."""
-    from arvcas.io.style import figure_format
-
-    return figure_format(path, fmt, what)
 
 
 def _model_options(n_quad: int):
@@ -175,7 +90,7 @@ def _export_c_outputs(a: argparse.Namespace) -> list:
 
 def _run_export_c(a: argparse.Namespace) -> int:
     from arvcas.build.export import export_c
-    from arvcas.params import load
+    from arvcas.system.params import load
 
     paths = export_c(a.dir, opts=_model_options(a.n_quad), params=load(a.params), prefix=a.prefix, force=a.force)
     for path in paths:
@@ -236,7 +151,7 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
     where they come from."""
     if getattr(a, "_design", None) is not None:
         return a._design
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.sim import scenario
 
     params = load(a.params)
@@ -367,7 +282,7 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
     import numpy as np
 
     from arvcas.build.codegen import compiled
-    from arvcas.params import default_layout, load, view
+    from arvcas.system.params import default_layout, load, view
 
     params = load(params_path)
     p = params.vector()
@@ -399,7 +314,7 @@ def _add_demo(p: argparse.ArgumentParser) -> None:
 
 
 def _run_demo(a: argparse.Namespace) -> int:
-    from arvcas.params import load
+    from arvcas.system.params import load
 
     rows = demo_table(a.params, a.n_quad)
     params = load(a.params)
@@ -498,7 +413,7 @@ def _metrics_table(chat, rmse) -> str:
 def _run_simulate(a: argparse.Namespace) -> int:
     from arvcas.io import results
     from arvcas.sim import scenario
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.sim.simulation import simulate
 
     if a.out is not None:
@@ -584,12 +499,12 @@ def _load_arg(text: str) -> float:
 
 
 def bench_module():
-    """``benchmarks/bench.py`` of the source checkout this package runs from (not part of the package)."""
+    """The package ``benchmarks/bench/`` of the source checkout this package runs from (not part of the package)."""
     import importlib
 
     root = Path(__file__).resolve().parents[1]
-    if not (root / "benchmarks" / "bench.py").is_file():
-        raise ValueError(f"bench: needs a source checkout of arvcas ({root / 'benchmarks' / 'bench.py'} not found)")
+    if not (root / "benchmarks" / "bench" / "__init__.py").is_file():
+        raise ValueError(f"bench: needs a source checkout of arvcas ({root / 'benchmarks' / 'bench'} not found)")
     if str(root) not in sys.path:
         sys.path.insert(0, str(root))
     return importlib.import_module("benchmarks.bench")
@@ -628,6 +543,7 @@ def _bench_outputs(a):
 
 def _table() -> tuple[Command, ...]:
     from arvcas.experiments import cli as x
+    from arvcas.experiments import validation as v
     from arvcas.tuning import cli as t
 
     return (
@@ -676,6 +592,12 @@ def _table() -> tuple[Command, ...]:
                 "(table, plot)", x.add_sweep, x.run_sweep,
                 inputs=(("config", "file"), ("params", "system"), ("check", "file")),
                 outputs=x.sweep_outputs, check=x.check_sweep),
+        Command("validate", "simulate a system open loop over logged trials (*.log.toml) and compare: RMSE, NRMSE, "
+                "R^2 per signal, figures", v.add_validate, v.run_validate,
+                inputs=(("system", "system"),), outputs=v.validate_outputs),
+        Command("identify", "estimate named parameters of a system from logged trials (IPOPT, 95 percent "
+                "intervals): writes the identified system file", v.add_identify, v.run_identify,
+                inputs=(("system", "system"),), outputs=v.identify_outputs, check=v.check_identify),
         Command("montecarlo", "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance "
                 "phases: CIs, failure rate", x.add_montecarlo, x.run_montecarlo,
                 inputs=(("config", "file"), ("params", "system"), ("from_front", "front"), ("check", "file")),
@@ -751,7 +673,7 @@ def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[
             p = shipped()[str(p)]
             setattr(a, dest, p)
         elif not p.exists() and p.suffix.lower() != ".toml":
-            from arvcas.config import closest
+            from arvcas.system.config import closest
 
             raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
                              f"file{closest(str(p), shipped(), 0.3)}")

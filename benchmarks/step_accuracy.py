@@ -89,11 +89,11 @@ def _plant_ode(cfg, opts=None, layout=None):
     ``tau`` is the held body wrench of the thrusters; ``t = t_k + s``. The right-hand side is the SX
     plant function ``uvms_rhs`` (direct Newton-Euler arm wrench, the trim of docs/model.md §3 at q0) with the scenario's
     joint trajectory, payload ramp and eq. 41's disturbance as functions of ``t``. ``layout``: the system's
-    :class:`arvcas.params.Layout` (default Haidou-1's); ``p`` is its parameter vector.
+    :class:`arvcas.system.params.Layout` (default Haidou-1's); ``p`` is its parameter vector.
     """
     from arvcas.model import manipulator
     from arvcas.model.uvms import ModelOptions, plant_functions
-    from arvcas.params import default_layout, view
+    from arvcas.system.params import default_layout, view
     from arvcas.sim import scenario
 
     lay = layout or default_layout()
@@ -125,7 +125,7 @@ def held_wrench(pv, thrust, layout=None) -> np.ndarray:
     """Body wrench ``B_T u`` per sample (rows) of the held, saturated thrust ``thrust`` (N+1, n_thrusters);
     ``B_T`` (6 x n_thrusters) of the system of ``layout`` (default Haidou-1)."""
     from arvcas.model import thrusters
-    from arvcas.params import view
+    from arvcas.system.params import view
 
     B = np.array(ca.evalf(thrusters.B_T(view(ca.DM(np.asarray(pv, float)), layout))))
     return np.asarray(thrust, float) @ B.T

@@ -28,7 +28,7 @@ from arvcas.build.dynamics import NAMES, jacobian_functions
 from arvcas.build.export import (DEFAULT_PREFIX, MANIFEST, ExportError, _check_reentrant, default_prefix,
                                  example_inputs, export_c, files)
 from arvcas.model import uvms
-from arvcas.params import load
+from arvcas.system.params import load
 from arvcas.system import SHIPPED, load_system
 
 RTOL = 1e-12

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from arvcas.controllers import gains as gains_mod  # noqa: E402
 from arvcas.io import plots  # noqa: E402
-from arvcas.params import load as load_params  # noqa: E402
+from arvcas.system.params import load as load_params  # noqa: E402
 from arvcas.sim.simulation import Result  # noqa: E402
 
 N = 51  # 5 s at h = 0.1 s

@@ -16,7 +16,7 @@ import pytest
 
 import arvcas
 from arvcas.model import thrusters, vehicle
-from arvcas.params import ParamsError, view
+from arvcas.system.params import ParamsError, view
 from arvcas.sim import scenario
 from arvcas.system import shipped
 

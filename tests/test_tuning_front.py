@@ -154,6 +154,9 @@ def test_front_indices_is_the_pairwise_definition():
 def test_figures_in_the_format_asked_for(fronts, tmp_path, capsys):
     """front plot and compare --plot write PNG, PDF or SVG by the name's suffix or --format; a format
     arvcas cannot write, or a suffix that contradicts --format, is refused in one line before any work."""
+    from arvcas.io import cliargs, style
+
+    assert cliargs.FIGURE_FORMATS == style.FORMATS  # --format's choices are the formats the style writes
     magic = {"png": b"\x89PNG\r\n\x1a\n", "pdf": b"%PDF-", "svg": b"<?xml"}
     for fmt, head in magic.items():
         out = tmp_path / f"front.{fmt}"

@@ -70,7 +70,7 @@ def synthetic_front(path: Path, *, model_hash: str | None = None, params=None, c
     """A finished three-member front.h5 written by arvcas's checkpoint writer (no tuning run)."""
     from arvcas.build.provenance import model_hash as current_hash
     from arvcas.controllers import gains as gains_mod
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.sim.scenario import load_scenario
     from arvcas.tuning import checkpoint as ck
 

@@ -903,7 +903,7 @@ def compiled(name: str, opts=None, system=None) -> ca.Function:
                     _PLANT[tag] = plant_functions(opts, lay)
                 return _PLANT[tag][name]
 
-            from arvcas.params import system_tag
+            from arvcas.system.params import system_tag
 
             desc = f"plant {name} {opts!r}{system_tag(st)}"
             f = build_described(name, desc, make, label=f"{name} for {st.name}")

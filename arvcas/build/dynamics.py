@@ -2,7 +2,7 @@
 
 ``dynamics("vehicle_rhs")(x, tau)`` evaluates the compiled C of :func:`arvcas.compiled` on NumPy
 arrays; the parameter vector defaults to the packaged parameters (``p=`` a vector, or ``params=`` a
-:class:`arvcas.params.Params`, overrides it). Every input takes one evaluation's shape (``x``:
+:class:`arvcas.system.params.Params`, overrides it). Every input takes one evaluation's shape (``x``:
 ``(12,)``, a size-1 input also a scalar) or a batch of n with a leading axis (``x``: ``(n, 12)``).
 Inputs without the batch axis (or with one row) are shared by all n evaluations; outputs have the
 batch axis if any input has it.
@@ -127,7 +127,7 @@ def _loop(name: str, opts, params=None) -> _Loop:
 def _default_p() -> np.ndarray:
     with _LOCK:
         if not _DEFAULT_P:
-            from arvcas.params import load
+            from arvcas.system.params import load
 
             v = np.ascontiguousarray(load().vector(), dtype=float)
             v.setflags(write=False)
@@ -233,10 +233,10 @@ class Dynamics:
         if params is not None:
             if p is not None:
                 raise ValueError(f"{self.name}: give p= or params=, not both")
-            from arvcas.params import Params
+            from arvcas.system.params import Params
 
             if not isinstance(params, Params):
-                raise ValueError(f"{self.name}: params: expected arvcas.params.Params, got {type(params).__name__}")
+                raise ValueError(f"{self.name}: params: expected arvcas.system.params.Params, got {type(params).__name__}")
             p = params.vector()
         return args, p
 

@@ -807,7 +807,7 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, forc
     """Write the C library, headers, build files, examples and README into ``out_dir``.
 
     ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``params``: the
-    system, a :class:`arvcas.params.Params` (or a :class:`arvcas.system.System`): its layout sizes the
+    system, a :class:`arvcas.system.params.Params` (or a :class:`arvcas.system.System`): its layout sizes the
     functions (``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``) and its numbers are the defaults
     in ``<lib>_params.h`` (default: Haidou-1); ``prefix``: of every symbol (a C identifier ending in
     ``_``; the library is ``lib<prefix without the last _>.so``; default :func:`default_prefix`,
@@ -817,14 +817,14 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, forc
     """
     from arvcas.build.dynamics import jacobian_functions
     from arvcas.model.uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
-    from arvcas.params import Params, load
+    from arvcas.system.params import Params, load
     from arvcas.system import System
 
     P = load() if params is None else params
     if isinstance(P, System):
         P = P.params
     if not isinstance(P, Params):
-        raise ExportError(f"export-c: params must be arvcas.params.Params, got {type(P).__name__}")
+        raise ExportError(f"export-c: params must be arvcas.system.params.Params, got {type(P).__name__}")
     prefix = check_prefix(default_prefix(P) if prefix is None else prefix, DEFAULT_PREFIX)
     if not isinstance(force, bool):
         raise ExportError(f"export-c: force: expected True or False, got {force!r}")

@@ -205,7 +205,7 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
 
 
 def _check_params(params):
-    from arvcas import params as params_mod
+    from arvcas.system import params as params_mod
     from arvcas.system import System, load_system
 
     if params is None:
@@ -215,7 +215,7 @@ def _check_params(params):
     if isinstance(params, (str, os.PathLike)):  # a shipped system's name or a system file
         return load_system(params).params
     if not isinstance(params, params_mod.Params):
-        raise FMUError(f"params: expected arvcas.params.Params, a system (name or file) or None, got "
+        raise FMUError(f"params: expected arvcas.system.params.Params, a system (name or file) or None, got "
                        f"{type(params).__name__}")
     return params
 
@@ -419,7 +419,7 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
     """Write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm to ``path``.
 
     ``path`` must end in ``.fmu``; an existing file is replaced only if it is an FMU arvcas wrote, or
-    with ``force=True``. ``params``, the system (its :class:`arvcas.params.Params` or
+    with ``force=True``. ``params``, the system (its :class:`arvcas.system.params.Params` or
     :class:`arvcas.system.System`, a system file, or None for Haidou-1), sizes the FMU (:func:`layout`)
     and sets the parameters' start values; every one stays settable in the FMU. ``opts`` is
     an :class:`arvcas.model.uvms.ModelOptions` (n_quad of the link drag). ``inputs``: ``"wrench"``

@@ -38,7 +38,7 @@ def _table(path=None) -> dict:
             with resources.files("arvcas").joinpath("data/gains.toml").open("rb") as f:
                 t = tomllib.load(f)
         else:
-            from arvcas import tomlfile
+            from arvcas.system import tomlfile
 
             t = tomlfile.parse(tomlfile.read_text(path, GainError, "gain table"), str(path), GainError)
         _TABLES[key] = t

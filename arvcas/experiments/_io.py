@@ -25,7 +25,9 @@ def write_text(path: Path, text: str) -> Path:
 
 
 def write_figure(path: Path, fig, fmt: str | None = None) -> Path:
-    return files.write_figure(path, fig, fmt, ResultsError)
+    from arvcas.io import style
+
+    return style.write_figure(path, fig, fmt, ResultsError)
 
 
 def write_result_dir(out_dir, stem: str, result, write_h5, markdown, plot, fmt: str = "png") -> dict[str, Path]:
@@ -46,7 +48,7 @@ def stored_inputs(path, config_text: str, params_vector, error: type[ValueError]
     the system's parameters (``error`` is raised when they do not fit); ``system``: the stored system
     (a shipped name or a system file; "" for Haidou-1). Returns ``(cfg, params)``.
     """
-    from arvcas.params import load as load_params
+    from arvcas.system.params import load as load_params
     from arvcas.sim import scenario
     from arvcas.system import load_system
 
@@ -61,7 +63,7 @@ def stored_inputs(path, config_text: str, params_vector, error: type[ValueError]
 
 def system_ref(params) -> str:
     """How a result file names the system of ``params``: "" for Haidou-1, a shipped name, or the file."""
-    from arvcas.params import default_layout
+    from arvcas.system.params import default_layout
     from arvcas.system import shipped
 
     st = params.structure

@@ -32,7 +32,7 @@ def _floats(text: str) -> list[float]:
 def _seeds(text: str) -> list[int]:
     """Seeds ``S1,S2,...`` or ``A..B`` (inclusive): each 0 <= s < 2**63, at most MAX_SEEDS (checked before
     the list is built)."""
-    from arvcas.cli import MAX_SEED
+    from arvcas.io.cliargs import MAX_SEED
 
     try:
         if ".." in text:  # a range A..B (inclusive)
@@ -53,13 +53,13 @@ def _seeds(text: str) -> list[int]:
 
 
 def _runs(text: str) -> int:
-    from arvcas.cli import count_arg
+    from arvcas.io.cliargs import count_arg
 
     return count_arg(1, MAX_RUNS, "--runs")(text)
 
 
 def _seed(text: str) -> int:
-    from arvcas.cli import seed_arg
+    from arvcas.io.cliargs import seed_arg
 
     return seed_arg(text)
 
@@ -94,13 +94,13 @@ def add_sweep(p: argparse.ArgumentParser) -> None:
 
 
 def _add_format(p: argparse.ArgumentParser) -> None:
-    from arvcas.cli import add_figure_format
+    from arvcas.io.cliargs import add_figure_format
 
     add_figure_format(p)
 
 
 def check_sweep(a: argparse.Namespace) -> None:
-    from arvcas.cli import check_memory, refuse
+    from arvcas.io.cliargs import check_memory, refuse
 
     if a.check is not None:
         refuse(a, ("h", "out", "controllers", "seeds", "noise_scale", "config", "params", "force", "format"),
@@ -138,7 +138,7 @@ def _report_check(path, diff: list[str], compared: str) -> int:
 
 def run_sweep(a: argparse.Namespace) -> int:
     from arvcas.sim import scenario
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.experiments import _io
     from arvcas.experiments.sweep import CONTROLLERS, reproduce_sweep, run_sweep, sweep_markdown, write_sweep_dir
 
@@ -189,7 +189,7 @@ _MC_BYTES_PER_RUN = (6 + 6 + 4 + 6 + 1) * 8 + 8  # chat, rmse, factors, phase, t
 
 
 def check_montecarlo(a: argparse.Namespace) -> None:
-    from arvcas.cli import check_memory, refuse
+    from arvcas.io.cliargs import check_memory, refuse
 
     if a.check is not None:
         refuse(a, ("controller", "runs", "out", "seed", "spread", "config", "params", "from_front", "index",
@@ -219,7 +219,7 @@ def montecarlo_outputs(a: argparse.Namespace) -> list:
 
 def run_montecarlo(a: argparse.Namespace) -> int:
     from arvcas.sim import scenario
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.experiments import _io
     from arvcas.experiments.montecarlo import read_montecarlo, reproduce, run_montecarlo, summary_markdown, write_montecarlo
 
@@ -296,7 +296,7 @@ def robust_outputs(a: argparse.Namespace) -> list:
 
 
 def check_robust(a: argparse.Namespace) -> None:
-    from arvcas.cli import check_memory
+    from arvcas.io.cliargs import check_memory
 
     from arvcas.tuning.checkpoint import read_checkpoint
     from arvcas.tuning.front import resolve_front_path
@@ -331,13 +331,13 @@ def _members(text: str):
     t = text.strip().lower()
     if t in ("all", "knee"):
         return t
-    from arvcas.cli import count_arg
+    from arvcas.io.cliargs import count_arg
 
     return count_arg(1, 1_000_000, "--members")(text)
 
 
 def add_explore(p: argparse.ArgumentParser) -> None:
-    from arvcas.cli import count_arg
+    from arvcas.io.cliargs import count_arg
 
     p.add_argument("fronts", type=Path, nargs="+", metavar="DIR",
                    help="study output directories (every front in them) or front.h5 files, of one system")
@@ -381,7 +381,7 @@ def run_explore(a: argparse.Namespace) -> int:
 
 def _run_compare_mc(a: argparse.Namespace, kind: str) -> int:
     """``kind``: "montecarlo" (two Monte Carlo files) or "robust" (two robust.h5 of ``front robust``)."""
-    from arvcas.cli import figure_file
+    from arvcas.io.cliargs import figure_file
     from arvcas.experiments import _io
 
     if kind == "montecarlo":
@@ -432,7 +432,7 @@ def _kind(a: argparse.Namespace) -> str:
 
 
 def check_compare(a: argparse.Namespace) -> None:
-    from arvcas.cli import refuse
+    from arvcas.io.cliargs import refuse
 
     if a.plot is None:
         refuse(a, ("paper", "format"), "only with --plot")

@@ -171,7 +171,7 @@ def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_
     """Everything the page shows, as JSON-ready data (module docstring)."""
     from arvcas import __version__
     from arvcas.controllers.gains import DOFS
-    from arvcas.metrics import norm_name
+    from arvcas.metrics.indices import norm_name
 
     say = say or (lambda msg: None)
     if samples < 2:

@@ -37,10 +37,10 @@ def output_files(out: str | Path, controllers, fmt: str = "png") -> list[Path]:
 def replay_knees(study_dir: str | Path, out: str | Path, say=print, fmt: str = "png") -> dict:
     """Replay every front's knee; write ``knee_<controller>.h5``, ``knees.md`` and three figures (``fmt``:
     png, pdf or svg)."""
-    from arvcas.io import files, results
+    from arvcas.io import files, results, style
     from arvcas.io.plots import plot_errors, plot_states
     from arvcas.model import thrusters
-    from arvcas.params import view
+    from arvcas.system.params import view
     from arvcas.sim.scenario import loads_scenario
     from arvcas.sim.simulation import simulate
     from arvcas.tuning import checkpoint as ck
@@ -68,11 +68,11 @@ def replay_knees(study_dir: str | Path, out: str | Path, say=print, fmt: str = "
         runs.append(r)
     lo, hi = thrusters.envelope(view(system))
     name = system.structure.name
-    files.write_figure(out / f"knees_states.{fmt}",
+    style.write_figure(out / f"knees_states.{fmt}",
                        plot_states(runs, title=f"Vehicle states at the fronts' knees ({name})"), fmt)
-    files.write_figure(out / f"knees_errors.{fmt}",
+    style.write_figure(out / f"knees_errors.{fmt}",
                        plot_errors(runs, title=rf"State errors $e = \eta - y_1$ at the fronts' knees ({name})"), fmt)
-    files.write_figure(out / f"knees_thrust.{fmt}", _thrust_figure(runs), fmt)
+    style.write_figure(out / f"knees_thrust.{fmt}", _thrust_figure(runs), fmt)
     files.write_text(out / "knees.md", _table(rows, system, lo, hi))
     return {c: r for c, *_, r in rows}
 

@@ -41,9 +41,9 @@ import numpy as np
 
 from arvcas.build import codegen
 from arvcas.controllers import gains as gains_mod
-from arvcas import metrics
+from arvcas.metrics import indices as metrics
 from arvcas.sim import scenario
-from arvcas.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
 from arvcas.io import style
 from arvcas.io.results import ResultsError
 from arvcas.sim.scenario import ScenarioConfig

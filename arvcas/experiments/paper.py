@@ -23,7 +23,7 @@ import numpy as np
 
 from arvcas import metrics
 from arvcas.controllers import gains as gains_mod
-from arvcas.io import files as _files, plots, results
+from arvcas.io import files as _files, plots, results, style
 from arvcas.sim import scenario
 from arvcas.io.results import ResultsError
 from arvcas.sim.scenario import ScenarioConfig
@@ -325,7 +325,7 @@ def run_paper(out_dir, seed: int = 0, progress: Callable[[str], None] | None = p
     }
     for name in FIGURE_FILES:
         fig = makers[name]()
-        files[name] = _files.write_figure(out / f"{name}.{fmt}", fig, fmt, ResultsError)
+        files[name] = style.write_figure(out / f"{name}.{fmt}", fig, fmt, ResultsError)
         say(f"  figure -> {files[name]}")
     if ekf_study:
         say("EKF process-noise study (docs/model.md §4: its effect on CHAT and RMSE) ...")

@@ -37,10 +37,10 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from arvcas.controllers import gains as gains_mod
-from arvcas import metrics
+from arvcas.metrics import indices as metrics
 from arvcas.sim import scenario
 from arvcas.io import style
-from arvcas.params import SCHEMA as PARAM_SCHEMA
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA
 from arvcas.sim.simulation import simulate_many
 from arvcas.experiments import _io
 from arvcas.experiments.montecarlo import CHUNK, DRAW_RULE, Draws, draw

@@ -36,9 +36,9 @@ from matplotlib.figure import Figure
 from arvcas.controllers import gains as gains_mod
 from arvcas.io import style
 from arvcas.io.plots import controller_color
-from arvcas import metrics
+from arvcas.metrics import indices as metrics
 from arvcas.sim import scenario
-from arvcas.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.sim.simulation import simulate
 from arvcas.experiments import _io

@@ -79,7 +79,7 @@ class _Design:
     gains: np.ndarray
     gains_source: str
     cfg: ScenarioConfig
-    params: object  # arvcas.params.Params
+    params: object  # arvcas.system.params.Params
     prefix: str
 
     @property

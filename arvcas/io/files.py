@@ -11,7 +11,7 @@ Output directories (:func:`check_dir`, :func:`prepare_dir`, :func:`target`)
     An output directory must exist (or be creatable in an existing parent) and be writable; a
     directory without any write permission bit counts as read-only also for root.
 
-Writing (:func:`atomic_write`, :func:`write_text`, :func:`write_figure`)
+Writing (:func:`atomic_write`, :func:`write_text`; figures: :func:`arvcas.io.style.write_figure`)
     A file is built under a temporary name ``.<name>.arvcas-tmp-<pid>-<random>`` in its
     directory, fsync'ed and renamed over the final name (``os.replace``): an interrupted or failed
     write leaves the previous file untouched and no partial file under the final name. The temporary
@@ -52,7 +52,7 @@ from pathlib import Path
 
 __all__ = [
     "FileError", "Terminated", "MAX_TEXT_BYTES", "TMP_MARK", "MANIFEST", "check_input", "read_bytes", "read_text",
-    "check_dir", "prepare_dir", "target", "atomic_write", "write_text", "write_figure", "remove_stale_temps",
+    "check_dir", "prepare_dir", "target", "atomic_write", "write_text", "remove_stale_temps",
     "install_signal_handlers", "written_by_arvcas", "hdf5_format", "permit_replace", "check_outputs", "same_file",
 ]
 
@@ -369,18 +369,6 @@ def atomic_write(path, write: Callable[[Path], None], error: type[ValueError] = 
 def write_text(path, text: str, error: type[ValueError] = FileError) -> Path:
     """UTF-8 text, written atomically."""
     return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"), error)
-
-
-def write_figure(path, fig, fmt: str | None = None, error: type[ValueError] = FileError) -> Path:
-    """A matplotlib figure, written atomically in ``fmt`` (``png``, ``pdf`` or ``svg``; default: from the
-    name's suffix) in the house style's settings (:func:`arvcas.io.style.save`)."""
-    from arvcas.io import style
-
-    try:
-        fmt = style.figure_format(path, fmt)
-    except ValueError as e:
-        raise error(str(e)) from None
-    return atomic_write(path, lambda p: style.save(fig, p, fmt), error)
 
 
 def remove_stale_temps(d) -> list[Path]:

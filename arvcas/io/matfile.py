@@ -32,7 +32,7 @@ import numpy as np
 
 from arvcas import __version__
 from arvcas.controllers import gains as gains_mod
-from arvcas.params import SCHEMA as PARAM_SCHEMA
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA
 
 __all__ = ["write_result_mat", "write_front_mat", "result_variables", "front_variables", "MatError"]
 
@@ -94,7 +94,7 @@ def front_variables(front) -> tuple[dict, dict, dict, dict]:
            "table2_F": _row(front.table2_F), "reference_point": _row(front.reference_point),
            "hypervolume": float(front.hv), "controller": str(front.controller), "study": str(front.study_name),
            "seed": float(front.seed), "draw_seeds": _row(front.draw_seeds)}
-    from arvcas.metrics import defaults_name, norm_name
+    from arvcas.metrics.indices import defaults_name, norm_name
 
     units = {"F": f"1 (normalised by {norm_name(front.system)})", "G": "1", "gains": "gain units (see gain_names)",
              "X": "log10 of gain units", "chat": "N or N m per controller sample", "rmse": "m or rad",

@@ -3,7 +3,7 @@
 
 Every function takes results, an optional ``fig`` (an empty :class:`matplotlib.figure.Figure`
 to draw into) and ``title``, and returns the Figure; nothing here calls ``pyplot`` (no global figure
-registry, no ``show``): write it with :func:`arvcas.io.files.write_figure` (PNG, PDF or SVG). Figures
+registry, no ``show``): write it with :func:`arvcas.io.style.write_figure` (PNG, PDF or SVG). Figures
 are drawn in the house style (:mod:`arvcas.io.style`: page width, journal font sizes, the
 colour-blind-safe palette; dense noisy series as min-max bands). Titles name no paper figure; `arvcas
 paper` passes its own ("(Fig. 5)"). Figures with one panel per DOF have six axes in 3 rows x 2 columns:
@@ -35,9 +35,9 @@ from matplotlib.figure import Figure
 
 from arvcas.controllers import gains as gains_mod
 from arvcas.io import style
-from arvcas.params import SCHEMA as PARAM_SCHEMA
-from arvcas.params import load as load_params
-from arvcas.systemfile import HAIDOU1_THRUSTERS
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA
+from arvcas.system.params import load as load_params
+from arvcas.system.systemfile import HAIDOU1_THRUSTERS
 
 __all__ = [
     "plot_states", "plot_errors", "plot_thrusts", "plot_sliding", "plot_gains", "plot_zigzag",

@@ -38,7 +38,7 @@ import numpy as np
 
 from arvcas.controllers import gains as gains_mod
 from arvcas.io import files
-from arvcas.params import SCHEMA as PARAM_SCHEMA
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA
 from arvcas.sim.signals import Signal
 from arvcas.sim.simulation import Result
 

@@ -3,7 +3,7 @@ a colour-blind-safe palette, how dense noisy series are drawn, and the formats a
 
 Every figure function of arvcas draws inside :func:`styled` (a decorator: matplotlib's ``rc_context``
 around the function, so nothing global changes) into a Figure from :func:`figure`, and is written by
-:func:`arvcas.io.files.write_figure` in one of :data:`FORMATS`.
+:func:`write_figure` (atomically, through :func:`arvcas.io.files.atomic_write`) in one of :data:`FORMATS`.
 
 * **Sizes.** A single journal column is 3.5 in (88-90 mm: Elsevier 90 mm, IEEE and MDPI 88.9 mm), a
   full page width 7.16 in (182 mm). Text is set at 8 pt (tick labels and legends 7 pt), the size
@@ -33,8 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
+from arvcas.io import files
+
 __all__ = ["COLUMN_WIDTH", "PAGE_WIDTH", "PALETTE", "FORMATS", "PNG_DPI", "RC", "styled", "figure", "color",
-           "trace", "log_labels", "figure_format", "save"]
+           "trace", "log_labels", "figure_format", "save", "write_figure"]
 
 COLUMN_WIDTH = 3.5  # in: one journal column (88-90 mm)
 PAGE_WIDTH = 7.16  # in: the full text width of a two-column page (182 mm)
@@ -224,3 +226,13 @@ def save(fig, path, fmt: str) -> None:
             "svg": {"Creator": f"arvcas {__version__}", "Date": None}}[fmt]
     with matplotlib.rc_context(_rc()):
         fig.savefig(path, format=fmt, dpi=PNG_DPI if fmt == "png" else None, metadata=meta)
+
+
+def write_figure(path, fig, fmt: str | None = None, error: type[ValueError] = files.FileError) -> Path:
+    """A matplotlib figure, written atomically (:func:`arvcas.io.files.atomic_write`) in ``fmt`` (``png``,
+    ``pdf`` or ``svg``; default: from the name's suffix) by :func:`save`."""
+    try:
+        fmt = figure_format(path, fmt)
+    except ValueError as e:
+        raise error(str(e)) from None
+    return files.atomic_write(path, lambda p: save(fig, p, fmt), error)

@@ -35,7 +35,7 @@ from arvcas.controllers import atd, gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model import manipulator, thrusters, vehicle
 from arvcas.sim import scenario, schedule, signals as signals_mod
-from arvcas.params import Layout as ParamLayout, default_layout, view
+from arvcas.system.params import Layout as ParamLayout, default_layout, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.spatial import J, J_dot, J_inv
 from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled

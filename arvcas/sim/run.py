@@ -32,8 +32,9 @@ from arvcas.build import calls, codegen
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model.uvms import ModelOptions
-from arvcas.params import Params, default_layout, system_tag
+from arvcas.system.params import Params, default_layout, system_tag
 from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
+from arvcas.sim.result import Result
 from arvcas.sim.scenario import ScenarioConfig
 
 __all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS"]
@@ -51,7 +52,7 @@ class Run:
 
     ``controller``: a registered name or a :class:`~arvcas.controllers.Controller`; ``scenario``: a
     :class:`~arvcas.sim.scenario.ScenarioConfig`, a scenario file, or None (the system's default);
-    ``params``: the system: :class:`~arvcas.params.Params`, an :class:`arvcas.system.System`, a shipped
+    ``params``: the system: :class:`~arvcas.system.params.Params`, an :class:`arvcas.system.System`, a shipped
     system's name (``arvcas systems``), a system file, or None (Haidou-1);
     ``options``: :class:`~arvcas.model.uvms.ModelOptions`.
     """
@@ -177,8 +178,6 @@ class CompiledRun:
         ``noise_scale`` multiplies the drawn sensor noise (0: perfect measurements) while the EKF keeps
         the nominal sensor covariance: an analysis knob for how much noise reaches the thrusters.
         """
-        from arvcas.sim.simulation import Result
-
         g = self._gains(gains, batch=False)
         if not (isinstance(noise_scale, (int, float)) and np.isfinite(noise_scale) and noise_scale >= 0):
             raise SimulationError(f"noise_scale: must be a finite number >= 0, got {noise_scale!r}")

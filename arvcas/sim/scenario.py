@@ -17,8 +17,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from arvcas import config, tomlfile
-from arvcas.config import ge, gt, le, quantity
+from arvcas.system import config, tomlfile
+from arvcas.system.config import ge, gt, le, quantity
 
 __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",

@@ -34,7 +34,7 @@ from arvcas.build import calls, codegen
 from arvcas.model import manipulator, vehicle
 from arvcas.sim import scenario
 from arvcas.model.linalg import lu_nopivot, lu_pack, lu_unpack
-from arvcas.params import default_layout, system_tag, view
+from arvcas.system.params import default_layout, system_tag, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.uvms import ModelOptions
 

@@ -267,7 +267,7 @@ DATASET_DOC: dict[str, tuple[str, str]] = {
     "draws/noise_seed": ("", "sensor-noise seed of each draw"),
     "draws/uncertainty": ("1", "nominal-model factors [C, D, g, arm] of each draw"),
     "draws/phase": ("rad", "disturbance phases of each draw (6 DOF)"),
-    "params": ("SI units of arvcas.params.SCHEMA, in its order", "parameter vector the runs used"),
+    "params": ("SI units of arvcas.system.params.SCHEMA, in its order", "parameter vector the runs used"),
     "X": ("log10 of the gain units", "decision vectors: log10 of the gains"),
     "gains": (_GAIN_UNITS, "gains = 10 ** X, the values the runs used"),
     "F": ("1", "objectives " + _OBJ + "; NaN when infeasible"),
@@ -294,7 +294,7 @@ DATASET_DOC: dict[str, tuple[str, str]] = {
 def _doc(ds: h5py.Dataset, system: str = "") -> None:
     """``units`` and ``description`` of a dataset, from :data:`DATASET_DOC`; for another system than
     Haidou-1 (``system``) the paper's tables are named as that system's defaults and normalisation."""
-    from arvcas.metrics import defaults_name, norm_name
+    from arvcas.metrics.indices import defaults_name, norm_name
 
     name = ds.name.lstrip("/")
     group, _, leaf = name.rpartition("/")

@@ -19,7 +19,7 @@ __all__ = ["add_tune", "check_tune", "run_tune", "add_front_export", "run_front_
 
 
 def add_tune(p: argparse.ArgumentParser) -> None:
-    from arvcas.cli import count_arg, seconds_arg
+    from arvcas.io.cliargs import count_arg, seconds_arg
 
     p.add_argument("study", type=Path, help="study file (TOML), e.g. studies/quick.toml")
     p.add_argument("--out", type=Path, required=True, metavar="DIR",
@@ -45,7 +45,7 @@ def add_tune(p: argparse.ArgumentParser) -> None:
 
 def check_tune(a: argparse.Namespace) -> None:
     """Options that do not apply (the study's engine is checked in :func:`run_tune`, once it is read)."""
-    from arvcas.cli import refuse
+    from arvcas.io.cliargs import refuse
 
     if not a.resume:
         refuse(a, ("allow_model_change",), "only with --resume")
@@ -108,7 +108,7 @@ def add_front_export(e: argparse.ArgumentParser) -> None:
 
 
 def add_front_plot(pl: argparse.ArgumentParser) -> None:
-    from arvcas.cli import add_figure_format
+    from arvcas.io.cliargs import add_figure_format
 
     pl.add_argument("file", type=Path, help="front.h5 (or a study output directory)")
     pl.add_argument("--out", type=Path, default=None, metavar="FIGURE",
@@ -146,7 +146,7 @@ def run_front_export(a: argparse.Namespace) -> int:
 
 
 def front_plot_outputs(a: argparse.Namespace) -> list:
-    from arvcas.cli import figure_file
+    from arvcas.io.cliargs import figure_file
     from arvcas.tuning.front import resolve_front_path
 
     out = a.out if a.out is not None else resolve_front_path(a.file).with_suffix(f".{a.format or 'png'}")
@@ -155,15 +155,15 @@ def front_plot_outputs(a: argparse.Namespace) -> list:
 
 
 def run_front_plot(a: argparse.Namespace) -> int:
-    from arvcas.cli import figure_file
-    from arvcas.io import files
+    from arvcas.io.cliargs import figure_file
+    from arvcas.io import files, style
     from arvcas.tuning.front import plot_front, read_front
 
     fr = read_front(a.file)
     out = front_plot_outputs(a)[0][1]
     files.target(out, f"--out {out}")
     fig = plot_front(fr, paper=a.paper)
-    files.write_figure(out, fig, figure_file(out, a.format, f"--out {out}"))
+    style.write_figure(out, fig, figure_file(out, a.format, f"--out {out}"))
     k = fr.knee()
     print(f"{fr.controller}: {fr.size} on the front, HV {fr.hv:.6g}; knee: member {k} "
           f"(f_chat {fr.F[k, 0]:.4g}, f_rmse {fr.F[k, 1]:.4g}); wrote {out}")
@@ -174,7 +174,7 @@ def run_front_plot(a: argparse.Namespace) -> int:
 
 
 def add_compare(p: argparse.ArgumentParser) -> None:
-    from arvcas.cli import add_figure_format
+    from arvcas.io.cliargs import add_figure_format
 
     p.add_argument("fronts", type=Path, nargs="+", metavar="DIR",
                    help="two or more study output directories or front.h5 files (or two Monte Carlo or robust-front "
@@ -192,8 +192,8 @@ def add_compare(p: argparse.ArgumentParser) -> None:
 
 def run_compare(a: argparse.Namespace) -> int:
     """Two or more fronts (``compare`` on Monte Carlo files is :func:`arvcas.experiments.cli.run_compare`)."""
-    from arvcas.cli import figure_file
-    from arvcas.io import files
+    from arvcas.io.cliargs import figure_file
+    from arvcas.io import files, style
     from arvcas.tuning.compare import compare_fronts, format_comparison
     from arvcas.tuning.front import check_same_model, plot_fronts, read_front
 
@@ -221,6 +221,6 @@ def run_compare(a: argparse.Namespace) -> int:
         hv = " vs ".join(f"{h:.4g}" for h in c.hv)
         fig.axes[0].set_title(f"{' vs '.join(c.labels)}: HV {hv} (ref {c.reference_point[0]:g}, "
                               f"{c.reference_point[1]:g})", fontsize=7)
-        files.write_figure(a.plot, fig, fmt)
+        style.write_figure(a.plot, fig, fmt)
         print(f"wrote {a.plot}")
     return 0

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arvcas.params import Params
+from arvcas.system.params import Params
 from arvcas.sim.scenario import ScenarioConfig
 
 __all__ = ["EngineError", "EvalTask", "evaluate_rows", "run_key", "ship_bundle", "LocalEngine", "DaskEngine",

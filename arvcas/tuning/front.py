@@ -306,7 +306,7 @@ def plot_front(front: Front | str | Path, ax=None, **kw):
 
 def system_params(c: ck.Checkpoint):
     """The parameters of the system a checkpoint's study ran on (Haidou-1's when it names none)."""
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.system import load_system
 
     return load_system(c.system).params if c.system else load()
@@ -314,7 +314,7 @@ def system_params(c: ck.Checkpoint):
 
 def check_provenance(path: str | Path, params, allow: bool, what: str) -> str:
     """Refuse to re-run a front's members under other model code, data or parameters (``params``: a
-    :class:`arvcas.params.Params` or its vector) than the study's: the stored numbers would not be
+    :class:`arvcas.system.params.Params` or its vector) than the study's: the stored numbers would not be
     reproduced. With ``allow`` returns what differs (empty if nothing), for the output to record."""
     path = resolve_front_path(path)
     c = ck.read_checkpoint(path)
@@ -386,7 +386,7 @@ def replay(path: str | Path, index: int, n_threads: int | None = None):
 
     Returns the :class:`~arvcas.tuning.problem.Evaluation` of that one member (F, G, per-DOF metrics).
     """
-    from arvcas.params import Params
+    from arvcas.system.params import Params
     from arvcas.sim.scenario import loads_scenario
     from arvcas.tuning.engines import EvalTask, LocalEngine
     from arvcas.tuning.run import evaluate_gains

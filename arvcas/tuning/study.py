@@ -6,7 +6,7 @@ stop, the objectives and the reference point of the hypervolume, the draws every
 evaluated on (common random numbers), and the engine. Every key is checked before any work:
 an unknown key (with the closest valid name), a missing key, a wrong type or a value out of range
 is a one-line :class:`StudyError` naming the file and the key. The schema is the dataclasses below
-(:mod:`arvcas.config`: each field's type and rule beside it), with upper bounds on every size a study
+(:mod:`arvcas.system.config`: each field's type and rule beside it), with upper bounds on every size a study
 asks for (``MAX_*``) and on the memory of one generation's tables.
 
 Layout (see ``studies/*.toml`` for commented examples)::
@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from arvcas import config, tomlfile
-from arvcas.config import Choices, Count, Equals, Invalid, Unique, ge, gt, le, quantity, setting
+from arvcas.system import config, tomlfile
+from arvcas.system.config import Choices, Count, Equals, Invalid, Unique, ge, gt, le, quantity, setting
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim import scenario as scenario_mod
 
@@ -54,7 +54,7 @@ OBJECTIVES = ("chat", "rmse")
 ALGORITHMS = ("nsga2",)
 
 # Sizes a study may ask for (each is a rule on its field; the tables of one generation are also held
-# under arvcas.config.MEMORY_CAP_BYTES, see _check_memory).
+# under arvcas.system.config.MEMORY_CAP_BYTES, see _check_memory).
 MAX_POPULATION = 100_000  # candidates of one generation (population, offspring)
 MAX_GENERATIONS = 1_000_000  # a checkpoint keeps a history row per generation
 MAX_GENERATIONS_PER_VARIABLE = 10_000  # x 66 gains = 660,000 generations
@@ -68,7 +68,7 @@ class StudyError(ValueError):
     """One-line error naming the study file and the key at fault."""
 
 
-# ---- dataclasses (each field's rule beside it: arvcas.config) --------------------------------------
+# ---- dataclasses (each field's rule beside it: arvcas.system.config) --------------------------------------
 
 
 @dataclass(frozen=True)
@@ -211,7 +211,7 @@ class Study:
         """The parameters the study's runs use (its system's; Haidou-1's by default)."""
         if self.params is not None:
             return self.params
-        from arvcas.params import load
+        from arvcas.system.params import load
 
         return load()
 
@@ -295,7 +295,7 @@ def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | N
     f = config.load_text(_StudyFile, text, where, StudyError).value
     params = None
     if f.evaluation.system is not None:
-        from arvcas.params import ParamsError
+        from arvcas.system.params import ParamsError
         from arvcas.system import shipped, load_system
 
         ref = f.evaluation.system

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Generic, Mapping, TypeVar
 
-from arvcas import tomlfile
+from arvcas.system import tomlfile
 
 __all__ = [
     "UNITS", "DIMENSIONS", "SI", "MEMORY_CAP_BYTES", "Invalid", "Bound", "gt", "ge", "lt", "le",
@@ -190,7 +190,7 @@ class Spec:
     per: str | None = None  # a quantity per step, per sample...: its unit may end in " per <per>"
 
 
-_META = "arvcas.config"
+_META = "arvcas.system.config"
 
 
 def _field(spec: Spec, default: Any, default_factory: Any) -> Any:
@@ -442,7 +442,7 @@ class _Ctx:
 
 def load_file(cls: type[T], path: str | Path, error: type[Exception], *, entries: bool = False,
               what: str = "file") -> Loaded[T]:
-    """Read (:func:`arvcas.tomlfile.read_text`), parse and load a TOML file into ``cls``."""
+    """Read (:func:`arvcas.system.tomlfile.read_text`), parse and load a TOML file into ``cls``."""
     p = Path(path)
     return load_text(cls, tomlfile.read_text(p, error, what), str(p), error, entries=entries)
 
@@ -722,4 +722,4 @@ def check_memory(nbytes: float, what: str, where: str, key: str, error: type[Exc
     """Refuse a request whose tables would exceed :data:`MEMORY_CAP_BYTES` (one line, before any work)."""
     if nbytes > MEMORY_CAP_BYTES:
         raise error(f"{where}: {key}: {what} would need about {format_bytes(nbytes)}, more than the "
-                    f"{format_bytes(MEMORY_CAP_BYTES)} cap (arvcas.config.MEMORY_CAP_BYTES)")
+                    f"{format_bytes(MEMORY_CAP_BYTES)} cap (arvcas.system.config.MEMORY_CAP_BYTES)")

@@ -3,7 +3,7 @@
 A system file describes one vehicle, its thrusters and its arm. Its *structure* (which hydrodynamic
 terms, how many thrusters and joints, which arm form) decides the shape of the compiled code; its
 *numbers* are runtime parameters. :func:`structure_of` reads the structure from the parsed document
-and :func:`schema_for` builds the strict schema (:mod:`arvcas.config` dataclasses) of exactly that
+and :func:`schema_for` builds the strict schema (:mod:`arvcas.system.config` dataclasses) of exactly that
 structure, so the numbers load with the one configuration loader: units, rules, closest-name hints.
 """
 
@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from arvcas import config
-from arvcas.config import ge, gt, quantity
+from arvcas.system import config
+from arvcas.system.config import ge, gt, quantity
 
 __all__ = [
     "HydroTerm", "Structure", "parse_term", "structure_of", "schema_for", "MAX_JOINTS", "VECTOR_ELEMENTS",

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from arvcas import config, systemfile
+from arvcas.system import config, systemfile
 
 __all__ = ["convert", "SUPPORTED_JOINTS"]
 

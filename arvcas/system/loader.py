@@ -1,6 +1,6 @@
 """Systems: a vehicle, its thrusters and its arm, described by one data file (docs/system-file.md).
 
-``load_system(name_or_path)`` gives a :class:`System`: its name, its validated :class:`arvcas.params.Params`
+``load_system(name_or_path)`` gives a :class:`System`: its name, its validated :class:`arvcas.system.params.Params`
 and the structure that sizes the compiled functions (``n_thrusters``, ``n_joints``). The shipped
 systems are the files named in :data:`SHIPPED` under ``arvcas/data/``; ``arvcas systems`` lists them.
 """
@@ -11,8 +11,8 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
-from arvcas import params as params_mod
-from arvcas.params import Params, ParamsError
+from arvcas.system import params as params_mod
+from arvcas.system.params import Params, ParamsError
 
 __all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT"]
 
@@ -68,8 +68,8 @@ def shipped() -> dict[str, Path]:
 def load_system(name_or_path: str | Path | None = None) -> System:
     """A shipped system by name (``arvcas systems``) or a system file by path (default: Haidou-1).
 
-    A one-line :class:`arvcas.params.ParamsError` for an unknown name (with the closest shipped one)
-    and for every fault of the file (:func:`arvcas.params.load`).
+    A one-line :class:`arvcas.system.params.ParamsError` for an unknown name (with the closest shipped one)
+    and for every fault of the file (:func:`arvcas.system.params.load`).
     """
     if name_or_path is None:
         name_or_path = DEFAULT
@@ -78,7 +78,7 @@ def load_system(name_or_path: str | Path | None = None) -> System:
         return System(params_mod.load(ships[name_or_path]))
     p = Path(name_or_path)
     if isinstance(name_or_path, str) and p.suffix.lower() not in (".toml",) and not p.exists():
-        from arvcas.config import closest
+        from arvcas.system.config import closest
 
         raise ParamsError(f"system {name_or_path!r}: neither a shipped system ({', '.join(ships)}) nor a "
                           f"system file{closest(name_or_path, ships, 0.3)}")

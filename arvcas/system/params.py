@@ -1,7 +1,7 @@
 """Model parameters: load and validate ``data/haidou1.toml`` into an immutable :class:`Params`.
 
 Every physical number of the model lives in that one file, each with its unit and its source. The
-file's schema is the dataclasses below (:mod:`arvcas.config`: dimension and rule beside each field);
+file's schema is the dataclasses below (:mod:`arvcas.system.config`: dimension and rule beside each field);
 the loader converts to SI (mm -> m, deg -> rad) and then checks that the numbers describe a physical
 vehicle (:func:`check_physical`). ``Params.vector()`` is the runtime input ``p`` of every compiled
 function, in the order of ``Params.names()``; model code reads it through :func:`view`, so changing
@@ -19,7 +19,7 @@ from typing import Any, Iterator, Mapping
 
 import numpy as np
 
-from arvcas import config, systemfile, tomlfile
+from arvcas.system import config, systemfile, tomlfile
 
 __all__ = ["Params", "ParamsError", "Layout", "load", "view", "layout_for", "default_layout", "SCHEMA", "UNITS",
            "default_path", "check_physical"]
@@ -43,12 +43,12 @@ def _rule_name(spec: config.Spec) -> str:
 class Layout:
     """The parameter vector of one system structure: names in order, dimension and sign rule of each.
 
-    ``structure`` (:class:`arvcas.systemfile.Structure`) is what the model code reads to shape its
+    ``structure`` (:class:`arvcas.system.systemfile.Structure`) is what the model code reads to shape its
     graphs; the numbers are the runtime vector ``p`` in the order of ``names``.
     """
 
     structure: systemfile.Structure
-    schema: type  # the strict file schema (arvcas.config dataclasses)
+    schema: type  # the strict file schema (arvcas.system.config dataclasses)
     names: tuple[str, ...]
     dims: tuple[str, ...]
     rules: tuple[str, ...]
@@ -108,7 +108,7 @@ def default_layout() -> Layout:
 def __getattr__(name: str) -> Any:
     if name == "SCHEMA":  # name -> (dimension, sign rule) of the default system, in vector order
         return default_layout().schema_dict()
-    raise AttributeError(f"module 'arvcas.params' has no attribute '{name}'")
+    raise AttributeError(f"module '{__name__}' has no attribute '{name}'")
 
 
 @dataclass(frozen=True)
@@ -192,7 +192,7 @@ def read_doc(path: Path) -> tuple[dict, str]:
     doc = tomlfile.parse(tomlfile.read_text(path, ParamsError), where, ParamsError)
     arm = doc.get("arm")
     if isinstance(arm, dict) and "urdf" in arm:
-        from arvcas import urdf
+        from arvcas.system import urdf
 
         doc = urdf.convert(doc, path, ParamsError)
     return doc, where
@@ -366,7 +366,7 @@ def view(p: Any, layout: Layout | None = None) -> Mapping[str, Any]:
     """Name-based access to a parameter vector of any type (CasADi SX/MX/DM, NumPy, Params).
 
     Model functions take this view, so one implementation builds graphs and evaluates numbers. The
-    view's ``s`` is the system's :class:`arvcas.systemfile.Structure` (default: Haidou-1's).
+    view's ``s`` is the system's :class:`arvcas.system.systemfile.Structure` (default: Haidou-1's).
     """
     if isinstance(p, Params):
         layout = layout or p.layout
