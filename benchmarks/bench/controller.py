@@ -1,29 +1,29 @@
-"""Time per step of the exported controller (``arvcas export-controller``): the budget on a vehicle's computer.
+"""Section 7: the exported controller's time per step (``arvcas export-controller``): the budget on a
+vehicle's computer.
 
-For each shipped system and each of the proposed law, AGSTA and PID, the controller is exported, its
-library built by its own Makefile (the flags of arvcas's build cache, no ``-mavx``: a vehicle's
-computer may lack it), and a small C driver generated here links it and calls ``<prefix>step`` on the
-measurements of the system's default scenario (a compiled run's true states plus the run's sensor
-noise, seed 0), resetting the controller after each pass over them, so the first-sample branch is
-in the mix once per run as on a vehicle. Reported: ns per step (median, min, max over repetitions),
-the CasADi instructions of a step k >= 1 (the machine-independent size of the work), the state's size
-in bytes, and ``init``'s time.
+Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
 
-A section of ``arvcas bench`` (:func:`bench_controller_step` returns the JSON part, :func:`markdown`
-the lines of bench.md); ``python -m benchmarks.controller_step`` runs it alone and prints the table.
+For each shipped system with a scenario and gains of its own and each of the proposed law, AGSTA and PID
+(``--quick``: Haidou-1's proposed law only), the controller is exported, its library built by its own
+Makefile (the flags of arvcas's build cache, no ``-mavx``: a vehicle's computer may lack it), and a small
+C driver generated here links it and calls ``<prefix>step`` over one run's measurements (the scenario's
+initial state plus its sensor noise, seed 0: the step's work does not depend on the values, CasADi
+evaluates both sides of every branch), resetting the controller after each pass, so the first-sample
+branch is in the mix once per run as on a vehicle. Reported: ns per step (median, min, max over the
+repetitions), the CasADi instructions of a step k >= 1 (the machine-independent size of the work), the
+state's size in bytes and ``init``'s time.
 """
 
 from __future__ import annotations
 
 import statistics
 import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["bench_controller_step", "markdown", "LAWS"]
+from benchmarks.bench.common import Settings, _stat
 
 LAWS = ("proposed", "agsta", "pid")
 
@@ -83,37 +83,28 @@ int main(int argc, char** argv) {
 """
 
 
-def _stat(xs: list[float]) -> dict:
-    return {"median": statistics.median(xs), "min": min(xs), "max": max(xs), "n": len(xs)}
-
-
-def _measurements(system: str, law: str) -> np.ndarray:
-    """(K, 12) measured [eta; nu] of the system's default scenario: a compiled run's true states plus
-    its sensor noise (seed 0)."""
-    import arvcas
-    from arvcas.sim import scenario
-
-    run = arvcas.Run(law, params=system).compile()
-    r = run.simulate(seed=0)
-    return np.hstack([r.eta, r.nu]) + scenario.noise_sequence(run.cfg, 0).T
-
-
-def bench_controller_step(reps: int = 7, steps: int = 200_000, systems=None, laws=LAWS, log=print) -> dict:
-    """``{system: {law: {"ns_per_step": stat, "init_ns", "state_bytes", "n_steps"}}}`` (see the module docstring)."""
+def _bench_controller(s: Settings, log) -> dict:
+    """``{system: {law: {"ns_per_step": stat, "instructions_per_step", "init_ns", "state_bytes", ...}}}``."""
     from arvcas.build import codegen
     from arvcas.io.export_controller import default_prefix, export_controller
     from arvcas.sim import closedloop, scenario
     from arvcas.system import SHIPPED, load_system
 
+    quick = s.mode == "quick"
+    reps, steps = s.reps, (2_000 if quick else 200_000)
     out: dict = {}
     with tempfile.TemporaryDirectory(prefix="arvcas-bench-ctl-") as tmp:
-        for system in systems or SHIPPED:
-            if load_system(system).params.default("scenario") is None:  # a system for validation only
-                continue
+        for system in SHIPPED[:1] if quick else SHIPPED:
+            sysm = load_system(system)
+            if sysm.params.default("scenario") is None or sysm.params.default("gains") is None:
+                continue  # a system for validation only (hinsdale_bluerov2_alpha5)
+            cfg = scenario.load_scenario(sysm.params.default("scenario"))
+            y = (np.array(list(cfg.initial_eta0) + list(cfg.initial_nu0))[:, None] + scenario.noise_sequence(cfg, 0)).T
             out[system] = {}
-            for law in laws:
+            for law in LAWS[:1] if quick else LAWS:
                 d = Path(tmp) / f"{system}_{law}"
-                export_controller(d, law, params=system)
+                log(f"controller: {system} / {law} ...")
+                export_controller(d, law, params=sysm, scenario=cfg)
                 prefix = default_prefix(system, law)
                 lib = prefix.rstrip("_")
                 subprocess.run(["make", "-s", "-C", str(d), f"lib{lib}.so"], check=True, capture_output=True)
@@ -123,7 +114,6 @@ def bench_controller_step(reps: int = 7, steps: int = 200_000, systems=None, law
                 subprocess.run([codegen.CC, *flags, "-I", str(d), "-o", str(d / "driver"), str(d / "driver.c"),
                                 f"-L{d}", f"-l{lib}", f"-Wl,-rpath,{d}", *codegen.LIBS], check=True,
                                capture_output=True)
-                y = _measurements(system, law)
                 data = d / "y.bin"
                 data.write_bytes(np.array([y.shape[0]], dtype="<i8").tobytes() + np.ascontiguousarray(y, "<f8").tobytes())
                 r = subprocess.run([str(d / "driver"), str(data), str(steps), str(reps)], capture_output=True,
@@ -131,24 +121,24 @@ def bench_controller_step(reps: int = 7, steps: int = 200_000, systems=None, law
                 ns = [float(ln.split()[1]) for ln in r.stdout.splitlines() if ln.startswith("ns_per_step ")]
                 val = {ln.split()[0]: float(ln.split()[1]) for ln in r.stdout.splitlines()
                        if ln.startswith(("init_ns ", "state_bytes "))}
-                s_ = load_system(system)
-                fn = closedloop.controller_functions(law, scenario.load_scenario(s_.params.default("scenario")),
-                                                     s_.layout)["step"]
+                fn = closedloop.controller_functions(law, cfg, sysm.layout)["step"]
                 out[system][law] = {"ns_per_step": _stat(ns), "init_ns": val["init_ns"],
                                     "instructions_per_step": int(fn.n_instructions()),
                                     "state_bytes": int(val["state_bytes"]), "n_steps": steps, "run_samples": y.shape[0]}
-                log(f"controller step {system} / {law}: {statistics.median(ns):.0f} ns per step "
+                log(f"controller: {system} / {law}: {statistics.median(ns):.0f} ns per step "
                     f"(min {min(ns):.0f}), state {int(val['state_bytes'])} bytes")
     return out
 
 
-def markdown(res: dict) -> list[str]:
-    """The bench.md lines of the section."""
-    L = ["## Exported controller: time per step", "",
-         "`arvcas export-controller` for each system's defaults, built by the export's Makefile (arvcas's flags, "
-         "without `-mavx`), timed by a C driver over the measurements of the default scenario (reset after each "
-         "run: the first-sample branch included). One step = EKF, reference, law, allocation and saturation: "
-         "the budget on a vehicle's computer.", "",
+def _controller_markdown(res: dict | None) -> list[str]:
+    """The bench.md lines of the section (none for a bench.json written before it existed)."""
+    if not res:
+        return []
+    L = ["", "## 7. The exported controller: time per step (issue 24)", "",
+         "`arvcas export-controller` with each system's defaults, built by the export's Makefile (arvcas's flags, "
+         "without `-mavx`), timed by a C driver over one run's measurements (the initial state plus the scenario's "
+         "sensor noise; reset after each run: the first-sample branch included). One step = EKF, reference, law, "
+         "allocation and saturation: the budget on a vehicle's computer.", "",
          "| system | law | ns per step (median) | min | max | CasADi instructions per step | state bytes | init ns |",
          "|---|---|---|---|---|---|---|---|"]
     for system, laws in res.items():
@@ -156,9 +146,4 @@ def markdown(res: dict) -> list[str]:
             st = r["ns_per_step"]
             L.append(f"| {system} | {law} | {st['median']:.0f} | {st['min']:.0f} | {st['max']:.0f} | "
                      f"{r['instructions_per_step']:,} | {r['state_bytes']} | {r['init_ns']:.0f} |")
-    return L + [""]
-
-
-if __name__ == "__main__":
-    res = bench_controller_step(reps=int(sys.argv[1]) if len(sys.argv) > 1 else 7)
-    print("\n".join(markdown(res)))
+    return L
