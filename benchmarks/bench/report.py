@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 from benchmarks.bench.common import CONTROLLER, N_INPUT_SETS
+from benchmarks.bench.controller import _controller_markdown
 from benchmarks.bench.targets import STUDY_RUNS
 
 def _m(st) -> float:
@@ -290,6 +291,7 @@ def render_markdown(res: dict) -> str:
                      f"{r['substeps']} | {_g(_m(r['run_metrics_s']))} ({_spread(r['run_metrics_s'])}) | "
                      f"{r['rtf_metrics']:,.0f}x | {r['instructions_per_sample']:,} | {_g(r['instr_per_s'])} |")
     L += _identification_markdown(res.get("identification"))
+    L += _controller_markdown(res.get("controller"))
     L += ["", "## Recommendation", "", rec["text"], ""]
     return "\n".join(L)
 
