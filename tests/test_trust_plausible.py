@@ -85,11 +85,13 @@ def test_the_command_line_refuses_and_warns_in_one_line(tmp_path, capsys):
 
 
 def test_scenario_rules(tmp_path):
-    with pytest.raises(ScenarioError, match=r"payload.event\[1\].t: 70 s: this event starts at or after the run's "
-                                            r"end \(time.duration 60 s\)"):
+    from arvcas.sim.scenario import ScenarioWarning
+
+    with pytest.warns(ScenarioWarning, match=r"payload.event\[1\].t: 70 s: this event starts at or after the run's "
+                                             r"end \(time.duration 60 s\), so it changes nothing"):
         load_scenario(scenario_variant(tmp_path, 't = { value = 20.0, unit = "s"', 't = { value = 70.0, unit = "s"'))
-    with pytest.raises(ScenarioError, match=r"arm.waypoint\[4\].t: .* starts at or after the run's end"):
-        load_scenario(scenario_variant(tmp_path, 'duration = { value = 60.0,', 'duration = { value = 22.0,'))
+    with pytest.warns(ScenarioWarning, match=r"arm.waypoint\[4\].t: .* starts at or after the run's end"):
+        load_scenario(scenario_variant(tmp_path, 'duration = { value = 60.0,', 'duration = { value = 22.0,', "s2.toml"))
     line = 'eta_d = { value = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0], unit = "m,rad",'
     for new, want in (('eta_d = { value = [0.0, 0.0, 0.0, 0.0, 0.0, 720.0], unit = "m,m,m,deg,deg,deg",', 0.0),
                       ('eta_d = { value = [0.0, 0.0, 0.0, 0.0, 0.0, -190.0], unit = "m,m,m,deg,deg,deg",', 170.0)):

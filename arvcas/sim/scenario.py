@@ -276,8 +276,9 @@ def default_scenario_path() -> Path:
 def load_scenario(path: str | Path | None = None) -> ScenarioConfig:
     """Load and validate the scenario file; one-line :class:`ScenarioError` naming file and key.
 
-    A file's events must also happen before its run ends (:func:`_check_within_run`); texts stored in
-    result files (:func:`loads_scenario`) may be shortened copies of a file and are not held to that."""
+    An event of the file that starts at or after its run's end is warned (:class:`ScenarioWarning`,
+    :func:`_check_within_run`): it changes nothing, likely a slip of units or of ``time.duration``, but a
+    shortened copy of a scenario (``to_toml`` of a replaced duration) has such events on purpose."""
     p = Path(path) if path is not None else default_scenario_path()
     cfg = loads_scenario(tomlfile.read_text(p, ScenarioError), str(p))
     _check_within_run(cfg, str(p))
@@ -296,9 +297,22 @@ def _check_within_run(cfg: ScenarioConfig, where: str) -> None:
         late += [(f"arm.{k}", getattr(cfg, "arm_" + k)) for k in ("hold_until", "payload_on", "return_start")
                  if getattr(cfg, "arm_" + k) >= T]
     if late:
+        import warnings
+
         key, t = late[0]
-        raise ScenarioError(f"{where}: {key}: {t:g} s: this event starts at or after the run's end (time.duration "
-                            f"{T:g} s), so it would change nothing")
+        more = f" (and {len(late) - 1} more)" if len(late) > 1 else ""
+        msg = (f"{where}: {key}: {t:g} s: this event starts at or after the run's end (time.duration {T:g} s), so "
+               f"it changes nothing{more}")
+        if msg not in _WARNED:  # once per process
+            _WARNED.add(msg)
+            warnings.warn(msg, ScenarioWarning, stacklevel=3)
+
+
+class ScenarioWarning(UserWarning):
+    """A scenario file's number that is allowed but changes nothing (an event after the run's end)."""
+
+
+_WARNED: set[str] = set()
 
 
 def loads_scenario(text: str, where: str = "<scenario text>") -> ScenarioConfig:
