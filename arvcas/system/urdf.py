@@ -35,7 +35,7 @@ import numpy as np
 
 from arvcas.system import config, systemfile
 
-__all__ = ["convert", "arm_chain", "subtree", "ArmChain", "SUPPORTED_JOINTS", "LOCKABLE_JOINTS"]
+__all__ = ["convert", "arm_chain", "subtree", "parse", "ArmChain", "SUPPORTED_JOINTS", "LOCKABLE_JOINTS"]
 
 SUPPORTED_JOINTS = ("revolute", "continuous", "fixed")
 LOCKABLE_JOINTS = ("revolute", "continuous", "prismatic")
@@ -71,6 +71,17 @@ def _si(entry: Any, key: str, dim: str, n: int | None, where: str, error) -> Any
                                                          and math.isfinite(x) for x in v):
         raise error(f"{where}: {key}: expected {n} finite numbers, got {v!r}")
     return np.array(v, dtype=float) * fac
+
+
+def parse(text: str, where: str, error) -> ET.Element:
+    """The ``<robot>`` element of a URDF's text; one-line errors naming ``where``."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as e:
+        raise error(f"{where}: malformed XML: {e}") from None
+    if root.tag != "robot":
+        raise error(f"{where}: the root element is <{root.tag}>, a URDF has <robot>")
+    return root
 
 
 def limits(j: ET.Element) -> tuple[float, float] | None:
@@ -355,13 +366,7 @@ def convert(doc: dict, path: Path, error) -> dict:
     uwhere = str(upath)
     from arvcas.io.files import read_text
 
-    text = read_text(upath, "URDF file", error)
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as e:
-        raise error(f"{uwhere}: malformed XML: {e}") from None
-    if root.tag != "robot":
-        raise error(f"{uwhere}: the root element is <{root.tag}>, a URDF has <robot>")
+    root = parse(read_text(upath, "URDF file", error), uwhere, error)
     kinds = {j.get("name"): j.get("type") for j in root.findall("joint")}
     lock = arm.get("lock", {})
     if not isinstance(lock, dict):
