@@ -350,15 +350,14 @@ class _Body:
     second: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))  # tensor about the origin
 
 
-def _vehicle(r: _Robot, base: str, arm_base: str | None, locks: dict, error) -> tuple[_Body, list[str]]:
-    """The links rigid on ``base`` and the arm's first moving joints (the arm's boundary)."""
+def _vehicle(r: _Robot, base: str, arm_base: str | None, locks: dict, error) -> _Body:
+    """The links rigid on ``base`` (the arm's stop at its first moving joints) and their mass properties."""
     thruster_joints = {t[1] for t in r.thrusters}
     body = _Body({base: (np.eye(3), np.zeros(3))}, {base: "the base link"})
     arm_sub = set()
     if arm_base is not None:
         sub = urdf.subtree(r.root, arm_base, r.where, error)
         arm_sub = {e.get("name") for e in sub.findall("joint")}
-    boundary = []
     todo = [base]
     while todo:
         parent = todo.pop()
@@ -375,8 +374,7 @@ def _vehicle(r: _Robot, base: str, arm_base: str | None, locks: dict, error) -> 
             elif name in thruster_joints:
                 q, how = 0.0, f"thruster joint '{name}'"
             elif name in arm_sub:
-                boundary.append(name)
-                continue
+                continue  # the arm's first moving joint: the arm begins
             else:
                 hint = "" if arm_base is None else f" or below the arm's base '{arm_base}'"
                 raise error(f"{r.where}: joint '{name}' ({kind}) moves link '{child}' on the vehicle: it is no "
@@ -397,7 +395,7 @@ def _vehicle(r: _Robot, base: str, arm_base: str | None, locks: dict, error) -> 
         body.mass += m
         body.first += m * cb
         body.second += R @ Ic @ R.T + m * (cb @ cb * np.eye(3) - np.outer(cb, cb))
-    return body, boundary
+    return body
 
 
 # ---- writing ----------------------------------------------------------------------------------------------
@@ -505,6 +503,8 @@ def import_uuv(description: str | Path, *, name: str | None = None, base_link: s
     source (e.g. the repository and commit). Every input is checked before any work; faults are one line.
     """
     check_options(arm_base, tool_link, tool_offset, stow, max_thrust, thruster_manager, gravity, error)
+    if name is not None and not systemfile.NAME_RE.match(name):
+        raise error(f"--name {name!r}: must match [a-z][a-z0-9_]* (it names compiled code and files)")
     path = _description_file(Path(description), error)
     locks = dict(locks or {})
     roots = [Path(p) for p in ros_paths] or default_roots(path)
@@ -537,7 +537,7 @@ def import_uuv(description: str | Path, *, name: str | None = None, base_link: s
                     f"that produce every wrench (fins and rudders are not modelled)")
     limits = _thrust_limits(r, max_thrust, thruster_manager, error)
 
-    body, boundary = _vehicle(r, base, arm_base, locks, error)
+    body = _vehicle(r, base, arm_base, locks, error)
     notes: list[str] = []
     lines: list[str] = []
     T = T_FLU_FRD
