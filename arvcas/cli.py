@@ -39,8 +39,8 @@ Paths = Callable[[argparse.Namespace], list]
 @dataclass(frozen=True)
 class Command:
     """One command of the table. ``inputs``: ``(dest, kind[, what])`` of arguments that name input files
-    (kind ``"file"``, ``"system"``: a shipped system's name or a system file, or ``"front"``: a front.h5
-    or a study directory holding one; ``what`` names the file
+    (kind ``"file"``, ``"system"``: a shipped system's name or a system file, ``"front"``: a front.h5
+    or a study directory holding one, or ``"description"``: a file or a folder; ``what`` names the file
     in messages, default "file"); ``outputs``: the
     ``(label, path)`` files the command will write, from the parsed arguments; ``check``: raises
     ValueError for options that do not apply or requests too large, before any work."""
@@ -349,6 +349,125 @@ def _run_systems(a: argparse.Namespace) -> int:
     return 0
 
 
+# ---- import-system -------------------------------------------------------------------------------
+
+
+def _numbers(n: int | None, what: str):
+    """An argparse type: comma-separated finite numbers (``n`` of them, or any number >= 1)."""
+    def parse(text: str) -> list[float]:
+        try:
+            v = [float(x) for x in text.split(",")]
+        except ValueError:
+            v = []
+        if not v or (n is not None and len(v) != n) or not all(math.isfinite(x) for x in v):
+            raise argparse.ArgumentTypeError(f"{what}: expected {n or 'one or more'} comma-separated numbers, "
+                                             f"got {text!r}")
+        return v
+
+    return parse
+
+
+def _lock_arg(text: str) -> tuple[str, float]:
+    name, eq, value = text.rpartition("=")
+    try:
+        q = float(value)
+    except ValueError:
+        q = math.nan
+    if not eq or not name or not math.isfinite(q):
+        raise argparse.ArgumentTypeError(f"--lock: expected JOINT=POSITION (rad, or m for a prismatic joint), "
+                                         f"got {text!r}")
+    return name, q
+
+
+def _add_import_uuv(p: argparse.ArgumentParser) -> None:
+    p.add_argument("description", type=Path, metavar="DESCRIPTION",
+                   help="the robot's URDF or xacro file, or its description package's folder (its robots/ file "
+                        "named *default*)")
+    p.add_argument("--out", type=Path, required=True, metavar="FILE.toml", help="the system file to write")
+    p.add_argument("--name", default=None, help="the system's name (default: the URDF's robot name)")
+    p.add_argument("--base-link", default=None, metavar="LINK", help="the vehicle's link (default: the URDF's root)")
+    p.add_argument("--arm-base", default=None, metavar="LINK",
+                   help="import the arm from this link (rigid on the vehicle; its weight and buoyancy join the "
+                        "vehicle's) ...")
+    p.add_argument("--tool-link", default=None, metavar="LINK", help="... to this link (the chain's end)")
+    p.add_argument("--tool-offset", type=_numbers(3, "--tool-offset"), default=None, metavar="X,Y,Z",
+                   help="the tool point in --tool-link's frame, m (default: its origin)")
+    p.add_argument("--lock", action="append", type=_lock_arg, default=None, metavar="JOINT=POSITION",
+                   help="hold a joint at a position (rad; m for a prismatic joint), e.g. a gripper's finger; "
+                        "repeat for each")
+    p.add_argument("--stow", type=_numbers(None, "--stow"), default=None, metavar="Q1,Q2,...",
+                   help="the arm's stow pose, rad (default: its zero pose, clipped to the limits)")
+    p.add_argument("--thruster-manager", type=Path, default=None, metavar="YAML",
+                   help="uuv_simulator's thruster_manager.yaml: its max_thrust is the thrust limit")
+    p.add_argument("--max-thrust", type=float, default=None, metavar="N",
+                   help="the thrust limit, N (when the thruster plugins give no thrustMin/thrustMax)")
+    p.add_argument("--gravity", type=float, default=None, metavar="M_PER_S2",
+                   help="the world's gravity (default 9.8, SDF's default, which uuv_simulator's worlds keep)")
+    p.add_argument("--ros-path", action="append", type=Path, default=None, metavar="DIR",
+                   help="a folder holding ROS packages for $(find ...) (default: the folder holding the "
+                        "description's package); repeatable")
+    p.add_argument("--xacro-arg", action="append", default=None, metavar="NAME:=VALUE", help="a xacro argument")
+    p.add_argument("--check-tam", type=Path, default=None, metavar="TAM.yaml",
+                   help="compare the written system's allocation matrix with uuv_simulator's TAM.yaml after the "
+                        "frame change and print the largest difference")
+    p.add_argument("--cite", default="", metavar="TEXT",
+                   help="put before every source, e.g. the repository and commit of the description")
+
+
+def _check_import_uuv(a: argparse.Namespace) -> None:
+    from arvcas.system.uuv import check_options
+
+    check_options(a.arm_base, a.tool_link, a.tool_offset, a.stow, a.max_thrust, a.thruster_manager, a.gravity,
+                  ValueError)
+
+
+def _run_import_uuv(a: argparse.Namespace) -> int:
+    import tempfile
+
+    import numpy as np
+
+    from arvcas.io import files
+    from arvcas.system import params as params_mod
+    from arvcas.system import uuv
+
+    args = {}
+    for x in a.xacro_arg or []:
+        k, sep, v = x.partition(":=")
+        if not sep or not k:
+            raise ValueError(f"--xacro-arg: expected NAME:=VALUE, got {x!r}")
+        args[k] = v
+    tam = uuv.read_tam(a.check_tam, ValueError) if a.check_tam is not None else None
+    imp = uuv.import_uuv(a.description, name=a.name, base_link=a.base_link, arm_base=a.arm_base,
+                         tool_link=a.tool_link, tool_offset=a.tool_offset,
+                         locks={k: (v, f"--lock {k}") for k, v in a.lock or []}, stow=a.stow,
+                         max_thrust=a.max_thrust, thruster_manager=a.thruster_manager, gravity=a.gravity,
+                         ros_paths=a.ros_path or (), xacro_args=args, cite=a.cite, error=ValueError)
+    with tempfile.TemporaryDirectory() as d:  # the file must load before it is written
+        tmp = Path(d) / a.out.name
+        tmp.write_text(imp.text, encoding="utf-8")
+        try:
+            params = params_mod.load(tmp)
+        except ValueError as e:
+            raise ValueError(f"the imported system does not load (arvcas's fault, please report): "
+                             f"{str(e).replace(str(tmp), str(a.out))}") from None
+    files.write_text(a.out, imp.text)
+    print(f"{a.out}: system '{imp.name}', {params.structure.n_thrusters} thrusters, {params.structure.n_joints} "
+          f"joints, {len(params)} parameters")
+    for n in imp.notes:
+        print(f"  not imported: {n}")
+    if tam is not None:
+        from arvcas.model.thrusters import B_T
+
+        if tam.shape[1] != imp.B_flu.shape[1]:
+            raise ValueError(f"--check-tam {a.check_tam}: {tam.shape[1]} columns, the description has "
+                             f"{imp.B_flu.shape[1]} thrusters")
+        T6 = np.kron(np.eye(2), uuv.T_FLU_FRD)
+        B = np.array(B_T(params_mod.view(params.vector(), params.layout)), dtype=float)
+        print(f"allocation matrix against {a.check_tam} (columns {', '.join(imp.thrusters)}; the TAM turned into "
+              f"x forward, y starboard, z down): largest difference {np.abs(B - T6 @ tam).max():.3g}")
+    return 0
+
+
 # ---- knees ---------------------------------------------------------------------------------------
 
 
@@ -559,6 +678,11 @@ def _table() -> tuple[Command, ...]:
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
         Command("systems", "list the shipped systems (vehicle, thrusters, arm) and their files", _add_systems,
                 _run_systems),
+        Command("import-system uuv", "a uuv_simulator / Gazebo vehicle (URDF or xacro, the Fossen plugin, thrusters, "
+                "an arm) as a system file, in arvcas's body frame (docs/importing.md)", _add_import_uuv,
+                _run_import_uuv, inputs=(("description", "description", "robot description"),
+                                         ("thruster_manager", "file"), ("check_tam", "file")),
+                outputs=_out_file("out"), check=_check_import_uuv),
         Command("knees", "replay the knee of every front of a study directory: result files, figures, a table",
                 _add_knees, _run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=_knees_outputs),
         Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
@@ -606,6 +730,7 @@ def _table() -> tuple[Command, ...]:
 
 
 TABLE: tuple[Command, ...] = _table()
+_GROUPS = {"front": "tuning fronts", "import-system": "another tool's description as a system file"}
 COMMANDS: dict[str, Command] = {c.name: c for c in TABLE}
 
 
@@ -631,7 +756,7 @@ def _parser() -> argparse.ArgumentParser:
         if action:
             if head not in groups:
                 actions = [c.name.partition(" ")[2] for c in TABLE if c.name.startswith(head + " ")]
-                hp = f"tuning fronts: {', '.join(actions)}"
+                hp = f"{_GROUPS.get(head, head)}: {', '.join(actions)}"
                 gp = sub.add_parser(head, help=hp, description=hp)
                 groups[head] = gp.add_subparsers(dest="action", metavar="ACTION", required=True, parser_class=_Parser)
             sp = groups[head].add_parser(action, help=cmd.help, description=cmd.help)
@@ -664,7 +789,8 @@ def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[
 
     if p is None:
         return None
-    label = "front" if dest == "fronts" else dest if dest in ("file", "study", "study_dir") else f"--{dest.replace('_', '-')}"
+    label = ("front" if dest == "fronts" else dest if dest in ("file", "study", "study_dir", "description")
+             else f"--{dest.replace('_', '-')}")
     if kind == "system":
         from arvcas.system import shipped
 
@@ -677,7 +803,7 @@ def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[
 
             raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
                              f"file{closest(str(p), shipped(), 0.3)}")
-    p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
+    p = files.check_input(p, what[0] if what else "file", allow_dir=kind in ("front", "description"))
     if kind == "front" and p.is_dir():
         p = p / "front.h5"
         if not p.exists():
