@@ -62,9 +62,13 @@ def _model_options(n_quad: int):
     return ModelOptions(n_quad=n_quad)
 
 
-def _add_model_args(p: argparse.ArgumentParser) -> None:
+def _add_system_arg(p: argparse.ArgumentParser, default: str = "haidou1") -> None:
     p.add_argument("--system", "--params", dest="params", metavar="NAME|FILE", type=Path, default=None,
-                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
+                   help=f"the system: a shipped one (arvcas systems) or a system file (default: {default})")
+
+
+def _add_model_args(p: argparse.ArgumentParser) -> None:
+    _add_system_arg(p)
     p.add_argument("--n-quad", metavar="N", type=count_arg(1, 20, "--n-quad"), default=5,
                    help="Gauss-Legendre points per link for the drag integral (default: 5)")
 
@@ -93,6 +97,117 @@ def _run_export_c(a: argparse.Namespace) -> int:
     paths = export_c(a.dir, opts=_model_options(a.n_quad), params=load(a.params), prefix=a.prefix, force=a.force)
     for path in paths:
         print(path)
+    print(f"build with: make -C {a.dir}")
+    return 0
+
+
+# ---- export-controller --------------------------------------------------------------------------
+
+
+def _member_arg(text: str):
+    """``knee`` or an integer index of a front member."""
+    if text == "knee":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected knee or an integer member index, got {text!r}") from None
+
+
+def _add_export_controller(p: argparse.ArgumentParser) -> None:
+    p.add_argument("dir", type=Path, help="output directory (created if its parent exists)")
+    p.add_argument("--controller", default=None,
+                   help="a controller: proposed, agsta, traditional, implicit, pid, or a plugin's (arvcas controllers; "
+                        "required unless --front)")
+    p.add_argument("--front", type=Path, default=None, metavar="FRONT",
+                   help="a tuning front (front.h5 or the study directory of one controller): export one member's gains "
+                        "with the front's controller, system and scenario (with --member)")
+    p.add_argument("--member", type=_member_arg, default=None, metavar="knee|INDEX",
+                   help="with --front: its knee (the rule of arvcas knees) or member INDEX (sorted by f_chat)")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="scenario file: the sampling period, the reference's timing and the default set point, nominal "
+                        "factors and EKF tuning (default: the front's study scenario, else the system's)")
+    p.add_argument("--allow-model-change", action="store_true",
+                   help="with --front: export even if the model code or parameters changed since the study (the "
+                        "export's README and header record it)")
+    p.add_argument("--prefix", default=None,
+                   help="prefix of every C symbol; the library is lib<prefix without its last _>.so "
+                        "(default: arvcas_<system>_<controller>_, e.g. arvcas_haidou1_proposed_)")
+    _add_system_arg(p, "the front's, else haidou1")
+
+
+def _check_export_controller(a: argparse.Namespace) -> None:
+    from arvcas.controllers.gains import check_controller
+
+    if a.front is None:
+        refuse(a, ("member", "allow_model_change"), "only with --front")
+        if a.controller is None:
+            raise ValueError("--controller: required unless --front (proposed, agsta, traditional, implicit, pid)")
+    elif a.member is None:
+        raise ValueError("--front needs --member knee|INDEX")
+    if a.controller is not None:
+        check_controller(a.controller)
+
+
+def _export_controller_design(a: argparse.Namespace) -> dict:
+    """What to export, from the arguments (memoised on ``a``): controller, system, scenario, gains and
+    where they come from."""
+    if getattr(a, "_design", None) is not None:
+        return a._design
+    from arvcas.system.params import load
+    from arvcas.sim import scenario
+
+    params = load(a.params)
+    design = {"controller": a.controller, "gains": None, "gains_source": None}
+    cfg_text = None
+    if a.front is not None:
+        from arvcas.tuning import checkpoint as ck
+        from arvcas.tuning.front import check_provenance, member_index, read_front, resolve_front_path, system_params
+
+        path = resolve_front_path(a.front)
+        if a.params is None:  # the front's own system
+            params = system_params(ck.read_checkpoint(path))
+        changed = check_provenance(path, params, a.allow_model_change, "--front")
+        fr = read_front(path)
+        i = member_index(fr, a.member)
+        if a.controller is not None and a.controller != fr.controller:
+            raise ValueError(f"--controller {a.controller} differs from the front's controller {fr.controller}")
+        what = "its knee" if a.member == "knee" else "members sorted by f_chat"
+        design.update(controller=fr.controller, gains=fr.gains[i].copy(), gains_source=(
+            f"member {i} of the {fr.size} of the front {path} ({what}; f_chat {fr.F[i, 0]:.6g}, f_rmse {fr.F[i, 1]:.6g})"
+            + (f"; exported under another model than the study's ({changed}), as allowed by --allow-model-change"
+               if changed else "")))
+        cfg_text = (fr.scenario_text, f"{path} (study scenario)")
+    if a.config is not None:
+        cfg = scenario.load_scenario(a.config)
+    elif cfg_text is not None and cfg_text[0]:
+        cfg = scenario.loads_scenario(*cfg_text)
+    elif params.default("scenario") is not None:
+        cfg = scenario.load_scenario(params.default("scenario"))
+    else:
+        cfg = None  # export_controller names what is missing
+    design.update(params=params, cfg=cfg)
+    a._design = design
+    return design
+
+
+def _export_controller_outputs(a: argparse.Namespace) -> list:
+    from arvcas.io.export_controller import default_prefix, files
+
+    d = _export_controller_design(a)
+    return [(f"DIR {a.dir}", a.dir / n) for n in files(a.prefix or default_prefix(d["params"], d["controller"]))]
+
+
+def _run_export_controller(a: argparse.Namespace) -> int:
+    from arvcas.io.export_controller import export_controller
+
+    d = _export_controller_design(a)
+    paths = export_controller(a.dir, d["controller"], gains=d["gains"], params=d["params"], scenario=d["cfg"],
+                              prefix=a.prefix, gains_source=d["gains_source"], force=a.force)
+    for path in paths:
+        print(path)
+    if d["gains"] is not None:
+        print(f"gains: {d['gains_source']}")
     print(f"build with: make -C {a.dir}")
     return 0
 
@@ -456,11 +571,17 @@ def _bench_outputs(a):
 
 def _table() -> tuple[Command, ...]:
     from arvcas.experiments import cli as x
+    from arvcas.experiments import validation as v
     from arvcas.tuning import cli as t
 
     return (
         Command("export-c", "write the plant functions as a C library with Makefile, example and README",
                 _add_export_c, _run_export_c, inputs=(("params", "system"),), outputs=_export_c_outputs),
+        Command("export-controller", "write the controller of a run (EKF, reference, law, allocation) with a front "
+                "member's or the default gains as a C library with header, Makefile, ctypes binding and examples",
+                _add_export_controller, _run_export_controller,
+                inputs=(("config", "file"), ("params", "system"), ("front", "front")),
+                outputs=_export_controller_outputs, check=_check_export_controller, plugins=True),
         Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
                 _add_export_fmu, _run_export_fmu, inputs=(("params", "system"),), outputs=_out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
@@ -502,6 +623,12 @@ def _table() -> tuple[Command, ...]:
                 "(table, plot)", x.add_sweep, x.run_sweep,
                 inputs=(("config", "file"), ("params", "system"), ("check", "file")),
                 outputs=x.sweep_outputs, check=x.check_sweep, plugins=True),
+        Command("validate", "simulate a system open loop over logged trials (*.log.toml) and compare: RMSE, NRMSE, "
+                "R^2 per signal, figures", v.add_validate, v.run_validate,
+                inputs=(("system", "system"),), outputs=v.validate_outputs),
+        Command("identify", "estimate named parameters of a system from logged trials (IPOPT, 95 percent "
+                "intervals): writes the identified system file", v.add_identify, v.run_identify,
+                inputs=(("system", "system"),), outputs=v.identify_outputs, check=v.check_identify),
         Command("montecarlo", "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance "
                 "phases: CIs, failure rate", x.add_montecarlo, x.run_montecarlo,
                 inputs=(("config", "file"), ("params", "system"), ("from_front", "front"), ("check", "file")),

@@ -29,6 +29,7 @@ LAYERS = (
     ("metrics", ("arvcas.metrics",)),
     ("I/O", ("arvcas.io",)),
     ("tuning", ("arvcas.tuning",)),
+    ("logs, validation and identification", ("arvcas.ident",)),
     ("experiments", ("arvcas.experiments",)),
     ("command line and the public facade", ("arvcas.cli", "arvcas")),
 )

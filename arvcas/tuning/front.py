@@ -26,7 +26,8 @@ from arvcas.metrics import DOFS, table3
 from arvcas.tuning import checkpoint as ck
 
 __all__ = ["Front", "read_front", "knee_index", "export_front", "plot_front", "plot_fronts", "member_gains",
-           "replay", "resolve_front_path", "front_paths", "check_provenance", "check_same_model", "system_params"]
+           "member_index", "replay", "resolve_front_path", "front_paths", "check_provenance", "check_same_model",
+           "system_params"]
 
 
 def resolve_front_path(p: str | Path) -> Path:
@@ -349,12 +350,18 @@ def check_same_model(a: str | Path, b: str | Path, allow: bool) -> str:
 # ---- replay ------------------------------------------------------------------------------------------
 
 
-def _member(fr: Front, index: int) -> int:
+def _member(fr: Front, index: int, what: str = "--index") -> int:
     if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
-        raise ValueError(f"--index: expected an integer, got {index!r}")
+        raise ValueError(f"{what}: expected an integer, got {index!r}")
     if not -fr.size <= index < fr.size:
-        raise ValueError(f"--index {index}: {fr.path} has {fr.size} front member(s) (0..{fr.size - 1})")
+        raise ValueError(f"{what} {index}: {fr.path} has {fr.size} front member(s) (0..{fr.size - 1})")
     return int(index) % fr.size
+
+
+def member_index(fr: Front, member, what: str = "--member") -> int:
+    """The front index of ``member``: ``"knee"`` (:meth:`Front.knee`, the rule of ``arvcas knees``) or an
+    integer (members sorted by f_chat; negative counts from the end)."""
+    return fr.knee() if member == "knee" else _member(fr, member, what)
 
 
 def member_gains(path: str | Path, index: int):

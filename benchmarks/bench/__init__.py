@@ -8,6 +8,8 @@ One module per section: :mod:`~benchmarks.bench.common` (settings, the required 
 state), :mod:`~benchmarks.bench.plant` (1), :mod:`~benchmarks.bench.closed_loop` (2),
 :mod:`~benchmarks.bench.targets` (2b: issue 14's targets), :mod:`~benchmarks.bench.compiling` (3),
 :mod:`~benchmarks.bench.startup` (4), :mod:`~benchmarks.bench.systems` (5),
+:mod:`~benchmarks.bench.identification` (6), :mod:`~benchmarks.bench.controller` (7: the exported
+controller's time per step),
 :mod:`~benchmarks.bench.runner` (:func:`run`: every section in one process, and :func:`write`) and
 :mod:`~benchmarks.bench.report` (``bench.md``).
 
@@ -35,6 +37,8 @@ What is measured:
 3. Compiling: cold (fresh temporary ``ARVCAS_CACHE``) and warm (disk hit) builds of ``uvms_rhs`` and
    of the run; a sweep over ``-O0..-O3`` of compile time against run speed, which decides the
    default optimisation level.
+7. The exported controller (``arvcas export-controller``): ns per ``step`` from a C driver linking
+   the export's own library, for the proposed law, AGSTA and PID on each system with a scenario.
 
 Interference: the load average before and after, and the share of the machine's CPU time used by
 other processes while measuring (from ``/proc/stat`` minus this process and its children), are

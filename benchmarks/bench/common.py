@@ -69,6 +69,7 @@ REQUIRED_KEYS = (
     "startup.cold_graph_trace_s", "startup.cold_graph_peak_rss_mb",
     "systems.haidou1.rtf_metrics", "systems.bluerov2_heavy_alpha5.rtf_metrics",
     "systems.bluerov2_heavy_alpha5.instructions_per_sample",
+    "controller.haidou1.proposed.ns_per_step", "controller.haidou1.proposed.instructions_per_step",
 )
 
 

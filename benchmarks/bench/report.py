@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 from benchmarks.bench.common import CONTROLLER, N_INPUT_SETS
+from benchmarks.bench.controller import _controller_markdown
 from benchmarks.bench.targets import STUDY_RUNS
 
 def _m(st) -> float:
@@ -289,5 +290,28 @@ def render_markdown(res: dict) -> str:
             L.append(f"| {name} | {r['n_thrusters']} | {r['n_joints']} | {r['duration_s']:g} | {r['n_samples']} x "
                      f"{r['substeps']} | {_g(_m(r['run_metrics_s']))} ({_spread(r['run_metrics_s'])}) | "
                      f"{r['rtf_metrics']:,.0f}x | {r['instructions_per_sample']:,} | {_g(r['instr_per_s'])} |")
+    L += _identification_markdown(res.get("identification"))
+    L += _controller_markdown(res.get("controller"))
     L += ["", "## Recommendation", "", rec["text"], ""]
     return "\n".join(L)
+
+
+def _identification_markdown(r: dict | None) -> list[str]:
+    if not r:
+        return []
+    v, i = r["validation"], r["identify"]
+    return [
+        "", "## 6. Validation and identification from logs (issue 21)", "",
+        f"Validation of the shipped Hinsdale trial {v['trial']} ({v['duration_s']:.1f} s, {v['samples']} samples at "
+        f"50 Hz): reading the log {_g(_m(v['read_s']))} s, the open-loop run and its metrics {_g(_m(v['validate_s']))} s, "
+        f"**{_g(v['total_s'])} s** together (target 1 s: {_verdict(v['total_s'], 1.0, False)}). The simulation alone "
+        f"{_g(_m(v['simulate_s']))} s compiled, {_g(_m(v['simulate_vm_s']))} s in CasADi's VM "
+        f"({v['vm_over_compiled']:.0f}x).", "",
+        f"Identification of {len(i['free'])} parameters of {i['system']} on {i['trials']} synthetic "
+        f"trials of {i['duration_s']:g} s ({i['samples']} samples), 2 threads, compiled code "
+        f"{'built in this run' if i['build_cold'] else 'from the cache'} ({_g(i['build_s'])} s, not counted): "
+        f"**{_g(i['wall_s'])} s**, {i['iterations']} IPOPT iterations ({i['status']}); target 60 s: "
+        f"{_verdict(i['wall_s'], 60.0, False)}. One evaluation of every trial with its sensitivities "
+        f"{_g(_m(i['sens_eval_s']))} s ({i['sens_per_sample_us']:.0f} us a sample on each thread), without "
+        f"{_g(_m(i['plain_eval_s']))} s. The estimates lie within {i['max_abs_z']:.1f} standard errors of the truth.",
+    ]

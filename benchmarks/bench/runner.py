@@ -20,6 +20,8 @@ from arvcas.system.params import load as load_params
 from benchmarks.bench.closed_loop import _bench_closed_loop
 from benchmarks.bench.common import Settings, _CpuMeter, _default_opt_level, _machine, _wait_for_load
 from benchmarks.bench.compiling import _bench_compile, _recommend
+from benchmarks.bench.controller import _bench_controller
+from benchmarks.bench.identification import _bench_identification
 from benchmarks.bench.plant import _Driver, _bench_plant
 from benchmarks.bench.report import render_markdown
 from benchmarks.bench.startup import _bench_startup
@@ -58,6 +60,8 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
             ("compile", lambda: _bench_compile(s, cfg, P, driver, work, log)),
             ("startup", lambda: _bench_startup(s, log)),
             ("systems", lambda: _bench_systems(s, log)),
+            ("identification", lambda: _bench_identification(s, log)),
+            ("controller", lambda: _bench_controller(s, log)),
         ):
             m = _CpuMeter()
             t0 = time.perf_counter()
