@@ -320,3 +320,18 @@ def test_dask_worker_loads_the_plugin(fresh, tmp_path):
     got = _chunk(task, G, 1)
     np.testing.assert_array_equal(got[0], want[0])
     assert got[4] == want[4] and base.origin("toy_smc").kind == "file"
+
+
+def test_every_command_that_takes_a_controller_takes_plugins():
+    """From the one table: a command with a controller option or a front to replay has --plugin (and the
+    listing of the controllers)."""
+    ap = cli._parser()
+    for c in cli.TABLE:
+        sub = ap._subparsers._group_actions[0].choices[c.name.split()[0]]
+        if " " in c.name:
+            sub = sub._subparsers._group_actions[0].choices[c.name.split()[1]]
+        opts = {o for a in sub._actions for o in a.option_strings}
+        takes = bool(opts & {"--controller", "--controllers", "--from-front", "--front"}) or \
+            any(kind == "front" for _, kind, *_ in c.inputs) and c.name not in ("front export", "front plot") or \
+            c.name == "controllers"
+        assert c.plugins == takes and ("--plugin" in opts) == takes, c.name
