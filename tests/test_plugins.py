@@ -277,6 +277,30 @@ def test_what_a_plugin_module_registers(tmp_path, fresh):
         plugins.add_registry("arvcas.scenarios", lambda obj: [])
 
 
+def test_a_later_registry_gets_the_same_discovery(tmp_path, fresh, monkeypatch):
+    """The group arvcas.objectives is reserved: a registry declared later (objectives as objects) is handed
+    what plugins loaded before gave, and its entry points load like the controllers'."""
+    monkeypatch.setattr(plugins, "_ADOPT", dict(plugins._ADOPT))
+    f = tmp_path / "lab_objectives.py"
+    f.write_text("class Energy:\n    name = 'energy'\n")
+    plugins.load(f)
+    d = tmp_path / "site"
+    (d / "lab_obj-1.0.dist-info").mkdir(parents=True)
+    (d / "lab_obj-1.0.dist-info" / "METADATA").write_text("Metadata-Version: 2.1\nName: lab-obj\nVersion: 1.0\n")
+    (d / "lab_obj-1.0.dist-info" / "entry_points.txt").write_text("[arvcas.objectives]\npeak = lab_objectives:Energy\n")
+    monkeypatch.syspath_prepend(str(d))
+    got = []
+
+    def adopt(obj):
+        got.append(obj)
+        return [getattr(obj, "name", "")]
+
+    plugins.add_registry("arvcas.objectives", adopt)
+    assert [getattr(o, "__name__", None) for o in got] == ["lab_objectives"]  # the module loaded before
+    assert plugins.find("arvcas.objectives", "peak") == ["energy"]
+    assert got[-1] is sys.modules["lab_objectives"].Energy and plugins.failures("arvcas.objectives") == []
+
+
 def test_source_digest_keys_the_compiled_run(tmp_path, fresh, monkeypatch):
     """A plugin package's every file counts (a helper module too); its digest is in the run's cache key."""
     import arvcas
