@@ -43,7 +43,8 @@ class Command:
     or a study directory holding one, or ``"description"``: a file or a folder; ``what`` names the file
     in messages, default "file"); ``outputs``: the
     ``(label, path)`` files the command will write, from the parsed arguments; ``check``: raises
-    ValueError for options that do not apply or requests too large, before any work."""
+    ValueError for options that do not apply or requests too large, before any work; ``plugins``: the
+    command takes a controller, and so ``--plugin MODULE|FILE.py`` (repeatable), loaded before ``check``."""
 
     name: str
     help: str
@@ -52,6 +53,7 @@ class Command:
     inputs: tuple = ()
     outputs: Paths | None = None
     check: Callable[[argparse.Namespace], None] | None = None
+    plugins: bool = False
 
 
 def _model_options(n_quad: int):
@@ -115,7 +117,8 @@ def _member_arg(text: str):
 def _add_export_controller(p: argparse.ArgumentParser) -> None:
     p.add_argument("dir", type=Path, help="output directory (created if its parent exists)")
     p.add_argument("--controller", default=None,
-                   help="a registered controller: proposed, agsta, traditional, implicit, pid (required unless --front)")
+                   help="a controller: proposed, agsta, traditional, implicit, pid, or a plugin's (arvcas controllers; "
+                        "required unless --front)")
     p.add_argument("--front", type=Path, default=None, metavar="FRONT",
                    help="a tuning front (front.h5 or the study directory of one controller): export one member's gains "
                         "with the front's controller, system and scenario (with --member)")
@@ -468,6 +471,29 @@ def _run_import_uuv(a: argparse.Namespace) -> int:
     return 0
 
 
+# ---- controllers -------------------------------------------------------------------------------
+
+
+def _add_controllers(p: argparse.ArgumentParser) -> None:
+    pass
+
+
+def _run_controllers(a: argparse.Namespace) -> int:
+    from arvcas.controllers import base
+
+    names, failed = base.available()  # every entry point of arvcas.controllers loaded; broken ones reported
+    print(f"{'name':16} {'gains/DOF':>9}  {'from':40}  description")
+    for n in names:
+        c = base.get(n)
+        p = base.origin(n)
+        own = c.own_source_files()
+        where = p.describe() if p is not None else (f"python: {type(c).__module__}" if own else "arvcas")
+        print(f"{n:16} {len(c.gains):9d}  {where:40}  {c.description}")
+    for f in failed:
+        print(f"warning: {f}", file=sys.stderr)
+    return 0
+
+
 # ---- knees ---------------------------------------------------------------------------------------
 
 
@@ -498,7 +524,8 @@ def _run_knees(a: argparse.Namespace) -> int:
 
 def _add_simulate(p: argparse.ArgumentParser) -> None:
     p.add_argument("--controller", default=None,
-                   help="a registered controller: proposed, agsta, traditional, implicit, pid (required unless --from-front)")
+                   help="a controller: proposed, agsta, traditional, implicit, pid, or a plugin's (arvcas controllers; "
+                        "required unless --from-front)")
     p.add_argument("--out", type=Path, default=None, metavar="FILE.h5",
                    help="write the result here: HDF5 (.h5), or a MATLAB file if the name ends in .mat")
     p.add_argument("--seed", type=seed_arg, default=None, help="sensor-noise seed (default 0; 0 <= seed < 2**63)")
@@ -558,7 +585,8 @@ def _run_simulate(a: argparse.Namespace) -> int:
         if a.config is None and cfg_text:
             cfg = scenario.loads_scenario(cfg_text, f"{a.from_front} (study scenario)")
     if controller is None:
-        raise ValueError("--controller: required (proposed, agsta, traditional, implicit, pid)")
+        raise ValueError("--controller: required (proposed, agsta, traditional, implicit, pid, or a plugin's: "
+                         "arvcas controllers)")
     r = simulate(controller, gains=gains, seed=0 if seed is None else seed, params=params, cfg=cfg,
                  opts=_model_options(a.n_quad))
     if a.from_front is not None and changed:
@@ -672,7 +700,7 @@ def _table() -> tuple[Command, ...]:
                 "member's or the default gains as a C library with header, Makefile, ctypes binding and examples",
                 _add_export_controller, _run_export_controller,
                 inputs=(("config", "file"), ("params", "system"), ("front", "front")),
-                outputs=_export_controller_outputs, check=_check_export_controller),
+                outputs=_export_controller_outputs, check=_check_export_controller, plugins=True),
         Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
                 _add_export_fmu, _run_export_fmu, inputs=(("params", "system"),), outputs=_out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
@@ -683,19 +711,22 @@ def _table() -> tuple[Command, ...]:
                 _run_import_uuv, inputs=(("description", "description", "robot description"),
                                          ("thruster_manager", "file"), ("check_tam", "file")),
                 outputs=_out_file("out"), check=_check_import_uuv),
+        Command("controllers", "list the controllers: the package's, the plugins' (entry points, --plugin) and "
+                "where each comes from", _add_controllers, _run_controllers, plugins=True),
         Command("knees", "replay the knee of every front of a study directory: result files, figures, a table",
-                _add_knees, _run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=_knees_outputs),
+                _add_knees, _run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=_knees_outputs,
+                plugins=True),
         Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
                 _add_demo, _run_demo, inputs=(("params", "system"),)),
         Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
                 _add_simulate, _run_simulate, inputs=(("config", "file"), ("params", "system"), ("from_front", "front")),
-                outputs=_out_file("out"), check=_check_simulate),
+                outputs=_out_file("out"), check=_check_simulate, plugins=True),
         Command("paper", "the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
                 _add_paper, _run_paper, outputs=_paper_outputs),
         Command("bench", "measure plant, closed-loop and compile speed; write bench.json and bench.md",
                 _add_bench, _run_bench, outputs=_bench_outputs),
         Command("tune", "NSGA-II on the CHAT/RMSE front from a study file (resumable, local or Dask)",
-                t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune),
+                t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune, plugins=True),
         Command("front export", "the front as CSV or JSON (stdout, or --out FILE), or a MATLAB .mat file",
                 t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out"),
                 check=t.check_front_export),
@@ -704,18 +735,18 @@ def _table() -> tuple[Command, ...]:
                 t.run_front_plot, inputs=(("file", "front"),), outputs=t.front_plot_outputs),
         Command("front explore", "one self-contained HTML page of every front: hover a member for its gains and "
                 "metrics, click it for its time response", x.add_explore, x.run_explore, inputs=(("fronts", "front"),),
-                outputs=x.explore_outputs, check=x.check_explore),
+                outputs=x.explore_outputs, check=x.check_explore, plugins=True),
         Command("front robust", "re-evaluate every front member under Monte Carlo; mark the robust non-dominated "
                 "ones (robust.h5, robust.md, robust.png)", x.add_robust, x.run_robust, inputs=(("file", "front"),),
-                outputs=x.robust_outputs, check=x.check_robust),
+                outputs=x.robust_outputs, check=x.check_robust, plugins=True),
         Command("compare", "hypervolumes of two or more fronts against one reference point, and who dominates where; "
                 "or two Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
                 "(front robust)", x.add_compare, x.run_compare, inputs=(("fronts", "front"),),
-                outputs=x.compare_outputs, check=x.check_compare),
+                outputs=x.compare_outputs, check=x.check_compare, plugins=True),
         Command("sweep", "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 "
                 "(table, plot)", x.add_sweep, x.run_sweep,
                 inputs=(("config", "file"), ("params", "system"), ("check", "file")),
-                outputs=x.sweep_outputs, check=x.check_sweep),
+                outputs=x.sweep_outputs, check=x.check_sweep, plugins=True),
         Command("validate", "simulate a system open loop over logged trials (*.log.toml) and compare: RMSE, NRMSE, "
                 "R^2 per signal, figures", v.add_validate, v.run_validate,
                 inputs=(("system", "system"),), outputs=v.validate_outputs),
@@ -725,7 +756,7 @@ def _table() -> tuple[Command, ...]:
         Command("montecarlo", "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance "
                 "phases: CIs, failure rate", x.add_montecarlo, x.run_montecarlo,
                 inputs=(("config", "file"), ("params", "system"), ("from_front", "front"), ("check", "file")),
-                outputs=x.montecarlo_outputs, check=x.check_montecarlo),
+                outputs=x.montecarlo_outputs, check=x.check_montecarlo, plugins=True),
     )
 
 
@@ -763,6 +794,11 @@ def _parser() -> argparse.ArgumentParser:
         else:
             sp = sub.add_parser(head, help=cmd.help, description=cmd.help)
         cmd.add_arguments(sp)
+        if cmd.plugins:
+            sp.add_argument("--plugin", action="append", default=None, metavar="MODULE|FILE.py",
+                            help="load a plugin first: a Python file or an importable module defining controllers "
+                                 "(repeatable; installed entry points of arvcas.controllers are found by themselves; "
+                                 "docs/plugins.md)")
         if cmd.outputs is not None:
             sp.add_argument("--force", action="store_true",
                             help="replace existing output files that arvcas did not write")
@@ -812,10 +848,23 @@ def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[
     return label, p
 
 
+def _load_plugins(a: argparse.Namespace) -> list[tuple[str, Path]]:
+    """Load the ``--plugin`` of a command (before its check: the check may look a controller up); returns
+    the plugin files as inputs (no output may replace them)."""
+    from arvcas.io import plugins
+
+    out = []
+    for spec in getattr(a, "plugin", None) or []:
+        p = plugins.load(spec, what="--plugin")
+        if p.kind == "file":
+            out.append(("--plugin", Path(p.spec)))
+    return out
+
+
 def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
     from arvcas.io import files
 
-    inputs = _inputs(cmd, a)
+    inputs = _inputs(cmd, a) + _load_plugins(a)
     if cmd.check is not None:
         cmd.check(a)
     if cmd.outputs is not None:
