@@ -39,11 +39,12 @@ Paths = Callable[[argparse.Namespace], list]
 @dataclass(frozen=True)
 class Command:
     """One command of the table. ``inputs``: ``(dest, kind[, what])`` of arguments that name input files
-    (kind ``"file"``, ``"system"``: a shipped system's name or a system file, or ``"front"``: a front.h5
-    or a study directory holding one; ``what`` names the file
+    (kind ``"file"``, ``"system"``: a shipped system's name or a system file, ``"front"``: a front.h5
+    or a study directory holding one, or ``"description"``: a file or a folder; ``what`` names the file
     in messages, default "file"); ``outputs``: the
     ``(label, path)`` files the command will write, from the parsed arguments; ``check``: raises
-    ValueError for options that do not apply or requests too large, before any work."""
+    ValueError for options that do not apply or requests too large, before any work; ``plugins``: the
+    command takes a controller, and so ``--plugin MODULE|FILE.py`` (repeatable), loaded before ``check``."""
 
     name: str
     help: str
@@ -52,6 +53,7 @@ class Command:
     inputs: tuple = ()
     outputs: Paths | None = None
     check: Callable[[argparse.Namespace], None] | None = None
+    plugins: bool = False
 
 
 def _model_options(n_quad: int):
@@ -115,7 +117,8 @@ def _member_arg(text: str):
 def _add_export_controller(p: argparse.ArgumentParser) -> None:
     p.add_argument("dir", type=Path, help="output directory (created if its parent exists)")
     p.add_argument("--controller", default=None,
-                   help="a registered controller: proposed, agsta, traditional, implicit, pid (required unless --front)")
+                   help="a controller: proposed, agsta, traditional, implicit, pid, or a plugin's (arvcas controllers; "
+                        "required unless --front)")
     p.add_argument("--front", type=Path, default=None, metavar="FRONT",
                    help="a tuning front (front.h5 or the study directory of one controller): export one member's gains "
                         "with the front's controller, system and scenario (with --member)")
@@ -361,6 +364,148 @@ def _run_systems(a: argparse.Namespace) -> int:
     return 0
 
 
+# ---- import-system -------------------------------------------------------------------------------
+
+
+def _numbers(n: int | None, what: str):
+    """An argparse type: comma-separated finite numbers (``n`` of them, or any number >= 1)."""
+    def parse(text: str) -> list[float]:
+        try:
+            v = [float(x) for x in text.split(",")]
+        except ValueError:
+            v = []
+        if not v or (n is not None and len(v) != n) or not all(math.isfinite(x) for x in v):
+            raise argparse.ArgumentTypeError(f"{what}: expected {n or 'one or more'} comma-separated numbers, "
+                                             f"got {text!r}")
+        return v
+
+    return parse
+
+
+def _lock_arg(text: str) -> tuple[str, float]:
+    name, eq, value = text.rpartition("=")
+    try:
+        q = float(value)
+    except ValueError:
+        q = math.nan
+    if not eq or not name or not math.isfinite(q):
+        raise argparse.ArgumentTypeError(f"--lock: expected JOINT=POSITION (rad, or m for a prismatic joint), "
+                                         f"got {text!r}")
+    return name, q
+
+
+def _add_import_uuv(p: argparse.ArgumentParser) -> None:
+    p.add_argument("description", type=Path, metavar="DESCRIPTION",
+                   help="the robot's URDF or xacro file, or its description package's folder (its robots/ file "
+                        "named *default*)")
+    p.add_argument("--out", type=Path, required=True, metavar="FILE.toml", help="the system file to write")
+    p.add_argument("--name", default=None, help="the system's name (default: the URDF's robot name)")
+    p.add_argument("--base-link", default=None, metavar="LINK", help="the vehicle's link (default: the URDF's root)")
+    p.add_argument("--arm-base", default=None, metavar="LINK",
+                   help="import the arm from this link (rigid on the vehicle; its weight and buoyancy join the "
+                        "vehicle's) ...")
+    p.add_argument("--tool-link", default=None, metavar="LINK", help="... to this link (the chain's end)")
+    p.add_argument("--tool-offset", type=_numbers(3, "--tool-offset"), default=None, metavar="X,Y,Z",
+                   help="the tool point in --tool-link's frame, m (default: its origin)")
+    p.add_argument("--lock", action="append", type=_lock_arg, default=None, metavar="JOINT=POSITION",
+                   help="hold a joint at a position (rad; m for a prismatic joint), e.g. a gripper's finger; "
+                        "repeat for each")
+    p.add_argument("--stow", type=_numbers(None, "--stow"), default=None, metavar="Q1,Q2,...",
+                   help="the arm's stow pose, rad (default: its zero pose, clipped to the limits)")
+    p.add_argument("--thruster-manager", type=Path, default=None, metavar="YAML",
+                   help="uuv_simulator's thruster_manager.yaml: its max_thrust is the thrust limit")
+    p.add_argument("--max-thrust", type=float, default=None, metavar="N",
+                   help="the thrust limit, N (when the thruster plugins give no thrustMin/thrustMax)")
+    p.add_argument("--gravity", type=float, default=None, metavar="M_PER_S2",
+                   help="the world's gravity (default 9.8, SDF's default, which uuv_simulator's worlds keep)")
+    p.add_argument("--ros-path", action="append", type=Path, default=None, metavar="DIR",
+                   help="a folder holding ROS packages for $(find ...) (default: the folder holding the "
+                        "description's package); repeatable")
+    p.add_argument("--xacro-arg", action="append", default=None, metavar="NAME:=VALUE", help="a xacro argument")
+    p.add_argument("--check-tam", type=Path, default=None, metavar="TAM.yaml",
+                   help="compare the written system's allocation matrix with uuv_simulator's TAM.yaml after the "
+                        "frame change and print the largest difference")
+    p.add_argument("--cite", default="", metavar="TEXT",
+                   help="put before every source, e.g. the repository and commit of the description")
+
+
+def _check_import_uuv(a: argparse.Namespace) -> None:
+    from arvcas.system.uuv import check_options
+
+    check_options(a.arm_base, a.tool_link, a.tool_offset, a.stow, a.max_thrust, a.thruster_manager, a.gravity,
+                  ValueError)
+
+
+def _run_import_uuv(a: argparse.Namespace) -> int:
+    import tempfile
+
+    import numpy as np
+
+    from arvcas.io import files
+    from arvcas.system import params as params_mod
+    from arvcas.system import uuv
+
+    args = {}
+    for x in a.xacro_arg or []:
+        k, sep, v = x.partition(":=")
+        if not sep or not k:
+            raise ValueError(f"--xacro-arg: expected NAME:=VALUE, got {x!r}")
+        args[k] = v
+    tam = uuv.read_tam(a.check_tam, ValueError) if a.check_tam is not None else None
+    imp = uuv.import_uuv(a.description, name=a.name, base_link=a.base_link, arm_base=a.arm_base,
+                         tool_link=a.tool_link, tool_offset=a.tool_offset,
+                         locks={k: (v, f"--lock {k}") for k, v in a.lock or []}, stow=a.stow,
+                         max_thrust=a.max_thrust, thruster_manager=a.thruster_manager, gravity=a.gravity,
+                         ros_paths=a.ros_path or (), xacro_args=args, cite=a.cite, error=ValueError)
+    with tempfile.TemporaryDirectory() as d:  # the file must load before it is written
+        tmp = Path(d) / a.out.name
+        tmp.write_text(imp.text, encoding="utf-8")
+        try:
+            params = params_mod.load(tmp)
+        except ValueError as e:
+            raise ValueError(f"the imported system does not load (arvcas's fault, please report): "
+                             f"{str(e).replace(str(tmp), str(a.out))}") from None
+    files.write_text(a.out, imp.text)
+    print(f"{a.out}: system '{imp.name}', {params.structure.n_thrusters} thrusters, {params.structure.n_joints} "
+          f"joints, {len(params)} parameters")
+    for n in imp.notes:
+        print(f"  not imported: {n}")
+    if tam is not None:
+        from arvcas.model.thrusters import B_T
+
+        if tam.shape[1] != imp.B_flu.shape[1]:
+            raise ValueError(f"--check-tam {a.check_tam}: {tam.shape[1]} columns, the description has "
+                             f"{imp.B_flu.shape[1]} thrusters")
+        T6 = np.kron(np.eye(2), uuv.T_FLU_FRD)
+        B = np.array(B_T(params_mod.view(params.vector(), params.layout)), dtype=float)
+        print(f"allocation matrix against {a.check_tam} (columns {', '.join(imp.thrusters)}; the TAM turned into "
+              f"x forward, y starboard, z down): largest difference {np.abs(B - T6 @ tam).max():.3g}")
+    return 0
+
+
+# ---- controllers -------------------------------------------------------------------------------
+
+
+def _add_controllers(p: argparse.ArgumentParser) -> None:
+    pass
+
+
+def _run_controllers(a: argparse.Namespace) -> int:
+    from arvcas.controllers import base
+
+    names, failed = base.available()  # every entry point of arvcas.controllers loaded; broken ones reported
+    print(f"{'name':16} {'gains/DOF':>9}  {'from':40}  description")
+    for n in names:
+        c = base.get(n)
+        p = base.origin(n)
+        own = c.own_source_files()
+        where = p.describe() if p is not None else (f"python: {type(c).__module__}" if own else "arvcas")
+        print(f"{n:16} {len(c.gains):9d}  {where:40}  {c.description}")
+    for f in failed:
+        print(f"warning: {f}", file=sys.stderr)
+    return 0
+
+
 # ---- knees ---------------------------------------------------------------------------------------
 
 
@@ -392,7 +537,8 @@ def _run_knees(a: argparse.Namespace) -> int:
 
 def _add_simulate(p: argparse.ArgumentParser) -> None:
     p.add_argument("--controller", default=None,
-                   help="a registered controller: proposed, agsta, traditional, implicit, pid (required unless --from-front)")
+                   help="a controller: proposed, agsta, traditional, implicit, pid, or a plugin's (arvcas controllers; "
+                        "required unless --from-front)")
     p.add_argument("--out", type=Path, default=None, metavar="FILE.h5",
                    help="write the result here: HDF5 (.h5), or a MATLAB file if the name ends in .mat")
     p.add_argument("--seed", type=seed_arg, default=None, help="sensor-noise seed (default 0; 0 <= seed < 2**63)")
@@ -452,7 +598,8 @@ def _run_simulate(a: argparse.Namespace) -> int:
         if a.config is None and cfg_text:
             cfg = scenario.loads_scenario(cfg_text, f"{a.from_front} (study scenario)")
     if controller is None:
-        raise ValueError("--controller: required (proposed, agsta, traditional, implicit, pid)")
+        raise ValueError("--controller: required (proposed, agsta, traditional, implicit, pid, or a plugin's: "
+                         "arvcas controllers)")
     r = simulate(controller, gains=gains, seed=0 if seed is None else seed, params=params, cfg=cfg,
                  opts=_model_options(a.n_quad))
     if a.from_front is not None and changed:
@@ -579,25 +726,33 @@ def _table() -> tuple[Command, ...]:
                 "member's or the default gains as a C library with header, Makefile, ctypes binding and examples",
                 _add_export_controller, _run_export_controller,
                 inputs=(("config", "file"), ("params", "system"), ("front", "front")),
-                outputs=_export_controller_outputs, check=_check_export_controller),
+                outputs=_export_controller_outputs, check=_check_export_controller, plugins=True),
         Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
                 _add_export_fmu, _run_export_fmu, inputs=(("params", "system"),), outputs=_out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
         Command("systems", "list the shipped systems (vehicle, thrusters, arm) and their files", _add_systems,
                 _run_systems),
+        Command("import-system uuv", "a uuv_simulator / Gazebo vehicle (URDF or xacro, the Fossen plugin, thrusters, "
+                "an arm) as a system file, in arvcas's body frame (docs/importing.md)", _add_import_uuv,
+                _run_import_uuv, inputs=(("description", "description", "robot description"),
+                                         ("thruster_manager", "file"), ("check_tam", "file")),
+                outputs=_out_file("out"), check=_check_import_uuv),
+        Command("controllers", "list the controllers: the package's, the plugins' (entry points, --plugin) and "
+                "where each comes from", _add_controllers, _run_controllers, plugins=True),
         Command("knees", "replay the knee of every front of a study directory: result files, figures, a table",
-                _add_knees, _run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=_knees_outputs),
+                _add_knees, _run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=_knees_outputs,
+                plugins=True),
         Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
                 _add_demo, _run_demo, inputs=(("params", "system"),)),
         Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
                 _add_simulate, _run_simulate, inputs=(("config", "file"), ("params", "system"), ("from_front", "front")),
-                outputs=_out_file("out", **_RESULT), check=_check_simulate),
+                outputs=_out_file("out", **_RESULT), check=_check_simulate, plugins=True),
         Command("paper", "the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
                 _add_paper, _run_paper, outputs=_paper_outputs),
         Command("bench", "measure plant, closed-loop and compile speed; write bench.json and bench.md",
                 _add_bench, _run_bench, outputs=_bench_outputs),
         Command("tune", "NSGA-II on the CHAT/RMSE front from a study file (resumable, local or Dask)",
-                t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune),
+                t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune, plugins=True),
         Command("front export", "the front as CSV or JSON (stdout, or --out FILE), or a MATLAB .mat file",
                 t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out", mat="arvcas-front"),
                 check=t.check_front_export),
@@ -606,18 +761,18 @@ def _table() -> tuple[Command, ...]:
                 t.run_front_plot, inputs=(("file", "front"),), outputs=t.front_plot_outputs),
         Command("front explore", "one self-contained HTML page of every front: hover a member for its gains and "
                 "metrics, click it for its time response", x.add_explore, x.run_explore, inputs=(("fronts", "front"),),
-                outputs=x.explore_outputs, check=x.check_explore),
+                outputs=x.explore_outputs, check=x.check_explore, plugins=True),
         Command("front robust", "re-evaluate every front member under Monte Carlo; mark the robust non-dominated "
                 "ones (robust.h5, robust.md, robust.png)", x.add_robust, x.run_robust, inputs=(("file", "front"),),
-                outputs=x.robust_outputs, check=x.check_robust),
+                outputs=x.robust_outputs, check=x.check_robust, plugins=True),
         Command("compare", "hypervolumes of two or more fronts against one reference point, and who dominates where; "
                 "or two Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
                 "(front robust)", x.add_compare, x.run_compare, inputs=(("fronts", "front"),),
-                outputs=x.compare_outputs, check=x.check_compare),
+                outputs=x.compare_outputs, check=x.check_compare, plugins=True),
         Command("sweep", "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 "
                 "(table, plot)", x.add_sweep, x.run_sweep,
                 inputs=(("config", "file"), ("params", "system"), ("check", "file")),
-                outputs=x.sweep_outputs, check=x.check_sweep),
+                outputs=x.sweep_outputs, check=x.check_sweep, plugins=True),
         Command("validate", "simulate a system open loop over logged trials (*.log.toml) and compare: RMSE, NRMSE, "
                 "R^2 per signal, figures", v.add_validate, v.run_validate,
                 inputs=(("system", "system"),), outputs=v.validate_outputs),
@@ -627,11 +782,12 @@ def _table() -> tuple[Command, ...]:
         Command("montecarlo", "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance "
                 "phases: CIs, failure rate", x.add_montecarlo, x.run_montecarlo,
                 inputs=(("config", "file"), ("params", "system"), ("from_front", "front"), ("check", "file")),
-                outputs=x.montecarlo_outputs, check=x.check_montecarlo),
+                outputs=x.montecarlo_outputs, check=x.check_montecarlo, plugins=True),
     )
 
 
 TABLE: tuple[Command, ...] = _table()
+_GROUPS = {"front": "tuning fronts", "import-system": "another tool's description as a system file"}
 COMMANDS: dict[str, Command] = {c.name: c for c in TABLE}
 
 
@@ -657,13 +813,18 @@ def _parser() -> argparse.ArgumentParser:
         if action:
             if head not in groups:
                 actions = [c.name.partition(" ")[2] for c in TABLE if c.name.startswith(head + " ")]
-                hp = f"tuning fronts: {', '.join(actions)}"
+                hp = f"{_GROUPS.get(head, head)}: {', '.join(actions)}"
                 gp = sub.add_parser(head, help=hp, description=hp)
                 groups[head] = gp.add_subparsers(dest="action", metavar="ACTION", required=True, parser_class=_Parser)
             sp = groups[head].add_parser(action, help=cmd.help, description=cmd.help)
         else:
             sp = sub.add_parser(head, help=cmd.help, description=cmd.help)
         cmd.add_arguments(sp)
+        if cmd.plugins:
+            sp.add_argument("--plugin", action="append", default=None, metavar="MODULE|FILE.py",
+                            help="load a plugin first: a Python file or an importable module defining controllers "
+                                 "(repeatable; installed entry points of arvcas.controllers are found by themselves; "
+                                 "docs/plugins.md)")
         if cmd.outputs is not None:
             sp.add_argument("--force", action="store_true",
                             help="replace existing output files that arvcas did not write")
@@ -690,7 +851,8 @@ def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[
 
     if p is None:
         return None
-    label = "front" if dest == "fronts" else dest if dest in ("file", "study", "study_dir") else f"--{dest.replace('_', '-')}"
+    label = ("front" if dest == "fronts" else dest if dest in ("file", "study", "study_dir", "description")
+             else f"--{dest.replace('_', '-')}")
     if kind == "system":
         from arvcas.system import shipped
 
@@ -703,7 +865,7 @@ def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[
 
             raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
                              f"file{closest(str(p), shipped(), 0.3)}")
-    p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
+    p = files.check_input(p, what[0] if what else "file", allow_dir=kind in ("front", "description"))
     if kind == "front" and p.is_dir():
         p = p / "front.h5"
         if not p.exists():
@@ -712,10 +874,23 @@ def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[
     return label, p
 
 
+def _load_plugins(a: argparse.Namespace) -> list[tuple[str, Path]]:
+    """Load the ``--plugin`` of a command (before its check: the check may look a controller up); returns
+    the plugin files as inputs (no output may replace them)."""
+    from arvcas.io import plugins
+
+    out = []
+    for spec in getattr(a, "plugin", None) or []:
+        p = plugins.load(spec, what="--plugin")
+        if p.kind == "file":
+            out.append(("--plugin", Path(p.spec)))
+    return out
+
+
 def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
     from arvcas.io import files
 
-    inputs = _inputs(cmd, a)
+    inputs = _inputs(cmd, a) + _load_plugins(a)
     if cmd.check is not None:
         cmd.check(a)
     if cmd.outputs is not None:

@@ -20,6 +20,7 @@ PKG = Path(__file__).resolve().parents[1] / "arvcas"
 # docs/architecture.md's table, lowest first: a module may import its own layer and those before it.
 LAYERS = (
     ("files", ("arvcas.io.files",)),  # atomic writes, locks, bounded reads: used by every layer that touches a file
+    ("plugins", ("arvcas.io.plugins",)),  # code from outside the package: used by every registry
     ("parameters and systems", ("arvcas.system",)),
     ("models", ("arvcas.model",)),
     ("build", ("arvcas.build",)),

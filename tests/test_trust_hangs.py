@@ -21,10 +21,10 @@ LAUGHS = ('<?xml version="1.0"?>\n<!DOCTYPE robot [\n <!ENTITY a "aaaaaaaaaa">\n
 
 
 @pytest.mark.parametrize("fault, message", [
-    ("loop", "the joints form a loop through link"),
-    ("no_parent", "joint 'joint2' has no <parent link="),
-    ("no_child", "joint 'joint1' has no <child link="),
-    ("two_parents", "is the child of two joints"),
+    ("loop", "link 'tool_link' is not below 'base_link'"),  # the walk goes down from the base: a loop is never reached
+    ("no_parent", "joint 'joint2' has no <parent> or <child>"),
+    ("no_child", "joint 'joint1' has no <parent> or <child>"),
+    ("two_parents", "link 'link2' is reached twice (joint 'joint2'): not a tree"),
     ("laughs", "has a document type declaration"),
     ("external", "has a document type declaration"),
 ])
@@ -62,7 +62,8 @@ def test_urdf_loop_refused_by_the_command_line(tmp_path, capsys):
     urdf = tmp_path / arm.urdf_name
     urdf.write_text(urdf.read_text().replace('<parent link="link2"/>\n    <child link="link3"/>',
                                              '<parent link="link3"/>\n    <child link="link3"/>'))
-    assert_refused(["export-c", "--system", path, tmp_path / "out"], capsys, tmp_path, "form a loop", timeout=60)
+    assert_refused(["export-c", "--system", path, tmp_path / "out"], capsys, tmp_path, "is not below 'base_link'",
+                   timeout=60)
 
 
 def test_many_bounds_its_memory_before_allocating(monkeypatch):
@@ -79,3 +80,19 @@ def test_many_bounds_its_memory_before_allocating(monkeypatch):
                            (range(10**12), "seeds: 1000000000000 values, more than the 10000000 allowed")):
         e = bounded(lambda: run.many(g, seeds=seeds), timeout=60)
         assert isinstance(e, SimulationError) and message in str(e), repr(e)
+
+
+def test_xacro_files_and_their_includes_are_read_without_a_dtd(tmp_path):
+    """xacro (``arvcas import-system uuv``) parses the file and every include through the same refusal."""
+    pytest.importorskip("xacro")
+    from arvcas.system import uuv
+
+    inc = tmp_path / "inc.xacro"
+    inc.write_text(LAUGHS.replace('<robot name="&j;">', '<robot xmlns:xacro="http://www.ros.org/wiki/xacro" '
+                                                       'name="&j;">'))
+    top = tmp_path / "top.xacro"
+    top.write_text('<?xml version="1.0"?>\n<robot xmlns:xacro="http://www.ros.org/wiki/xacro" name="r">\n'
+                   '  <xacro:include filename="inc.xacro"/>\n</robot>\n')
+    for path in (inc, top):
+        e = bounded(lambda: uuv.expand(path, {}, {}, error=ParamsError), timeout=60)
+        assert isinstance(e, ParamsError) and "has a document type declaration" in str(e), repr(e)

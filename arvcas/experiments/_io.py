@@ -17,7 +17,7 @@ from arvcas.io import files
 from arvcas.io.results import ResultsError, atomic_write
 
 __all__ = ["atomic_write", "write_text", "write_figure", "write_result_dir", "stored_inputs", "provenance",
-           "prepare_dir", "target", "str_attr", "check_format"]
+           "prepare_dir", "target", "str_attr", "check_format", "controller_sources", "require_controllers"]
 
 
 def write_text(path: Path, text: str) -> Path:
@@ -94,6 +94,36 @@ def provenance() -> dict[str, str]:
         "h5py_version": h5py.__version__,
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
+
+
+def controller_sources(controllers) -> str:
+    """JSON ``{name: record}`` of the controllers defined outside the package
+    (:func:`arvcas.controllers.base.provenance`: the plugin and the digest of its source); "" when none."""
+    import json
+
+    from arvcas.controllers.base import provenance
+
+    recs = {c: r for c in controllers for r in [provenance(c)] if r}
+    return json.dumps(recs, sort_keys=True) if recs else ""
+
+
+def require_controllers(path, controllers, sources: str) -> None:
+    """Before a file's runs are re-run: each controller is registered (an entry point of its name is
+    loaded), or a one-line ResultsError saying which plugin to load (``sources``: the file's
+    :func:`controller_sources`)."""
+    import json
+
+    from arvcas.controllers import base
+
+    recs = json.loads(sources) if sources else {}
+    for c in controllers:
+        try:
+            base.get(c)
+        except base.ControllerError as e:
+            if c not in recs:
+                raise ResultsError(f"{path}: {e}") from None
+            src, hint = base.describe_provenance(recs[c])
+            raise ResultsError(f"{path}: controller '{c}' is not registered; it came from {src}: {hint}") from None
 
 
 def prepare_dir(d, what: str) -> Path:

@@ -227,6 +227,9 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
         "front_path": str(mc.meta.get("front_path", "")),
         **_io.provenance(),
     }
+    sources = _io.controller_sources([mc.controller])
+    if sources:  # a controller from a plugin: which, and its source's digest
+        attrs["controller_sources"] = sources
     if mc.meta.get("system"):  # another system: its name and the objectives' normalisation
         attrs["system"] = str(mc.meta["system"])
         ref = mc.meta.get("reference")
@@ -262,10 +265,8 @@ def read_montecarlo(path) -> MonteCarlo:
         a = f.attrs
         controller = _io.str_attr(a["controller"])
         names = [_io.str_attr(x) for x in np.asarray(a["gain_names"]).ravel()]
-        try:
-            expect = gains_mod.gain_names(controller)
-        except ValueError:
-            raise ResultsError(f"{path}: unknown controller '{controller}'") from None
+        _io.require_controllers(path, [controller], _io.str_attr(a["controller_sources"]) if "controller_sources" in a else "")
+        expect = gains_mod.gain_names(controller)
         if names != expect:
             raise ResultsError(f"{path}: gain_names do not match controller '{controller}' of this arvcas version")
         d = Draws(int(a["master_seed"]), float(a["spread"]), np.array(f["noise_seed"][()], dtype=np.int64),

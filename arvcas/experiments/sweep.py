@@ -220,6 +220,9 @@ def write_sweep(sw: Sweep, path) -> Path:
             a["zigzag_definition"] = __doc__.split("Zigzag of k1", 1)[1].split("Totals are", 1)[0].strip()
             for k, v in _io.provenance().items():
                 a[k] = v
+            sources = _io.controller_sources(sw.controllers)
+            if sources:  # controllers from plugins: which, and their sources' digests
+                a["controller_sources"] = sources
             for c, g in sw.gains.items():
                 ds = f.create_dataset(f"gains/{c}", data=g)
                 ds.attrs["names"] = np.array(gains_mod.gain_names(c), dtype=object)
@@ -249,7 +252,8 @@ def read_sweep(path) -> Sweep:
             k1_seed0={c: [np.array(f[f"k1/{c}/{j}"][()]) for j in range(len(hs))] for c in ctrls},
             config_text=_io.str_attr(a["config"]), params_vector=np.array(a["params"], float),
             noise_scale=float(a["noise_scale"]),
-            meta={**{k: _io.str_attr(a[k]) for k in ("arvcas_version", "casadi_version", "created", "system") if k in a},
+            meta={**{k: _io.str_attr(a[k]) for k in ("arvcas_version", "casadi_version", "created", "system",
+                                                     "controller_sources") if k in a},
                   **({"param_names": [_io.str_attr(x) for x in a["param_names"]],
                       "reference": (tuple(np.array(a["ref_chat"], float)), tuple(np.array(a["ref_rmse"], float)))
                       if "ref_chat" in a else None} if "system" in a else {})},
@@ -262,6 +266,7 @@ def reproduce_sweep(path) -> tuple[Sweep, list[str]]:
     """Re-run the sweep stored in ``path`` from its stored configuration (scenario, parameters, gains,
     periods, seeds, noise scale); returns the new sweep and the fields that differ (empty: bit for bit)."""
     old = read_sweep(path)
+    _io.require_controllers(path, old.controllers, old.meta.get("controller_sources", ""))
     cfg, params = _io.stored_inputs(path, old.config_text, old.params_vector, ValueError, old.meta.get("system", ""))
     new = run_sweep(old.hs, old.controllers, old.seeds, cfg=cfg, params=params, gains=old.gains,
                     noise_scale=old.noise_scale)

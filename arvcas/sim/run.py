@@ -19,7 +19,6 @@ toolchain, so a warm start only loads a shared library.
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +29,7 @@ import numpy as np
 from arvcas import __version__
 from arvcas.build import calls, codegen
 from arvcas.controllers import gains as gains_mod
-from arvcas.controllers.base import Controller, get as get_controller
+from arvcas.controllers.base import Controller, get as get_controller, provenance
 from arvcas.model.uvms import ModelOptions
 from arvcas.system.params import Params, default_layout, system_tag
 from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
@@ -78,16 +77,6 @@ class Run:
         return CompiledRun(with_law, cfg, params, self.options)
 
 
-def _file_digest(paths) -> str:
-    h = hashlib.sha256()
-    for p in paths:
-        try:
-            h.update(Path(p).read_bytes())
-        except OSError:
-            h.update(f"<unreadable {p}>".encode())
-    return h.hexdigest()
-
-
 class CompiledRun:
     """A compiled closed-loop run (see the module docstring). Build it with :meth:`Run.compile`.
 
@@ -104,14 +93,14 @@ class CompiledRun:
         self.inputs = closedloop.INPUTS
         self._fns: dict[bool, ca.Function] = {}
         self._pv = params.vector()
+        self._source: dict | None = None
 
     # -- compiled functions ----------------------------------------------------------------------------
     def description(self, trace: bool) -> str:
         """What keys the compiled run in the cache (beside the package's model hash and the toolchain)."""
         law = self.controller
-        own = [f for f in law.source_files() if not f.startswith(str(Path(codegen.__file__).resolve().parents[1]))]
         system = system_tag(self.params.structure)
-        return (f"run controller={law.identity()} own_source={_file_digest(own)} trace={trace} "
+        return (f"run controller={law.identity()} own_source={law.source_digest()} trace={trace} "
                 f"scenario={self.cfg.graph_key()!r} options={self.opts!r}{system}")
 
     def function(self, trace: bool) -> ca.Function:
@@ -234,6 +223,10 @@ class CompiledRun:
         st = self.params.structure
         if st != default_layout().structure:  # another system: its name, file and parameter names
             meta |= {"system": st.name, "system_file": self.params.path, "param_names": self.params.names()}
+        if self._source is None:  # a law from outside the package: where it came from, its source's digest
+            self._source = provenance(self.controller)
+        if self._source:
+            meta["controller_source"] = self._source
         return meta
 
     def batch(self, gains, seed: int = 0, uncertainty=None, phase=None, n_threads: int | None = None,

@@ -6,7 +6,8 @@
 - :mod:`~arvcas.system.systemfile`: a system file's *structure* (what shapes the compiled code);
 - :mod:`~arvcas.system.params`: its *numbers* (:class:`~arvcas.system.params.Params`, SI, with units
   and sources), checked physical;
-- :mod:`~arvcas.system.urdf`: a URDF arm read by Pinocchio;
+- :mod:`~arvcas.system.urdf`: a URDF arm read by Pinocchio (a gripper's joints locked);
+- :mod:`~arvcas.system.uuv`: a uuv_simulator / Gazebo description imported as a system file (docs/importing.md);
 - :mod:`~arvcas.system.loader`: :class:`System` and :func:`load_system` (shipped systems by name).
 
 This layer uses none above it (docs/architecture.md) but the model's matrices in the physical check.

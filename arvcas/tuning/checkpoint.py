@@ -15,7 +15,9 @@ study file), ``study_path``, ``identity`` (JSON of what shapes the search, see
 ``interrupted``, ``finished``), ``stop_reason``, ``n_gen``, ``n_eval``, ``rng_state`` (JSON),
 ``reference_point``, ``versions`` (JSON: arvcas, pymoo, casadi, numpy, h5py, python),
 ``artifact_key`` (content hash of the compiled run), ``engine`` (last session), ``created``,
-``updated`` (ISO 8601 UTC).
+``updated`` (ISO 8601 UTC); for a controller defined outside the package, ``plugin`` (JSON of
+:func:`arvcas.controllers.base.provenance`: the controller's class, the sha256 of its source files,
+and the plugin file, module or entry point and distribution it came from).
 
 =====================  ===========  =============================================================
 dataset                shape        content
@@ -62,7 +64,7 @@ from arvcas.io import files
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "HISTORY_FIELDS", "CheckpointError", "Checkpoint", "write_checkpoint",
     "read_checkpoint", "StudyLock", "check_out_dir", "front_indices", "versions", "FRONT_NAME",
-    "remove_stale_temps", "provenance_diff",
+    "remove_stale_temps", "provenance_diff", "controller_of",
 ]
 
 FORMAT = "arvcas.tuning.front"
@@ -140,6 +142,7 @@ class Checkpoint:
     system: str = ""  # the system the runs used: a shipped name or a system file ("": Haidou-1)
     ref_chat: np.ndarray | None = None  # the objectives' per-DOF normalisation (None: Table 3's AGSTA)
     ref_rmse: np.ndarray | None = None
+    plugin: dict = field(default_factory=dict)  # where a controller from outside the package came from
     engine: str = ""
     created: str = ""
     updated: str = ""
@@ -227,12 +230,37 @@ class StudyLock:
         self.release()
 
 
-def provenance_diff(c: Checkpoint, params_vector) -> list[str]:
+def controller_of(c, where: str):
+    """The registered controller of a checkpoint or front ``c`` (an entry point of its name is loaded);
+    for one from a plugin that is not loaded, a one-line :class:`CheckpointError` saying which plugin
+    to load (``where``: the file, for the message)."""
+    from arvcas.controllers import base
+
+    try:
+        return base.get(c.controller)
+    except base.ControllerError as e:
+        if not c.plugin:
+            raise CheckpointError(f"{where}: {e}") from None
+        src, hint = base.describe_provenance(c.plugin)
+        raise CheckpointError(f"{where}: controller '{c.controller}' is not registered; it came from {src} (source "
+                              f"sha256 {str(c.plugin.get('digest', ''))[:12]}): {hint}") from None
+
+
+def provenance_diff(c: Checkpoint, params_vector, where: str = "front") -> list[str]:
     """What differs between the code, data and parameters that computed ``c`` and this installation's
-    (``params_vector``): empty when a resume or replay under them reproduces the stored numbers."""
+    (``params_vector``): empty when a resume or replay under them reproduces the stored numbers. A
+    controller from a plugin must be registered (:func:`controller_of`); its source files are compared
+    with the digest the file records."""
     from arvcas.build.provenance import model_hash
 
     out = []
+    if c.plugin:
+        now = controller_of(c, where).source_digest()
+        if now != c.plugin.get("digest"):
+            from arvcas.controllers.base import describe_provenance
+
+            out.append(f"the source of controller '{c.controller}' changed ({describe_provenance(c.plugin)[0]}: sha256 "
+                       f"{str(c.plugin.get('digest', ''))[:12]} in the file, {now[:12]} now)")
     if not c.model_hash:
         out.append("the file records no model hash (written by an older arvcas)")
     elif c.model_hash != model_hash():
@@ -323,6 +351,8 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
     f.attrs["model_changes"] = json.dumps(list(c.model_changes))
     if c.system:
         f.attrs["system"] = c.system
+    if c.plugin:
+        f.attrs["plugin"] = json.dumps(c.plugin, sort_keys=True)
     if c.ref_chat is not None:
         f.attrs["ref_chat"] = np.asarray(c.ref_chat, dtype=float)
         f.attrs["ref_rmse"] = np.asarray(c.ref_rmse, dtype=float)
@@ -431,6 +461,7 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     kw["model_hash"] = _s(f.attrs["model_hash"]) if "model_hash" in f.attrs else ""
     kw["model_changes"] = _json_attr(f, "model_changes", path, list) if "model_changes" in f.attrs else []
     kw["system"] = _s(f.attrs["system"]) if "system" in f.attrs else ""
+    kw["plugin"] = _json_attr(f, "plugin", path, dict) if "plugin" in f.attrs else {}
     if "ref_chat" in f.attrs:
         kw["ref_chat"], kw["ref_rmse"] = np.asarray(f.attrs["ref_chat"], float), np.asarray(f.attrs["ref_rmse"], float)
     if "population" in f:

@@ -10,7 +10,10 @@ client's own compiled code. The client ships it: the libraries of the run and of
 bytes with their sha256 (:func:`ship_bundle`, scattered once to every worker), which a worker loads
 without a C compiler or a compile cache (:func:`arvcas.build.codegen.preload`; a worker on another
 platform, or with other arvcas model code, refuses with a one-line error naming it). The engine still
-checks that every chunk reports the client's key. An error raised on a worker says which worker.
+checks that every chunk reports the client's key. An error raised on a worker says which worker. A
+controller from a plugin file or module is loaded on each worker from the same file or module
+(:attr:`EvalTask.plugins`; an entry point is found there by itself): the file must be at the same
+path on the workers' machines, and its source digest is part of the key they check.
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ class EvalTask:
     cfg: ScenarioConfig
     params: Params
     ref: tuple | None = None  # per-DOF (chat, rmse) normalisation; None: the paper's Table 3 AGSTA
+    plugins: tuple[str, ...] = ()  # plugin files or modules a worker loads first (the controller's)
 
 
 def run_key(controller: str, cfg: ScenarioConfig, params: Params | None = None) -> str:
@@ -118,6 +122,10 @@ def _chunk(task: EvalTask, gains: np.ndarray, n_threads: int, bundle: dict | Non
     from arvcas.build import codegen
 
     try:
+        from arvcas.io import plugins
+
+        for spec in task.plugins:
+            plugins.load(spec, what="plugin")
         if bundle is not None:
             codegen.preload(bundle)
         return evaluate_rows(task, gains, n_threads=n_threads)

@@ -99,6 +99,7 @@ class Front:
     study_text: str
     versions: dict
     system: str = ""  # the study's system ("": Haidou-1, objectives normalised by the paper's Table 3)
+    plugin: dict | None = None  # a controller from outside the package: where it came from (checkpoint.py)
 
     @property
     def size(self) -> int:
@@ -136,7 +137,7 @@ def read_front(path: str | Path) -> Front:
         table2_G=c.table2_G if c.table2_G is not None else np.full(1, np.nan),
         reference_point=c.reference_point, history=c.history, seed=c.seed, draw_seeds=c.draw_seeds,
         draw_uncertainty=c.draw_uncertainty, draw_phase=c.draw_phase, scenario_text=c.scenario_text,
-        study_text=c.study_text, versions=c.versions, system=c.system,
+        study_text=c.study_text, versions=c.versions, system=c.system, plugin=c.plugin or None,
     )
 
 
@@ -213,6 +214,8 @@ def export_front(path: str | Path, fmt: str) -> str:
         "knee": fr.knee() if fr.size else None, "gain_names": fr.names, "dofs": list(DOFS), "members": members,
         "versions": fr.versions,
     }
+    if fr.plugin:
+        doc["plugin"] = fr.plugin
     return json.dumps(doc, indent=1) + "\n"
 
 
@@ -319,7 +322,7 @@ def check_provenance(path: str | Path, params, allow: bool, what: str) -> str:
     path = resolve_front_path(path)
     c = ck.read_checkpoint(path)
     vec = params.vector() if hasattr(params, "vector") else params
-    diff = ck.provenance_diff(c, vec)
+    diff = ck.provenance_diff(c, vec, str(path))
     if diff and not allow:
         raise ck.CheckpointError(f"{what} {path}: {'; '.join(diff)}; a re-run would not reproduce the study "
                                  f"(--allow-model-change to run anyway; the output records it)")
@@ -335,6 +338,9 @@ def check_same_model(a: str | Path, b: str | Path, allow: bool) -> str:
         why.append(f"model hash {ca.model_hash[:12] or 'none'} vs {cb.model_hash[:12] or 'none'}")
     if ca.params.shape != cb.params.shape or not np.array_equal(ca.params, cb.params):
         why.append("different parameter vectors")
+    da, db = ca.plugin.get("digest", ""), cb.plugin.get("digest", "")
+    if ca.controller == cb.controller and da != db:
+        why.append(f"controller {ca.controller} from different source (sha256 {da[:12] or 'none'} vs {db[:12] or 'none'})")
     if why and not allow:
         raise ck.CheckpointError(f"compare: {a} and {b} were computed with different models ({', '.join(why)}); "
                                  f"their objectives are not comparable (--allow-model-change to compare anyway)")
@@ -368,6 +374,7 @@ def member_gains(path: str | Path, index: int):
     """
     fr = read_front(path)
     i = _member(fr, index)
+    ck.controller_of(fr, str(fr.path))  # a plugin's controller: loaded, or which plugin to load
     if fr.draw_seeds.size != 1:
         raise ValueError(f"{fr.path}: the objectives average {fr.draw_seeds.size} draws; one simulate run cannot "
                          f"reproduce them (use arvcas.tuning.front.replay)")

@@ -11,7 +11,9 @@ asks for (``MAX_*``) and on the memory of one generation's tables.
 
 Layout (see ``studies/*.toml`` for commented examples)::
 
-    [study]        name, description?, controllers (str or list), seed (NSGA-II's generator)
+    [study]        name, description?, controllers (str or list), seed (NSGA-II's generator), plugins?
+                   (Python files, relative to the study file, or module names, loaded before the
+                   controllers are looked up: docs/plugins.md)
     [variables]    scale (> 1: default bounds [g / scale, g * scale] around each Table 2 gain g),
                    bounds? (table: column name "c" for every DOF, or gain name "x.c" -> [lower, upper])
     [algorithm]    name = "nsga2", population (>= 4), offspring?, include_table2?, crossover_prob?,
@@ -206,6 +208,7 @@ class Study:
     path: str = ""
     system: str | None = None  # evaluation.system as written (None: Haidou-1)
     params: object = dataclasses.field(repr=False, compare=False, default=None)  # the system's Params
+    plugins: tuple[str, ...] = ()  # study.plugins as written (loaded when the file was read)
 
     def system_params(self):
         """The parameters the study's runs use (its system's; Haidou-1's by default)."""
@@ -258,6 +261,7 @@ class _StudySection:
                                            scalar_ok=True)
     seed: int = setting(ge(0))  # NSGA-II's generator
     description: str = setting(default="")
+    plugins: tuple[str, ...] = setting(Unique(), scalar_ok=True, default=())  # files (relative) or modules
 
 
 @dataclass(frozen=True)
@@ -291,8 +295,11 @@ def load_study(path: str | Path) -> Study:
 
 
 def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | None = None) -> Study:
-    """Validate study TOML text; ``base_dir`` resolves a relative ``evaluation.scenario`` path."""
-    f = config.load_text(_StudyFile, text, where, StudyError).value
+    """Validate study TOML text; ``base_dir`` resolves a relative ``evaluation.scenario`` path (and the
+    study's plugin files)."""
+    doc = tomlfile.parse(text, where, StudyError)
+    _load_plugins(doc, where, base_dir)
+    f = config.load_doc(_StudyFile, doc, where, StudyError).value
     params = None
     if f.evaluation.system is not None:
         from arvcas.system.params import ParamsError
@@ -327,8 +334,33 @@ def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | N
         name=f.study.name, description=f.study.description, controllers=controllers, seed=f.study.seed,
         variables=variables, algorithm=f.algorithm, termination=f.termination, objectives=f.objectives,
         draws=f.evaluation.draws, engine=f.engine, scenario=cfg, scenario_path=scen_rel, text=text, path=where,
-        system=f.evaluation.system, params=params,
+        system=f.evaluation.system, params=params, plugins=f.study.plugins,
     )
+
+
+def _load_plugins(doc: dict, where: str, base_dir) -> None:
+    """Before the file is validated (its controllers must be registered by then): load ``study.plugins``
+    and look up, among the installed entry points, the controllers it names that are not registered."""
+    from arvcas.controllers import base
+    from arvcas.io import plugins
+
+    sec = doc.get("study") if isinstance(doc.get("study"), dict) else {}
+    if "plugins" in sec:
+        specs = config.check_value(_StudyFile, "study.plugins", sec["plugins"], where, StudyError)
+        for spec in (specs,) if isinstance(specs, str) else specs:
+            try:
+                plugins.load(spec, base_dir, what=f"{where}: study.plugins:")
+            except plugins.PluginError as e:
+                raise StudyError(str(e)) from None
+    names = sec.get("controllers")
+    for n in (names,) if isinstance(names, str) else names if isinstance(names, list) else ():
+        if isinstance(n, str) and n not in base.names():
+            try:
+                base.get(n)
+            except plugins.PluginError as e:  # an entry point of that name that does not load
+                raise StudyError(f"{where}: study.controllers: {e}") from None
+            except base.ControllerError:
+                pass  # not a plugin's either: the validation names it with the allowed ones
 
 
 def _variables(sec: _VariablesSection, controllers: tuple[str, ...], cfg, where: str, params=None) -> Variables:
