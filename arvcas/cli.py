@@ -85,9 +85,9 @@ def _add_export_c(p: argparse.ArgumentParser) -> None:
 
 
 def _export_c_outputs(a: argparse.Namespace) -> list:
-    from arvcas.build.export import default_prefix, files
+    from arvcas.build.export import KIND, default_prefix, files
 
-    return [(f"DIR {a.dir}", a.dir / n) for n in files(a.prefix or default_prefix(a.params))]
+    return [(f"DIR {a.dir}", a.dir / n, KIND, a.dir) for n in files(a.prefix or default_prefix(a.params))]
 
 
 def _run_export_c(a: argparse.Namespace) -> int:
@@ -195,7 +195,8 @@ def _export_controller_outputs(a: argparse.Namespace) -> list:
     from arvcas.io.export_controller import default_prefix, files
 
     d = _export_controller_design(a)
-    return [(f"DIR {a.dir}", a.dir / n) for n in files(a.prefix or default_prefix(d["params"], d["controller"]))]
+    return [(f"DIR {a.dir}", a.dir / n, "export-controller", a.dir)
+            for n in files(a.prefix or default_prefix(d["params"], d["controller"]))]
 
 
 def _run_export_controller(a: argparse.Namespace) -> int:
@@ -288,7 +289,19 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
     from arvcas.system.params import default_layout, load, view
 
     params = load(params_path)
+    if params.structure.n_joints == 0:
+        raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) has no arm: there is no coupling "
+                         f"wrench to show")
     p = params.vector()
+    cfg = None
+    if params.structure != default_layout().structure:
+        from arvcas.sim import scenario
+
+        if params.default("scenario") is None:
+            raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) names no default scenario "
+                             f"([defaults] scenario): the demo follows its arm motion")
+        cfg = scenario.load_scenario(params.default("scenario"))
+        scenario.check_joint_limits(cfg, params)
     f = compiled("arm_wrench", _model_options(n_quad), system=params)
     z6 = np.zeros(6)
     if params.structure == default_layout().structure:
@@ -299,7 +312,6 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
         from arvcas.model.manipulator import stow_pose
         from arvcas.sim import scenario
 
-        cfg = scenario.load_scenario(params.default("scenario"))
         ts = ca.SX.sym("t")
         fq = ca.Function("q", [ts], list(scenario.joint_trajectory(cfg, stow_pose(view(p, params.layout)), ts)))
         traj = lambda t: [np.array(x).ravel() for x in fq(t)]  # noqa: E731
@@ -507,7 +519,8 @@ def _add_knees(p: argparse.ArgumentParser) -> None:
 def _knees_outputs(a):
     from arvcas.experiments.knees import front_controllers, output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out, front_controllers(a.study_dir), a.format or "png")]
+    return _kinds([(f"--out {a.out}", p) for p in output_files(a.out, front_controllers(a.study_dir), a.format or "png")],
+                  _RESULT)
 
 
 def _run_knees(a: argparse.Namespace) -> int:
@@ -592,7 +605,8 @@ def _run_simulate(a: argparse.Namespace) -> int:
     if a.from_front is not None and changed:
         r.meta["model_change_allowed"] = changed
         print(f"note: replayed under another model than the study's ({changed}), as allowed by --allow-model-change")
-    status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s"
+    status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s" + (
+        f": {r.meta['failure']}" if r.meta.get("failure") else "")
     print(f"{controller}: seed {r.seed}, {r.t[-1]:g} s, {status}")
     print(_metrics_table(r.chat, r.rmse))
     if a.out is not None and a.out.suffix == ".mat":
@@ -670,18 +684,30 @@ def _run_bench(a: argparse.Namespace) -> int:
 # ---- declared outputs -------------------------------------------------------------------------------------
 
 
-def _out_file(dest: str, label: str | None = None) -> Paths:
+def _kinds(outs, formats: dict[str, str]) -> list:
+    """``(label, path)`` outputs with the kind (:mod:`arvcas.io.files`) each will be written as, by suffix:
+    ``formats`` maps ``h5`` or ``mat`` to the arvcas format written there (others: by suffix)."""
+    from arvcas.io.matfile import mat_kind
+
+    kinds = {"h5": formats.get("h5"), "mat": mat_kind(formats["mat"]) if "mat" in formats else None}
+    return [(lab, p, kinds.get(p.suffix.lower().lstrip("."))) for lab, p in outs]
+
+
+def _out_file(dest: str, label: str | None = None, **formats: str) -> Paths:
     def outs(a):
         p = getattr(a, dest)
-        return [] if p is None else [(label or f"--{dest.replace('_', '-')}", Path(p))]
+        return [] if p is None else _kinds([(label or f"--{dest.replace('_', '-')}", Path(p))], formats)
 
     return outs
+
+
+_RESULT = {"h5": "arvcas-result", "mat": "arvcas-result"}  # io.results.FORMAT, io.matfile's "arvcas-result"
 
 
 def _paper_outputs(a):
     from arvcas.experiments.paper import output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out, fmt=a.format or "png")]
+    return _kinds([(f"--out {a.out}", p) for p in output_files(a.out, fmt=a.format or "png")], _RESULT)
 
 
 def _bench_outputs(a):
@@ -720,7 +746,7 @@ def _table() -> tuple[Command, ...]:
                 _add_demo, _run_demo, inputs=(("params", "system"),)),
         Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
                 _add_simulate, _run_simulate, inputs=(("config", "file"), ("params", "system"), ("from_front", "front")),
-                outputs=_out_file("out"), check=_check_simulate, plugins=True),
+                outputs=_out_file("out", **_RESULT), check=_check_simulate, plugins=True),
         Command("paper", "the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
                 _add_paper, _run_paper, outputs=_paper_outputs),
         Command("bench", "measure plant, closed-loop and compile speed; write bench.json and bench.md",
@@ -728,7 +754,7 @@ def _table() -> tuple[Command, ...]:
         Command("tune", "NSGA-II on the CHAT/RMSE front from a study file (resumable, local or Dask)",
                 t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune, plugins=True),
         Command("front export", "the front as CSV or JSON (stdout, or --out FILE), or a MATLAB .mat file",
-                t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out"),
+                t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out", mat="arvcas-front"),
                 check=t.check_front_export),
         Command("front plot", "plot the front, the default gains (Haidou-1: Table 2) on the same draws and the knee "
                 "point (PNG, PDF or SVG)", t.add_front_plot,
@@ -870,9 +896,32 @@ def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
     if cmd.outputs is not None:
         outs = cmd.outputs(a)
         files.check_outputs(outs, inputs, force=a.force)
-        for d in {p.parent if str(p.parent) else Path(".") for _, p in outs}:
+        for d in {o[1].parent if str(o[1].parent) else Path(".") for o in outs}:
             if d.is_dir():
                 files.remove_stale_temps(d)
+
+
+def _choose_numpy_mode() -> int | None:
+    """CasADi 3.8's NumPy mode (issue #2959) for this command: -1, the legacy behaviour without its notice.
+    arvcas's own code calls no NumPy function on a CasADi value, so its numbers are the same in every mode
+    (tests/test_trust_casadi_mode.py); -1 also keeps the libraries the commands use (pymoo, matplotlib)
+    on the behaviour they were tested with. The previous mode is returned, to be restored (a caller in the
+    same process keeps its own)."""
+    import casadi as ca
+
+    get = getattr(ca.GlobalOptions, "getNumpyMode", None)
+    if get is None:  # pragma: no cover - CasADi before 3.8
+        return None
+    before = get()
+    ca.GlobalOptions.setNumpyMode(-1)
+    return before
+
+
+def _restore_numpy_mode(before: int | None) -> None:
+    if before is not None:
+        import casadi as ca
+
+        ca.GlobalOptions.setNumpyMode(before)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -892,6 +941,18 @@ def main(argv: list[str] | None = None) -> int:
         logging.basicConfig(level=logging.INFO, format="arvcas: %(message)s")
     old = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP)}
     files.install_signal_handlers()
+    import warnings
+
+    shown = warnings.showwarning
+
+    def show(message, category, *args, **kw):  # a system file's implausible number: one line
+        if category.__name__ in ("PlausibilityWarning", "ScenarioWarning"):
+            print(f"arvcas: warning: {' '.join(str(message).split())}", file=sys.stderr)
+        else:
+            shown(message, category, *args, **kw)
+
+    warnings.showwarning = show
+    numpy_mode = _choose_numpy_mode()
     try:
         from arvcas.build.codegen import report_progress
 
@@ -912,6 +973,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         import threading
 
+        warnings.showwarning = shown
+        _restore_numpy_mode(numpy_mode)
         if threading.current_thread() is threading.main_thread():
             for s, h in old.items():
                 if h is not None:

@@ -293,7 +293,7 @@ def test_export_replaces_only_its_own_unchanged_files(tmp_path, capsys):
     export_c(out)  # again: every file is arvcas's and unchanged
     assert (out / "Makefile").read_text() == before and (out / "notes.txt").read_text() == "mine"
     (out / "example.c").write_text("/* edited */")
-    with pytest.raises(ExportError, match=r"example.c was changed since arvcas export-c wrote it"):
+    with pytest.raises(ExportError, match=r"example.c: was changed since arvcas wrote it"):
         export_c(out)
     assert (out / "example.c").read_text() == "/* edited */"
     assert cli.main(["export-c", str(out)]) == 2
@@ -307,16 +307,16 @@ def test_export_replaces_only_its_own_unchanged_files(tmp_path, capsys):
     other = tmp_path / "other"
     other.mkdir()
     (other / "Makefile").write_text("all:\n")
-    with pytest.raises(ExportError, match=r"Makefile exists and was not written by arvcas export-c"):
+    with pytest.raises(ExportError, match=r"Makefile: exists and was not written by arvcas"):
         export_c(other)
     assert (other / "Makefile").read_text() == "all:\n" and not (other / "example.c").exists()
-    (other / MANIFEST).write_text("{not json")
-    with pytest.raises(ExportError, match=r"is not a manifest arvcas wrote"):
-        export_c(other)
     (other / "Makefile").unlink()
+    (other / MANIFEST).write_text("{not json")  # export-c's own listing: a file like any other
+    with pytest.raises(ExportError, match=r"arvcas-export.json: exists and was not written by arvcas"):
+        export_c(other)
     (other / MANIFEST).unlink()
     (other / "example.py").symlink_to(tmp_path / "lib" / "example.py")
-    with pytest.raises(ExportError, match=r"example.py exists and was not written"):
+    with pytest.raises(ExportError, match=r"example.py: exists and was not written"):
         export_c(other)
     export_c(other, force=True)
     assert not (other / "example.py").is_symlink()

@@ -72,7 +72,7 @@ def test_own_text_outputs_are_recognised_until_edited(tmp_path, front, capsys):
     assert out.read_bytes() == first and files.written_by_arvcas(out)
     out.write_text(out.read_text() + "my edit\n")  # now the user's
     assert not files.written_by_arvcas(out)
-    assert_refused(argv, capsys, tmp_path, "was not written by arvcas")
+    assert_refused(argv, capsys, tmp_path, "was changed since arvcas wrote it")
     (tmp_path / files.MANIFEST).write_text("{not json")
     assert_refused(["front", "export", front, "--format", "csv", "--out", tmp_path / "g.csv"], capsys, tmp_path,
                    "not an arvcas manifest")

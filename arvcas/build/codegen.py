@@ -14,7 +14,9 @@ with ``cc`` and loaded with :func:`casadi.external`. Builds are cached between p
   ``os.replace`` publishes the ``.so`` and, last, the manifest.
 * **locked**: an ``fcntl.flock`` lock file per key (exclusive to build, shared to verify and load),
   so two processes building the same function at once compile it once and both succeed. Waiting is
-  bounded: on timeout the function is built privately in a temporary directory and not published.
+  bounded: on timeout, and in a cache that cannot be written (read-only), the function is built
+  privately in a directory of this process outside the cache (:func:`arvcas.io.files.private_dir`,
+  in the system's temporary directory) and not published.
 
 Generating C for ``uvms_rhs`` (6-9k instructions) takes 15-40 ms: a few per cent of compiling it
 (0.3 s at -O0, 1-2 s at -O2) and less than building its SX graph, which a cache hit in a new process
@@ -525,7 +527,10 @@ def _publish(plan: _Plan, d: Path, so: Path, man: Path) -> dict:
 
 
 def _build_private(plan: _Plan, d: Path) -> ca.Function:
-    work = Path(tempfile.mkdtemp(prefix=".private-", dir=d))
+    """Build in a directory of this process outside the cache ``d`` (which may be read-only)."""
+    from arvcas.io.files import private_dir
+
+    work = private_dir("build")
     with _LOCK:
         if not _PRIVATE_DIRS:
             atexit.register(_remove_private_dirs)
@@ -556,8 +561,17 @@ def _sweep(d: Path) -> None:
                 pass
 
 
+class _LoadFailed(CacheError):
+    """A library that does not load (not a library, another ABI): a cached one that verified against its
+    manifest (tampered with and re-signed) is rebuilt; anywhere else this one line is the error."""
+
+
 def _load(plan, so: Path, manifest: dict) -> ca.Function:
-    f = ca.external(plan.name, str(so))
+    try:
+        f = ca.external(plan.name, str(so))
+    except RuntimeError as e:
+        first = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
+        raise _LoadFailed(f"{so} does not load ({first[:160]})") from None
     with _LOCK:
         _KEEP.append(f)
         _MANIFESTS[f.__hash__()] = dict(manifest, path=str(so))
@@ -601,6 +615,20 @@ def _build(fn: ca.Function, cmd_flags: list[str], d: Path, lock_timeout: float, 
     return _lookup_or_publish(plan, lambda: plan, d, lock_timeout, plan.name)
 
 
+def _hit(look, so: Path, man: Path) -> tuple[ca.Function | None, str, str]:
+    """(the loaded artifact, "", "") if it verifies and loads; else (None, why it does not verify, why it
+    does not load)."""
+    m, why = _verify(look, so, man)
+    if m is None:
+        return None, why, ""
+    try:
+        f = _load(look, so, m)
+    except _LoadFailed as e:
+        return None, "", str(e)
+    _STATS["disk_hit"] += 1
+    return f, "", ""
+
+
 def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_timeout: float,
                        label: str = "") -> ca.Function:
     """Load the verified artifact of ``look`` (name, key), else build it (``make_plan()``) and publish it.
@@ -610,12 +638,12 @@ def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_tim
     without the lock is safe; a build there is private (a temporary directory, not published).
     """
     so, man, lock = d / f"{look.stem()}.so", d / f"{look.stem()}.json", d / f"{look.stem()}.lock"
+    unloadable = ""  # a verified library that did not load (tampered and re-signed, or foreign): rebuilt
     with _flock(lock, exclusive=False, timeout=lock_timeout) as got:
         if got or got is None:
-            m, why = _verify(look, so, man)
-            if m is not None:
-                _STATS["disk_hit"] += 1
-                return _load(look, so, m)
+            f, why, unloadable = _hit(look, so, man)
+            if f is not None:
+                return f
     what = label or look.name
     with _flock(lock, exclusive=True, timeout=lock_timeout) as got:
         if got is None:
@@ -626,10 +654,11 @@ def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_tim
             log.warning("lock %s busy for %.0f s: building %s privately", lock, lock_timeout, look.name)
             with _Progress(what):
                 return _build_private(make_plan(), d)
-        m, why = _verify(look, so, man)  # another process may have built it meanwhile
-        if m is not None:
-            _STATS["disk_hit"] += 1
-            return _load(look, so, m)
+        if not unloadable:  # another process may have built it meanwhile
+            f, why, unloadable = _hit(look, so, man)
+            if f is not None:
+                return f
+        why = unloadable or why
         if why:
             _STATS["rejected"] += 1
             log.warning("cached %s rejected (%s): rebuilding", so.name, why)
@@ -844,7 +873,9 @@ def preload(b: dict) -> int:
         todo = [it for it in b["items"] if it["ident"] not in _PRELOADED]
         if not todo:
             return 0
-        d = Path(tempfile.mkdtemp(prefix="arvcas-shipped-"))
+        from arvcas.io.files import private_dir
+
+        d = private_dir("shipped")
         if not _PRIVATE_DIRS:
             atexit.register(_remove_private_dirs)
         _PRIVATE_DIRS.append(d)
@@ -855,7 +886,11 @@ def preload(b: dict) -> int:
             so = d / f"{it['name']}-{it['ident'][:20]}.so"
             so.write_bytes(data)
             os.chmod(so, 0o500)
-            f = ca.external(it["name"], str(so))
+            try:
+                f = ca.external(it["name"], str(so))
+            except RuntimeError as e:
+                why = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
+                raise CacheError(f"{here}: shipped library {it['name']} does not load ({why[:160]})") from None
             _KEEP.append(f)
             _MANIFESTS[f.__hash__()] = dict(it["manifest"], path=str(so), shipped=True)
             _PRELOADED[it["ident"]] = f

@@ -124,7 +124,10 @@ def check_sweep(a: argparse.Namespace) -> None:
 
 
 def sweep_outputs(a: argparse.Namespace) -> list:
-    return [] if a.out is None else [(f"--out {a.out}", a.out / f"sweep.{e}") for e in ("h5", "md", a.format or "png")]
+    from arvcas.experiments.sweep import FORMAT
+
+    return [] if a.out is None else [(f"--out {a.out}", a.out / f"sweep.{e}", FORMAT if e == "h5" else None)
+                                     for e in ("h5", "md", a.format or "png")]
 
 
 def _report_check(path, diff: list[str], compared: str) -> int:
@@ -214,7 +217,9 @@ def check_montecarlo(a: argparse.Namespace) -> None:
 def montecarlo_outputs(a: argparse.Namespace) -> list:
     if a.out is None or a.check is not None or a.draws_toml:
         return []
-    return [("--out", a.out), ("--out (its Markdown summary)", a.out.with_suffix(".md"))]
+    from arvcas.experiments.montecarlo import FORMAT
+
+    return [("--out", a.out, FORMAT), ("--out (its Markdown summary)", a.out.with_suffix(".md"))]
 
 
 def run_montecarlo(a: argparse.Namespace) -> int:
@@ -292,7 +297,9 @@ def _robust_dir(a: argparse.Namespace) -> Path:
 
 def robust_outputs(a: argparse.Namespace) -> list:
     d = _robust_dir(a)
-    return [(f"--out {d}", d / f"robust.{e}") for e in ("h5", "md", a.format or "png")]
+    from arvcas.experiments.robust import FORMAT
+
+    return [(f"--out {d}", d / f"robust.{e}", FORMAT if e == "h5" else None) for e in ("h5", "md", a.format or "png")]
 
 
 def check_robust(a: argparse.Namespace) -> None:

@@ -237,7 +237,7 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
             attrs["ref_chat"], attrs["ref_rmse"] = np.asarray(ref[0], float), np.asarray(ref[1], float)
 
     def fill(tmp: Path) -> None:
-        with h5py.File(tmp, "w") as f:
+        with _io.files.new_hdf5(tmp) as f:
             for k, v in attrs.items():
                 f.attrs[k] = v
             f.create_dataset("noise_seed", data=d.noise_seed.astype(np.int64))
@@ -250,7 +250,7 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
             f["phase"].attrs["units"] = "rad"
             f["t_fail"].attrs["units"] = "s (NaN when the run completed)"
 
-    return _io.atomic_write(path, fill)
+    return _io.atomic_write(path, fill, FORMAT)
 
 
 def is_montecarlo_file(path) -> bool:

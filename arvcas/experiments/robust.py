@@ -219,7 +219,7 @@ def write_robust(rf: RobustFront, path) -> Path:
     st = rf.stats()
 
     def fill(tmp: Path) -> None:
-        with h5py.File(tmp, "w") as f:
+        with _io.files.new_hdf5(tmp) as f:
             a = f.attrs
             a["format"], a["format_version"] = FORMAT, FORMAT_VERSION
             a["front_path"], a["controller"], a["study_name"] = rf.front_path, rf.controller, rf.study_name
@@ -253,7 +253,7 @@ def write_robust(rf: RobustFront, path) -> Path:
             f.create_dataset("robust_nd", data=st["robust_nd"])
             f.create_dataset("certainly_dominated", data=st["certainly_dominated"])
 
-    return _io.atomic_write(path, fill)
+    return _io.atomic_write(path, fill, FORMAT)
 
 
 def read_robust(path) -> RobustFront:

@@ -200,7 +200,7 @@ def write_sweep(sw: Sweep, path) -> Path:
     path = _io.target(path, str(path))
 
     def fill(tmp: Path) -> None:
-        with h5py.File(tmp, "w") as f:
+        with _io.files.new_hdf5(tmp) as f:
             a = f.attrs
             a["format"], a["format_version"] = FORMAT, FORMAT_VERSION
             a["hs"] = np.array(sw.hs)
@@ -236,7 +236,7 @@ def write_sweep(sw: Sweep, path) -> Path:
                     ds = f.create_dataset(f"k1/{c}/{j}", data=k1, compression="gzip", shuffle=True)
                     ds.attrs["h"] = sw.hs[j]
 
-    return _io.atomic_write(path, fill)
+    return _io.atomic_write(path, fill, FORMAT)
 
 
 def read_sweep(path) -> Sweep:

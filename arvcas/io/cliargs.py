@@ -6,7 +6,7 @@ do not apply, and the ``--format`` option of a command that writes figures.
 It lives in the I/O layer, below tuning and the experiments, so that every command module imports it
 and none imports another's module for it (docs/architecture.md: no import circles); it imports nothing
 of arvcas at its top (the command line's start stays light), only :mod:`arvcas.io.style` inside
-:func:`figure_file`.
+:func:`figure_file` and :mod:`arvcas.build.calls` (the one memory bound) inside :func:`check_memory`.
 """
 
 from __future__ import annotations
@@ -58,22 +58,17 @@ def seconds_arg(text: str) -> float:
 
 
 def _total_memory() -> int | None:
-    import os
+    from arvcas.build.calls import total_memory
 
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError):  # pragma: no cover
-        return None
+    return total_memory()
 
 
 def check_memory(what: str, n_bytes: float, share: float = 0.5) -> None:
-    """Refuse a request whose results would take more than ``share`` of this machine's memory."""
-    total = _total_memory()
-    if total is None:  # pragma: no cover
-        return
-    if n_bytes > share * total:
-        raise ValueError(f"{what}: would need about {n_bytes / 2**30:.3g} GiB for its results, more than "
-                         f"{share:.0%} of this machine's {total / 2**30:.3g} GiB; ask for less")
+    """Refuse a request whose results would take more than ``share`` of this machine's memory
+    (:func:`arvcas.build.calls.check_memory`, the one memory bound)."""
+    from arvcas.build.calls import check_memory as check
+
+    check(what, n_bytes, share, ValueError, _total_memory())
 
 
 def refuse(a: argparse.Namespace, names, why: str) -> None:

@@ -230,9 +230,9 @@ def save(fig, path, fmt: str) -> None:
 
 def write_figure(path, fig, fmt: str | None = None, error: type[ValueError] = files.FileError) -> Path:
     """A matplotlib figure, written atomically (:func:`arvcas.io.files.atomic_write`) in ``fmt`` (``png``,
-    ``pdf`` or ``svg``; default: from the name's suffix) by :func:`save`."""
+    ``pdf`` or ``svg``; default: from the name's suffix) by :func:`save`; its kind is ``fmt``."""
     try:
         fmt = figure_format(path, fmt)
     except ValueError as e:
         raise error(str(e)) from None
-    return files.atomic_write(path, lambda p: save(fig, p, fmt), error)
+    return files.atomic_write(path, lambda p: save(fig, p, fmt), error, fmt)

@@ -77,7 +77,8 @@ class Result:
         return float(t[-1]) if t is not None and len(t) else 0.0
 
     def __repr__(self) -> str:
-        status = "ok" if self.ok else f"diverged at t = {self.t_fail:g} s"
+        status = "ok" if self.ok else f"diverged at t = {self.t_fail:g} s" + (
+            f" ({self.meta['failure']})" if self.meta.get("failure") else "")
         fmt = lambda v: "[" + ", ".join(f"{x:.3g}" for x in np.asarray(v, dtype=float).ravel()) + "]"  # noqa: E731
         chat, rmse = fmt(self.chat), fmt(self.rmse)
         return (f"<Result {self.controller}, seed {self.seed}, {self.duration:g} s, {status}; "

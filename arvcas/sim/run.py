@@ -39,6 +39,7 @@ from arvcas.sim.scenario import ScenarioConfig
 __all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS"]
 
 MAX_RUNS = 10_000_000  # runs in one batch call (the outputs alone take 100 bytes a run)
+_OUT_BYTES = 2 * 8 * (6 + 6 + 1 + 1)  # a run's outputs (chat, rmse, ok, t_fail) and their returned copies
 
 
 class SimulationError(ValueError):
@@ -148,8 +149,8 @@ class CompiledRun:
         return g
 
     def _unc_phase(self, uncertainty, phase):
-        unc = self.cfg.uncertainty if uncertainty is None else np.asarray(uncertainty, dtype=float)
-        ph = np.array(self.cfg.disturbance_phase) if phase is None else np.asarray(phase, dtype=float)
+        unc = self.cfg.uncertainty if uncertainty is None else calls.real_array(uncertainty, "uncertainty", SimulationError)
+        ph = np.array(self.cfg.disturbance_phase) if phase is None else calls.real_array(phase, "phase", SimulationError)
         if unc.shape != (4,) or not np.isfinite(unc).all():
             raise SimulationError(f"uncertainty: expected 4 finite factors [C, D, g, arm], got {unc}")
         if ph.shape != (6,) or not np.isfinite(ph).all():
@@ -168,7 +169,8 @@ class CompiledRun:
         the nominal sensor covariance: an analysis knob for how much noise reaches the thrusters.
         """
         g = self._gains(gains, batch=False)
-        if not (isinstance(noise_scale, (int, float)) and np.isfinite(noise_scale) and noise_scale >= 0):
+        if isinstance(noise_scale, bool) or not (isinstance(noise_scale, (int, float)) and np.isfinite(noise_scale)
+                                                 and noise_scale >= 0):
             raise SimulationError(f"noise_scale: must be a finite number >= 0, got {noise_scale!r}")
         noise = scenario.noise_sequence(self.cfg, seed) * float(noise_scale)
         unc, ph = self._unc_phase(uncertainty, phase)
@@ -184,6 +186,8 @@ class CompiledRun:
             i += w
         ok_b = bool(out["ok"].item() > 0.5)
         meta = self._meta(fn) | ({"noise_scale": float(noise_scale)} if noise_scale != 1.0 else {})
+        if not ok_b:
+            meta["failure"] = self._failure(series, float(out["t_fail"].item()))
         return Result(
             controller=self.controller.name, gains=np.asarray(g, dtype=float), seed=int(seed),
             chat=out["chat"].ravel(), rmse=out["rmse"].ravel(), ok=ok_b,
@@ -191,6 +195,26 @@ class CompiledRun:
             config_text=self.cfg.to_toml(), params_vector=self._pv.copy(), uncertainty=unc, phase=ph, h=self.cfg.time_h,
             meta=meta, signals=self.signals, series=series,
         )
+
+    def _failure(self, series: dict, t_fail: float) -> str:
+        """Why a traced run stopped at ``t_fail`` (the closed loop's checks, in docs/model.md §6's order):
+        the tracking error beyond the scenario's limits, a controller command that is not finite (or
+        above 1e12), or else the plant's state that the step from ``t_fail`` made non-finite (or >= 1e6)."""
+        cfg = self.cfg
+        k = min(int(round(t_fail / cfg.time_h)), len(series["eta"]) - 1)
+        e = np.abs(series["eta"][k] - series["eta_ref"][k])
+        lim = np.array([cfg.limits_e_position] * 3 + [cfg.limits_e_attitude] * 3)
+        dofs = "x y z phi theta psi".split()
+        bad = [i for i in range(6) if not e[i] < lim[i]]
+        if bad and np.isfinite(e[bad[0]]):
+            i = bad[0]
+            return (f"tracking error of {dofs[i]} {e[i]:.3g} {'m' if i < 3 else 'rad'} reached "
+                    f"limits.{'e_position' if i < 3 else 'e_attitude'} ({lim[i]:g})")
+        tau = series["tau_cmd"][k]
+        if not (np.isfinite(tau).all() and np.abs(tau).max() < 1e12):
+            return "the controller's command is not finite or above 1e12 (gains or controller state)"
+        return (f"the plant's state became non-finite (NaN or inf) or reached 1e6 in the step after t = "
+                f"{t_fail:g} s: the model gives no finite motion there (check the system's numbers and inputs)")
 
     def _meta(self, fn: ca.Function) -> dict:
         art = codegen.artifact_of(fn) or {}
@@ -225,10 +249,12 @@ class CompiledRun:
         ``gains``: (n_gains,) or (n, n_gains); ``seeds``: (n,) non-negative integers; ``uncertainty``:
         None, (4,) or (n, 4); ``phase``: None, (6,) or (n, 6). Returns ``(chat, rmse, ok, t_fail)``.
         """
-        seeds = np.asarray(seeds)
+        seeds = calls.integer_array(seeds, "seeds", SimulationError, max_size=MAX_RUNS)
         if seeds.ndim != 1 or seeds.size == 0:
             raise SimulationError(f"seeds: expected a non-empty 1-D sequence of integers, got shape {seeds.shape}")
         n = seeds.size
+        if n > MAX_RUNS:
+            raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
         g = self._gains(gains, batch=True)
         if g.shape[0] not in (1, n):
             raise SimulationError(f"gains: {g.shape[0]} gain sets for {n} seeds (give 1 or {n})")
@@ -236,7 +262,7 @@ class CompiledRun:
         unc0, ph0 = self._unc_phase(None, None)
 
         def rows(v, default, k, name):
-            a = np.asarray(default if v is None else v, dtype=float)
+            a = calls.real_array(default if v is None else v, name, SimulationError)
             if a.shape == (k,):
                 a = np.broadcast_to(a, (n, k))
             if a.shape != (n, k) or not np.isfinite(a).all():
@@ -245,7 +271,15 @@ class CompiledRun:
 
         U = rows(uncertainty, unc0, 4, "uncertainty")
         PH = rows(phase, ph0, 6, "phase")
-        noise = np.hstack([scenario.noise_sequence(self.cfg, int(sd)) for sd in seeds])
+        first = scenario.noise_sequence(self.cfg, int(seeds[0]))  # every draw's noise block has its shape
+        k = first.shape[1]
+        # bounded before allocating: n noise blocks, the per-run inputs, the outputs (and their copies)
+        calls.check_memory(f"many: {n} runs", n * (first.nbytes + 8 * (G.shape[1] + 4 + 6) + _OUT_BYTES),
+                           error=SimulationError)
+        noise = np.empty((first.shape[0], n * k), order="F")  # as call_named reads it: no copy
+        noise[:, :k] = first
+        for i in range(1, n):
+            noise[:, i * k:(i + 1) * k] = scenario.noise_sequence(self.cfg, int(seeds[i]))
         return self._evaluate(n, {"gains": G.T, "noise": noise, "unc": U.T, "phase": PH.T},
                               {"gains", "noise", "unc", "phase"}, n_threads)
 
@@ -254,6 +288,7 @@ class CompiledRun:
         the others and the time table are shared. NaN metrics for a diverged run."""
         if n > MAX_RUNS:
             raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
+        calls.check_memory(f"runs: {n}", n * _OUT_BYTES, error=SimulationError)
         fn = self.function(trace=False)
         out = calls.call_named(fn, {**varying, **self._shared()}, n=n, per_run=per_run,
                                n_threads=_n_threads(n_threads))

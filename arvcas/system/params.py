@@ -22,7 +22,7 @@ import numpy as np
 from arvcas.system import config, systemfile, tomlfile
 
 __all__ = ["Params", "ParamsError", "Layout", "load", "view", "layout_for", "default_layout", "SCHEMA", "UNITS",
-           "default_path", "check_physical"]
+           "default_path", "check_physical", "check_plausible", "PlausibilityWarning"]
 
 
 class ParamsError(ValueError):
@@ -217,9 +217,24 @@ def load(path: str | Path | None = None) -> Params:
     units = tuple(loaded.entries[k][0] for k in lay.leaf)
     sources = tuple(loaded.entries[k][1] for k in lay.leaf)
     check_physical(dict(zip(lay.names, values)), where, lay)
+    _warn_implausible(dict(zip(lay.names, values)), where, lay, doc)
     desc = doc.get("system", {}).get("description", "")
     defaults = tuple((k, str(systemfile.rel_path(p, v))) for k, v in doc.get("defaults", {}).items())
     return Params(tuple(values), units, sources, where, lay, desc if isinstance(desc, str) else "", defaults)
+
+
+def _warn_implausible(values: dict, where: str, lay: Layout, doc: dict) -> None:
+    """:func:`check_plausible` on a loaded file: refusals raised, the rest warned (``PlausibilityWarning``)."""
+    import warnings
+
+    accept = doc.get("system", {}).get("accept_implausible", False) is True
+    for msg in check_plausible(values, where, lay, accept):
+        if msg not in _WARNED:  # once per process (a command may load its system twice)
+            _WARNED.add(msg)
+            warnings.warn(msg, PlausibilityWarning, stacklevel=3)
+
+
+_WARNED: set[str] = set()
 
 
 def _default_name(p: Path) -> str:
@@ -376,3 +391,106 @@ def view(p: Any, layout: Layout | None = None) -> Mapping[str, Any]:
         raise ParamsError(f"parameter vector has {p.shape[0]} entries, expected {len(lay)} "
                           f"(system {lay.structure.name})")
     return _View(p, lay)
+
+
+# ---- physical plausibility (docs/system-file.md "Plausibility") -------------------------------------------
+
+
+class PlausibilityWarning(UserWarning):
+    """A system file's number is possible but implausible for its vehicle (docs/system-file.md)."""
+
+
+_RHO_WATER = 1000.0  # kg/m^3: the scale of a vehicle described without fluid (env.rho = 0)
+# (warn above, refuse above) as multiples of the vehicle's own scale
+_MASS_RATIO = (1.0, 10.0)  # a link's or the payload's mass (or displaced water) / the vehicle's mass
+_LENGTH_RATIO = (10.0, 100.0)  # a distance / the vehicle's size (m / rho)^(1/3)
+_THRUST_RATIO = (10.0, 1000.0)  # a thrust limit / the vehicle's weight in air m g
+_BUOYANCY = ((0.8, 1.25), (0.1, 10.0))  # buoyancy / weight: warned outside the first, refused outside the second
+_CROSSOVER_SPEED = 0.5  # m/s or rad/s: a DOF's damping may turn energy-injecting only above this speed
+
+
+def check_plausible(values: Mapping[str, float], where: str, layout: Layout, accept: bool = False) -> list[str]:
+    """The plausibility rules of docs/system-file.md, against the vehicle's own scale: damping that
+    dissipates, buoyancy near the weight, masses, volumes, distances and thrust limits of the size of the
+    vehicle. The impossible is refused (one-line :class:`ParamsError` naming the key and the rule) unless
+    ``accept`` (the file's ``[system] accept_implausible = true``); the implausible is returned (and, by
+    :func:`load`, warned as :class:`PlausibilityWarning`)."""
+    st = layout.structure
+    rho, g, m = values["env.rho"], values["env.g"], values["vehicle.m"]
+    size = (m / (rho if rho > 0 else _RHO_WATER)) ** (1 / 3)
+    found: list[tuple[bool, str, str]] = []  # (impossible, key, why)
+
+    def rule(key: str, ratio: float, limits, what: str) -> None:
+        if ratio > limits[1]:
+            found.append((True, key, f"{what} ({ratio:.3g} times), more than {limits[1]:g} times is not a vehicle"))
+        elif ratio > limits[0]:
+            found.append((False, key, f"{what} ({ratio:.3g} times), more than {limits[0]:g} times"))
+
+    if rho > 0:
+        b = (m + values["vehicle.buoyancy_excess"]) / m if st.buoyancy == "excess" else rho * values["vehicle.volume"] / m
+        (wlo, whi), (rlo, rhi) = _BUOYANCY
+        key = "vehicle.buoyancy_excess" if st.buoyancy == "excess" else "vehicle.volume"
+        if not rlo <= b <= rhi:
+            found.append((True, key, f"buoyancy {b:.3g} times the weight (allowed {rlo:g}..{rhi:g}: a unit mix-up?)"))
+        elif not wlo <= b <= whi:
+            found.append((False, key, f"buoyancy {b:.3g} times the weight (a vehicle is trimmed near 1: "
+                                      f"{wlo:g}..{whi:g})"))
+    for k in layout.names:
+        v = abs(values[k])
+        leaf = k.rsplit(".", 1)[-1]
+        if (k.startswith("arm.link") and leaf == "mass") or k == "payload.mass":
+            rule(k, v / m, _MASS_RATIO, f"{v:g} kg against the vehicle's {m:g} kg")
+        elif (k.startswith("arm.link") and leaf == "volume") or k == "payload.volume":
+            rule(k, v * (rho if rho > 0 else _RHO_WATER) / m, _MASS_RATIO,
+                 f"{v:g} m^3 displaces water of the vehicle's mass")
+        elif layout.dims[layout.index[k]] == "length":
+            rule(k, v / size, _LENGTH_RATIO, f"{v:g} m against the vehicle's size {size:.3g} m")
+        elif k.startswith("thrusters.") and leaf in ("u_min", "u_max"):
+            rule(k, v / (m * g), _THRUST_RATIO, f"{v:g} N against the vehicle's weight {m * g:.4g} N")
+    found += _damping_rules(values, st)
+    refused = [f for f in found if f[0]]
+    if refused and not accept:
+        _, key, why = refused[0]
+        raise ParamsError(f"{where}: {key}: {why}; if this is deliberate, set [system] accept_implausible = true "
+                          f"(docs/system-file.md, Plausibility)")
+    return [f"{where}: {key}: {why}" for _, key, why in found]
+
+
+def _damping_rules(values: Mapping[str, float], st) -> list[tuple[bool, str, str]]:
+    """Damping must dissipate: the linear damping matrix D (D[row, col] = -coefficient) has a positive
+    semidefinite symmetric part (no energy injected at low speed), and a DOF's diagonal damping
+    -(linear + quadratic |v|) does not turn negative at every speed (refused) or below
+    :data:`_CROSSOVER_SPEED` (warned)."""
+    scale = values["env.rho"] if st.hydro_per_rho else 1.0
+    D = np.zeros((6, 6))
+    quad = {}
+    for t in st.hydro:
+        c = values[f"hydro.{t.name}"] * scale
+        if t.col is None:
+            continue
+        if not t.factors:
+            D[t.row, t.col] += -c
+        elif t.row == t.col and t.factors == (f"abs{systemfile.VELOCITIES[t.col]}",):
+            quad[t.row] = (t.name, c)
+    out = []
+    S = 0.5 * (D + D.T)
+    eig = np.linalg.eigvalsh(S)
+    if eig[0] < -1e-9 * max(1.0, float(np.abs(S).max())):
+        keys = [f"hydro.{t.name}" for t in st.hydro if t.col is not None and not t.factors]
+        out.append((True, ", ".join(keys) or "hydro", f"the linear damping injects energy (its symmetric part has the "
+                                                      f"eigenvalue {eig[0]:.3g}; damping must dissipate: derivatives "
+                                                      f"like X_u are <= 0 in Fossen's signs)"))
+    for i, (name, q) in quad.items():
+        if q <= 0:
+            continue
+        lcoef = -D[i, i]  # the linear coefficient (<= 0 when dissipative)
+        speed = -lcoef / q
+        unit = "m/s" if i < 3 else "rad/s"
+        if speed <= 0:
+            out.append((True, f"hydro.{name}", f"{name} = {q / scale:g} > 0 injects energy at every speed of "
+                                               f"{systemfile.VELOCITIES[i]} (damping must dissipate: <= 0 in "
+                                               f"Fossen's signs)"))
+        elif speed < _CROSSOVER_SPEED:
+            out.append((False, f"hydro.{name}", f"{systemfile.VELOCITIES[i]}'s damping injects energy above "
+                                                f"{speed:.3g} {unit}"))
+    return out

@@ -10,6 +10,7 @@ structure, so the numbers load with the one configuration loader: units, rules, 
 from __future__ import annotations
 
 import dataclasses
+import keyword
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,8 +28,8 @@ MAX_JOINTS = 7
 FORCES = "XYZKMN"
 VELOCITIES = "uvwpqr"
 FORMS = ("dh", "chain", "urdf")
-NAME_RE = re.compile(r"^[a-z][a-z0-9_]{0,63}$")
-THRUSTER_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
+NAME_RE = re.compile(r"^[a-z][a-z0-9_]{0,63}\Z")  # \Z: "$" would accept a final newline
+THRUSTER_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}\Z")
 
 # Table A1's names for its four stern-angle terms: aliases of their full term names (docs/model.md §2).
 HYDRO_ALIASES = {
@@ -166,6 +167,30 @@ def _numbered(table: dict, prefix: str, path: str) -> int:
     return len(idx)
 
 
+def _thruster_name(n: Any, i: int) -> str:
+    """A thruster's name: an identifier of at most 32 characters that is not a Python keyword (it names a
+    field of the file's schema, a parameter and a signal)."""
+    if not isinstance(n, str) or not THRUSTER_RE.match(n):
+        raise _Bad(f"thrusters.unit[{i}].name: expected a name like \"T1\" ([A-Za-z][A-Za-z0-9_]*, at most 32 "
+                   f"characters), got {n!r}")
+    if keyword.iskeyword(n):
+        raise _Bad(f"thrusters.unit[{i}].name: {n!r} is a Python keyword; choose another name (like \"T1\")")
+    return n
+
+
+_SYSTEM_KEYS = ("name", "description", "accept_implausible")
+
+
+def _check_system_keys(sysd: dict) -> None:
+    """``[system]`` has a name, a description and ``accept_implausible`` (true: the plausibility rules of
+    docs/system-file.md warn instead of refusing; it shapes no code)."""
+    for k in sysd:
+        if k not in _SYSTEM_KEYS:
+            raise _Bad(f"system.{k}: unknown key (allowed: {', '.join(_SYSTEM_KEYS)}){config.closest(k, _SYSTEM_KEYS)}")
+    if not isinstance(sysd.get("accept_implausible", False), bool):
+        raise _Bad(f"system.accept_implausible: expected true or false, got {sysd['accept_implausible']!r}")
+
+
 def structure_of(doc: dict, where: str, error: type[Exception], default_name: str = "") -> Structure:
     """The :class:`Structure` of a parsed system file; ``error`` (one line naming ``where`` and the key)."""
     try:
@@ -176,9 +201,7 @@ def structure_of(doc: dict, where: str, error: type[Exception], default_name: st
 
 def _structure(doc: dict, default_name: str) -> Structure:
     sysd = _table(doc, "system", "", required=False)
-    for k in sysd:
-        if k not in ("name", "description"):
-            raise _Bad(f"system.{k}: unknown key (allowed: name, description){config.closest(k, ['name', 'description'])}")
+    _check_system_keys(sysd)
     if not isinstance(sysd.get("description", ""), str):
         raise _Bad("system.description: expected a string")
     dfl = doc.get("defaults", {})
@@ -230,9 +253,7 @@ def _structure(doc: dict, default_name: str) -> Structure:
             raise _Bad("thrusters.unit: expected an array of tables [[thrusters.unit]]")
         names = []
         for i, u in enumerate(units_list):
-            n = u.get("name")
-            if not isinstance(n, str) or not THRUSTER_RE.match(n):
-                raise _Bad(f"thrusters.unit[{i}].name: expected a name like \"T1\" ([A-Za-z][A-Za-z0-9_]*), got {n!r}")
+            n = _thruster_name(u.get("name"), i)
             if n in names:
                 raise _Bad(f"thrusters.unit[{i}].name: '{n}' is used twice")
             names.append(n)

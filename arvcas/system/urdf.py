@@ -73,8 +73,36 @@ def _si(entry: Any, key: str, dim: str, n: int | None, where: str, error) -> Any
     return np.array(v, dtype=float) * fac
 
 
+def refuse_dtd(text, where: str, error) -> None:
+    """Refuse (``error``, one line) XML with a document type declaration: a ``<!DOCTYPE>``, and with it
+    every entity declaration, internal or external, is found by expat before any tree is built, so no
+    entity is ever expanded (the "billion laughs" and external-entity attacks; defusedxml's
+    ``forbid_dtd``). URDF, xacro and package.xml files have no DTD."""
+    import xml.parsers.expat as expat
+
+    class _DTD(Exception):
+        pass
+
+    def refuse(*_args):
+        raise _DTD
+
+    scan = expat.ParserCreate()
+    scan.StartDoctypeDeclHandler = refuse
+    scan.EntityDeclHandler = refuse
+    scan.ExternalEntityRefHandler = refuse
+    try:
+        scan.Parse(text, True)
+    except _DTD:
+        raise error(f"{where}: has a document type declaration (<!DOCTYPE ...>); arvcas reads XML without one "
+                    f"(it expands no entities)") from None
+    except expat.ExpatError as e:
+        raise error(f"{where}: malformed XML: {e}") from None
+
+
 def parse(text: str, where: str, error) -> ET.Element:
-    """The ``<robot>`` element of a URDF's text; one-line errors naming ``where``."""
+    """The ``<robot>`` element of a URDF's text, parsed with no DTD (:func:`refuse_dtd`); one-line errors
+    naming ``where``."""
+    refuse_dtd(text, where, error)
     try:
         root = ET.fromstring(text)
     except ET.ParseError as e:

@@ -90,8 +90,11 @@ def find_packages(roots: list[Path], error=ImportError_) -> dict[str, Path]:
             dirs[:] = sorted(x for x in dirs if not x.startswith("."))
             if "package.xml" in files:
                 try:
-                    name = (ET.parse(os.path.join(d, "package.xml")).getroot().findtext("name") or "").strip()
-                except ET.ParseError:
+                    pxml = Path(d) / "package.xml"
+                    text = pxml.read_text(encoding="utf-8", errors="replace")
+                    urdf.refuse_dtd(text, str(pxml), ValueError)  # no entity is expanded
+                    name = (ET.fromstring(text).findtext("name") or "").strip()
+                except (ET.ParseError, OSError, ValueError):
                     continue
                 if name and name not in found:
                     found[name] = Path(d).resolve()
@@ -141,6 +144,19 @@ def expand(path: Path, packages: dict[str, Path], args: dict[str, str], error=Im
 
     old = sa._eval_find, sa._eval_dict.get("find")
     sa._eval_find, sa._eval_dict["find"] = find, find
+    real_parse = xacro.parse
+
+    def parse_without_dtd(inp, filename=None):  # the file and every include: no DTD, no entity expanded
+        if inp is None:
+            with open(os.path.join(xacro.root_dir, filename), encoding="utf-8") as fh:
+                inp = fh.read()
+        elif hasattr(inp, "read"):
+            inp = inp.read()
+        if isinstance(inp, (str, bytes)):
+            urdf.refuse_dtd(inp, filename or str(path), error)
+        return real_parse(inp, filename)
+
+    xacro.parse = parse_without_dtd
     xacro.all_includes = []
     try:
         xacro.init_stacks(None)
@@ -153,6 +169,7 @@ def expand(path: Path, packages: dict[str, Path], args: dict[str, str], error=Im
         raise error(f"{path}: xacro: {' '.join(str(e).split())}") from None
     finally:
         sa._eval_find, sa._eval_dict["find"] = old
+        xacro.parse = real_parse
         xacro.init_stacks(None)
 
 

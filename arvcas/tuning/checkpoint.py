@@ -394,13 +394,13 @@ def write_checkpoint(c: Checkpoint, path: Path) -> Path:
     if not c.created:
         c.created = c.updated
     try:
-        return files.atomic_write(path, lambda tmp: _write_file(tmp, c), CheckpointError)
+        return files.atomic_write(path, lambda tmp: _write_file(tmp, c), CheckpointError, FORMAT)
     except CheckpointError as e:
         raise CheckpointError(f"{e}; the previous one is kept") from None
 
 
 def _write_file(tmp: Path, c: Checkpoint) -> None:
-    with h5py.File(tmp, "w") as f:
+    with files.new_hdf5(tmp) as f:  # in memory, then plain I/O: a full disk is one OSError
         _write(f, c)
 
 
@@ -508,6 +508,31 @@ def _json_attr(f: h5py.File, name: str, path: Path, kind: type):
     return v
 
 
+def _validate_population(c: Checkpoint, path: Path) -> None:
+    """The population's values, not only its shapes (a resume feeds them to NSGA-II): numbers; the
+    decision variables X finite and within the study's bounds (log10 of lower, upper); the gains 10**X;
+    the constraint G finite; the objectives F finite for every feasible member (G <= 0)."""
+    def bad(k: str, why: str) -> CheckpointError:
+        return CheckpointError(f"{path}: damaged arvcas front file (population/{k}: {why})")
+
+    for k in ("X", "gains", "F", "G", "rank", "crowding", "chat", "rmse", "ok", "t_fail"):
+        if np.asarray(getattr(c, k)).dtype.kind not in "biuf":
+            raise bad(k, f"not numbers ({np.asarray(getattr(c, k)).dtype})")
+    if not (np.isfinite(c.lower).all() and np.isfinite(c.upper).all() and (c.lower > 0).all()
+            and (c.lower < c.upper).all()):
+        raise CheckpointError(f"{path}: damaged arvcas front file (variables/lower, upper are not 0 < lower < upper)")
+    lo, hi = np.log10(c.lower), np.log10(c.upper)
+    if not np.isfinite(c.X).all() or (c.X < lo - 1e-9).any() or (c.X > hi + 1e-9).any():
+        raise bad("X", "not finite or outside the study's bounds")
+    if not np.allclose(c.gains, 10.0 ** c.X, rtol=1e-12, atol=0.0):
+        raise bad("gains", "not 10**X")
+    if not np.isfinite(c.G).all():
+        raise bad("G", "not finite")
+    feasible = c.G[:, 0] <= 0
+    if not np.isfinite(c.F[feasible]).all():
+        raise bad("F", "not finite for a feasible member")
+
+
 def _validate(c: Checkpoint, path: Path) -> None:
     m = len(c.names)
     if c.lower.shape != (m,) or c.upper.shape != (m,) or c.table2.shape != (m,):
@@ -521,6 +546,7 @@ def _validate(c: Checkpoint, path: Path) -> None:
             if getattr(c, k).shape != shp:
                 raise CheckpointError(f"{path}: damaged arvcas front file (population/{k} has shape "
                                       f"{getattr(c, k).shape}, expected {shp})")
+        _validate_population(c, path)
     lens = {len(c.history[k]) for k in HISTORY_FIELDS}
     if len(lens) != 1 or lens.pop() != c.n_gen:
         raise CheckpointError(f"{path}: damaged arvcas front file (history does not cover {c.n_gen} generations)")
