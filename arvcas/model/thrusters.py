@@ -101,3 +101,179 @@ def envelope(P):
     hi = np.array([reach(A[:, k]) for k in range(6)])
     lo = np.array([reach(-A[:, k]) for k in range(6)])
     return lo, hi
+
+
+# ---- thruster dynamics: command maps and the first-order lag (docs/model.md §9) ---------------------------
+#
+# A thruster with dynamics has one state, its rotor state ``s`` in the units of its command (PWM
+# microseconds, a normalised command or rotor speed) counted from the edge of its dead band: ``s = 0``
+# is the rotor at rest, and the command the autopilot sends for ``s`` is ``c = c_hi + s`` (s > 0) or
+# ``c_lo + s`` (s < 0), [c_lo, c_hi] the dead band. Its steady thrust is ``F(s)``: the map's table with
+# the dead band's flat run taken out (strictly increasing through (0, 0)), or the quadratic rotor law
+# ``k s |s|``. The state follows the held command ``y`` by ``ds/dt = clip((y - s) / tau, -r, r)`` with
+# ``tau`` the spin-up constant while |s| grows and the spin-down constant while it shrinks; over a
+# sample the command is held, so the solution is written in closed form (:func:`lag_states`).
+
+__all__ += ["has_dynamics", "thruster_maps", "map_grid", "map_thrust", "map_inverse", "map_range", "command_of",
+            "time_constants", "lag_constants", "lag_states", "LAG_EXP_LIMIT"]
+
+LAG_EXP_LIMIT = 700.0  # h / tau above this would overflow the closed form's exp(h / tau) (refused before a run)
+
+
+def has_dynamics(P) -> bool:
+    return P.s.thruster_dynamics is not None
+
+
+def thruster_maps(P) -> list:
+    """The map of each listed thruster (its :class:`arvcas.systemfile.ThrusterMap`), in thruster order."""
+    return [P.s.thruster_map(d.map) for d in P.s.thruster_dynamics]
+
+
+def _mp(m, key):
+    return f"thrusters.map.{m.name}.{key}"
+
+
+def map_grid(P, m):
+    """A table map as ``(s, F)``: the rotor-state grid (command minus the dead band's edge) and the
+    thrust (N), both strictly increasing through (0, 0)."""
+    i0, i1 = m.zero
+    c = [P[_mp(m, f"command.{i}")] for i in range(m.n)]
+    T = [P[_mp(m, f"thrust.{i}")] for i in range(m.n)]
+    s = [c[i] - c[i0] for i in range(i0 + 1)] + [c[i] - c[i1] for i in range(i1 + 1, m.n)]
+    return ca.vertcat(*s), ca.vertcat(*(T[:i0 + 1] + T[i1 + 1:]))
+
+
+_INTERP: dict = {}
+
+
+def _interpolant(n_grid: int) -> ca.Function:
+    """Linear interpolation on a runtime grid of ``n_grid`` points (CasADi's, binary search; its batch
+    option is not used: in CasADi 3.8.2 it evaluates the first point only)."""
+    f = _INTERP.get(n_grid)
+    if f is None:
+        f = _INTERP[n_grid] = ca.interpolant(f"thr_interp_{n_grid}", "linear", [n_grid], 1,
+                                             {"lookup_mode": ["binary"]})
+    return f
+
+
+def _lookup(grid, values, x):
+    """values(x) by linear interpolation, for a column ``x``: one call per point (the closed loop looks
+    its tables up in MX instead, :func:`arvcas.sim.closedloop._lookup`)."""
+    f = _interpolant(grid.shape[0])
+    return ca.vertcat(*[f(x[i], grid, values) for i in range(x.shape[0])])
+
+
+def map_thrust(P, m, s):
+    """Steady thrust F(s) (N) of map ``m`` at rotor states ``s`` (a column)."""
+    if m.kind == "table":
+        g, v = map_grid(P, m)
+        return _lookup(g, v, s)
+    return P[_mp(m, "rotor_constant")] * s * ca.fabs(s)
+
+
+def map_inverse(P, m, u):
+    """The rotor state whose steady thrust is ``u`` (a column, N, within the map's range)."""
+    if m.kind == "table":
+        g, v = map_grid(P, m)
+        return _lookup(v, g, u)
+    return ca.sign(u) * ca.sqrt(ca.fabs(u) / P[_mp(m, "rotor_constant")])
+
+
+def map_range(P, m):
+    """(s_min, s_max) of map ``m``'s rotor state: the table's ends, or the command limits beyond the dead band."""
+    if m.kind == "table":
+        i0, i1 = m.zero
+        return (P[_mp(m, "command.0")] - P[_mp(m, f"command.{i0}")],
+                P[_mp(m, f"command.{m.n - 1}")] - P[_mp(m, f"command.{i1}")])
+    db = P[_mp(m, "dead_band")]
+    return P[_mp(m, "command_min")] + db, P[_mp(m, "command_max")] - db
+
+
+def command_of(P, m, s):
+    """The command the autopilot sends for rotor state ``s`` (map units): beyond the dead band's edge, the
+    dead band's middle at rest."""
+    if m.kind == "table":
+        i0, i1 = m.zero
+        lo, hi = P[_mp(m, f"command.{i0}")], P[_mp(m, f"command.{i1}")]
+    else:
+        hi = P[_mp(m, "dead_band")]
+        lo = -hi
+    return ca.if_else(s > 0, hi + s, ca.if_else(s < 0, lo + s, 0.5 * (lo + hi)))
+
+
+def time_constants(P, i: int):
+    """(tau_up, tau_down, rate limit or None) of listed thruster ``i`` (s, s, command units / s)."""
+    n, d = P.s.thrusters[i], P.s.thruster_dynamics[i]
+    if d.asymmetric:
+        up, down = P[f"thrusters.{n}.time_constant_up"], P[f"thrusters.{n}.time_constant_down"]
+    else:
+        up = down = P[f"thrusters.{n}.time_constant"]
+    return up, down, (P[f"thrusters.{n}.rate_limit"] if d.rate_limit else None)
+
+
+def lag_constants(P, offsets) -> ca.SX:
+    """The closed form's per-run constants: ``exp(-t / tau)`` at each time offset ``t`` of a sample, per
+    thruster (spin-up, then spin-down for an asymmetric one), stacked in thruster order."""
+    out = []
+    for i, d in enumerate(P.s.thruster_dynamics):
+        up, down, _ = time_constants(P, i)
+        out += [ca.exp(-t / up) for t in offsets]
+        if d.asymmetric:
+            out += [ca.exp(-t / down) for t in offsets]
+    return ca.vertcat(*out)
+
+
+def _phase(xs, z, tau, r, ts, Es, h, t0=None):
+    """The solution of ``dx/dt = clip((z - x) / tau, -r, r)`` from ``x(t0) = xs`` at the times ``ts``
+    (``Es[j] = exp(-ts[j] / tau)``): a ramp at the rate limit while ``|z - x| > r tau``, then the
+    exponential approach. ``exp(min(t0 + t_ramp, h) / tau)`` carries the delayed start (the tail is
+    used only for times after it, all <= h)."""
+    d = z - xs
+    if r is None:
+        if t0 is None:
+            return [z - d * E for E in Es]
+        G = ca.exp(ca.fmin(t0, h) / tau)
+        return [z - d * E * G for E in Es]
+    t0 = 0 if t0 is None else t0
+    a, sg = ca.fabs(d), ca.sign(d)
+    tr = ca.fmax(0, a / r - tau)
+    m = ca.fmin(a, r * tau)
+    G = ca.exp(ca.fmin(t0 + tr, h) / tau)
+    return [ca.if_else(t - t0 <= tr, xs + sg * r * (t - t0), z - sg * m * E * G) for t, E in zip(ts, Es)]
+
+
+def lag_states(P, s0, y, consts, offsets, h):
+    """Each thruster's rotor state at the time offsets of a sample (``offsets[j]`` s after its start, the
+    last one ``<= h``), from ``s0`` with the command ``y`` held: a list over thrusters of lists over offsets.
+
+    Exact for the lag of :func:`time_constants`: with one time constant, :func:`_phase` over the whole
+    sample; with spin-up and spin-down constants, spin-up while moving away from rest, spin-down while
+    moving towards the target on the same side, and for a reversal spin-down until the rotor stops (at
+    ``t_c``) then spin-up from rest. ``consts``: :func:`lag_constants`.
+    """
+    k, out, m = 0, [], len(offsets)
+    for i, d in enumerate(P.s.thruster_dynamics):
+        up, down, r = time_constants(P, i)
+        Eu = [consts[k + j] for j in range(m)]
+        k += m
+        if not d.asymmetric:
+            out.append(_phase(s0[i], y[i], up, r, offsets, Eu, h))
+            continue
+        Ed = [consts[k + j] for j in range(m)]
+        k += m
+        x, z = s0[i], y[i]
+        grow = x * (z - x) >= 0  # at rest or moving away from it: spin-up all sample
+        cross = x * z < 0  # a reversal: spin-down to rest, then spin-up
+        PU = _phase(x, z, up, r, offsets, Eu, h)
+        PA = _phase(x, z, down, r, offsets, Ed, h)
+        a = ca.fabs(x) + ca.fabs(z)
+        if r is None:
+            tc = down * ca.log(a / ca.fabs(z))
+        else:
+            tra = ca.fmax(0, a / r - down)
+            t_zero = ca.fabs(x) / r
+            tc = ca.if_else(t_zero <= tra, t_zero, tra + down * ca.log(ca.fmin(a, r * down) / ca.fabs(z)))
+        PB = _phase(0, z, up, r, offsets, Eu, h, t0=tc)
+        out.append([ca.if_else(grow, pu, ca.if_else(ca.logic_and(cross, t >= tc), pb, pa))
+                    for t, pu, pa, pb in zip(offsets, PU, PA, PB)])
+    return out
