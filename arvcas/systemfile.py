@@ -568,12 +568,15 @@ def _thruster_cls(dyn: ThrusterDynamics | None, unit: str) -> type:
     """A listed thruster's schema: geometry and limits, then its dynamics (docs/system-file.md)."""
     if dyn is None:
         return Thruster
-    tau = quantity("time", gt(0, "a first-order lag's time constant"))
-    fields = [(f.name, f.type, f) for f in dataclasses.fields(Thruster)]
+    def tau():  # a new field each time (a dataclass field object belongs to one field)
+        return quantity("time", gt(0, "a first-order lag's time constant"))
+
+    fields = [(f.name, f.type, quantity(f.metadata[config._META].dim, n=f.metadata[config._META].n))
+              for f in dataclasses.fields(Thruster)]
     if dyn.asymmetric:
-        fields += [("time_constant_up", float, tau), ("time_constant_down", float, tau)]
+        fields += [("time_constant_up", float, tau()), ("time_constant_down", float, tau())]
     else:
-        fields.append(("time_constant", float, tau))
+        fields.append(("time_constant", float, tau()))
     if dyn.rate_limit:
         fields.append(("rate_limit", float, quantity(COMMAND_UNITS[unit][1], gt(0))))
     return dataclasses.make_dataclass(f"Thruster{'A' if dyn.asymmetric else ''}{'R' if dyn.rate_limit else ''}_"

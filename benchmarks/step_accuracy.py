@@ -84,35 +84,78 @@ FRONTS = SYSTEMS["haidou1"]["fronts"]
 # ---- the reference: CVODES on the plant with the thrust held per sample ---------------------------------
 
 def _plant_ode(cfg, opts=None, layout=None):
-    """(x, s, par, xdot): the plant over one sample, local time ``s`` in [0, h], ``par = [tau (6); t_k; phase (6); p]``.
+    """(x, s, par, xdot): the plant over one sample, local time ``s`` in [0, h], ``par = [u; t_k; phase (6); water; p]``.
 
-    ``tau`` is the held body wrench of the thrusters; ``t = t_k + s``. The right-hand side is the SX
-    plant function ``uvms_rhs`` (direct Newton-Euler arm wrench, the trim of docs/model.md §3 at q0) with the scenario's
-    joint trajectory, payload ramp and eq. 41's disturbance as functions of ``t``. ``layout``: the system's
-    :class:`arvcas.params.Layout` (default Haidou-1's); ``p`` is its parameter vector.
+    ``u`` is the held body wrench of the thrusters (6); with thruster dynamics (docs/model.md §9) it is each
+    rotor's held target (one per thruster) and the rotor states join ``x`` (12 + n_thrusters), following the
+    textbook lag ``ds/dt = clip((y - s) / tau, -r, r)`` (tau the spin-up constant while ``|s|`` grows, the
+    spin-down one while it shrinks) through the map's table (CasADi's linear interpolant) or rotor law,
+    here integrated with the plant: an independent implementation of the closed loop's closed form.
+    ``t = t_k + s``. The right-hand side is the plant with the direct Newton-Euler arm wrench
+    (``uvms_xdot``, the function behind ``uvms_rhs``; the trim of docs/model.md §3 at q0), the scenario's
+    joint trajectory, payload ramp, eq. 41's disturbance, current and tether as functions of ``t``.
+    ``layout``: the system's :class:`arvcas.params.Layout` (default Haidou-1's); ``p`` is its parameter vector.
     """
-    from arvcas.model import manipulator
-    from arvcas.model.uvms import ModelOptions, plant_functions
+    from arvcas.model import manipulator, thrusters
+    from arvcas.model.uvms import ModelOptions, uvms_xdot
     from arvcas.params import default_layout, view
-    from arvcas.sim import scenario
+    from arvcas.sim import closedloop, scenario
 
     lay = layout or default_layout()
-    uvms = plant_functions(opts or ModelOptions(), layout=lay)["uvms_rhs"]
-    npar = len(lay)
-    x, s, par = ca.SX.sym("x", 12), ca.SX.sym("s"), ca.SX.sym("par", 13 + npar)
-    tau, tk, ph, p = par[0:6], par[6], par[7:13], par[13:]
+    st = lay.structure
+    dyn = st.has_thruster_dynamics
+    npar, nw = len(lay), cfg.water_vector.size
+    nu_in = st.n_thrusters if dyn else 6
+    x, s, par = ca.SX.sym("x", 12 + (st.n_thrusters if dyn else 0)), ca.SX.sym("s"), ca.SX.sym("par", nu_in + 7 + nw + npar)
+    u, tk, ph, w, p = par[0:nu_in], par[nu_in], par[nu_in + 1:nu_in + 7], par[nu_in + 7:nu_in + 7 + nw], par[nu_in + 7 + nw:]
+    P = view(p, lay)
     t = tk + s
-    q, qd, qdd = scenario.joint_trajectory(cfg, manipulator.stow_pose(view(p, lay)), t)
+    q, qd, qdd = scenario.joint_trajectory(cfg, manipulator.stow_pose(P), t)
     pl = scenario.payload_profile(cfg, t)
-    xdot = uvms(x, tau + scenario.disturbance(cfg, t, ph), q, qd, qdd, pl, p)
-    return x, s, par, xdot
+    extra = []
+    if dyn:
+        sr = x[12:]
+        T, sdot = [], []
+        for i, d in enumerate(st.thruster_dynamics):
+            m = st.thruster_map(d.map)
+            up, down, rate = thrusters.time_constants(P, i)
+            tau = ca.if_else(sr[i] * (u[i] - sr[i]) >= 0, up, down)
+            v = (u[i] - sr[i]) / tau
+            sdot.append(v if rate is None else ca.fmin(ca.fmax(v, -rate), rate))
+            T.append(thrusters.map_thrust(P, m, sr[i]))
+        wrench = ca.mtimes(thrusters.B_T(P), ca.vertcat(*T))
+        extra = [ca.vertcat(*sdot)]
+    else:
+        wrench = u
+    eta, nu = x[0:6], x[6:12]
+    current, tether = closedloop._water(cfg, P, w, t, eta, nu) if cfg.has_water else (None, 0)
+    xdot = uvms_xdot(P, x[0:12], wrench + scenario.disturbance(cfg, t, ph) + tether, q, qd, qdd, pl, opts or ModelOptions(),
+                     current=current)
+    return x, s, par, ca.vertcat(xdot, *extra)
 
 
-def _par_columns(cfg, pv, taus, phase):
-    """The per-sample ``par`` columns for samples k = 0 .. min(len(taus), N) - 1 (taus: a row per sample)."""
-    n = min(len(taus), scenario_n(cfg) - 1)
-    return np.vstack([np.asarray(taus, float)[:n].T, (np.arange(n) * cfg.time_h)[None, :],
-                      np.tile(np.asarray(phase, float)[:, None], (1, n)), np.tile(np.asarray(pv, float)[:, None], (1, n))])
+def _par_columns(cfg, pv, inputs, phase):
+    """The per-sample ``par`` columns for samples k = 0 .. min(len(inputs), N) - 1 (inputs: a row per sample)."""
+    n = min(len(inputs), scenario_n(cfg) - 1)
+    w = cfg.water_vector
+    return np.vstack([np.asarray(inputs, float)[:n].T, (np.arange(n) * cfg.time_h)[None, :],
+                      np.tile(np.asarray(phase, float)[:, None], (1, n)), np.tile(w[:, None], (1, n)),
+                      np.tile(np.asarray(pv, float)[:, None], (1, n))])
+
+
+def plant_inputs(pv, r, layout=None) -> np.ndarray:
+    """The reference's input per sample of a traced run ``r``: the held wrench of its saturated thrust, or with
+    thruster dynamics each rotor's target, the inverse map of the allocation's thrust (``r.thrust_cmd``)."""
+    from arvcas.model import thrusters
+    from arvcas.params import default_layout, view
+
+    lay = layout or default_layout()
+    if not lay.structure.has_thruster_dynamics:
+        return held_wrench(pv, r.thrust, lay)
+    P = view(ca.DM(np.asarray(pv, float)), lay)
+    maps = thrusters.thruster_maps(P)
+    return np.array([[float(thrusters.map_inverse(P, maps[i], ca.DM(row[i]))) for i in range(len(maps))]
+                     for row in r.thrust_cmd])
 
 
 def scenario_n(cfg) -> int:
@@ -131,9 +174,17 @@ def held_wrench(pv, thrust, layout=None) -> np.ndarray:
     return np.asarray(thrust, float) @ B.T
 
 
+def _x0(x0, x):
+    """The reference's initial state: the vehicle's, and the rotors at rest (the run's first sample)."""
+    x0 = np.asarray(x0, float)
+    return np.r_[x0, np.zeros(x.shape[0] - x0.size)]
+
+
 def cvodes_states(cfg, pv, x0, taus, phase, tol: float = CVODES_TOL, n_samples: int | None = None, opts=None,
                   layout=None):
-    """Plant states at t_k, k = 0..n (rows, (n+1, 12)) under the held wrenches ``taus[k]`` over [t_k, t_k + h].
+    """Plant states at t_k, k = 0..n (rows, (n+1, 12)) under the held inputs ``taus[k]`` over [t_k, t_k + h]
+    (:func:`plant_inputs`: wrenches, or the rotors' targets with thruster dynamics, whose states are integrated
+    with the plant and left out of the rows).
 
     CVODES (Adams, functional iteration: the plant is not stiff, and the AD Jacobian of the drag term
     is NaN at zero relative velocity), abstol = reltol = ``tol``, restarted at every sample.
@@ -144,8 +195,8 @@ def cvodes_states(cfg, pv, x0, taus, phase, tol: float = CVODES_TOL, n_samples: 
     F = ca.integrator("ref", "cvodes", {"x": x, "p": par, "t": s, "ode": xdot}, 0.0, [cfg.time_h], o)
     P = _par_columns(cfg, pv, taus, phase)
     n = P.shape[1] if n_samples is None else int(n_samples)
-    X = np.array(F.mapaccum(n)(x0=np.asarray(x0, float), p=P[:, :n])["xf"]).T
-    return np.vstack([np.asarray(x0, float)[None, :], X])
+    X = np.array(F.mapaccum(n)(x0=_x0(x0, x), p=P[:, :n])["xf"]).T
+    return np.vstack([_x0(x0, x)[None, :], X])[:, :12]
 
 
 def rk4_states(cfg, pv, x0, taus, phase, h_plant: float, n_samples: int | None = None, opts=None, layout=None):
@@ -168,8 +219,8 @@ def rk4_states(cfg, pv, x0, taus, phase, h_plant: float, n_samples: int | None =
     step = ca.Function("rk4_sample", [x, par], [xk])
     P = _par_columns(cfg, pv, taus, phase)
     n = P.shape[1] if n_samples is None else int(n_samples)
-    X = np.array(step.mapaccum(n)(np.asarray(x0, float), P[:, :n])).T
-    return np.vstack([np.asarray(x0, float)[None, :], X])
+    X = np.array(step.mapaccum(n)(_x0(x0, x), P[:, :n])).T
+    return np.vstack([_x0(x0, x)[None, :], X])[:, :12]
 
 
 def _state_err(A, B) -> dict:
@@ -242,7 +293,7 @@ def _run_and_reference(sysm, cfg, c, g, seed, unc, ph, tol):
                                                                                 phase=ph)
     n = min(_valid(r, cfg.time_h), scenario_n(cfg)) - 1
     X = np.hstack([r.eta, r.nu])[:n + 1]
-    taus = held_wrench(sysm.params.vector(), r.thrust, sysm.layout)
+    taus = plant_inputs(sysm.params.vector(), r, sysm.layout)
     return r, n, X, taus, cvodes_states(cfg, sysm.params.vector(), X[0], taus, r.phase, tol=tol, n_samples=n,
                                         layout=sysm.layout)
 
@@ -309,7 +360,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
             X = np.hstack([r.eta, r.nu])[:nv]
             states[(label, hp)] = X
             metrics[(label, hp)] = (r.chat[None, :], r.rmse[None, :], np.array([r.ok]))
-            taus = held_wrench(pv, r.thrust, lay)
+            taus = plant_inputs(pv, r, lay)
             t0 = time.perf_counter()
             Xc = cvodes_states(cfg, pv, X[0], taus, r.phase, tol=tol, n_samples=min(nv, scenario_n(cfg)) - 1,
                                layout=lay)
@@ -382,7 +433,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
     label0 = traced[0][0]
     cfg_b = dataclasses.replace(cfg0, time_h_plant=BASE)
     r0 = arvcas.Run(controller=traced[0][1], scenario=cfg_b, params=sysm).compile().simulate()
-    taus0 = held_wrench(pv, r0.thrust, lay)
+    taus0 = plant_inputs(pv, r0, lay)
     X0 = np.hstack([r0.eta, r0.nu])[0]
     n0 = min(_valid(r0, cfg_b.time_h), scenario_n(cfg_b)) - 1
     ref_a = cvodes_states(cfg_b, pv, X0, taus0, r0.phase, tol=tol, n_samples=n0, layout=lay)

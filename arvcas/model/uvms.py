@@ -73,17 +73,18 @@ def coupled_terms_scheduled(P, eta, nu, tau, rec: dict, tau_extra, opts: ModelOp
     return nud, tm0 - ca.mtimes(rec["M_arm"], nud)
 
 
-def coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions):
+def coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions, current=None):
     """nu_dot of the exactly coupled vehicle + arm (see :func:`coupled_terms`)."""
-    return coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts)[0]
+    return coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts, current)[0]
 
 
-def uvms_xdot(P, x, tau, q, qd, qdd, payload, opts: ModelOptions, trim=None):
-    """xdot = [J(eta) nu; nu_dot] of the coupled system; ``trim`` defaults to docs/model.md §3 trim at q0."""
+def uvms_xdot(P, x, tau, q, qd, qdd, payload, opts: ModelOptions, trim=None, current=None):
+    """xdot = [J(eta) nu; nu_dot] of the coupled system; ``trim`` defaults to docs/model.md §3 trim at q0;
+    ``current``: ``(nu_c, nu_c_dot)`` (docs/model.md §10; the public ``uvms_rhs`` has none)."""
     eta, nu = x[0:6], x[6:12]
     if trim is None:
         trim = manipulator.trim_wrench(P, eta, opts.n_quad)
-    nud = coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, trim, opts)
+    nud = coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, trim, opts, current)
     return ca.vertcat(ca.mtimes(J(eta), nu), nud)
 
 

@@ -126,10 +126,10 @@ def stage_offsets(cfg: ScenarioConfig) -> list[float]:
 
 def thruster_constants(P, cfg: ScenarioConfig):
     """Per-run constants of the thruster dynamics, from p: the lag's ``exp(-t / tau)`` at the stage offsets
-    (:func:`arvcas.model.thrusters.lag_constants`) and each table map's rotor-state grid and thrust
-    (:func:`arvcas.model.thrusters.map_grid`). ``(E, tables)``."""
+    (:func:`arvcas.model.thrusters.lag_constants`) and each table map's rotor-state grid, thrust and slopes
+    (:func:`arvcas.model.thrusters.map_table`). ``(E, tables)``."""
     E = thrusters.lag_constants(P, stage_offsets(cfg))
-    tabs = [ca.vertcat(*thrusters.map_grid(P, m)) for m in P.s.thruster_maps if m.kind == "table"]
+    tabs = [ca.vertcat(*thrusters.map_table(P, m)) for m in P.s.thruster_maps if m.kind == "table"]
     return E, (ca.vertcat(*tabs) if tabs else ca.DM.zeros(0, 1))
 
 
@@ -220,13 +220,27 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     return rk4, pc_fn
 
 
-def _lookup(grid, values, x, mode: str):
-    """``values(x)`` by linear interpolation on ``grid`` for a column ``x`` (MX; ``mode``: casadi.low's
-    ``"exact"`` for a uniform grid, ``"binary"`` otherwise); beyond the ends, the end segments continue."""
-    n = grid.shape[0]
-    i = ca.low(grid, x, {"lookup_mode": mode})  # within [0, n - 2]
-    g0, g1, v0, v1 = grid[i], grid[i + 1], values[i], values[i + 1]
-    return v0 + (x - g0) / (g1 - g0) * (v1 - v0)
+def _pchip(g, v, d, x, mode: str):
+    """The monotone cubic through ``(g_i, v_i)`` with slopes ``d_i`` at a column ``x`` (MX: the interval by
+    ``casadi.low``, ``"exact"`` for a uniform grid, ``"binary"`` otherwise; then one cubic)."""
+    i = ca.low(g, x, {"lookup_mode": mode})  # within [0, n - 2]
+    return thrusters.hermite(g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1], x)
+
+
+def _pchip_inverse(g, v, d, u, iterations: int = 8):
+    """The ``x`` at which the monotone cubic equals ``u`` (a column, MX): its interval by ``casadi.low`` on
+    the values, then Newton's method on that interval's cubic from the secant's guess, kept in the
+    interval (quadratic convergence from a guess within a few percent: 8 steps reach round-off)."""
+    i = ca.low(v, u, {"lookup_mode": "binary"})
+    g0, g1, v0, v1, d0, d1 = g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
+    h = g1 - g0
+    t = ca.fmin(ca.fmax((u - v0) / (v1 - v0), 0), 1)
+    for _ in range(iterations):
+        t2 = t * t
+        p = (2 * t * t2 - 3 * t2 + 1) * v0 + (t * t2 - 2 * t2 + t) * h * d0 + (3 * t2 - 2 * t * t2) * v1 + (t * t2 - t2) * h * d1
+        dp = (6 * t2 - 6 * t) * (v0 - v1) + (3 * t2 - 4 * t + 1) * h * d0 + (3 * t2 - 2 * t) * h * d1
+        t = ca.fmin(ca.fmax(t - (p - u) / ca.fmax(dp, 1e-12 * (v1 - v0)), 0), 1)
+    return g0 + t * h
 
 
 def _thruster_functions(spec: RunSpec):
@@ -264,8 +278,8 @@ def _thruster_functions(spec: RunSpec):
 
 
 def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, E, tabs, p):
-    """One sample of the thruster dynamics in MX: the inverse maps (table lookups), the lag, the maps at
-    every stage (table lookups), the wrenches. Returns ``(W (6 n_stages), s_end, T_end, command)``."""
+    """One sample of the thruster dynamics in MX: the inverse maps (table lookups and Newton), the lag, the
+    maps at every stage (table lookups), the wrenches. Returns ``(W (6 n_stages), s_end, T_end, command)``."""
     st = spec.lay.structure
     n, m_off = st.n_thrusters, schedule.n_stages(spec.cfg)
     maps = [st.thruster_map(d.map) for d in st.thruster_dynamics]
@@ -273,19 +287,20 @@ def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, 
     for m in st.thruster_maps:
         if m.kind == "table":
             n_g = m.n - (m.zero[1] - m.zero[0])
-            grids[m.name] = (tabs[k:k + n_g], tabs[k + n_g:k + 2 * n_g], "exact" if m.uniform else "binary")
-            k += 2 * n_g
+            grids[m.name] = (tabs[k:k + n_g], tabs[k + n_g:k + 2 * n_g], tabs[k + 2 * n_g:k + 3 * n_g],
+                             "exact" if m.uniform else "binary")
+            k += 3 * n_g
     y_tab = [ca.MX(1, 1)] * n
-    for name, (g, v, _) in grids.items():
+    for name, (g, v, d, _) in grids.items():
         idx = [i for i, m in enumerate(maps) if m.name == name]
-        ys = _lookup(v, g, ca.vertcat(*[u[i] for i in idx]), "binary")  # thrust -> rotor state
+        ys = _pchip_inverse(g, v, d, ca.vertcat(*[u[i] for i in idx]))  # thrust -> rotor state
         for r, i in enumerate(idx):
             y_tab[i] = ys[r]
     s_all, cmd = lag(s0, u, ca.vertcat(*y_tab), E, p)
     T_tab = [ca.MX.zeros(m_off, 1)] * n
-    for name, (g, v, mode) in grids.items():
+    for name, (g, v, d, mode) in grids.items():
         idx = [i for i, m in enumerate(maps) if m.name == name]
-        Ts = _lookup(g, v, ca.vertcat(*[s_all[i * m_off:(i + 1) * m_off] for i in idx]), mode)
+        Ts = _pchip(g, v, d, ca.vertcat(*[s_all[i * m_off:(i + 1) * m_off] for i in idx]), mode)
         for r, i in enumerate(idx):
             T_tab[i] = Ts[r * m_off:(r + 1) * m_off]
     W, T_end = wrench(ca.vertcat(*T_tab), s_all, p)

@@ -172,7 +172,8 @@ def eval_task(study: Study, controller: str, params=None) -> EvalTask:
     cfg = study.scenario
     draws = tuple((d.noise_seed, *d.resolved(cfg)) for d in study.draws)
     params = params if params is not None else study.system_params()
-    return EvalTask(controller=controller, draws=draws, cfg=cfg, params=params, ref=reference(study, params, draws))
+    return EvalTask(controller=controller, draws=draws, cfg=cfg, params=params, ref=reference(study, params, draws),
+                    chat=study.objectives.chat)
 
 
 def reference(study: Study, params, draws) -> tuple | None:
@@ -185,7 +186,8 @@ def reference(study: Study, params, draws) -> tuple | None:
 
     seed, unc, ph = draws[0]
     run = compiled_run("agsta", params, study.scenario)
-    chat, rmse, ok, _ = run.many(run.default_gains(), [seed], uncertainty=unc, phase=ph, n_threads=1)
+    chat, rmse, ok, _ = run.many(run.default_gains(), [seed], uncertainty=unc, phase=ph, n_threads=1,
+                                 chat=study.objectives.chat)
     if not ok[0]:
         raise StudyError(f"{study.path}: evaluation.system: the AGSTA at the default gains of "
                          f"{params.structure.name} diverges on draw 1: no normalisation for the objectives")
