@@ -138,6 +138,7 @@ class Structure:
     mount_rpy: bool
     link_drag: tuple[bool, ...]  # chain: the link has a drag segment
     link_cd: tuple[bool, ...]  # chain: the link has its own Cd
+    arm_trim: bool = True  # docs/model.md §3's trim buoyancy for the stowed arm (``[arm] trim = false``: none)
     thruster_maps: tuple["ThrusterMap", ...] = ()  # command maps, [thrusters.map.<name>]
     thruster_dynamics: tuple["ThrusterDynamics", ...] | None = None  # per listed thruster, or None: instantaneous
 
@@ -165,8 +166,8 @@ class Structure:
 class ThrusterMap:
     """A command map (docs/system-file.md): from the command the autopilot sends to steady thrust.
 
-    ``kind``: ``"table"`` (points ``command.i -> thrust.i``, linear in between; its run of zero thrust is the
-    dead band, ``zero = (first, last)`` index of that run) or ``"quadratic"`` (uuv_simulator's rotor law
+    ``kind``: ``"table"`` (points ``command.i -> thrust.i``, the monotone cubic through them; its run of zero
+    thrust is the dead band, ``zero = (first, last)`` index of that run) or ``"quadratic"`` (uuv_simulator's rotor law
     ``T = k s |s|`` on the command ``s`` beyond a dead band). ``unit``: the command's unit (COMMAND_UNITS).
     """
 
@@ -314,6 +315,9 @@ def _with_arm(doc: dict, vehicle_only: tuple) -> Structure:
         raise _Bad(f"arm: {nj} joints, at most {MAX_JOINTS} are supported")
     if nl != nj:
         raise _Bad(f"arm: {nj} joints but {nl} links (each joint moves one link: arm.link1 .. arm.link{nj})")
+    trim = arm.get("trim", True)
+    if not isinstance(trim, bool):
+        raise _Bad(f"arm.trim: expected true or false, got {trim!r}")
     mount = _table(arm, "mount", "arm") if nj else arm.get("mount", {})
     rpy = [k for k in ("roll", "pitch", "yaw") if k in mount]
     if rpy and len(rpy) != 3:
@@ -335,7 +339,7 @@ def _with_arm(doc: dict, vehicle_only: tuple) -> Structure:
                 raise _Bad(f"arm.link{i}: a drag segment needs drag_diameter, drag_from and drag_to (or none)")
             drag.append(bool(have))
             cd.append("Cd" in lk)
-    return Structure(*vehicle_only, form, nj, bool(rpy), tuple(drag), tuple(cd))
+    return Structure(*vehicle_only, form, nj, bool(rpy), tuple(drag), tuple(cd), trim)
 
 
 _DYN_KEYS = ("map", "time_constant", "time_constant_up", "time_constant_down", "rate_limit")
@@ -727,11 +731,13 @@ def schema_for(s: Structure) -> type:
 
 
 def file_doc(doc: dict) -> dict:
-    """The document as the schema reads it: ``[system]``, ``[defaults]`` and ``hydro.coriolis_added_mass``
-    (not numbers) removed, a thruster list keyed by name."""
+    """The document as the schema reads it: ``[system]``, ``[defaults]``, ``hydro.coriolis_added_mass`` and
+    ``arm.trim`` (not numbers) removed, a thruster list keyed by name."""
     out = {k: v for k, v in doc.items() if k not in ("system", "defaults")}
     if isinstance(out.get("hydro"), dict) and "coriolis_added_mass" in out["hydro"]:
         out["hydro"] = {k: v for k, v in out["hydro"].items() if k != "coriolis_added_mass"}
+    if isinstance(out.get("arm"), dict) and "trim" in out["arm"]:
+        out["arm"] = {k: v for k, v in out["arm"].items() if k != "trim"}
     thr = out.get("thrusters")
     if isinstance(thr, dict) and isinstance(thr.get("unit"), list):
         listed = {u["name"]: {k: v for k, v in u.items() if k not in ("name", "map")} for u in thr["unit"]}

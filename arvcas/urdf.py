@@ -109,10 +109,10 @@ def convert(doc: dict, path: Path, error) -> dict:
     for k in ("urdf", "base_link", "tool_link"):
         if not isinstance(arm.get(k), str):
             raise error(f"{where}: arm.{k}: expected a string (docs/system-file.md form 3)")
-    extra = [k for k in arm if k not in ("urdf", "base_link", "tool_link", "mount", "stow", "hydro")]
+    extra = [k for k in arm if k not in ("urdf", "base_link", "tool_link", "mount", "stow", "hydro", "trim")]
     if extra:
         raise error(f"{where}: arm.{extra[0]}: not a key of a URDF arm (allowed: urdf, base_link, tool_link, "
-                    f"mount, stow, hydro)")
+                    f"mount, stow, hydro, trim)")
     upath = systemfile.rel_path(path, arm["urdf"])
     uwhere = str(upath)
     from arvcas.io.files import read_text
@@ -140,7 +140,7 @@ def convert(doc: dict, path: Path, error) -> dict:
         raise error(f"{uwhere}: the URDF's moving joints {names} are not the chain {base} -> {tool} {moving}: "
                     f"only a serial arm rooted at '{base}' is supported")
     fname = Path(arm["urdf"]).name
-    out = {k: v for k, v in arm.items() if k in ("mount", "stow")}
+    out = {k: v for k, v in arm.items() if k in ("mount", "stow", "trim")}
     for i, jname in enumerate(moving, start=1):
         jid = model.getJointId(jname)
         M = model.jointPlacements[jid]

@@ -34,9 +34,11 @@ from arvcas.system import SHIPPED, load_system
 RTOL = 1e-12
 
 
-@pytest.fixture(scope="module", params=SHIPPED)
+@pytest.fixture(scope="module", params=SHIPPED[:2])
 def system(request):
-    """Each shipped system in turn (the export fixtures below are per system)."""
+    """Haidou-1 and the BlueROV2 Heavy in turn (the export fixtures below are per system). The third shipped
+    system, hinsdale_bluerov2_alpha5, has the BlueROV2's structure (8-thruster list, 4-joint chain arm),
+    trim off: exporting it would add CI time but no code path (tests/test_hinsdale.py checks it)."""
     return load_system(request.param)
 
 

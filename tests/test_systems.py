@@ -20,7 +20,7 @@ from arvcas.params import ParamsError, view
 from arvcas.sim import scenario
 from arvcas.system import shipped
 
-SYSTEMS = ("haidou1", "bluerov2_heavy_alpha5")
+SYSTEMS = ("haidou1", "bluerov2_heavy_alpha5", "hinsdale_bluerov2_alpha5")
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +55,7 @@ def test_every_number_has_a_source_inside_the_repository(systems, name):
 @pytest.mark.parametrize("name", SYSTEMS)
 def test_vehicle_properties(systems, name):
     """M positive definite, nu' C(nu) nu = 0 (C_RB and C_A skew in the sense of Fossen), and at rest
-    level the restoring forces are the net weight in heave only (CG above/below CB)."""
+    level the restoring force is the net weight in heave only, with no moment where CG is above/below CB."""
     P = view(systems[name].params)
     M = _np(vehicle.M(P))
     assert np.linalg.eigvalsh(0.5 * (M + M.T))[0] > 0
@@ -69,7 +69,9 @@ def test_vehicle_properties(systems, name):
             assert abs(nu @ CA @ nu) <= 1e-12 * np.linalg.norm(CA) * (nu @ nu)
     g0 = _np(vehicle.g_vec(P, ca.DM.zeros(6))).ravel()
     W, B = (float(x) for x in vehicle.weight_buoyancy(P))
-    np.testing.assert_allclose(g0, [0, 0, -(W - B), 0, 0, 0], atol=1e-12 * W)
+    np.testing.assert_allclose(g0[:3], [0, 0, -(W - B)], atol=1e-12 * W)
+    if name != "hinsdale_bluerov2_alpha5":  # ballasted with its arm, level only with it (tests/test_hinsdale.py)
+        np.testing.assert_allclose(g0[3:], 0, atol=1e-12 * W)
 
 
 def test_bluerov2_damping_is_diagonal_linear_plus_quadratic(systems):
@@ -177,6 +179,7 @@ BAD = [
     ("more than 7 joints", None, r"at most 7"),
     ("two forms of buoyancy", lambda t: t.replace("[vehicle]\n", '[vehicle]\nbuoyancy_excess = { value = 0.0, unit = "kg", source = "x" }\n', 1),
      r"vehicle: give exactly one of 'buoyancy_excess'"),
+    ("arm.trim not a boolean", lambda t: t + "\n[arm]\ntrim = 1\n", r"arm.trim: expected true or false, got 1"),
 ]
 
 
@@ -225,6 +228,34 @@ def _paper_waypoint_text():
     events = ('\n[payload]\n[[payload.event]]\nt = { value = 22.0, unit = "s", source = "payload_on" }\n'
               'ramp = { value = 0.5, unit = "s", source = "payload_ramp" }\nto = { value = 1.0, unit = "1", source = "x" }\n')
     return text[:a] + "[arm]\n" + PAPER_AS_WAYPOINTS + text[b:] + events
+
+
+def test_arm_trim_off_removes_exactly_the_trim(tmp_path, btext):
+    """``[arm] trim = false`` (a vehicle whose numbers include its ballast, docs/system-file.md): uvms_rhs
+    and the closed loop's run constants carry no trim, and nothing else changes. With the trim (the shipped
+    BlueROV2, CG above CB) the vehicle at rest, level, arm stowed, has almost no angular acceleration."""
+    from arvcas.model import manipulator, uvms
+    from arvcas.sim import closedloop
+
+    path = tmp_path / "notrim.toml"
+    path.write_text(btext + "\n[arm]\ntrim = false\n", encoding="utf-8")
+    on, off = arvcas.load_system("bluerov2_heavy_alpha5"), arvcas.load_system(path)
+    assert on.structure.arm_trim and not off.structure.arm_trim
+    assert np.array_equal(on.params.vector(), off.params.vector())
+    P_on, P_off = view(on.params), view(off.params)
+    opts = uvms.ModelOptions()
+    x = ca.DM.zeros(12)
+    q0 = manipulator.stow_pose(P_on)
+    z4 = ca.DM.zeros(4)
+    xd_on = _np(uvms.uvms_xdot(P_on, x, ca.DM.zeros(6), q0, z4, z4, 0, opts)).ravel()
+    xd_off = _np(uvms.uvms_xdot(P_off, x, ca.DM.zeros(6), q0, z4, z4, 0, opts)).ravel()
+    xd_none = _np(uvms.uvms_xdot(P_on, x, ca.DM.zeros(6), q0, z4, z4, 0, opts, trim=ca.DM.zeros(6))).ravel()
+    np.testing.assert_allclose(xd_off, xd_none, rtol=1e-14, atol=1e-15)
+    # trimmed, only the net weight's coupling through the arm's inertia remains; untrimmed, the arm's moment
+    assert np.abs(xd_on[9:12]).max() < 0.01 * np.abs(xd_off[9:12]).max()
+    np.testing.assert_array_equal(_np(manipulator.trim_wrench(P_off, ca.DM.zeros(6))).ravel(), 0)
+    assert np.all(_np(closedloop.derived_constants(P_off, opts))[:3] == 0)
+    assert np.all(_np(closedloop.derived_constants(P_on, opts))[:3] != 0)
 
 
 def test_paper_scenario_as_waypoints_equals_its_reach_form(params):

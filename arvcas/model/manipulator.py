@@ -23,7 +23,7 @@ from arvcas.model.spatial import Rx, Rz, Rzyx, skew
 
 __all__ = [
     "n_joints", "dh", "joint_axis", "link_vectors", "link_inertia", "forward_kinematics", "rnea", "arm_wrench",
-    "stow_pose", "trim_wrench", "trim_static", "trim_from_static", "base_inertia", "mount", "tool_point",
+    "stow_pose", "has_trim", "trim_wrench", "trim_static", "trim_from_static", "base_inertia", "mount", "tool_point",
     "drag_links", "drag_segment", "schedule_fields", "arm_schedule", "drag_wrench", "arm_wrench_scheduled",
 ]
 
@@ -532,10 +532,15 @@ def trim_from_static(Fz, Mx, My, eta):
     return ca.vertcat(f_t, ca.cross(r_t, f_t))
 
 
+def has_trim(P) -> bool:
+    """Whether the system gets docs/model.md §3's trim: an arm, and not ``[arm] trim = false``."""
+    return n_joints(P) > 0 and P.s.arm_trim
+
+
 def trim_wrench(P, eta, n_quad: int = 5):
     """The trim of docs/model.md §3 at attitude ``eta``, computed from the same parameters (follows rho, links).
 
-    Zero for a system without an arm."""
-    if n_joints(P) == 0:
+    Zero for a system without an arm or with ``[arm] trim = false`` (its vehicle carries its own ballast)."""
+    if not has_trim(P):
         return ca.DM.zeros(6)
     return trim_from_static(*trim_static(P, n_quad), eta)

@@ -94,7 +94,7 @@ def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int
 
 def derived_constants(P, opts: ModelOptions):
     """Per-run constants computed once from p: trim static wrench (F_z, M_x, M_y) and Mhat = diag(M)."""
-    if manipulator.n_joints(P) == 0:
+    if not manipulator.has_trim(P):
         Fz = Mx = My = 0
     else:
         Fz, Mx, My = manipulator.trim_static(P, opts.n_quad)
@@ -147,8 +147,8 @@ def _water(cfg: ScenarioConfig, P, water, t, eta, nu):
 
 
 def _trim(P, Fz, Mx, My, eta):
-    """The trim wrench of docs/model.md §3 from the run's constants (zero without an arm)."""
-    if manipulator.n_joints(P) == 0:
+    """The trim wrench of docs/model.md §3 from the run's constants (zero without an arm or its trim)."""
+    if not manipulator.has_trim(P):
         return ca.DM.zeros(6)
     return manipulator.trim_from_static(Fz, Mx, My, eta)
 
