@@ -83,9 +83,9 @@ def test_delivered_thrust_is_the_lag_of_the_command(short, blue):
 
 def test_plant_equals_cvodes_with_the_rotor_states(short, blue):
     """The closed loop's trajectory over its first 2 s against CVODES (1e-14) integrating the plant with the
-    rotor states as ODE states (the textbook lag through CasADi's own linear interpolant of the table,
-    benchmarks/step_accuracy.py), the current and the tether: the RK4 at h_plant = 0.005 s driven by the
-    closed form's stage thrusts stays within 1e-8 m, rad (results/step's rule: 1e-6)."""
+    rotor states as ODE states (the textbook lag through the map's cubic, benchmarks/step_accuracy.py), the
+    current and the tether: the RK4 at the scenario's h_plant = 0.0025 s driven by the closed form's stage
+    thrusts stays within 2e-7 m, rad (measured 6.9e-8 over 3 s; results/step's rule: 1e-6)."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("step_accuracy", ROOT / "benchmarks" / "step_accuracy.py")
@@ -98,7 +98,7 @@ def test_plant_equals_cvodes_with_the_rotor_states(short, blue):
     ref = sa.cvodes_states(cfg, pv, X[0], ys, r.phase, tol=1e-14, n_samples=n, layout=blue.layout)
     err = np.abs(X[:n + 1] - ref).max()
     print("closed loop with T200 dynamics and current vs CVODES over 2 s:", err)
-    assert err < 1e-8
+    assert err < 2e-7
     assert np.abs(X[n] - X[0]).max() > 1e-3  # it does move
 
 
