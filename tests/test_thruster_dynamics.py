@@ -379,3 +379,21 @@ def test_instantaneous_drops_the_dynamics_and_keeps_every_number(blue):
     assert all(i[n] == p[n] for n in i.names())
     assert set(p.names()) - set(i.names()) == {n for n in p.names() if ".map." in n or "time_constant" in n}
     assert len(i) == 239  # the parameters of the BlueROV2 file before issue 22 (results/bluerov2 knees)
+
+
+def test_study_says_which_chat_it_optimises():
+    """[objectives] chat: the paper's commanded CHAT by default (and then absent from the identity, so that
+    earlier checkpoints resume), "delivered" on the delivered wrench; anything else one line."""
+    from arvcas.tuning import loads_study
+    from arvcas.tuning.study import StudyError
+    from studytext import tiny_study
+
+    base = tiny_study()
+    s = loads_study(base, "s.toml")
+    assert s.objectives.chat == "commanded" and "chat" not in s.identity("agsta")["objectives"]
+    text = base.replace("reference_point = [300.0, 4.0]", 'reference_point = [300.0, 4.0]\nchat = "delivered"')
+    d = loads_study(text, "s.toml")
+    assert d.objectives.chat == "delivered" and d.identity("agsta")["objectives"]["chat"] == "delivered"
+    with pytest.raises(StudyError, match=r"s\.toml: objectives\.chat: unknown CHAT signal 'deliverd' \(did you mean "
+                                         r"'delivered'\?\) \(allowed: commanded, delivered\)"):
+        loads_study(text.replace('"delivered"', '"deliverd"'), "s.toml")
