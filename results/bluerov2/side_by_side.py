@@ -3,7 +3,8 @@
     python results/bluerov2/side_by_side.py
 
 Reads only committed files: the instantaneous-thruster study (issue 12: results/bluerov2/<controller>/,
-knees/) and the T200 study (issue 22: results/bluerov2/t200/<controller>/, t200/knees/). For each study:
+knees/) and the two T200 studies (issue 22: t200_group_noise/ with issue 12's group sensor variances,
+t200/ with the shipped scenario's per-axis ones; <controller>/, knees/ in each). For each study:
 hypervolume at (2, 2) on its own normalisation (its own AGSTA at the default gains), the knee, the lowest
 f_chat and f_rmse, the pairwise dominance (arvcas.tuning.compare_fronts); the T200 fronts also on the
 instantaneous study's normalisation (their per-DOF CHAT and RMSE divided by the instantaneous study's
@@ -19,11 +20,16 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 STUDIES = {"instantaneous thrusters, current as a wrench (issue 12)": HERE,
-           "T200 dynamics, current as relative velocity, tether (issue 22)": HERE / "t200"}
+           "T200 + current + tether, group noise (issue 22)": HERE / "t200_group_noise",
+           "T200 + current + tether, per-axis noise (issue 22, the shipped scenario)": HERE / "t200"}
 CONTROLLERS = ("proposed", "agsta", "pid")
 PAIRS = (("proposed", "agsta"), ("pid", "proposed"), ("pid", "agsta"))
 REF = (2.0, 2.0)
 DOFS = ("x", "y", "z", "phi", "theta", "psi")
+
+
+def _short(label: str) -> str:
+    return label.split(" (")[0]
 
 
 def _g(x, d=4):
@@ -59,7 +65,7 @@ def main() -> str:
             t2 = f.table2_F
             t2s = f"({_g(t2[0])}, {_g(t2[1])})" if np.isfinite(t2).all() else "diverged"
             Fb = np.stack([np.mean(f.chat[0] / base_ref[0], axis=1), np.mean(f.rmse[0] / base_ref[1], axis=1)], axis=1)
-            L.append(f"| {label.split(',')[0]} | {c} | {f.size} | {f.hv:.4f} | {t2s} | ({_g(f.F[k, 0])}, {_g(f.F[k, 1])}) | "
+            L.append(f"| {_short(label)} | {c} | {f.size} | {f.hv:.4f} | {t2s} | ({_g(f.F[k, 0])}, {_g(f.F[k, 1])}) | "
                      f"{_g(f.F[:, 0].min())} | {_g(f.F[:, 1].min())} | {hypervolume(Fb, f.G, np.array(REF)):.4f} | "
                      f"({_g(Fb[k, 0])}, {_g(Fb[k, 1])}) |")
     L += ["", "## Pairwise dominance (each study on its own scale, reference point (2, 2))", "",
@@ -68,7 +74,7 @@ def main() -> str:
         for a, b in PAIRS:
             if a in fr and b in fr:
                 cmp = compare_fronts(fr[a], fr[b], ref=REF)
-                L.append(f"| {label.split(',')[0]} | {a} vs {b} | {cmp.hv[0]:.4f} | {cmp.hv[1]:.4f} | "
+                L.append(f"| {_short(label)} | {a} vs {b} | {cmp.hv[0]:.4f} | {cmp.hv[1]:.4f} | "
                          f"{cmp.coverage[0]:.0%} | {cmp.coverage[1]:.0%} |")
     L += ["", "## Knees: CHAT and RMSE per DOF (replays of each front's knee)", "",
           "CHAT in N (x, y, z) and N m (phi, theta, psi) per controller sample, on the commanded wrench (eq. 42) and "
@@ -92,7 +98,7 @@ def main() -> str:
             r = read_result(p)
             cd = r.chat_delivered if r.chat_delivered is not None else metrics.chat(r.thrust @ B.T)
             fmt = lambda v: " ".join(_g(x, 3) for x in v)  # noqa: E731
-            L.append(f"| {label.split(',')[0]} | {c} | {fmt(r.chat)} | {fmt(cd)} | {fmt(r.rmse)} | "
+            L.append(f"| {_short(label)} | {c} | {fmt(r.chat)} | {fmt(cd)} | {fmt(r.rmse)} | "
                      f"{np.abs(r.thrust).max():.3g} |")
     return "\n".join(L) + "\n"
 
