@@ -74,7 +74,8 @@ SYSTEMS = {
                 "agsta": ROOT / "results/tuning/paper/agsta/front.h5"},
         controllers=None, mc=("proposed", "agsta"), out=ROOT / "results" / "step", label="Haidou-1"),
     "bluerov2_heavy_alpha5": dict(
-        fronts={c: ROOT / f"results/bluerov2/{c}/front.h5" for c in ("proposed", "agsta", "pid")},
+        # the fronts tuned on the current plant (T200 dynamics, issue 22; results/bluerov2/<c> are issue 12's)
+        fronts={c: ROOT / f"results/bluerov2/t200/{c}/front.h5" for c in ("proposed", "agsta", "pid")},
         controllers=("proposed", "agsta", "pid"), mc=("proposed", "agsta"),
         out=ROOT / "results" / "step" / "bluerov2_heavy_alpha5", label="BlueROV2 Heavy + Reach Alpha 5"),
 }
@@ -200,10 +201,17 @@ def cvodes_states(cfg, pv, x0, taus, phase, tol: float = CVODES_TOL, n_samples: 
 
 
 def rk4_states(cfg, pv, x0, taus, phase, h_plant: float, n_samples: int | None = None, opts=None, layout=None):
-    """The textbook RK4 of the same ODE (same held wrenches), ``h / h_plant`` steps per sample; (n+1, 12).
+    """The textbook RK4 of the same ODE (same held inputs), ``h / h_plant`` steps per sample; (n+1, 12).
 
     An independent RK4 (no time table, the direct plant function) that checks the reference machinery.
+    With thruster dynamics the rotors are not RK4 states: their closed form (docs/model.md §9) gives the
+    thrust at every stage, as in the closed loop, here evaluated in NumPy sample by sample.
     """
+    from arvcas.params import default_layout
+
+    lay = layout or default_layout()
+    if lay.structure.has_thruster_dynamics:
+        return _rk4_states_lag(cfg, pv, x0, taus, phase, h_plant, n_samples, opts, lay)
     x, s, par, xdot = _plant_ode(cfg, opts, layout)
     f = ca.Function("f", [x, s, par], [xdot])
     m = int(round(cfg.time_h / h_plant))
@@ -221,6 +229,45 @@ def rk4_states(cfg, pv, x0, taus, phase, h_plant: float, n_samples: int | None =
     n = P.shape[1] if n_samples is None else int(n_samples)
     X = np.array(step.mapaccum(n)(_x0(x0, x), P[:, :n])).T
     return np.vstack([_x0(x0, x)[None, :], X])[:, :12]
+
+
+def _rk4_states_lag(cfg, pv, x0, targets, phase, h_plant, n_samples, opts, lay):
+    """:func:`rk4_states` with thruster dynamics: the vehicle's RK4 driven by the wrench ``B F(s(t))`` at its
+    stages, ``s(t)`` the lag's closed form from each sample's rotor states towards its ``targets``."""
+    from arvcas.model import thrusters
+    from arvcas.params import layout_for, view
+
+    inst = layout_for(lay.structure.instantaneous())
+    pv_inst = np.asarray(pv, float)[[lay.index[n] for n in inst.names]]
+    x, s, par, xdot = _plant_ode(cfg, opts, inst)  # the plant with a wrench input
+    f = ca.Function("f", [x, s, par], [xdot])
+    P = view(ca.DM(np.asarray(pv, float)), lay)
+    maps = thrusters.thruster_maps(P)
+    B = np.array(ca.DM(thrusters.B_T(P)))
+    m = int(round(cfg.time_h / h_plant))
+    offs = [j * 0.5 * h_plant for j in range(2 * m + 1)]
+    E = thrusters.lag_constants(P, offs)
+    n = min(len(targets), scenario_n(cfg) - 1) if n_samples is None else int(n_samples)
+    xk, sk = np.asarray(x0, float), np.zeros(len(maps))
+    out = [xk]
+    for k in range(n):
+        S = thrusters.lag_states(P, ca.DM(sk), ca.DM(np.asarray(targets[k], float)), E, offs, cfg.time_h)
+        srows = np.array([[float(ca.DM(v)) for v in row] for row in S])  # (n_thr, stages)
+        T = np.array([np.array(ca.DM(thrusters.map_thrust(P, maps[i], ca.DM(srows[i])))).ravel()
+                      for i in range(len(maps))])
+        W = B @ T  # (6, stages)
+        base = np.r_[k * cfg.time_h, np.asarray(phase, float), cfg.water_vector, pv_inst]
+        fx = lambda xx, j: np.array(f(xx, offs[j], np.r_[W[:, j], base])).ravel()  # noqa: E731
+        for i in range(m):
+            a = 2 * i
+            k1 = fx(xk, a)
+            k2 = fx(xk + h_plant / 2 * k1, a + 1)
+            k3 = fx(xk + h_plant / 2 * k2, a + 1)
+            k4 = fx(xk + h_plant * k3, a + 2)
+            xk = xk + h_plant / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        sk = srows[:, -1]
+        out.append(xk)
+    return np.vstack(out)
 
 
 def _state_err(A, B) -> dict:
