@@ -15,7 +15,8 @@ from arvcas.build.dynamics import dynamics  # noqa: E402
 from arvcas.sim.run import CompiledRun, Run  # noqa: E402
 from arvcas.sim.simulation import Result, default_gains, simulate, simulate_batch, simulate_many  # noqa: E402
 from arvcas.controllers import Controller, Gain, register as register_controller  # noqa: E402
-from arvcas.system import System, load_system  # noqa: E402
+from arvcas.system import System, load_system, params  # noqa: E402  (arvcas.params: the parameter loader)
 
 __all__ = ["__version__", "Run", "CompiledRun", "Result", "compiled", "dynamics", "simulate", "simulate_batch",
-           "simulate_many", "default_gains", "Controller", "Gain", "register_controller", "System", "load_system"]
+           "simulate_many", "default_gains", "Controller", "Gain", "register_controller", "System", "load_system",
+           "params"]

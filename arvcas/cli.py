@@ -11,11 +11,12 @@ before calling ``run``:
 * output policy (:func:`arvcas.io.files.check_outputs`): no output is an input or another output,
   none is a special file, an existing file arvcas did not write is refused without ``--force``
   (added to every command that writes); stale temporary files of killed runs are removed;
-* bounds: counts, seeds and timeouts are checked by their argparse types (:func:`seed_arg`,
-  :func:`count_arg`, :func:`seconds_arg`) and the memory a request would take by the command's check.
+* bounds: counts, seeds and timeouts are checked by their argparse types (:mod:`arvcas.io.cliargs`:
+  ``seed_arg``, ``count_arg``, ``seconds_arg``) and the memory a request would take by the command's check.
 
-Errors (ValueError and subclasses, OSError) are printed as one line ``arvcas: error: ...`` with exit
-code 2, usage errors likewise (``arvcas: error: CMD: argument ...``); SIGTERM and SIGHUP end the
+A compile that takes more than a second prints a progress line on standard error
+(:func:`arvcas.build.codegen.report_progress`). Errors (ValueError and subclasses, OSError) are printed
+as one line ``arvcas: error: ...`` with exit code 2, usage errors likewise (``arvcas: error: CMD: argument ...``); SIGTERM and SIGHUP end the
 command like Ctrl-C (temporary files removed), exit 128 + signal.
 """
 
@@ -28,8 +29,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["main", "TABLE", "COMMANDS", "Command", "seed_arg", "count_arg", "seconds_arg", "check_memory",
-           "MAX_SEED", "refuse"]
+from arvcas.io.cliargs import add_figure_format, count_arg, refuse, seed_arg
+
+__all__ = ["main", "TABLE", "COMMANDS", "Command"]
 
 Paths = Callable[[argparse.Namespace], list]
 
@@ -37,11 +39,12 @@ Paths = Callable[[argparse.Namespace], list]
 @dataclass(frozen=True)
 class Command:
     """One command of the table. ``inputs``: ``(dest, kind[, what])`` of arguments that name input files
-    (kind ``"file"``, ``"system"``: a shipped system's name or a system file, or ``"front"``: a front.h5
-    or a study directory holding one; ``what`` names the file
+    (kind ``"file"``, ``"system"``: a shipped system's name or a system file, ``"front"``: a front.h5
+    or a study directory holding one, or ``"description"``: a file or a folder; ``what`` names the file
     in messages, default "file"); ``outputs``: the
     ``(label, path)`` files the command will write, from the parsed arguments; ``check``: raises
-    ValueError for options that do not apply or requests too large, before any work."""
+    ValueError for options that do not apply or requests too large, before any work; ``plugins``: the
+    command takes a controller, and so ``--plugin MODULE|FILE.py`` (repeatable), loaded before ``check``."""
 
     name: str
     help: str
@@ -50,75 +53,7 @@ class Command:
     inputs: tuple = ()
     outputs: Paths | None = None
     check: Callable[[argparse.Namespace], None] | None = None
-
-
-# ---- bounds (argparse types: refused at parse time, before any work) ------------------------------------
-
-MAX_SEED = 2**63  # seeds are stored as int64 and fed to numpy's SeedSequence
-
-
-def seed_arg(text: str) -> int:
-    """A seed: an integer with 0 <= seed < 2**63."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer seed, got {text!r}") from None
-    if not 0 <= v < MAX_SEED:
-        raise argparse.ArgumentTypeError(f"{text} is out of range (allowed: 0 <= seed < 2**63)")
-    return v
-
-
-def count_arg(lo: int, hi: int, what: str = "count"):
-    """An argparse type: an integer ``lo <= n <= hi``."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"{v} is out of range (allowed: {lo}..{hi})")
-        return v
-
-    parse.__name__ = what
-    return parse
-
-
-def seconds_arg(text: str) -> float:
-    """A duration in seconds: finite and positive (not nan, inf, 0 or negative)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"{text}: must be a finite number of seconds > 0")
-    return v
-
-
-def _total_memory() -> int | None:
-    import os
-
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError):  # pragma: no cover
-        return None
-
-
-def check_memory(what: str, n_bytes: float, share: float = 0.5) -> None:
-    """Refuse a request whose results would take more than ``share`` of this machine's memory."""
-    total = _total_memory()
-    if total is None:  # pragma: no cover
-        return
-    if n_bytes > share * total:
-        raise ValueError(f"{what}: would need about {n_bytes / 2**30:.3g} GiB for its results, more than "
-                         f"{share:.0%} of this machine's {total / 2**30:.3g} GiB; ask for less")
-
-
-def refuse(a: argparse.Namespace, names, why: str) -> None:
-    """ValueError if any of the options ``names`` (dest names) was given (is not None/False)."""
-    for n in names:
-        v = getattr(a, n, None)
-        if v is not None and v is not False:
-            raise ValueError(f"--{n.replace('_', '-')}: {why}")
+    plugins: bool = False
 
 
 def _model_options(n_quad: int):
@@ -127,9 +62,13 @@ def _model_options(n_quad: int):
     return ModelOptions(n_quad=n_quad)
 
 
-def _add_model_args(p: argparse.ArgumentParser) -> None:
+def _add_system_arg(p: argparse.ArgumentParser, default: str = "haidou1") -> None:
     p.add_argument("--system", "--params", dest="params", metavar="NAME|FILE", type=Path, default=None,
-                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
+                   help=f"the system: a shipped one (arvcas systems) or a system file (default: {default})")
+
+
+def _add_model_args(p: argparse.ArgumentParser) -> None:
+    _add_system_arg(p)
     p.add_argument("--n-quad", metavar="N", type=count_arg(1, 20, "--n-quad"), default=5,
                    help="Gauss-Legendre points per link for the drag integral (default: 5)")
 
@@ -146,18 +85,130 @@ def _add_export_c(p: argparse.ArgumentParser) -> None:
 
 
 def _export_c_outputs(a: argparse.Namespace) -> list:
-    from arvcas.build.export import default_prefix, files
+    from arvcas.build.export import KIND, default_prefix, files
 
-    return [(f"DIR {a.dir}", a.dir / n) for n in files(a.prefix or default_prefix(a.params))]
+    return [(f"DIR {a.dir}", a.dir / n, KIND, a.dir) for n in files(a.prefix or default_prefix(a.params))]
 
 
 def _run_export_c(a: argparse.Namespace) -> int:
     from arvcas.build.export import export_c
-    from arvcas.params import load
+    from arvcas.system.params import load
 
     paths = export_c(a.dir, opts=_model_options(a.n_quad), params=load(a.params), prefix=a.prefix, force=a.force)
     for path in paths:
         print(path)
+    print(f"build with: make -C {a.dir}")
+    return 0
+
+
+# ---- export-controller --------------------------------------------------------------------------
+
+
+def _member_arg(text: str):
+    """``knee`` or an integer index of a front member."""
+    if text == "knee":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected knee or an integer member index, got {text!r}") from None
+
+
+def _add_export_controller(p: argparse.ArgumentParser) -> None:
+    p.add_argument("dir", type=Path, help="output directory (created if its parent exists)")
+    p.add_argument("--controller", default=None,
+                   help="a controller: proposed, agsta, traditional, implicit, pid, or a plugin's (arvcas controllers; "
+                        "required unless --front)")
+    p.add_argument("--front", type=Path, default=None, metavar="FRONT",
+                   help="a tuning front (front.h5 or the study directory of one controller): export one member's gains "
+                        "with the front's controller, system and scenario (with --member)")
+    p.add_argument("--member", type=_member_arg, default=None, metavar="knee|INDEX",
+                   help="with --front: its knee (the rule of arvcas knees) or member INDEX (sorted by f_chat)")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="scenario file: the sampling period, the reference's timing and the default set point, nominal "
+                        "factors and EKF tuning (default: the front's study scenario, else the system's)")
+    p.add_argument("--allow-model-change", action="store_true",
+                   help="with --front: export even if the model code or parameters changed since the study (the "
+                        "export's README and header record it)")
+    p.add_argument("--prefix", default=None,
+                   help="prefix of every C symbol; the library is lib<prefix without its last _>.so "
+                        "(default: arvcas_<system>_<controller>_, e.g. arvcas_haidou1_proposed_)")
+    _add_system_arg(p, "the front's, else haidou1")
+
+
+def _check_export_controller(a: argparse.Namespace) -> None:
+    from arvcas.controllers.gains import check_controller
+
+    if a.front is None:
+        refuse(a, ("member", "allow_model_change"), "only with --front")
+        if a.controller is None:
+            raise ValueError("--controller: required unless --front (proposed, agsta, traditional, implicit, pid)")
+    elif a.member is None:
+        raise ValueError("--front needs --member knee|INDEX")
+    if a.controller is not None:
+        check_controller(a.controller)
+
+
+def _export_controller_design(a: argparse.Namespace) -> dict:
+    """What to export, from the arguments (memoised on ``a``): controller, system, scenario, gains and
+    where they come from."""
+    if getattr(a, "_design", None) is not None:
+        return a._design
+    from arvcas.system.params import load
+    from arvcas.sim import scenario
+
+    params = load(a.params)
+    design = {"controller": a.controller, "gains": None, "gains_source": None}
+    cfg_text = None
+    if a.front is not None:
+        from arvcas.tuning import checkpoint as ck
+        from arvcas.tuning.front import check_provenance, member_index, read_front, resolve_front_path, system_params
+
+        path = resolve_front_path(a.front)
+        if a.params is None:  # the front's own system
+            params = system_params(ck.read_checkpoint(path))
+        changed = check_provenance(path, params, a.allow_model_change, "--front")
+        fr = read_front(path)
+        i = member_index(fr, a.member)
+        if a.controller is not None and a.controller != fr.controller:
+            raise ValueError(f"--controller {a.controller} differs from the front's controller {fr.controller}")
+        what = "its knee" if a.member == "knee" else "members sorted by f_chat"
+        design.update(controller=fr.controller, gains=fr.gains[i].copy(), gains_source=(
+            f"member {i} of the {fr.size} of the front {path} ({what}; f_chat {fr.F[i, 0]:.6g}, f_rmse {fr.F[i, 1]:.6g})"
+            + (f"; exported under another model than the study's ({changed}), as allowed by --allow-model-change"
+               if changed else "")))
+        cfg_text = (fr.scenario_text, f"{path} (study scenario)")
+    if a.config is not None:
+        cfg = scenario.load_scenario(a.config)
+    elif cfg_text is not None and cfg_text[0]:
+        cfg = scenario.loads_scenario(*cfg_text)
+    elif params.default("scenario") is not None:
+        cfg = scenario.load_scenario(params.default("scenario"))
+    else:
+        cfg = None  # export_controller names what is missing
+    design.update(params=params, cfg=cfg)
+    a._design = design
+    return design
+
+
+def _export_controller_outputs(a: argparse.Namespace) -> list:
+    from arvcas.io.export_controller import default_prefix, files
+
+    d = _export_controller_design(a)
+    return [(f"DIR {a.dir}", a.dir / n, "export-controller", a.dir)
+            for n in files(a.prefix or default_prefix(d["params"], d["controller"]))]
+
+
+def _run_export_controller(a: argparse.Namespace) -> int:
+    from arvcas.io.export_controller import export_controller
+
+    d = _export_controller_design(a)
+    paths = export_controller(a.dir, d["controller"], gains=d["gains"], params=d["params"], scenario=d["cfg"],
+                              prefix=a.prefix, gains_source=d["gains_source"], force=a.force)
+    for path in paths:
+        print(path)
+    if d["gains"] is not None:
+        print(f"gains: {d['gains_source']}")
     print(f"build with: make -C {a.dir}")
     return 0
 
@@ -235,10 +286,22 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
     import numpy as np
 
     from arvcas.build.codegen import compiled
-    from arvcas.params import default_layout, load, view
+    from arvcas.system.params import default_layout, load, view
 
     params = load(params_path)
+    if params.structure.n_joints == 0:
+        raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) has no arm: there is no coupling "
+                         f"wrench to show")
     p = params.vector()
+    cfg = None
+    if params.structure != default_layout().structure:
+        from arvcas.sim import scenario
+
+        if params.default("scenario") is None:
+            raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) names no default scenario "
+                             f"([defaults] scenario): the demo follows its arm motion")
+        cfg = scenario.load_scenario(params.default("scenario"))
+        scenario.check_joint_limits(cfg, params)
     f = compiled("arm_wrench", _model_options(n_quad), system=params)
     z6 = np.zeros(6)
     if params.structure == default_layout().structure:
@@ -249,7 +312,6 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
         from arvcas.model.manipulator import stow_pose
         from arvcas.sim import scenario
 
-        cfg = scenario.load_scenario(params.default("scenario"))
         ts = ca.SX.sym("t")
         fq = ca.Function("q", [ts], list(scenario.joint_trajectory(cfg, stow_pose(view(p, params.layout)), ts)))
         traj = lambda t: [np.array(x).ravel() for x in fq(t)]  # noqa: E731
@@ -267,7 +329,7 @@ def _add_demo(p: argparse.ArgumentParser) -> None:
 
 
 def _run_demo(a: argparse.Namespace) -> int:
-    from arvcas.params import load
+    from arvcas.system.params import load
 
     rows = demo_table(a.params, a.n_quad)
     params = load(a.params)
@@ -302,18 +364,163 @@ def _run_systems(a: argparse.Namespace) -> int:
     return 0
 
 
+# ---- import-system -------------------------------------------------------------------------------
+
+
+def _numbers(n: int | None, what: str):
+    """An argparse type: comma-separated finite numbers (``n`` of them, or any number >= 1)."""
+    def parse(text: str) -> list[float]:
+        try:
+            v = [float(x) for x in text.split(",")]
+        except ValueError:
+            v = []
+        if not v or (n is not None and len(v) != n) or not all(math.isfinite(x) for x in v):
+            raise argparse.ArgumentTypeError(f"{what}: expected {n or 'one or more'} comma-separated numbers, "
+                                             f"got {text!r}")
+        return v
+
+    return parse
+
+
+def _lock_arg(text: str) -> tuple[str, float]:
+    name, eq, value = text.rpartition("=")
+    try:
+        q = float(value)
+    except ValueError:
+        q = math.nan
+    if not eq or not name or not math.isfinite(q):
+        raise argparse.ArgumentTypeError(f"--lock: expected JOINT=POSITION (rad, or m for a prismatic joint), "
+                                         f"got {text!r}")
+    return name, q
+
+
+def _add_import_uuv(p: argparse.ArgumentParser) -> None:
+    p.add_argument("description", type=Path, metavar="DESCRIPTION",
+                   help="the robot's URDF or xacro file, or its description package's folder (its robots/ file "
+                        "named *default*)")
+    p.add_argument("--out", type=Path, required=True, metavar="FILE.toml", help="the system file to write")
+    p.add_argument("--name", default=None, help="the system's name (default: the URDF's robot name)")
+    p.add_argument("--base-link", default=None, metavar="LINK", help="the vehicle's link (default: the URDF's root)")
+    p.add_argument("--arm-base", default=None, metavar="LINK",
+                   help="import the arm from this link (rigid on the vehicle; its weight and buoyancy join the "
+                        "vehicle's) ...")
+    p.add_argument("--tool-link", default=None, metavar="LINK", help="... to this link (the chain's end)")
+    p.add_argument("--tool-offset", type=_numbers(3, "--tool-offset"), default=None, metavar="X,Y,Z",
+                   help="the tool point in --tool-link's frame, m (default: its origin)")
+    p.add_argument("--lock", action="append", type=_lock_arg, default=None, metavar="JOINT=POSITION",
+                   help="hold a joint at a position (rad; m for a prismatic joint), e.g. a gripper's finger; "
+                        "repeat for each")
+    p.add_argument("--stow", type=_numbers(None, "--stow"), default=None, metavar="Q1,Q2,...",
+                   help="the arm's stow pose, rad (default: its zero pose, clipped to the limits)")
+    p.add_argument("--thruster-manager", type=Path, default=None, metavar="YAML",
+                   help="uuv_simulator's thruster_manager.yaml: its max_thrust is the thrust limit")
+    p.add_argument("--max-thrust", type=float, default=None, metavar="N",
+                   help="the thrust limit, N (when the thruster plugins give no thrustMin/thrustMax)")
+    p.add_argument("--gravity", type=float, default=None, metavar="M_PER_S2",
+                   help="the world's gravity (default 9.8, SDF's default, which uuv_simulator's worlds keep)")
+    p.add_argument("--ros-path", action="append", type=Path, default=None, metavar="DIR",
+                   help="a folder holding ROS packages for $(find ...) (default: the folder holding the "
+                        "description's package); repeatable")
+    p.add_argument("--xacro-arg", action="append", default=None, metavar="NAME:=VALUE", help="a xacro argument")
+    p.add_argument("--check-tam", type=Path, default=None, metavar="TAM.yaml",
+                   help="compare the written system's allocation matrix with uuv_simulator's TAM.yaml after the "
+                        "frame change and print the largest difference")
+    p.add_argument("--cite", default="", metavar="TEXT",
+                   help="put before every source, e.g. the repository and commit of the description")
+
+
+def _check_import_uuv(a: argparse.Namespace) -> None:
+    from arvcas.system.uuv import check_options
+
+    check_options(a.arm_base, a.tool_link, a.tool_offset, a.stow, a.max_thrust, a.thruster_manager, a.gravity,
+                  ValueError)
+
+
+def _run_import_uuv(a: argparse.Namespace) -> int:
+    import tempfile
+
+    import numpy as np
+
+    from arvcas.io import files
+    from arvcas.system import params as params_mod
+    from arvcas.system import uuv
+
+    args = {}
+    for x in a.xacro_arg or []:
+        k, sep, v = x.partition(":=")
+        if not sep or not k:
+            raise ValueError(f"--xacro-arg: expected NAME:=VALUE, got {x!r}")
+        args[k] = v
+    tam = uuv.read_tam(a.check_tam, ValueError) if a.check_tam is not None else None
+    imp = uuv.import_uuv(a.description, name=a.name, base_link=a.base_link, arm_base=a.arm_base,
+                         tool_link=a.tool_link, tool_offset=a.tool_offset,
+                         locks={k: (v, f"--lock {k}") for k, v in a.lock or []}, stow=a.stow,
+                         max_thrust=a.max_thrust, thruster_manager=a.thruster_manager, gravity=a.gravity,
+                         ros_paths=a.ros_path or (), xacro_args=args, cite=a.cite, error=ValueError)
+    with tempfile.TemporaryDirectory() as d:  # the file must load before it is written
+        tmp = Path(d) / a.out.name
+        tmp.write_text(imp.text, encoding="utf-8")
+        try:
+            params = params_mod.load(tmp)
+        except ValueError as e:
+            raise ValueError(f"the imported system does not load (arvcas's fault, please report): "
+                             f"{str(e).replace(str(tmp), str(a.out))}") from None
+    files.write_text(a.out, imp.text)
+    print(f"{a.out}: system '{imp.name}', {params.structure.n_thrusters} thrusters, {params.structure.n_joints} "
+          f"joints, {len(params)} parameters")
+    for n in imp.notes:
+        print(f"  not imported: {n}")
+    if tam is not None:
+        from arvcas.model.thrusters import B_T
+
+        if tam.shape[1] != imp.B_flu.shape[1]:
+            raise ValueError(f"--check-tam {a.check_tam}: {tam.shape[1]} columns, the description has "
+                             f"{imp.B_flu.shape[1]} thrusters")
+        T6 = np.kron(np.eye(2), uuv.T_FLU_FRD)
+        B = np.array(B_T(params_mod.view(params.vector(), params.layout)), dtype=float)
+        print(f"allocation matrix against {a.check_tam} (columns {', '.join(imp.thrusters)}; the TAM turned into "
+              f"x forward, y starboard, z down): largest difference {np.abs(B - T6 @ tam).max():.3g}")
+    return 0
+
+
+# ---- controllers -------------------------------------------------------------------------------
+
+
+def _add_controllers(p: argparse.ArgumentParser) -> None:
+    pass
+
+
+def _run_controllers(a: argparse.Namespace) -> int:
+    from arvcas.controllers import base
+
+    names, failed = base.available()  # every entry point of arvcas.controllers loaded; broken ones reported
+    print(f"{'name':16} {'gains/DOF':>9}  {'from':40}  description")
+    for n in names:
+        c = base.get(n)
+        p = base.origin(n)
+        own = c.own_source_files()
+        where = p.describe() if p is not None else (f"python: {type(c).__module__}" if own else "arvcas")
+        print(f"{n:16} {len(c.gains):9d}  {where:40}  {c.description}")
+    for f in failed:
+        print(f"warning: {f}", file=sys.stderr)
+    return 0
+
+
 # ---- knees ---------------------------------------------------------------------------------------
 
 
 def _add_knees(p: argparse.ArgumentParser) -> None:
-    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR", help="the --out directory of arvcas tune")
+    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR",
+                   help="the --out directory of arvcas tune (one front, or one per controller), or a front.h5")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="where to write (created if missing)")
+    add_figure_format(p)
 
 
 def _knees_outputs(a):
-    from arvcas.experiments.knees import knee_fronts, output_files
+    from arvcas.experiments.knees import front_controllers, output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out, [f.parent.name for f in knee_fronts(a.study_dir)])]
+    return _kinds([(f"--out {a.out}", p) for p in output_files(a.out, front_controllers(a.study_dir), a.format or "png")],
+                  _RESULT)
 
 
 def _run_knees(a: argparse.Namespace) -> int:
@@ -321,7 +528,7 @@ def _run_knees(a: argparse.Namespace) -> int:
     from arvcas.io import files
 
     files.prepare_dir(a.out, f"--out {a.out}")
-    replay_knees(a.study_dir, a.out)
+    replay_knees(a.study_dir, a.out, fmt=a.format or "png")
     return 0
 
 
@@ -330,7 +537,8 @@ def _run_knees(a: argparse.Namespace) -> int:
 
 def _add_simulate(p: argparse.ArgumentParser) -> None:
     p.add_argument("--controller", default=None,
-                   help="a registered controller: proposed, agsta, traditional, implicit, pid (required unless --from-front)")
+                   help="a controller: proposed, agsta, traditional, implicit, pid, or a plugin's (arvcas controllers; "
+                        "required unless --from-front)")
     p.add_argument("--out", type=Path, default=None, metavar="FILE.h5",
                    help="write the result here: HDF5 (.h5), or a MATLAB file if the name ends in .mat")
     p.add_argument("--seed", type=seed_arg, default=None, help="sensor-noise seed (default 0; 0 <= seed < 2**63)")
@@ -364,7 +572,7 @@ def _metrics_table(chat, rmse) -> str:
 def _run_simulate(a: argparse.Namespace) -> int:
     from arvcas.io import results
     from arvcas.sim import scenario
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.sim.simulation import simulate
 
     if a.out is not None:
@@ -390,13 +598,15 @@ def _run_simulate(a: argparse.Namespace) -> int:
         if a.config is None and cfg_text:
             cfg = scenario.loads_scenario(cfg_text, f"{a.from_front} (study scenario)")
     if controller is None:
-        raise ValueError("--controller: required (proposed, agsta, traditional, implicit, pid)")
+        raise ValueError("--controller: required (proposed, agsta, traditional, implicit, pid, or a plugin's: "
+                         "arvcas controllers)")
     r = simulate(controller, gains=gains, seed=0 if seed is None else seed, params=params, cfg=cfg,
                  opts=_model_options(a.n_quad))
     if a.from_front is not None and changed:
         r.meta["model_change_allowed"] = changed
         print(f"note: replayed under another model than the study's ({changed}), as allowed by --allow-model-change")
-    status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s"
+    status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s" + (
+        f": {r.meta['failure']}" if r.meta.get("failure") else "")
     print(f"{controller}: seed {r.seed}, {r.t[-1]:g} s, {status}")
     print(_metrics_table(r.chat, r.rmse))
     if a.out is not None and a.out.suffix == ".mat":
@@ -414,12 +624,13 @@ def _run_simulate(a: argparse.Namespace) -> int:
 def _add_paper(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     p.add_argument("--seed", type=seed_arg, default=0, help="sensor-noise seed shared by the runs (default 0)")
+    add_figure_format(p, "Figures 5-11")
 
 
 def _run_paper(a: argparse.Namespace) -> int:
     from arvcas.experiments.paper import run_paper
 
-    out = run_paper(a.out, seed=a.seed)
+    out = run_paper(a.out, seed=a.seed, fmt=a.format or "png")
     print((a.out / "table3.md").read_text())
     # the job succeeded when every run completed; whether the paper's comparison reproduces is
     # a finding, reported in table3.md, not an error
@@ -449,12 +660,12 @@ def _load_arg(text: str) -> float:
 
 
 def bench_module():
-    """``benchmarks/bench.py`` of the source checkout this package runs from (not part of the package)."""
+    """The package ``benchmarks/bench/`` of the source checkout this package runs from (not part of the package)."""
     import importlib
 
     root = Path(__file__).resolve().parents[1]
-    if not (root / "benchmarks" / "bench.py").is_file():
-        raise ValueError(f"bench: needs a source checkout of arvcas ({root / 'benchmarks' / 'bench.py'} not found)")
+    if not (root / "benchmarks" / "bench" / "__init__.py").is_file():
+        raise ValueError(f"bench: needs a source checkout of arvcas ({root / 'benchmarks' / 'bench'} not found)")
     if str(root) not in sys.path:
         sys.path.insert(0, str(root))
     return importlib.import_module("benchmarks.bench")
@@ -473,18 +684,30 @@ def _run_bench(a: argparse.Namespace) -> int:
 # ---- declared outputs -------------------------------------------------------------------------------------
 
 
-def _out_file(dest: str, label: str | None = None) -> Paths:
+def _kinds(outs, formats: dict[str, str]) -> list:
+    """``(label, path)`` outputs with the kind (:mod:`arvcas.io.files`) each will be written as, by suffix:
+    ``formats`` maps ``h5`` or ``mat`` to the arvcas format written there (others: by suffix)."""
+    from arvcas.io.matfile import mat_kind
+
+    kinds = {"h5": formats.get("h5"), "mat": mat_kind(formats["mat"]) if "mat" in formats else None}
+    return [(lab, p, kinds.get(p.suffix.lower().lstrip("."))) for lab, p in outs]
+
+
+def _out_file(dest: str, label: str | None = None, **formats: str) -> Paths:
     def outs(a):
         p = getattr(a, dest)
-        return [] if p is None else [(label or f"--{dest.replace('_', '-')}", Path(p))]
+        return [] if p is None else _kinds([(label or f"--{dest.replace('_', '-')}", Path(p))], formats)
 
     return outs
+
+
+_RESULT = {"h5": "arvcas-result", "mat": "arvcas-result"}  # io.results.FORMAT, io.matfile's "arvcas-result"
 
 
 def _paper_outputs(a):
     from arvcas.experiments.paper import output_files
 
-    return [(f"--out {a.out}", p) for p in output_files(a.out)]
+    return _kinds([(f"--out {a.out}", p) for p in output_files(a.out, fmt=a.format or "png")], _RESULT)
 
 
 def _bench_outputs(a):
@@ -493,53 +716,78 @@ def _bench_outputs(a):
 
 def _table() -> tuple[Command, ...]:
     from arvcas.experiments import cli as x
+    from arvcas.experiments import validation as v
     from arvcas.tuning import cli as t
 
     return (
         Command("export-c", "write the plant functions as a C library with Makefile, example and README",
                 _add_export_c, _run_export_c, inputs=(("params", "system"),), outputs=_export_c_outputs),
+        Command("export-controller", "write the controller of a run (EKF, reference, law, allocation) with a front "
+                "member's or the default gains as a C library with header, Makefile, ctypes binding and examples",
+                _add_export_controller, _run_export_controller,
+                inputs=(("config", "file"), ("params", "system"), ("front", "front")),
+                outputs=_export_controller_outputs, check=_check_export_controller, plugins=True),
         Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
                 _add_export_fmu, _run_export_fmu, inputs=(("params", "system"),), outputs=_out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
         Command("systems", "list the shipped systems (vehicle, thrusters, arm) and their files", _add_systems,
                 _run_systems),
+        Command("import-system uuv", "a uuv_simulator / Gazebo vehicle (URDF or xacro, the Fossen plugin, thrusters, "
+                "an arm) as a system file, in arvcas's body frame (docs/importing.md)", _add_import_uuv,
+                _run_import_uuv, inputs=(("description", "description", "robot description"),
+                                         ("thruster_manager", "file"), ("check_tam", "file")),
+                outputs=_out_file("out"), check=_check_import_uuv),
+        Command("controllers", "list the controllers: the package's, the plugins' (entry points, --plugin) and "
+                "where each comes from", _add_controllers, _run_controllers, plugins=True),
         Command("knees", "replay the knee of every front of a study directory: result files, figures, a table",
-                _add_knees, _run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=_knees_outputs),
+                _add_knees, _run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=_knees_outputs,
+                plugins=True),
         Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
                 _add_demo, _run_demo, inputs=(("params", "system"),)),
         Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
                 _add_simulate, _run_simulate, inputs=(("config", "file"), ("params", "system"), ("from_front", "front")),
-                outputs=_out_file("out"), check=_check_simulate),
+                outputs=_out_file("out", **_RESULT), check=_check_simulate, plugins=True),
         Command("paper", "the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
                 _add_paper, _run_paper, outputs=_paper_outputs),
         Command("bench", "measure plant, closed-loop and compile speed; write bench.json and bench.md",
                 _add_bench, _run_bench, outputs=_bench_outputs),
         Command("tune", "NSGA-II on the CHAT/RMSE front from a study file (resumable, local or Dask)",
-                t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune),
+                t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune, plugins=True),
         Command("front export", "the front as CSV or JSON (stdout, or --out FILE), or a MATLAB .mat file",
-                t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out"),
+                t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out", mat="arvcas-front"),
                 check=t.check_front_export),
-        Command("front plot", "plot the front, Table 2 on the same draws and the knee point (PNG)", t.add_front_plot,
+        Command("front plot", "plot the front, the default gains (Haidou-1: Table 2) on the same draws and the knee "
+                "point (PNG, PDF or SVG)", t.add_front_plot,
                 t.run_front_plot, inputs=(("file", "front"),), outputs=t.front_plot_outputs),
+        Command("front explore", "one self-contained HTML page of every front: hover a member for its gains and "
+                "metrics, click it for its time response", x.add_explore, x.run_explore, inputs=(("fronts", "front"),),
+                outputs=x.explore_outputs, check=x.check_explore, plugins=True),
         Command("front robust", "re-evaluate every front member under Monte Carlo; mark the robust non-dominated "
                 "ones (robust.h5, robust.md, robust.png)", x.add_robust, x.run_robust, inputs=(("file", "front"),),
-                outputs=x.robust_outputs, check=x.check_robust),
-        Command("compare", "hypervolumes of two fronts against one reference point, and who dominates where; or two "
-                "Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
-                "(front robust)", x.add_compare, x.run_compare, inputs=(("a", "front"), ("b", "front")),
-                outputs=x.compare_outputs, check=x.check_compare),
+                outputs=x.robust_outputs, check=x.check_robust, plugins=True),
+        Command("compare", "hypervolumes of two or more fronts against one reference point, and who dominates where; "
+                "or two Monte Carlo files (per-DOF differences with 95 percent intervals); or two robust fronts "
+                "(front robust)", x.add_compare, x.run_compare, inputs=(("fronts", "front"),),
+                outputs=x.compare_outputs, check=x.check_compare, plugins=True),
         Command("sweep", "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 "
                 "(table, plot)", x.add_sweep, x.run_sweep,
                 inputs=(("config", "file"), ("params", "system"), ("check", "file")),
-                outputs=x.sweep_outputs, check=x.check_sweep),
+                outputs=x.sweep_outputs, check=x.check_sweep, plugins=True),
+        Command("validate", "simulate a system open loop over logged trials (*.log.toml) and compare: RMSE, NRMSE, "
+                "R^2 per signal, figures", v.add_validate, v.run_validate,
+                inputs=(("system", "system"),), outputs=v.validate_outputs),
+        Command("identify", "estimate named parameters of a system from logged trials (IPOPT, 95 percent "
+                "intervals): writes the identified system file", v.add_identify, v.run_identify,
+                inputs=(("system", "system"),), outputs=v.identify_outputs, check=v.check_identify),
         Command("montecarlo", "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance "
                 "phases: CIs, failure rate", x.add_montecarlo, x.run_montecarlo,
                 inputs=(("config", "file"), ("params", "system"), ("from_front", "front"), ("check", "file")),
-                outputs=x.montecarlo_outputs, check=x.check_montecarlo),
+                outputs=x.montecarlo_outputs, check=x.check_montecarlo, plugins=True),
     )
 
 
 TABLE: tuple[Command, ...] = _table()
+_GROUPS = {"front": "tuning fronts", "import-system": "another tool's description as a system file"}
 COMMANDS: dict[str, Command] = {c.name: c for c in TABLE}
 
 
@@ -565,13 +813,18 @@ def _parser() -> argparse.ArgumentParser:
         if action:
             if head not in groups:
                 actions = [c.name.partition(" ")[2] for c in TABLE if c.name.startswith(head + " ")]
-                hp = f"tuning fronts: {', '.join(actions)}"
+                hp = f"{_GROUPS.get(head, head)}: {', '.join(actions)}"
                 gp = sub.add_parser(head, help=hp, description=hp)
                 groups[head] = gp.add_subparsers(dest="action", metavar="ACTION", required=True, parser_class=_Parser)
             sp = groups[head].add_parser(action, help=cmd.help, description=cmd.help)
         else:
             sp = sub.add_parser(head, help=cmd.help, description=cmd.help)
         cmd.add_arguments(sp)
+        if cmd.plugins:
+            sp.add_argument("--plugin", action="append", default=None, metavar="MODULE|FILE.py",
+                            help="load a plugin first: a Python file or an importable module defining controllers "
+                                 "(repeatable; installed entry points of arvcas.controllers are found by themselves; "
+                                 "docs/plugins.md)")
         if cmd.outputs is not None:
             sp.add_argument("--force", action="store_true",
                             help="replace existing output files that arvcas did not write")
@@ -580,49 +833,95 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _inputs(cmd: Command, a: argparse.Namespace) -> list[tuple[str, Path]]:
-    """Apply the input policy to the declared inputs; returns them as (label, path of the file)."""
-    from arvcas.io import files
-
+    """Apply the input policy to the declared inputs (an argument may hold a list); returns them as
+    (label, path of the file)."""
     out = []
     for dest, kind, *what in cmd.inputs:
-        p = getattr(a, dest, None)
-        if p is None:
-            continue
-        label = dest if dest in ("file", "study", "a", "b", "study_dir") else f"--{dest.replace('_', '-')}"
-        if kind == "system":
-            from arvcas.system import shipped
+        value = getattr(a, dest, None)
+        for p in value if isinstance(value, list) else [value]:
+            item = _input(dest, kind, what, p, a)
+            if item is not None:
+                out.append(item)
+    return out
 
-            label = "--system"
-            if str(p) in shipped():
-                p = shipped()[str(p)]
-                setattr(a, dest, p)
-            elif not p.exists() and p.suffix.lower() != ".toml":
-                from arvcas.config import closest
 
-                raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
-                                 f"file{closest(str(p), shipped(), 0.3)}")
-        p = files.check_input(p, what[0] if what else "file", allow_dir=kind == "front")
-        if kind == "front" and p.is_dir():
-            p = p / "front.h5"
-            if not p.exists():
-                continue  # the handler names what the directory holds
-            files.check_input(p)
-        out.append((label, p))
+def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[str, Path] | None:
+    """The input policy for one input ``p`` of argument ``dest``: (label, path of the file) or None."""
+    from arvcas.io import files
+
+    if p is None:
+        return None
+    label = ("front" if dest == "fronts" else dest if dest in ("file", "study", "study_dir", "description")
+             else f"--{dest.replace('_', '-')}")
+    if kind == "system":
+        from arvcas.system import shipped
+
+        label = "--system"
+        if str(p) in shipped():
+            p = shipped()[str(p)]
+            setattr(a, dest, p)
+        elif not p.exists() and p.suffix.lower() != ".toml":
+            from arvcas.system.config import closest
+
+            raise ValueError(f"--system {p}: neither a shipped system ({', '.join(shipped())}) nor a system "
+                             f"file{closest(str(p), shipped(), 0.3)}")
+    p = files.check_input(p, what[0] if what else "file", allow_dir=kind in ("front", "description"))
+    if kind == "front" and p.is_dir():
+        p = p / "front.h5"
+        if not p.exists():
+            return None  # the handler names what the directory holds
+        files.check_input(p)
+    return label, p
+
+
+def _load_plugins(a: argparse.Namespace) -> list[tuple[str, Path]]:
+    """Load the ``--plugin`` of a command (before its check: the check may look a controller up); returns
+    the plugin files as inputs (no output may replace them)."""
+    from arvcas.io import plugins
+
+    out = []
+    for spec in getattr(a, "plugin", None) or []:
+        p = plugins.load(spec, what="--plugin")
+        if p.kind == "file":
+            out.append(("--plugin", Path(p.spec)))
     return out
 
 
 def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
     from arvcas.io import files
 
-    inputs = _inputs(cmd, a)
+    inputs = _inputs(cmd, a) + _load_plugins(a)
     if cmd.check is not None:
         cmd.check(a)
     if cmd.outputs is not None:
         outs = cmd.outputs(a)
         files.check_outputs(outs, inputs, force=a.force)
-        for d in {p.parent if str(p.parent) else Path(".") for _, p in outs}:
+        for d in {o[1].parent if str(o[1].parent) else Path(".") for o in outs}:
             if d.is_dir():
                 files.remove_stale_temps(d)
+
+
+def _choose_numpy_mode() -> int | None:
+    """CasADi 3.8's NumPy mode (issue #2959) for this command: -1, the legacy behaviour without its notice.
+    arvcas's own code calls no NumPy function on a CasADi value, so its numbers are the same in every mode
+    (tests/test_trust_casadi_mode.py); -1 also keeps the libraries the commands use (pymoo, matplotlib)
+    on the behaviour they were tested with. The previous mode is returned, to be restored (a caller in the
+    same process keeps its own)."""
+    import casadi as ca
+
+    get = getattr(ca.GlobalOptions, "getNumpyMode", None)
+    if get is None:  # pragma: no cover - CasADi before 3.8
+        return None
+    before = get()
+    ca.GlobalOptions.setNumpyMode(-1)
+    return before
+
+
+def _restore_numpy_mode(before: int | None) -> None:
+    if before is not None:
+        import casadi as ca
+
+        ca.GlobalOptions.setNumpyMode(before)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -642,10 +941,25 @@ def main(argv: list[str] | None = None) -> int:
         logging.basicConfig(level=logging.INFO, format="arvcas: %(message)s")
     old = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP)}
     files.install_signal_handlers()
+    import warnings
+
+    shown = warnings.showwarning
+
+    def show(message, category, *args, **kw):  # a system file's implausible number: one line
+        if category.__name__ in ("PlausibilityWarning", "ScenarioWarning"):
+            print(f"arvcas: warning: {' '.join(str(message).split())}", file=sys.stderr)
+        else:
+            shown(message, category, *args, **kw)
+
+    warnings.showwarning = show
+    numpy_mode = _choose_numpy_mode()
     try:
+        from arvcas.build.codegen import report_progress
+
         cmd = COMMANDS[a._command]
         _apply_policies(cmd, a)
-        return cmd.run(a)
+        with report_progress(sys.stderr):  # a build of more than a second says so on standard error
+            return cmd.run(a)
     except (ValueError, OSError) as e:
         msg = " ".join(str(e).split()) or type(e).__name__
         print(f"arvcas: error: {msg}", file=sys.stderr)
@@ -659,6 +973,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         import threading
 
+        warnings.showwarning = shown
+        _restore_numpy_mode(numpy_mode)
         if threading.current_thread() is threading.main_thread():
             for s, h in old.items():
                 if h is not None:

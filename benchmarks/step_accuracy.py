@@ -95,11 +95,11 @@ def _plant_ode(cfg, opts=None, layout=None):
     ``t = t_k + s``. The right-hand side is the plant with the direct Newton-Euler arm wrench
     (``uvms_xdot``, the function behind ``uvms_rhs``; the trim of docs/model.md §3 at q0), the scenario's
     joint trajectory, payload ramp, eq. 41's disturbance, current and tether as functions of ``t``.
-    ``layout``: the system's :class:`arvcas.params.Layout` (default Haidou-1's); ``p`` is its parameter vector.
+    ``layout``: the system's :class:`arvcas.system.params.Layout` (default Haidou-1's); ``p`` is its parameter vector.
     """
     from arvcas.model import manipulator, thrusters
     from arvcas.model.uvms import ModelOptions, uvms_xdot
-    from arvcas.params import default_layout, view
+    from arvcas.system.params import default_layout, view
     from arvcas.sim import closedloop, scenario
 
     lay = layout or default_layout()
@@ -148,7 +148,7 @@ def plant_inputs(pv, r, layout=None) -> np.ndarray:
     """The reference's input per sample of a traced run ``r``: the held wrench of its saturated thrust, or with
     thruster dynamics each rotor's target, the inverse map of the allocation's thrust (``r.thrust_cmd``)."""
     from arvcas.model import thrusters
-    from arvcas.params import default_layout, view
+    from arvcas.system.params import default_layout, view
 
     lay = layout or default_layout()
     if not lay.structure.has_thruster_dynamics:
@@ -169,7 +169,7 @@ def held_wrench(pv, thrust, layout=None) -> np.ndarray:
     """Body wrench ``B_T u`` per sample (rows) of the held, saturated thrust ``thrust`` (N+1, n_thrusters);
     ``B_T`` (6 x n_thrusters) of the system of ``layout`` (default Haidou-1)."""
     from arvcas.model import thrusters
-    from arvcas.params import view
+    from arvcas.system.params import view
 
     B = np.array(ca.evalf(thrusters.B_T(view(ca.DM(np.asarray(pv, float)), layout))))
     return np.asarray(thrust, float) @ B.T
@@ -207,7 +207,7 @@ def rk4_states(cfg, pv, x0, taus, phase, h_plant: float, n_samples: int | None =
     With thruster dynamics the rotors are not RK4 states: their closed form (docs/model.md §9) gives the
     thrust at every stage, as in the closed loop, here evaluated in NumPy sample by sample.
     """
-    from arvcas.params import default_layout
+    from arvcas.system.params import default_layout
 
     lay = layout or default_layout()
     if lay.structure.has_thruster_dynamics:
@@ -235,7 +235,7 @@ def _rk4_states_lag(cfg, pv, x0, targets, phase, h_plant, n_samples, opts, lay):
     """:func:`rk4_states` with thruster dynamics: the vehicle's RK4 driven by the wrench ``B F(s(t))`` at its
     stages, ``s(t)`` the lag's closed form from each sample's rotor states towards its ``targets``."""
     from arvcas.model import thrusters
-    from arvcas.params import layout_for, view
+    from arvcas.system.params import layout_for, view
 
     inst = layout_for(lay.structure.instantaneous())
     pv_inst = np.asarray(pv, float)[[lay.index[n] for n in inst.names]]

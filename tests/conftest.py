@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from arvcas import params as _params
+from arvcas.system import params as _params
 from arvcas.model import uvms as _uvms
 
 

@@ -2,7 +2,7 @@
 
 Independent reference for the CasADi graphs (docs/model.md §3): a free-flyer root for the vehicle body (its
 frame at the COB, SNAME body axes; world = NED, so gravity is +g along z), then six revolute-Z joints
-placed by Craig's modified DH. Only numbers come from :class:`arvcas.params.Params`; the DH
+placed by Craig's modified DH. Only numbers come from :class:`arvcas.system.params.Params`; the DH
 placements, link vectors, cylinder inertias and rotation matrices are computed here.
 
 Pinocchio conventions used by the tests:

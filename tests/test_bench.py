@@ -50,7 +50,8 @@ def test_bench_quick_writes_complete_finite_figures(tmp_path, capsys):
     for where, v in _numbers(res["machine"], "machine"):  # load averages and CPU shares may be 0
         assert math.isfinite(v) and v >= 0, f"{where} = {v}"
     md = (tmp_path / "bench.md").read_text()
-    for heading in ("## 1. Plant functions", "## 2. Closed loop", "## 3. Compiling", "## Recommendation"):
+    for heading in ("## 1. Plant functions", "## 2. Closed loop", "## 3. Compiling", "## 7. The exported controller",
+                    "## Recommendation"):
         assert heading in md
     assert "| uvms_rhs |" in md and "| uvms_rhs_jac |" in md and "QUICK MODE" in md
     assert "### Calling the dynamics from other code" in md and "written by hand in NumPy" in md

@@ -89,3 +89,33 @@ def test_cache_without_writable_lock_files_serves_verified_artifacts(tmp_path, m
     assert after["disk_hit"] == before["disk_hit"] + 1 and after["compile"] == before["compile"]
     assert codegen.artifact_of(g)["path"] == path
     assert not [r for r in caplog.records if "busy" in r.getMessage()]
+
+
+def test_a_build_reports_its_progress_and_a_cache_hit_is_silent(tmp_path, monkeypatch, capsys):
+    """report_progress: a build longer than the threshold writes one line, what it built and how long it
+    took; the same build from the cache writes nothing (the command line reports at 1 s on stderr)."""
+    import io
+
+    import casadi as ca
+
+    monkeypatch.setenv("ARVCAS_CACHE", str(tmp_path / "cache"))
+    x = ca.SX.sym("x", 20)
+    y = x
+    for i in range(30):
+        y = ca.sin(y * 1.001 + ca.cos(y[::-1])) + 1e-3 * i
+    make = lambda: ca.Function("progress_probe", [x], [y])  # noqa: E731
+    out = io.StringIO()
+    with codegen.report_progress(out, after=0.0):
+        f = codegen.build_described("progress_probe", "progress test", make, label="the probe for a test")
+    assert f(ca.DM.ones(20)).shape == (20, 1)
+    line = out.getvalue()
+    assert line.startswith("arvcas: compiling the probe for a test ...") and line.endswith(" s\n"), line
+    assert line.count("\n") == 1 and float(line.split("... ")[1].split(" s")[0]) > 0
+    codegen._DESCRIBED.clear()  # a new process's view: the library is loaded from the disk cache
+    out2 = io.StringIO()
+    with codegen.report_progress(out2, after=0.0):
+        codegen.build_described("progress_probe", "progress test", make, label="the probe for a test")
+    assert out2.getvalue() == ""
+    capsys.readouterr()
+    codegen.build_described("progress_probe", "progress test 2", make)  # a build outside report_progress: silent
+    assert capsys.readouterr() == ("", "")

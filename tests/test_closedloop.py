@@ -11,7 +11,7 @@ from arvcas.build import calls, codegen
 from arvcas.sim import closedloop, scenario, schedule
 from arvcas.controllers import gains
 from arvcas import metrics
-from arvcas.params import load as load_params
+from arvcas.system.params import load as load_params
 from arvcas.sim.simulation import SimulationError, simulate, simulate_batch
 
 

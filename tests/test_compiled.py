@@ -24,7 +24,7 @@ import pytest
 
 from arvcas.build import codegen as C
 from arvcas.model import uvms
-from arvcas.params import load
+from arvcas.system.params import load
 
 RTOL = 1e-12
 
@@ -151,7 +151,7 @@ def test_second_process_reuses_artifact(built, cache):
         cache,
         f"""
         import numpy as np
-        from arvcas.params import load
+        from arvcas.system.params import load
         from arvcas.model.uvms import plant_functions
         t0 = time.perf_counter()
         f = C.build(plant_functions()["uvms_rhs"])  # keyed by its C text, as the module's fixture built it

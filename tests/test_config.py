@@ -1,4 +1,4 @@
-"""arvcas.config: one strict loader for parameter, scenario and study files.
+"""arvcas.system.config: one strict loader for parameter, scenario and study files.
 
 The packaged files load to the same SI numbers as their raw TOML values times unit factors written
 out here independently; every fault is one line naming the file and the key; units are checked
@@ -17,13 +17,13 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from arvcas import config, params as ap
-from arvcas.config import Choices, Count, Equals, Invalid, ge, gt, le, quantity, setting
+from arvcas.system import config, params as ap
+from arvcas.system.config import Choices, Count, Equals, Invalid, ge, gt, le, quantity, setting
 from arvcas.sim import scenario
 from arvcas.sim.scenario import ScenarioError, default_scenario_path, load_scenario, loads_scenario
 from arvcas.tuning.study import StudyError, loads_study
 
-# independent of arvcas.config.UNITS: the only non-SI units the packaged files use
+# independent of arvcas.system.config.UNITS: the only non-SI units the packaged files use
 _FACTOR = {"mm": 1e-3, "deg": math.pi / 180.0}
 
 

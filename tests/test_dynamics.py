@@ -13,7 +13,7 @@ import arvcas
 from arvcas.build import dynamics as dyn
 from arvcas.build.export import example_inputs
 from arvcas.model import uvms
-from arvcas.params import load
+from arvcas.system.params import load
 
 RTOL = 1e-12
 
@@ -175,9 +175,9 @@ def test_errors_are_one_line():
         (lambda: d(np.tile(x, (3, 1)), tau, p=np.where(np.arange(140) == 9, np.nan, 1.0)), r"p has a non-finite value nan"),
         (lambda: d(np.where(np.arange(24).reshape(2, 12) == 13, -np.inf, 1.0), tau), r"x has a non-finite value -inf at index \[1, 1\]"),
         (lambda: d(x, tau, p=load().vector(), params=load()), r"give p= or params=, not both"),
-        (lambda: d(x, tau, params={"a": 1}), r"params: expected arvcas.params.Params, got dict"),
+        (lambda: d(x, tau, params={"a": 1}), r"params: expected arvcas.system.params.Params, got dict"),
         (lambda: d(x, tau, n_threads=0), r"n_threads: expected a positive integer or None, got 0"),
-        (lambda: d("abc", tau), r"x: expected an array of numbers, got str"),
+        (lambda: d("abc", tau), r"x: expected numbers, got a str"),
         (lambda: arvcas.dynamics("uvms_rhs", system="bluerov2"), r"neither a shipped system .*did you mean 'bluerov2_heavy_alpha5'"),
         (lambda: arvcas.dynamics("nope"), r"unknown function 'nope'; allowed: vehicle_rhs, arm_wrench, .*uvms_rhs_jac"),
     ]

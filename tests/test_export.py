@@ -28,7 +28,7 @@ from arvcas.build.dynamics import NAMES, jacobian_functions
 from arvcas.build.export import (DEFAULT_PREFIX, MANIFEST, ExportError, _check_reentrant, default_prefix,
                                  example_inputs, export_c, files)
 from arvcas.model import uvms
-from arvcas.params import load
+from arvcas.system.params import load
 from arvcas.system import SHIPPED, load_system
 
 RTOL = 1e-12
@@ -76,10 +76,12 @@ def _run(cmd, **kw):
 
 
 @pytest.fixture(scope="module")
-def made(exported):
+def made(exported, prefix):
     if shutil.which("make") is None or shutil.which("c++") is None:
         pytest.skip("make or c++ is not installed")
-    _run(["make", "-C", str(exported)])
+    out = _run(["make", "-C", str(exported)])
+    lib = prefix.rstrip("_")
+    assert re.search(rf"^compiling lib{lib}\.so \.\.\. \d+ s$", out, re.M), out  # make's progress line
     return exported
 
 
@@ -291,7 +293,7 @@ def test_export_replaces_only_its_own_unchanged_files(tmp_path, capsys):
     export_c(out)  # again: every file is arvcas's and unchanged
     assert (out / "Makefile").read_text() == before and (out / "notes.txt").read_text() == "mine"
     (out / "example.c").write_text("/* edited */")
-    with pytest.raises(ExportError, match=r"example.c was changed since arvcas export-c wrote it"):
+    with pytest.raises(ExportError, match=r"example.c: was changed since arvcas wrote it"):
         export_c(out)
     assert (out / "example.c").read_text() == "/* edited */"
     assert cli.main(["export-c", str(out)]) == 2
@@ -305,16 +307,16 @@ def test_export_replaces_only_its_own_unchanged_files(tmp_path, capsys):
     other = tmp_path / "other"
     other.mkdir()
     (other / "Makefile").write_text("all:\n")
-    with pytest.raises(ExportError, match=r"Makefile exists and was not written by arvcas export-c"):
+    with pytest.raises(ExportError, match=r"Makefile: exists and was not written by arvcas"):
         export_c(other)
     assert (other / "Makefile").read_text() == "all:\n" and not (other / "example.c").exists()
-    (other / MANIFEST).write_text("{not json")
-    with pytest.raises(ExportError, match=r"is not a manifest arvcas wrote"):
-        export_c(other)
     (other / "Makefile").unlink()
+    (other / MANIFEST).write_text("{not json")  # export-c's own listing: a file like any other
+    with pytest.raises(ExportError, match=r"arvcas-export.json: exists and was not written by arvcas"):
+        export_c(other)
     (other / MANIFEST).unlink()
     (other / "example.py").symlink_to(tmp_path / "lib" / "example.py")
-    with pytest.raises(ExportError, match=r"example.py exists and was not written"):
+    with pytest.raises(ExportError, match=r"example.py: exists and was not written"):
         export_c(other)
     export_c(other, force=True)
     assert not (other / "example.py").is_symlink()

@@ -11,6 +11,7 @@ sinusoids in every DOF.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import shutil
 import zipfile
 
@@ -24,6 +25,9 @@ from fmpy.validation import validate_fmu  # noqa: E402
 
 from arvcas.build import fmu as fmu_mod  # noqa: E402
 from arvcas.build.codegen import compiled  # noqa: E402
+from arvcas.io import files  # noqa: E402
+
+from trust_helpers import bounded  # noqa: E402
 from arvcas.sim import scenario  # noqa: E402
 
 H = 0.01  # the FMU's default RK4 step (the scenario's former plant step, docs/model.md §4)
@@ -402,6 +406,56 @@ def test_wrong_guid_and_parameters_after_init_refused(fmu_path, md):
             m.setReal([m.vr["env.rho"]], [0.0])
 
 
+def test_do_step_is_bounded_and_checks_the_communication_point(fmu_path, md, capsys):
+    """A huge communication step or a tiny h_rk4 (1e10+ RK4 steps) is refused before any work, one logged
+    message; so is a currentCommunicationPoint that is not the instance's time."""
+    from fmpy.fmi1 import FMICallException
+
+    cases = [(None, 0.0, 1e9, "more than 1000000 RK4 steps"), ({"h_rk4": 1e-12}, 0.0, 0.01, "more than 1000000"),
+             (None, 5.0, 0.01, "currentCommunicationPoint is not the instance's current time")]
+    for values, tc, H, message in cases:
+        with _instance(fmu_path, md, "cs", cls=FMU2Slave, values=values) as sl:
+            capsys.readouterr()
+            e = bounded(lambda: sl.doStep(currentCommunicationPoint=tc, communicationStepSize=H))
+            assert isinstance(e, FMICallException), repr(e)
+            assert message in capsys.readouterr().out
+            if values is None:  # the instance goes on with a step it can take
+                sl.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.01)
+                sl.doStep(currentCommunicationPoint=0.01, communicationStepSize=0.01)
+
+
+def test_ranges_declared_and_checked_with_a_logged_message(fmu_path, md, capsys):
+    """min/max in the model description; parameters checked at initialization by the loader's rules, NaN
+    states and out-of-range inputs refused by fmi2SetReal / fmi2SetContinuousStates (fmi2Error, logged)."""
+    from fmpy.fmi1 import FMICallException
+
+    var = {v.name: v for v in md.modelVariables}
+    assert (var["payload"].min, var["payload"].max) == ("0.0", "1.0") and var["vehicle.m"].min == "0.0"
+    assert var["h_rk4"].min == "0.0" and var["vehicle.xG"].min is None
+    cases = [({"vehicle.m": -1.0}, "fmi2ExitInitializationMode: vehicle.m = -1: must be > 0"),
+             ({"thrusters.u_min": 500.0}, "thrusters.u_min = 500: must be below its upper limit"),
+             ({"arm.stow.q1": 3.5}, "arm.stow.q1 = 3.5: outside its joint's limits"),
+             ({"env.rho": float("nan")}, "env.rho = nan: not a finite number")]
+    for values, message in cases:
+        with pytest.raises(FMICallException):
+            with _instance(fmu_path, md, "bad", values=values):
+                pass
+        assert message in capsys.readouterr().out
+    with _instance(fmu_path, md, "me") as m:
+        capsys.readouterr()
+        for vr, v, message in ((m.vr["payload"], 1.5, "payload = 1.5: outside [0, 1]"),
+                               (m.vr["tau[3]"], float("inf"), "tau[3] = inf: not a finite number")):
+            with pytest.raises(FMICallException):
+                m.setReal([vr], [v])
+            assert message in capsys.readouterr().out
+        x = np.full(12, 0.1)
+        x[4] = np.nan
+        with pytest.raises(FMICallException):
+            m.setContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 12)
+        assert "fmi2SetContinuousStates: eta[5] = nan: not a finite number" in capsys.readouterr().out
+        m.setReal([m.vr["payload"]], [1.0])  # the instance goes on
+
+
 # ---------------------------------------------------------------------------------------------
 # arguments and files
 
@@ -437,9 +491,14 @@ def test_foreign_file_refused_then_forced(tmp_path, fmu_path):
     with pytest.raises(fmu_mod.FMUError, match="not an FMU written by arvcas"):
         fmu_mod.export_fmu(other)
     assert other.read_bytes() == before
-    # an FMU arvcas wrote may be replaced; nothing is compiled to decide that
+    # an FMU arvcas wrote (recorded in the directory's manifest) may be replaced; nothing is compiled or
+    # unpacked to decide that; a copy made by someone else is not arvcas's, whatever it says inside
     mine = tmp_path / "mine.fmu"
     shutil.copyfile(fmu_path, mine)
+    with pytest.raises(fmu_mod.FMUError, match="not an FMU written by arvcas"):
+        fmu_mod._check_path(mine, force=False)
+    mine.unlink()
+    files.atomic_write(mine, lambda t: shutil.copyfile(fmu_path, t), kind=fmu_mod.KIND)
     assert fmu_mod._check_path(mine, force=False) == mine
     # a symbolic link is not replaced, even one to an FMU arvcas wrote
     link = tmp_path / "link.fmu"

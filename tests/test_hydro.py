@@ -19,7 +19,7 @@ import pytest
 from scipy.integrate import quad_vec
 
 from arvcas.model import hydro, manipulator
-from arvcas import params as ap
+from arvcas.system import params as ap
 
 N_LIST = (1, 2, 3, 5, 8)
 N_FINE = 64

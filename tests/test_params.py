@@ -11,8 +11,8 @@ import re
 import numpy as np
 import pytest
 
-from arvcas import params as ap
-from arvcas.params import ParamsError
+from arvcas.system import params as ap
+from arvcas.system.params import ParamsError
 
 
 @pytest.fixture(scope="module")

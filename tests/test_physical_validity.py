@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from arvcas import params as ap
-from arvcas.params import ParamsError
+from arvcas.system import params as ap
+from arvcas.system.params import ParamsError
 
 
 @pytest.fixture(scope="module")

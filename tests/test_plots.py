@@ -14,7 +14,7 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from arvcas.controllers import gains as gains_mod  # noqa: E402
 from arvcas.io import plots  # noqa: E402
-from arvcas.params import load as load_params  # noqa: E402
+from arvcas.system.params import load as load_params  # noqa: E402
 from arvcas.sim.simulation import Result  # noqa: E402
 
 N = 51  # 5 s at h = 0.1 s
@@ -188,3 +188,74 @@ def test_rejects_non_results():
         plots.plot_states([1, 2])
     with pytest.raises(ValueError):
         plots.plot_states([])
+
+
+# ---- the house style (arvcas.io.style) ---------------------------------------------------------------------------
+
+
+def test_titles_name_no_paper_figure(runs):
+    figs = [plots.plot_states([runs["proposed"]]), plots.plot_errors([runs["proposed"]]),
+            plots.plot_thrusts([runs["proposed"]]), plots.plot_sliding([runs["proposed"]]),
+            plots.plot_gains([runs["proposed"]]), plots.plot_zigzag(runs["traditional"], runs["proposed"]),
+            plots.plot_disturbance(runs["proposed"])]
+    for fig in figs:
+        assert "Fig." not in fig.get_suptitle() and fig.get_suptitle()
+    assert plots.plot_states([runs["proposed"]], title="T (Fig. 5)").get_suptitle() == "T (Fig. 5)"
+
+
+def test_house_style_sizes_fonts_and_palette(runs):
+    from arvcas.io import style
+
+    fig = plots.plot_errors([runs["proposed"], runs["agsta"]])
+    assert fig.get_figwidth() == pytest.approx(style.PAGE_WIDTH)
+    ax = fig.axes[0]
+    assert ax.yaxis.label.get_fontsize() == 8 and ax.get_yticklabels()[0].get_fontsize() == 7
+    colors = [ln.get_color() for ln in ax.get_lines()[:2]]
+    assert colors == [style.color("tab:blue"), style.color("tab:red")] == ["#0072B2", "#D55E00"]
+    assert set(style.PALETTE.values()) >= set(colors)
+    import matplotlib
+
+    assert matplotlib.rcParams["font.size"] != 8 or matplotlib.rcParams["svg.fonttype"] != "none"  # no global change
+
+
+def test_dense_noisy_series_drawn_as_a_band_smooth_ones_sample_by_sample():
+    from matplotlib.collections import PolyCollection
+
+    from arvcas.io import style
+
+    t = np.arange(3001) * 0.02
+    rng = np.random.default_rng(1)
+    noisy = np.sin(0.2 * t) + 0.3 * rng.normal(size=t.size)
+    smooth = np.sin(0.2 * t)
+    fig = style.figure("column")
+    ax = fig.add_subplot()
+    band_line = style.trace(ax, t, noisy, color="k")
+    line = style.trace(ax, t, smooth, color="k")
+    assert line.get_xdata().size == t.size  # every sample
+    bins = band_line.get_xdata().size
+    assert 50 <= bins < t.size / style.SAMPLES_PER_POINT
+    bands = [c for c in ax.collections if isinstance(c, PolyCollection)]
+    assert len(bands) == 1
+    ys = bands[0].get_paths()[0].vertices[:, 1]
+    assert ys.max() == pytest.approx(noisy.max()) and ys.min() == pytest.approx(noisy.min())
+    np.testing.assert_allclose(band_line.get_ydata().mean(), noisy.mean(), atol=0.02)
+    few = style.trace(ax, t[:200], noisy[:200])  # few samples: drawn as they are
+    assert few.get_xdata().size == 200
+
+
+def test_thrust_figure_takes_the_systems_thrusters():
+    r = synthetic("proposed")
+    names = [f"thrusters.P{j}.{k}" for j in range(1, 9) for k in ("position.x", "u_min", "u_max")]
+    N = r.t.size
+    r8 = Result(controller="proposed", gains=r.gains, seed=0, t=r.t, eta=r.eta, nu=r.nu, eta_hat=r.eta_hat,
+                eta_ref=r.eta_ref, tau_cmd=r.tau_cmd, thrust=np.linspace(-1, 1, N * 8).reshape(N, 8),
+                s=r.s, k1=r.k1, k2=r.k2, f_hat=r.f_hat, f_true=r.f_true, q=np.zeros((N, 4)), payload=r.payload,
+                chat=r.chat, rmse=r.rmse, ok=True, t_fail=None, h=H,
+                params_vector=np.tile([0.1, -0.5, 0.5], 8), meta={"param_names": names, "system": "eight"})
+    assert plots.thruster_names(r8) == tuple(f"P{j}" for j in range(1, 9))
+    fig = plots.plot_thrusts([r8])
+    assert len(fig.axes) == 8 and [ax.get_title() for ax in fig.axes] == [f"P{j}" for j in range(1, 9)]
+    assert sum(ax.get_xlabel() == "time (s)" for ax in fig.axes) == 2
+    # its limits, per thruster: +-0.5 N reached at both ends of every panel
+    assert all(len([ln for ln in ax.get_lines() if ln.get_label() == "saturation limit"]) == 2 for ax in fig.axes)
+    assert plots.thruster_names(synthetic("agsta"))[0] == "T1 stern left"  # Haidou-1's six

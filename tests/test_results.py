@@ -15,7 +15,7 @@ import pytest
 
 from arvcas.controllers import gains as gains_mod
 from arvcas.io import results
-from arvcas.params import SCHEMA
+from arvcas.system.params import SCHEMA
 from arvcas.io.results import ResultsError, read_result, write_result
 from arvcas.sim.simulation import Result
 

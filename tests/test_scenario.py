@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from arvcas.sim import scenario
-from arvcas.params import load as load_params
+from arvcas.system.params import load as load_params
 from arvcas.sim.scenario import ScenarioError, default_scenario_path, load_scenario, loads_scenario
 
 TEXT = default_scenario_path().read_text()

@@ -16,7 +16,7 @@ from arvcas.build import calls
 from arvcas.model import manipulator, vehicle
 from arvcas.sim import scenario, schedule
 from arvcas.model.linalg import lu_nopivot, lu_pack, lu_solve, lu_unpack, solve_nopivot
-from arvcas.params import SCHEMA, view
+from arvcas.system.params import SCHEMA, view
 from arvcas.model.uvms import ModelOptions, coupled_terms, coupled_terms_scheduled
 
 NP = len(SCHEMA)

@@ -4,12 +4,17 @@ Alpha 5, its checkpoint naming the system and the normalisation, the knee replay
 
 from __future__ import annotations
 
+import base64
+import json
+import re
+import shutil
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 import arvcas
+import arvcas.tuning
 from arvcas import cli
 from arvcas.sim import scenario
 from arvcas.tuning import checkpoint as ck
@@ -88,3 +93,147 @@ def test_montecarlo_on_another_system_reproduces_from_its_file(study_dir):
     assert mc.meta["system"] == "bluerov2_heavy_alpha5" and mc.meta["reference"] is not None
     assert np.isfinite(mc.objectives()).all()
     assert cli.main(["montecarlo", "--check", str(out)]) == 0
+
+
+# ---- the front explorer (issue 24) and the outputs' labels ---------------------------------------------------
+
+PAPER_NAMES = re.compile(r"Table \d|Table A\d|the paper's|paper Table|\(Fig\. \d+")
+
+
+def _page_data(page):
+    text = page.read_text(encoding="utf-8")
+    m = re.search(r'<script type="application/json" id="data">(.*?)</script>', text, re.S)
+    return json.loads(m.group(1).replace("<\\/", "</"))
+
+
+def _unpack(p: dict, width: int) -> np.ndarray:
+    q = np.frombuffer(base64.b64decode(p["q"]), dtype="<u2").reshape(-1, width).astype(float)
+    out = np.asarray(p["lo"]) + np.asarray(p["step"]) * q
+    out[q == 65535] = np.nan
+    return out
+
+
+def _chromium(args, timeout=120):
+    """Headless Chromium (the Debian package) on a fresh profile; returns (stdout, stderr)."""
+    import subprocess
+    import tempfile
+
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    if exe is None:
+        pytest.skip("chromium is not installed (Debian: apt-get install chromium; .ci/run installs it)")
+    with tempfile.TemporaryDirectory() as profile:
+        r = subprocess.run([exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                            "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                            f"--user-data-dir={profile}", "--enable-logging=stderr", "--v=0",
+                            "--virtual-time-budget=5000", *args],
+                           capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return r.stdout, r.stderr
+
+
+@pytest.fixture(scope="module")
+def page(study_dir):
+    out = study_dir / "front.html"
+    assert cli.main(["front", "explore", str(study_dir / "out"), "--out", str(out)]) == 0
+    return out
+
+
+def test_explore_page_holds_every_front_and_the_members_own_responses(study_dir, page):
+    from arvcas.tuning.front import read_front
+
+    doc = _page_data(page)
+    assert doc["system"] == "bluerov2_heavy_alpha5" and [f["controller"] for f in doc["fronts"]] == ["agsta", "proposed"]
+    for f in doc["fronts"]:
+        fr = read_front(study_dir / "out" / f["controller"])
+        assert f["F"] == fr.F.tolist() and f["knee"] == fr.knee() and f["thrusters"] == [f"T{i}" for i in range(1, 9)]
+        assert sorted(f["traces"], key=str) == sorted([str(i) for i in range(fr.size)] + ["defaults"], key=str)
+        assert f["replay"]["reproduced"] and f["replay"]["max_difference"] == 0.0  # replays checked bit for bit
+    # one member's stored response against an independent replay (arvcas simulate --from-front's path)
+    f = doc["fronts"][1]
+    i = f["knee"]
+    controller, gains, seed, cfg_text = arvcas.tuning.member_gains(study_dir / "out" / "proposed", i)
+    s = arvcas.load_system("bluerov2_heavy_alpha5")
+    r = arvcas.simulate(controller, gains=gains, seed=seed, params=s.params,
+                        cfg=scenario.loads_scenario(cfg_text))
+    keep = np.rint(np.asarray(f["t"]) / r.h).astype(int)
+    for key, ref in (("e", (r.eta - r.eta_ref)[keep]), ("u", np.asarray(r.thrust)[keep])):
+        got = _unpack(f["traces"][str(i)][key], ref.shape[1])
+        step = np.asarray(f["traces"][str(i)][key]["step"])
+        assert got.shape == ref.shape and np.all(np.abs(got - ref) <= 0.5 * step * (1 + 1e-9) + 1e-300)
+
+
+def test_explore_page_loads_in_headless_chromium_without_console_errors(page, tmp_path):
+    shot = tmp_path / "shot.png"
+    dom, err = _chromium(["--window-size=1280,1100", f"--screenshot={shot}", "--dump-dom", page.as_uri()])
+    console = [ln for ln in err.splitlines() if ":CONSOLE" in ln]
+    assert not console, console  # the page logs nothing: no error, no warning, no uncaught exception
+    assert 'data-ready="1"' in dom and '<p id="status">ready</p>' in dom  # its script ran to the end
+    from matplotlib.image import imread
+
+    img = (imread(shot)[..., :3] * 255).round()
+    assert img.shape[:2] == (1100, 1280)
+    assert (np.abs(img - 255).sum(axis=2) > 30).mean() > 0.03  # not blank
+    top = img[:600]  # the front plot
+    for f in _page_data(page)["fronts"]:
+        rgb = np.array([int(f["color"][k:k + 2], 16) for k in (1, 3, 5)], dtype=float)
+        near = (np.abs(top - rgb).max(axis=2) <= 12).sum()
+        assert near > 150, (f["controller"], f["color"], near)  # every front is drawn in its colour
+
+
+def test_explore_refuses_before_any_run(study_dir, tmp_path, capsys):
+    cases = [
+        (["front", "explore", str(study_dir / "out"), "--out", str(tmp_path / "p.txt")], "name it FILE.html"),
+        (["front", "explore", str(study_dir / "out"), "--out", str(tmp_path / "p.html"), "--members", "0"],
+         "--members"),
+        (["front", "explore", str(study_dir / "out" / "agsta"), str(tmp_path / "none"), "--out",
+          str(tmp_path / "p.html")], "none"),
+    ]
+    for argv, msg in cases:
+        assert cli.main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("arvcas: error: ") and msg in err and err.count("\n") == 1, err
+        assert not (tmp_path / "p.html").exists()
+
+
+def test_no_output_for_the_bluerov2_names_a_paper_table(study_dir, page, tmp_path, capsys):
+    """Every text a command prints or writes for the BlueROV2 (tables, reports, figures as SVG, the page's
+    data, the front's dataset descriptions) names its own defaults and normalisation, never the paper's."""
+    import h5py
+
+    out, d = study_dir / "out", tmp_path
+    runs = [
+        ["compare", str(out / "agsta"), str(out / "proposed"), "--plot", str(d / "cmp.svg")],
+        ["front", "plot", str(out / "proposed"), "--out", str(d / "front.svg")],
+        ["front", "export", str(out / "proposed"), "--format", "json", "--out", str(d / "front.json")],
+        ["front", "export", str(out / "proposed"), "--format", "csv"],
+        ["front", "export", str(out / "proposed"), "--format", "mat", "--out", str(d / "front.mat")],
+        ["knees", str(out), "--out", str(d / "knees"), "--format", "svg"],
+        ["front", "robust", str(out / "agsta"), "--runs", "2", "--out", str(d / "robust"), "--format", "svg"],
+        ["montecarlo", "--from-front", str(out / "proposed"), "--index", "knee", "--runs", "2", "--config",
+         str(study_dir / "short.toml"), "--system", "bluerov2_heavy_alpha5", "--out", str(d / "mc.h5")],
+        ["tune", str(study_dir / "study.toml"), "--out", str(out), "--resume"],
+        ["sweep", "--system", "bluerov2_heavy_alpha5", "--config", str(study_dir / "short.toml"), "--h", "0.1",
+         "--controllers", "proposed,agsta", "--out", str(d / "sweep"), "--format", "svg"],
+    ]
+    texts = []
+    for argv in runs:
+        assert cli.main(argv) == 0, argv
+        texts.append(" ".join(capsys.readouterr()))
+    for p in d.rglob("*"):
+        if p.suffix in (".svg", ".md", ".json", ".csv", ".txt"):
+            texts.append(p.read_text(encoding="utf-8"))
+    assert (d / "cmp.svg").read_text().lstrip().startswith("<?xml") and "<svg" in (d / "knees" / "knees_thrust.svg").read_text()
+    assert ">T8<" in (d / "knees" / "knees_thrust.svg").read_text()  # the system's own thruster names, as text
+    texts.append(json.dumps(_page_data(page)))
+    for h5 in [out / "proposed" / "front.h5", *d.rglob("*.h5")]:  # descriptions in the front and result files
+        with h5py.File(h5, "r") as f:
+            texts += [str(v) for v in f.attrs.values()]
+            f.visititems(lambda n, o: texts.extend(str(v) for v in o.attrs.values()))
+    from scipy.io import loadmat
+
+    mat = loadmat(d / "front.mat", simplify_cells=True)
+    texts += [str(mat[k]) for k in ("units", "description", "arvcas")]
+    found = sorted({m.group(0) for t in texts for m in PAPER_NAMES.finditer(t)})
+    assert not found, found
+    joined = "\n".join(texts)
+    assert "default gains" in joined and "AGSTA's value at the default gains" in joined

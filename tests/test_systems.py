@@ -16,7 +16,7 @@ import pytest
 
 import arvcas
 from arvcas.model import thrusters, vehicle
-from arvcas.params import ParamsError, view
+from arvcas.system.params import ParamsError, view
 from arvcas.sim import scenario
 from arvcas.system import shipped
 
@@ -273,7 +273,7 @@ def test_paper_scenario_as_waypoints_equals_its_reach_form(params):
     fb = ca.Function("b", [t], [*scenario.joint_trajectory(b, q0, t), scenario.payload_profile(b, t)])
     for tt in np.linspace(0, 60, 1201):
         for x, y in zip(fa(tt), fb(tt)):
-            np.testing.assert_allclose(np.array(y), np.array(x), rtol=0, atol=1e-15 * max(1.0, float(np.abs(x).max())))
+            np.testing.assert_allclose(np.array(y), np.array(x), rtol=0, atol=1e-15 * max(1.0, float(np.abs(np.asarray(x, dtype=float)).max())))
     back = scenario.loads_scenario(b.to_toml(), "effective")
     assert back.graph_key() == b.graph_key()
 

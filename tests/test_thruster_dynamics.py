@@ -24,7 +24,7 @@ from scipy import integrate, optimize, signal
 
 import arvcas
 from arvcas.model import manipulator, thrusters, vehicle, water
-from arvcas.params import ParamsError, view
+from arvcas.system.params import ParamsError, view
 from arvcas.sim import scenario
 
 DATA = Path(arvcas.__file__).parent / "data"
@@ -146,7 +146,7 @@ def test_lag_closed_form_equals_scipy(s0, y, up, down, r):
     st = dataclasses.replace(arvcas.load_system("bluerov2_heavy_alpha5").structure)
     dyn = tuple(dataclasses.replace(d, asymmetric=asym, rate_limit=r is not None) for d in st.thruster_dynamics)
     st = dataclasses.replace(st, thruster_dynamics=dyn)
-    from arvcas.params import layout_for
+    from arvcas.system.params import layout_for
 
     lay = layout_for(st)
     vals = np.zeros(len(lay))

@@ -22,7 +22,7 @@ import arvcas
 from arvcas import metrics
 from arvcas.io.results import read_result
 from arvcas.model import thrusters
-from arvcas.params import view
+from arvcas.system.params import view
 from arvcas.sim import closedloop, scenario, schedule
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from arvcas import cli
+from arvcas.io import cliargs
 
 from trust_helpers import assert_refused, synthetic_front
 
@@ -50,7 +50,7 @@ def test_bounds(tmp_path, capsys):
 
 
 def test_memory_estimate_refuses_before_allocating(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(cli, "_total_memory", lambda: 64 * 2**20)  # a 64 MiB machine
+    monkeypatch.setattr(cliargs, "_total_memory", lambda: 64 * 2**20)  # a 64 MiB machine
     d = tmp_path
     front = synthetic_front(d / "front.h5")
     cases = [
@@ -68,7 +68,7 @@ def test_seed_edges(text, ok):
     import argparse
 
     if ok:
-        assert cli.seed_arg(text) == int(text)
+        assert cliargs.seed_arg(text) == int(text)
     else:
         with pytest.raises(argparse.ArgumentTypeError):
-            cli.seed_arg(text)
+            cliargs.seed_arg(text)

@@ -48,7 +48,7 @@ def test_output_refusals(tmp_path, front, capsys):
         (["montecarlo", "--controller", "agsta", "--runs", "2", "--out", d / "X.md"], "is also the output --out"),
         (["paper", "--out", d / "md"], "was not written by arvcas"),
         (["bench", "--quick", "--out", d / "bench"], "was not written by arvcas"),
-        (["compare", front, front, "--plot", front], "is the input a"),
+        (["compare", front, front, "--plot", front], "is the input front"),
         (["simulate", "--controller", "agsta", "--config", notes, "--out", notes, "--force"], "is the input --config"),
     ]
     for argv, msg in cases:
@@ -72,7 +72,7 @@ def test_own_text_outputs_are_recognised_until_edited(tmp_path, front, capsys):
     assert out.read_bytes() == first and files.written_by_arvcas(out)
     out.write_text(out.read_text() + "my edit\n")  # now the user's
     assert not files.written_by_arvcas(out)
-    assert_refused(argv, capsys, tmp_path, "was not written by arvcas")
+    assert_refused(argv, capsys, tmp_path, "was changed since arvcas wrote it")
     (tmp_path / files.MANIFEST).write_text("{not json")
     assert_refused(["front", "export", front, "--format", "csv", "--out", tmp_path / "g.csv"], capsys, tmp_path,
                    "not an arvcas manifest")

@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 
 from arvcas.io.results import read_result
-from arvcas.params import load
+from arvcas.system.params import load
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning import load_study, run_study
 

@@ -68,7 +68,7 @@ def test_plot(fronts, tmp_path, capsys):
     assert cli.main(["front", "plot", str(fronts["agsta"]), "--out", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "knee: member" in capsys.readouterr().out
-    labels = [t.get_text() for t in read_front(fronts["agsta"]).plot().axes[0].get_legend().get_texts()]
+    labels = [t.get_text() for t in read_front(fronts["agsta"]).plot().legends[0].get_texts()]  # below the axes
     assert any("Table 2" in t for t in labels) and any("knee" in t for t in labels)
 
 
@@ -149,3 +149,69 @@ def test_front_indices_is_the_pairwise_definition():
         got, ref = front_indices(F, G), _front_indices_by_pairs(F, G)
         assert got.dtype == ref.dtype and np.array_equal(got, ref), (n, got, ref)
     assert len(front_indices(np.zeros((3, 2)), np.zeros((3, 1)))) == 1  # three duplicates: the first kept
+
+
+def test_figures_in_the_format_asked_for(fronts, tmp_path, capsys):
+    """front plot and compare --plot write PNG, PDF or SVG by the name's suffix or --format; a format
+    arvcas cannot write, or a suffix that contradicts --format, is refused in one line before any work."""
+    from arvcas.io import cliargs, style
+
+    assert cliargs.FIGURE_FORMATS == style.FORMATS  # --format's choices are the formats the style writes
+    magic = {"png": b"\x89PNG\r\n\x1a\n", "pdf": b"%PDF-", "svg": b"<?xml"}
+    for fmt, head in magic.items():
+        out = tmp_path / f"front.{fmt}"
+        assert cli.main(["front", "plot", str(fronts["agsta"]), "--out", str(out)]) == 0
+        assert out.read_bytes().startswith(head), fmt
+    assert b"<svg" in (tmp_path / "front.svg").read_bytes()[:2000]
+    out = tmp_path / "noext"
+    assert cli.main(["front", "plot", str(fronts["agsta"]), "--out", str(out), "--format", "pdf"]) == 0
+    assert out.read_bytes().startswith(magic["pdf"])
+    assert cli.main(["front", "plot", str(fronts["agsta"].parent), "--format", "svg"]) == 0  # default: next to it
+    assert (fronts["agsta"].parent / "front.svg").read_bytes().startswith(magic["svg"])
+    capsys.readouterr()
+    for argv, msg in ((["--out", str(tmp_path / "f.jpg")], "cannot write .jpg figures"),
+                      (["--out", str(tmp_path / "f.png"), "--format", "pdf"], "ends in .png but --format is pdf"),
+                      (["--out", str(tmp_path / "f")], "no suffix")):
+        assert cli.main(["front", "plot", str(fronts["agsta"]), *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("arvcas: error: ") and msg in err and err.count("\n") == 1, err
+    assert not (tmp_path / "f.jpg").exists() and not (tmp_path / "f.png").exists()
+    assert cli.main(["compare", str(fronts["agsta"]), str(fronts["proposed"]), "--format", "pdf"]) == 2
+    assert "--format: only with --plot" in capsys.readouterr().err
+    cmp = tmp_path / "cmp.pdf"
+    assert cli.main(["compare", str(fronts["agsta"]), str(fronts["proposed"]), "--plot", str(cmp)]) == 0
+    assert cmp.read_bytes().startswith(magic["pdf"])
+    # the same figure twice gives the same bytes (no creation date; seeded SVG ids)
+    again = tmp_path / "again.svg"
+    assert cli.main(["front", "plot", str(fronts["agsta"]), "--out", str(again)]) == 0
+    assert again.read_bytes() == (tmp_path / "front.svg").read_bytes()
+
+
+def test_compare_takes_any_number_of_fronts(fronts, capsys):
+    a, b = fronts["agsta"], fronts["proposed"]
+    c = compare_fronts(a, b, a)
+    fa = read_front(a)
+    assert c.labels == ("agsta (agsta) [A]", "proposed", "agsta (agsta) [C]")
+    assert c.hv[0] == c.hv[2] and c.coverage_matrix[0][2] == c.coverage_matrix[2][0] == 1.0
+    assert all(c.coverage_matrix[i][i] == 1.0 for i in range(3))
+    assert {w for _, _, w in c.regions} <= {"A", "B", "C", "tie", "A only", "B only", "C only", "none"}
+    assert c.regions[0][0] == min(fa.F[0, 0], read_front(b).F[0, 0])
+    two = compare_fronts(a, b)
+    assert two.coverage == (two.coverage_matrix[0][1], two.coverage_matrix[1][0])
+    assert cli.main(["compare", str(a), str(b), str(a.parent)]) == 0
+    out = capsys.readouterr().out
+    assert "largest hypervolume" in out and "coverage: share of each column's front" in out
+    assert sum(line.startswith(("agsta", "proposed")) for line in out.splitlines()) >= 3
+    assert "Table 2 (f_chat, f_rmse)" in out  # Haidou-1's fronts name the paper's table
+    assert cli.main(["compare", str(a)]) == 2
+    assert "needs two or more fronts" in capsys.readouterr().err
+
+
+def test_knees_of_a_one_controller_study_directory(fronts, tmp_path, capsys):
+    study = fronts["agsta"].parent  # the --out of a study of one controller: DIR/front.h5
+    out = tmp_path / "knees"
+    assert cli.main(["knees", str(study), "--out", str(out), "--format", "pdf"]) == 0
+    names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
+    assert names == {"knee_agsta.h5", "knees.md", "knees_states.pdf", "knees_errors.pdf", "knees_thrust.pdf"}
+    assert all((out / n).read_bytes().startswith(b"%PDF-") for n in names if n.endswith(".pdf"))
+    assert "| agsta |" in (out / "knees.md").read_text()

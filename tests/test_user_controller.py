@@ -87,7 +87,7 @@ def test_simulates_and_its_law_holds(toy_result):
 
 def _mhat():
     from arvcas.model import vehicle
-    from arvcas.params import load, view
+    from arvcas.system.params import load, view
 
     return np.diag(np.asarray(ca.DM(vehicle.M(view(ca.DM(load().vector()))))))
 

@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from arvcas import params as ap
+from arvcas.system import params as ap
 from arvcas.model import spatial, thrusters, vehicle
 
 RTOL = 1e-9

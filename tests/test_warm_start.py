@@ -33,7 +33,7 @@ if {forbid_graph!r}:
     uvms.plant_functions = no_graph
 f = C.compiled("thrust", uvms.ModelOptions(n_quad={n_quad}))
 print(json.dumps({{"stats": C.stats(), "path": C.artifact_of(f)["path"],
-                  "tau": [float(v) for v in f([10, 20, 30, 40, 50, 60], __import__("arvcas.params").params.load().vector()).full().ravel()]}}))
+                  "tau": [float(v) for v in f([10, 20, 30, 40, 50, 60], __import__("arvcas.system.params").system.params.load().vector()).full().ravel()]}}))
 """
 
 

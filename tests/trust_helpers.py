@@ -12,6 +12,24 @@ from arvcas import cli
 from arvcas.io.files import TMP_MARK
 
 
+def bounded(fn, timeout: float = 120.0):
+    """``fn()`` in a thread that must end within ``timeout`` s (a hang fails the test, not the run); returns
+    the exception it raised, or None."""
+    box = {}
+
+    def target():
+        try:
+            fn()
+        except BaseException as e:  # noqa: BLE001 - returned
+            box["e"] = e
+
+    t = threading.Thread(target=target, daemon=True)
+    t.start()
+    t.join(timeout)
+    assert not t.is_alive(), f"did not return within {timeout} s"
+    return box.get("e")
+
+
 def run(argv, capsys, timeout: float = 300.0):
     """``cli.main(argv)`` in a thread that must end within ``timeout``; returns (exit code, stderr)."""
     rc, _out, err = run3(argv, capsys, timeout)
@@ -70,7 +88,7 @@ def synthetic_front(path: Path, *, model_hash: str | None = None, params=None, c
     """A finished three-member front.h5 written by arvcas's checkpoint writer (no tuning run)."""
     from arvcas.build.provenance import model_hash as current_hash
     from arvcas.controllers import gains as gains_mod
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.sim.scenario import load_scenario
     from arvcas.tuning import checkpoint as ck
 
@@ -96,3 +114,15 @@ def synthetic_front(path: Path, *, model_hash: str | None = None, params=None, c
     )
     assert X.shape == (n, m)
     return ck.write_checkpoint(c, path)
+
+
+def scenario_variant(tmp_path: Path, old: str, new: str, name: str = "s.toml") -> Path:
+    """The BlueROV2's shipped scenario with the text ``old`` replaced by ``new`` (once), written to tmp_path."""
+    from arvcas.system import shipped
+
+    src = shipped()["bluerov2_heavy_alpha5"].parent / "bluerov2_heavy_alpha5.scenario.toml"
+    text = src.read_text()
+    assert old in text, old
+    p = tmp_path / name
+    p.write_text(text.replace(old, new, 1))
+    return p

@@ -30,7 +30,88 @@ from concurrent.futures import ThreadPoolExecutor
 import casadi as ca
 import numpy as np
 
-__all__ = ["call", "call_many", "call_named", "fortran", "batch_loop", "run_loop"]
+__all__ = ["call", "call_many", "call_named", "fortran", "batch_loop", "run_loop", "total_memory", "check_memory",
+           "real_array", "integer_array"]
+
+
+def _typed(x, name: str, error: type[Exception], max_size: int | None = None) -> np.ndarray:
+    """``x`` as an ndarray, refusing what NumPy would silently reinterpret: masked arrays (the mask would
+    be dropped), and objects that are not numbers (strings, None, nested ragged lists); a sequence longer
+    than ``max_size`` is refused before it is converted (``range(10**12)`` would take 8 TB)."""
+    if max_size is not None and not isinstance(x, np.ndarray) and hasattr(x, "__len__"):
+        try:
+            n = len(x)
+        except OverflowError:  # a range longer than sys.maxsize
+            raise error(f"{name}: more values than the {max_size} allowed") from None
+        if n > max_size:
+            raise error(f"{name}: {n} values, more than the {max_size} allowed")
+    if isinstance(x, np.ma.MaskedArray):
+        raise error(f"{name}: a masked array is not accepted (its mask would be ignored); pass "
+                    f"numpy.ma.filled(x, value) or the unmasked data")
+    if isinstance(x, (str, bytes)):
+        raise error(f"{name}: expected numbers, got a {type(x).__name__}")
+    try:
+        return np.asarray(x)
+    except (ValueError, TypeError, OverflowError) as e:
+        raise error(f"{name}: expected an array of numbers ({' '.join(str(e).split())})") from None
+
+
+def real_array(x, name: str, error: type[Exception] = TypeError) -> np.ndarray:
+    """``x`` as a float64 array if it is real numbers (integers or floats of any width); anything else is
+    refused with one line naming ``name``: complex numbers (NumPy would drop the imaginary part),
+    booleans, strings and other objects, masked arrays."""
+    a = _typed(x, name, error)
+    if a.dtype.kind in "iuf":
+        return a.astype(float, copy=False)
+    what = {"c": "complex numbers (the imaginary part would be dropped)", "b": "booleans",
+            "U": "strings", "S": "bytes", "O": "Python objects", "M": "dates", "m": "time spans"}.get(a.dtype.kind,
+                                                                                                      str(a.dtype))
+    raise error(f"{name}: expected real numbers (float or integer), got {what}")
+
+
+def integer_array(x, name: str, error: type[Exception] = TypeError, lo: int = 0, hi: int = 2**63,
+                  max_size: int | None = None) -> np.ndarray:
+    """``x`` as an int64 array if it is integers with ``lo <= v < hi`` (Python ints, NumPy integer arrays,
+    a range); floats (even integral ones: 1e3 would be truncated silently elsewhere), booleans and
+    everything :func:`real_array` refuses are refused with one line naming ``name``; so is a sequence of
+    more than ``max_size`` values, before it is converted."""
+    a = _typed(x, name, error, max_size)
+    if a.dtype.kind == "O" and a.size and all(isinstance(v, int) and not isinstance(v, bool) for v in a.flat):
+        if not all(lo <= v < hi for v in a.flat):
+            raise error(f"{name}: every value must be an integer with {lo} <= v < {_power(hi)}")
+        a = a.astype(np.int64)
+    if a.dtype.kind not in "iu":
+        kind = "booleans" if a.dtype.kind == "b" else ("floats" if a.dtype.kind == "f" else str(a.dtype))
+        raise error(f"{name}: expected integers, got {kind}")
+    if a.size and (a.min() < lo or (a.dtype.kind == "u" and int(a.max()) >= hi) or int(a.max()) >= hi):
+        raise error(f"{name}: every value must be an integer with {lo} <= v < {_power(hi)}")
+    return a.astype(np.int64, copy=False)
+
+
+def _power(v: int) -> str:
+    return f"2**{v.bit_length() - 1}" if v > 1 and v & (v - 1) == 0 else str(v)
+
+
+def total_memory() -> int | None:
+    """This machine's physical memory in bytes (None where the OS does not say)."""
+    import os
+
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError):  # pragma: no cover
+        return None
+
+
+def check_memory(what: str, n_bytes: float, share: float = 0.5, error: type[Exception] = ValueError,
+                 total: int | None = None) -> None:
+    """Refuse (``error``, one line) a request that would take more than ``share`` of this machine's
+    memory (``total``, default :func:`total_memory`), before anything is allocated."""
+    total = total_memory() if total is None else total
+    if total is None:  # pragma: no cover
+        return
+    if n_bytes > share * total:
+        raise error(f"{what}: would need about {n_bytes / 2**30:.3g} GiB, more than {share:.0%} of this "
+                    f"machine's {total / 2**30:.3g} GiB; ask for less")
 
 
 def fortran(a, shape: tuple[int, int]) -> np.ndarray:

@@ -14,12 +14,18 @@ with ``cc`` and loaded with :func:`casadi.external`. Builds are cached between p
   ``os.replace`` publishes the ``.so`` and, last, the manifest.
 * **locked**: an ``fcntl.flock`` lock file per key (exclusive to build, shared to verify and load),
   so two processes building the same function at once compile it once and both succeed. Waiting is
-  bounded: on timeout the function is built privately in a temporary directory and not published.
+  bounded: on timeout, and in a cache that cannot be written (read-only), the function is built
+  privately in a directory of this process outside the cache (:func:`arvcas.io.files.private_dir`,
+  in the system's temporary directory) and not published.
 
 Generating C for ``uvms_rhs`` (6-9k instructions) takes 15-40 ms: a few per cent of compiling it
 (0.3 s at -O0, 1-2 s at -O2) and less than building its SX graph, which a cache hit in a new process
 pays anyway. So there is no cheaper first-level key; a per-process memo makes a repeated
 :func:`build` of the same Function object cost a dictionary lookup (no disk access, no hashing).
+
+**Progress**: a build (graph, C and compiler) that takes more than :data:`PROGRESS_AFTER_S` writes one
+line to the stream :func:`report_progress` set (the command line sets standard error):
+``arvcas: compiling the run for bluerov2_heavy_alpha5 / proposed ... 6.8 s``. Cache hits are silent.
 
 Besides ``opt_level`` and ``flags``, ``-ffp-contract=off -fno-math-errno`` is always passed: GCC contracts ``a*b+c``
 into FMA by default wherever the target has FMA (aarch64, ``-march=native``), which changes the last
@@ -71,6 +77,7 @@ __all__ = [
     "artifact_of",
     "cache_info",
     "stats",
+    "report_progress",
 ]
 
 log = logging.getLogger(__name__)
@@ -138,6 +145,9 @@ class Artifact:
     verified: bool  # manifest present, key consistent, .so sha256 matches
 
 
+PROGRESS_AFTER_S = 1.0  # a build that takes longer says so (report_progress)
+
+
 # ---------------------------------------------------------------------------------------------
 # process state
 
@@ -149,6 +159,63 @@ _PLANT: dict[str, dict[str, ca.Function]] = {}
 _COMPILED: dict[tuple[str, str], ca.Function] = {}
 _STATS: Counter = Counter()
 _PRIVATE_DIRS: list[Path] = []
+_PROGRESS: list = []  # the stream report_progress set (at most one)
+
+
+@contextlib.contextmanager
+def report_progress(stream=None, after: float | None = None) -> Iterator[None]:
+    """Within this block, every build that takes more than ``after`` seconds (default
+    :data:`PROGRESS_AFTER_S`) writes ``arvcas: compiling <what> ...`` to ``stream`` (default standard
+    error) when that time has passed, and the build's duration when it ends, on the same line."""
+    entry = (stream if stream is not None else sys.stderr, PROGRESS_AFTER_S if after is None else float(after))
+    with _LOCK:
+        _PROGRESS.append(entry)
+    try:
+        yield
+    finally:
+        with _LOCK:
+            _PROGRESS.remove(entry)
+
+
+class _Progress:
+    """The progress line of one build (:func:`report_progress`); silent when none was asked for."""
+
+    def __init__(self, what: str):
+        self.what, self.shown, self.timer = what, False, None
+        self.lock = threading.Lock()
+        with _LOCK:
+            self.sink = _PROGRESS[-1] if _PROGRESS else None
+
+    def __enter__(self):
+        self.t0 = time.perf_counter()
+        if self.sink is not None:
+            self.timer = threading.Timer(self.sink[1], self._start)
+            self.timer.daemon = True
+            self.timer.start()
+        return self
+
+    def _start(self) -> None:
+        with self.lock:
+            if self.timer is None:
+                return
+            self.shown = True
+            self._write(f"arvcas: compiling {self.what} ...")
+
+    def _write(self, text: str) -> None:
+        try:
+            self.sink[0].write(text)
+            self.sink[0].flush()
+        except (OSError, ValueError):  # a closed stream: progress is not worth an error
+            pass
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        with self.lock:
+            if self.timer is not None:
+                self.timer.cancel()
+                self.timer = None
+            if self.shown:
+                dt = time.perf_counter() - self.t0
+                self._write(f" {dt:.1f} s\n" if exc_type is None else f" failed after {dt:.1f} s\n")
 
 
 def stats() -> dict[str, int]:
@@ -460,7 +527,10 @@ def _publish(plan: _Plan, d: Path, so: Path, man: Path) -> dict:
 
 
 def _build_private(plan: _Plan, d: Path) -> ca.Function:
-    work = Path(tempfile.mkdtemp(prefix=".private-", dir=d))
+    """Build in a directory of this process outside the cache ``d`` (which may be read-only)."""
+    from arvcas.io.files import private_dir
+
+    work = private_dir("build")
     with _LOCK:
         if not _PRIVATE_DIRS:
             atexit.register(_remove_private_dirs)
@@ -491,8 +561,17 @@ def _sweep(d: Path) -> None:
                 pass
 
 
+class _LoadFailed(CacheError):
+    """A library that does not load (not a library, another ABI): a cached one that verified against its
+    manifest (tampered with and re-signed) is rebuilt; anywhere else this one line is the error."""
+
+
 def _load(plan, so: Path, manifest: dict) -> ca.Function:
-    f = ca.external(plan.name, str(so))
+    try:
+        f = ca.external(plan.name, str(so))
+    except RuntimeError as e:
+        first = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
+        raise _LoadFailed(f"{so} does not load ({first[:160]})") from None
     with _LOCK:
         _KEEP.append(f)
         _MANIFESTS[f.__hash__()] = dict(manifest, path=str(so))
@@ -533,10 +612,25 @@ def build(
 
 def _build(fn: ca.Function, cmd_flags: list[str], d: Path, lock_timeout: float, extra_c: str = "") -> ca.Function:
     plan = _plan(fn, cmd_flags, extra_c)
-    return _lookup_or_publish(plan, lambda: plan, d, lock_timeout)
+    return _lookup_or_publish(plan, lambda: plan, d, lock_timeout, plan.name)
 
 
-def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_timeout: float) -> ca.Function:
+def _hit(look, so: Path, man: Path) -> tuple[ca.Function | None, str, str]:
+    """(the loaded artifact, "", "") if it verifies and loads; else (None, why it does not verify, why it
+    does not load)."""
+    m, why = _verify(look, so, man)
+    if m is None:
+        return None, why, ""
+    try:
+        f = _load(look, so, m)
+    except _LoadFailed as e:
+        return None, "", str(e)
+    _STATS["disk_hit"] += 1
+    return f, "", ""
+
+
+def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_timeout: float,
+                       label: str = "") -> ca.Function:
     """Load the verified artifact of ``look`` (name, key), else build it (``make_plan()``) and publish it.
 
     A cache whose lock files cannot be created (read-only) still serves verified artifacts: the
@@ -544,29 +638,34 @@ def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_tim
     without the lock is safe; a build there is private (a temporary directory, not published).
     """
     so, man, lock = d / f"{look.stem()}.so", d / f"{look.stem()}.json", d / f"{look.stem()}.lock"
+    unloadable = ""  # a verified library that did not load (tampered and re-signed, or foreign): rebuilt
     with _flock(lock, exclusive=False, timeout=lock_timeout) as got:
         if got or got is None:
-            m, why = _verify(look, so, man)
-            if m is not None:
-                _STATS["disk_hit"] += 1
-                return _load(look, so, m)
+            f, why, unloadable = _hit(look, so, man)
+            if f is not None:
+                return f
+    what = label or look.name
     with _flock(lock, exclusive=True, timeout=lock_timeout) as got:
         if got is None:
             log.info("cache %s is not writable: building %s privately", d, look.name)
-            return _build_private(make_plan(), d)
+            with _Progress(what):
+                return _build_private(make_plan(), d)
         if not got:
             log.warning("lock %s busy for %.0f s: building %s privately", lock, lock_timeout, look.name)
-            return _build_private(make_plan(), d)
-        m, why = _verify(look, so, man)  # another process may have built it meanwhile
-        if m is not None:
-            _STATS["disk_hit"] += 1
-            return _load(look, so, m)
+            with _Progress(what):
+                return _build_private(make_plan(), d)
+        if not unloadable:  # another process may have built it meanwhile
+            f, why, unloadable = _hit(look, so, man)
+            if f is not None:
+                return f
+        why = unloadable or why
         if why:
             _STATS["rejected"] += 1
             log.warning("cached %s rejected (%s): rebuilding", so.name, why)
         _sweep(d)
-        plan = make_plan()
-        m = _publish(plan, d, so, man)
+        with _Progress(what):
+            plan = make_plan()
+            m = _publish(plan, d, so, man)
         return _load(plan, so, m)
 
 
@@ -593,6 +692,7 @@ def build_described(
     flags: tuple[str, ...] = (),
     lock_timeout: float = LOCK_TIMEOUT_S,
     batch_loop: bool = False,
+    label: str = "",
 ) -> ca.Function:
     """The compiled function ``name`` described by ``description``, built by ``make()`` only on a miss.
 
@@ -603,6 +703,7 @@ def build_described(
     options, scenario fields, a user controller's own source). ``make()`` must return a Function
     called ``name``. Memoized per process. ``batch_loop``: the library also holds
     :func:`batch_loop_c`'s loops (part of the key), which :func:`arvcas.build.calls.call_many` uses.
+    ``label``: what the progress line calls the build ("the run for haidou1 / proposed"; default ``name``).
     """
     from arvcas.build.provenance import model_hash
 
@@ -633,7 +734,7 @@ def build_described(
             p = _plan(fn, cmd_flags, batch_loop_c(fn) if batch_loop else "")
             return _Plan(p.name, p.n_instructions, p.c_text, p.codegen_s, p.compiler, p.cmd_flags, key)
 
-        f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout)
+        f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout, label)
         _MANIFESTS[f.__hash__()]["ident"] = ident
         _DESCRIBED[mkey] = f
         return f
@@ -772,7 +873,9 @@ def preload(b: dict) -> int:
         todo = [it for it in b["items"] if it["ident"] not in _PRELOADED]
         if not todo:
             return 0
-        d = Path(tempfile.mkdtemp(prefix="arvcas-shipped-"))
+        from arvcas.io.files import private_dir
+
+        d = private_dir("shipped")
         if not _PRIVATE_DIRS:
             atexit.register(_remove_private_dirs)
         _PRIVATE_DIRS.append(d)
@@ -783,7 +886,11 @@ def preload(b: dict) -> int:
             so = d / f"{it['name']}-{it['ident'][:20]}.so"
             so.write_bytes(data)
             os.chmod(so, 0o500)
-            f = ca.external(it["name"], str(so))
+            try:
+                f = ca.external(it["name"], str(so))
+            except RuntimeError as e:
+                why = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
+                raise CacheError(f"{here}: shipped library {it['name']} does not load ({why[:160]})") from None
             _KEEP.append(f)
             _MANIFESTS[f.__hash__()] = dict(it["manifest"], path=str(so), shipped=True)
             _PRELOADED[it["ident"]] = f
@@ -831,10 +938,10 @@ def compiled(name: str, opts=None, system=None) -> ca.Function:
                     _PLANT[tag] = plant_functions(opts, lay)
                 return _PLANT[tag][name]
 
-            from arvcas.params import system_tag
+            from arvcas.system.params import system_tag
 
             desc = f"plant {name} {opts!r}{system_tag(st)}"
-            f = build_described(name, desc, make)
+            f = build_described(name, desc, make, label=f"{name} for {st.name}")
             _COMPILED[mkey] = f
         return f
 

@@ -2,7 +2,7 @@
 
 ``dynamics("vehicle_rhs")(x, tau)`` evaluates the compiled C of :func:`arvcas.compiled` on NumPy
 arrays; the parameter vector defaults to the packaged parameters (``p=`` a vector, or ``params=`` a
-:class:`arvcas.params.Params`, overrides it). Every input takes one evaluation's shape (``x``:
+:class:`arvcas.system.params.Params`, overrides it). Every input takes one evaluation's shape (``x``:
 ``(12,)``, a size-1 input also a scalar) or a batch of n with a leading axis (``x``: ``(n, 12)``).
 Inputs without the batch axis (or with one row) are shared by all n evaluations; outputs have the
 batch axis if any input has it.
@@ -23,7 +23,9 @@ How a call runs (costs in ``docs/calling-dynamics.md``, measured by ``arvcas ben
   of rows from a counter they share in C (:func:`arvcas.build.calls.run_loop`, as a batch of runs does). Results do not depend on the thread count, and equal single calls, to the bit.
 
 Checks (one-line ``ValueError`` naming the function and the argument): the number of inputs, every
-shape, batch sizes that disagree, and non-finite values (NaN or inf) anywhere in the inputs.
+shape, batch sizes that disagree, real numbers only (complex, boolean, string and masked arrays are
+refused: NumPy would drop an imaginary part or a mask), non-finite values (NaN or inf) anywhere in the
+inputs, a payload fraction outside [0, 1], and ``params=`` of another system's layout.
 
 Jacobians: ``vehicle_rhs_jac(x, tau, p) -> (xdot, dxdot_dx, dxdot_dtau)`` and
 ``uvms_rhs_jac(x, tau, q, qd, qdd, payload, p) -> (xdot, dxdot_dx, dxdot_dtau, dxdot_dq)``, exact
@@ -127,7 +129,7 @@ def _loop(name: str, opts, params=None) -> _Loop:
 def _default_p() -> np.ndarray:
     with _LOCK:
         if not _DEFAULT_P:
-            from arvcas.params import load
+            from arvcas.system.params import load
 
             v = np.ascontiguousarray(load().vector(), dtype=float)
             v.setflags(write=False)
@@ -190,6 +192,8 @@ class Dynamics:
         ends = np.cumsum([0] + [int(np.prod(s)) for s in self.output_shapes]).tolist()
         self._out_slices = tuple(zip(ends[:-1], ends[1:]))
         self._one_vector = len(self.output_shapes) == 1 and len(self.output_shapes[0]) == 1
+        # the payload fraction's place among the inputs (checked in [0, 1]); None without one
+        self._payload = self.input_names.index("payload") if "payload" in self.input_names else None
 
     def __repr__(self) -> str:
         ins = ", ".join(f"{n}[{s}]" for n, s in zip(self.input_names, self.input_sizes))
@@ -204,10 +208,7 @@ class Dynamics:
     def _array(self, i: int, a) -> tuple[np.ndarray, int | None]:
         """(array, batch size or None) of input i, shape-checked and finite-checked."""
         m = self.input_sizes[i]
-        try:
-            arr = np.asarray(a, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(f"{self._where(i)}: expected an array of numbers, got {type(a).__name__}") from None
+        arr = calls.real_array(a, self._where(i), ValueError)  # complex, bool, str, masked: refused by name
         sh = arr.shape
         if sh == (m,) or (m == 1 and sh == ()):
             n = None
@@ -233,10 +234,18 @@ class Dynamics:
         if params is not None:
             if p is not None:
                 raise ValueError(f"{self.name}: give p= or params=, not both")
-            from arvcas.params import Params
+            from arvcas.system.params import Params
 
             if not isinstance(params, Params):
-                raise ValueError(f"{self.name}: params: expected arvcas.params.Params, got {type(params).__name__}")
+                raise ValueError(f"{self.name}: params: expected arvcas.system.params.Params, got {type(params).__name__}")
+            mine = self.params.structure if self.params is not None else None
+            if mine is None:
+                from arvcas.system.params import default_layout
+
+                mine = default_layout().structure
+            if params.structure != mine:  # the same length would read another layout's numbers in this order
+                raise ValueError(f"{self.name}: params: of system '{params.structure.name}', whose parameter layout "
+                                 f"is not this function's ('{mine.name}'); use dynamics(name, system=...) for it")
             p = params.vector()
         return args, p
 
@@ -313,6 +322,8 @@ class Dynamics:
         np.concatenate(arrs, out=xin)
         if not math.isfinite(xin @ tiny):
             self._raise_nonfinite(arrs)
+        if self._payload is not None and not 0.0 <= xin[self._offsets[self._payload]] <= 1.0:
+            self._raise_payload(arrs[self._payload])
         return self._evaluate(buf, evaluate, allout)
 
     def _single(self, arrs, parr, p_given):
@@ -325,6 +336,8 @@ class Dynamics:
                 xin[offs[i]:offs[i] + sizes[i]] = a.reshape(-1)
         if not math.isfinite(xin @ tiny):  # finite unless an entry is (no FP warning but for +inf with -inf)
             self._raise_nonfinite(arrs)
+        if self._payload is not None and not 0.0 <= xin[self._offsets[self._payload]] <= 1.0:
+            self._raise_payload(arrs[self._payload])
         if last_p[0] is not parr:
             if p_given and not np.isfinite(parr).all():
                 raise ValueError(f"{self.name}: p has a non-finite value {_first_bad(parr)}")
@@ -344,6 +357,11 @@ class Dynamics:
         res = [flat[a:b].reshape(s[::-1]).T if len(s) == 2 else flat[a:b] for (a, b), s in zip(self._out_slices, self.output_shapes)]
         return res[0] if len(res) == 1 else tuple(res)
 
+    def _raise_payload(self, a):
+        v = np.asarray(a, dtype=float).ravel()
+        bad = v[~((v >= 0.0) & (v <= 1.0))]
+        raise ValueError(f"{self.name}: payload: a fraction of the system's payload, in [0, 1], got {float(bad[0])!r}")
+
     def _raise_nonfinite(self, arrs):
         for i, a in enumerate(arrs):
             if not np.isfinite(a).all():
@@ -356,6 +374,8 @@ class Dynamics:
         for i, a in enumerate(arrs):
             if not np.isfinite(a).all():
                 raise ValueError(f"{self._where(i)} has a non-finite value {_first_bad(a)}")
+        if self._payload is not None and not ((arrs[self._payload] >= 0.0) & (arrs[self._payload] <= 1.0)).all():
+            self._raise_payload(arrs[self._payload])
         lp = _loop(self.name, self.opts, self.params)
         # per input: a C-ordered array read in place, with its row stride (0: shared by all rows)
         keep, base, stride = [], [], []

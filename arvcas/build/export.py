@@ -20,9 +20,11 @@ arvcas itself):
   through ``find_package``) and Python ctypes (``example.py``), printing the same lines.
 * ``README.md`` and ``arvcas-export.json``, the manifest: every file written with its sha256.
 
-A file in DIR is only replaced if the manifest lists it with its current sha256 (arvcas wrote it and
-nobody changed it since); anything else is refused with a one-line :class:`ExportError` unless
-``force``.
+The one output policy of :mod:`arvcas.io.files` decides what may be replaced: a file in DIR is only
+replaced if the directory's ``.arvcas-manifest.json`` records it as written by export-c with its
+current sha256 (arvcas wrote it, as an export, and nobody changed it since); anything else is refused
+with a one-line :class:`ExportError` unless ``force``. ``consumer/`` is never a symbolic link (refused
+even with ``force``: nothing is written out of DIR).
 """
 
 from __future__ import annotations
@@ -38,7 +40,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["ExportError", "export_c", "example_inputs", "files", "default_prefix", "MANIFEST", "DEFAULT_PREFIX"]
+from arvcas.build.text import build_word, c_comment, c_comment_lines, c_string, markdown
+
+__all__ = ["ExportError", "export_c", "example_inputs", "files", "default_prefix", "MANIFEST", "DEFAULT_PREFIX",
+           "check_out_dir", "check_prefix", "check_replaceable", "write_package", "KIND"]
 
 DEFAULT_PREFIX = "arvcas_haidou1_"  # the default system's: default_prefix("haidou1")
 MANIFEST = "arvcas-export.json"
@@ -170,19 +175,21 @@ def files(prefix: str = DEFAULT_PREFIX) -> tuple[str, ...]:
 # directory and manifest
 
 
-def _check_out_dir(out_dir) -> Path:
+def check_out_dir(out_dir, what: str = "export-c") -> Path:
+    """The absolute output directory of an export (``what``: the command, in messages); it may not
+    exist yet if its parent does."""
     out = Path(os.path.abspath(Path(out_dir).expanduser()))
     if out.exists():
         if not out.is_dir():
-            raise ExportError(f"export-c: {out} exists and is not a directory")
+            raise ExportError(f"{what}: {out} exists and is not a directory")
         if not os.access(out, os.W_OK | os.X_OK):
-            raise ExportError(f"export-c: directory {out} is not writable")
+            raise ExportError(f"{what}: directory {out} is not writable")
         return out
     parent = out.parent
     if not parent.is_dir():
-        raise ExportError(f"export-c: parent directory {parent} does not exist")
+        raise ExportError(f"{what}: parent directory {parent} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise ExportError(f"export-c: cannot create {out}: {parent} is not writable")
+        raise ExportError(f"{what}: cannot create {out}: {parent} is not writable")
     return out
 
 
@@ -190,49 +197,18 @@ def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def _read_manifest(out: Path, force: bool) -> dict[str, str]:
-    """{relative path: sha256} of the files a previous export wrote ({} if none)."""
-    path = out / MANIFEST
-    if not os.path.lexists(path):
-        return {}
-    try:
-        if path.is_symlink() or not path.is_file():
-            raise ValueError("not a regular file")
-        m = json.loads(path.read_text(encoding="utf-8"))
-        if not isinstance(m, dict) or m.get("format") != MANIFEST_FORMAT or not isinstance(m.get("files"), dict):
-            raise ValueError("not an arvcas export manifest")
-        return {str(k): str(v) for k, v in m["files"].items()}
-    except (OSError, ValueError) as e:
-        if force:
-            return {}
-        raise ExportError(f"export-c: {path} is not a manifest arvcas wrote ({e}); move it away or pass --force") from None
+KIND = "export-c"  # the kind of every file export-c writes (arvcas.io.files); an export's kind is its command
 
 
-def _check_overwrite(out: Path, names, manifest: dict[str, str], force: bool) -> None:
-    """Refuse to replace a file arvcas did not write, or one changed since it wrote it."""
-    if force:
-        return
-    for name in names:
-        path = out / name
-        if name == MANIFEST or not os.path.lexists(path):
-            continue
-        if name not in manifest:
-            raise ExportError(f"export-c: {path} exists and was not written by arvcas export-c (not in {MANIFEST});"
-                              f" move it away or pass --force")
-        if path.is_symlink() or not path.is_file() or _sha256(path.read_bytes()) != manifest[name]:
-            raise ExportError(f"export-c: {path} was changed since arvcas export-c wrote it (sha256 differs from"
-                              f" {MANIFEST}); move it away or pass --force")
-
-
-def _write(out: Path, name: str, data: bytes) -> None:
-    """Through the one atomic writer (:mod:`arvcas.io.files`); the export's own manifest check
-    (:func:`_check_overwrite`) has already decided that this file may be replaced."""
+def _write(out: Path, name: str, data: bytes, kind: str = KIND) -> None:
+    """Through the one atomic writer (:mod:`arvcas.io.files`), which applies the output policy again
+    (and :func:`check_replaceable`'s --force permissions); a subdirectory is never a symbolic link."""
     from arvcas.io import files
 
     path = out / name
-    path.parent.mkdir(exist_ok=True)
-    files.permit_replace([path])
-    files.atomic_write(path, lambda tmp: tmp.write_bytes(data), ExportError)
+    if path.parent != out:
+        files.subdir(out, path.parent.relative_to(out).as_posix(), ExportError)
+    files.atomic_write(path, lambda tmp: tmp.write_bytes(data), ExportError, kind)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -248,10 +224,14 @@ def _c_double(v: float) -> str:
 
 
 def _ident(name: str) -> str:
-    return "".join(c if c.isalnum() else "_" for c in name).upper()
+    return "".join(c if c.isascii() and c.isalnum() else "_" for c in name).upper()
 
 
-def _params_header(P, opts, prefix: str) -> str:
+def _params_header(P, opts, prefix: str, title: str = "Default parameter vector p of the arvcas plant functions, SI units.",
+                   use: str = "Every function takes p as its last input; change an entry to change the model, no rebuild.",
+                   extra=()) -> str:
+    """``<lib>_params.h``: the default ``p`` with an index macro, name and SI unit per entry; ``extra``:
+    further lines before the end (other defaults of an export); ``opts`` None: no model options line."""
     from arvcas import __version__
     from arvcas.build.units import si_unit
 
@@ -262,13 +242,14 @@ def _params_header(P, opts, prefix: str) -> str:
     if len(set(macros)) != len(macros):  # e.g. two names differing only in case
         dup = next(m for m in macros if macros.count(m) > 1)
         raise ExportError(f"export-c: parameter names collide as C macro {dup}")
-    width = max(len(n) for n in names)
+    shown = [c_comment(n) for n in names]
+    width = max(len(n) for n in shown)
     guard = f"{up}PARAMS_H"
     lines = [
-        "/* Default parameter vector p of the arvcas plant functions, SI units.",
-        f" * Generated by arvcas {__version__} (CasADi {ca.__version__}) from {P.path}",
-        f" * Model options: {opts!r} (tag {opts.tag()}).",
-        " * Every function takes p as its last input; change an entry to change the model, no rebuild.",
+        f"/* {c_comment(title)}",
+        f" * Generated by arvcas {__version__} (CasADi {ca.__version__}) from {c_comment(P.path)}",
+        *([] if opts is None else [f" * Model options: {c_comment(repr(opts))} (tag {c_comment(opts.tag())})."]),
+        f" * {c_comment(use)}",
         " */",
         f"#ifndef {guard}",
         f"#define {guard}",
@@ -285,8 +266,8 @@ def _params_header(P, opts, prefix: str) -> str:
         si = si_unit(P, n)  # from the system's layout
         file_unit = P.unit(n)
         unit = si if file_unit in (si, "SI") else f"{si} (file: {file_unit})"
-        lines.append(f"  {_c_double(values[i]) + ',':<24} /* [{i:3d}] {n:<{width}}  {unit} */")
-    lines += ["};", "", f"#endif /* {guard} */", ""]
+        lines.append(f"  {_c_double(values[i]) + ',':<24} /* [{i:3d}] {shown[i]:<{width}}  {c_comment(unit)} */")
+    lines += ["};", *extra, "", f"#endif /* {guard} */", ""]
     return "\n".join(lines)
 
 
@@ -363,16 +344,17 @@ def _header(fns: dict[str, ca.Function], c_text: str, prefix: str, opts, P) -> s
     if _is_haidou1(st):
         what = [f"/* {lib}.h: the arvcas plant functions of the Haidou-1 ARV and its manipulator, in C."]
     else:
-        what = [f"/* {lib}.h: the arvcas plant functions of the system {st.name}, in C:",
-                f" * {P.description.replace('*/', '* /')}" if P.description else None,
+        what = [f"/* {lib}.h: the arvcas plant functions of the system {c_comment(st.name)}, in C:",
+                *(f" * {line}" for line in (c_comment_lines(P.description) if P.description else ())),
                 f" * {st.n_thrusters} thrusters, {st.n_joints} joints ({st.arm} arm), {len(P)} parameters:"
                 f" q[{st.n_joints}], u[{st.n_thrusters}], p[{len(P)}] (names, SI units in {lib}_params.h)."]
         what = [ln for ln in what if ln is not None]
     L = [
         *what,
         " *",
-        f" * Generated by arvcas {__version__} with CasADi {ca.__version__}; model options {opts!r}; default",
-        f" * parameters from {P.path} (in {lib}_params.h). Link with -l{lib} -lm.",
+        f" * Generated by arvcas {__version__} with CasADi {ca.__version__}; model options {c_comment(repr(opts))};"
+        " default",
+        f" * parameters from {c_comment(P.path)} (in {lib}_params.h). Link with -l{lib} -lm.",
         " *",
         " * UNITS AND FRAMES: SI units throughout; {b} is the body frame at the centre of buoyancy (COB),",
         " * x forward, y starboard, z down; eta is the NED position of the COB and the ZYX Euler angles.",
@@ -431,7 +413,7 @@ def _header(fns: dict[str, ca.Function], c_text: str, prefix: str, opts, P) -> s
         L += ["", "/* " + "-" * 96, f" * {full}: {_SUMMARY[short]}", " *"]
         for kind, i, name, size, meaning in rows:
             slot = f"arg[{i}]" if kind == "in" else f"res[{i}]"
-            L.append(f" *   {slot:<7} {name:<{width}} {size:>5}  {meaning}")
+            L.append(f" *   {slot:<7} {name:<{width}} {size:>5}  {c_comment(meaning)}")
         L += [
             " *",
             f" * work: arg {ws['sz_arg']} pointers, res {ws['sz_res']} pointers, iw {ws['sz_iw']} integers,"
@@ -494,19 +476,19 @@ def _example_c(fns, inputs, prefix: str) -> str:
         out += [
             f"    casadi_real* out[{f.n_out()}] = {{{', '.join(outs)}}};",
             f"    if ({full}_n_in() != {len(args)} || {full}_n_out() != {f.n_out()}) {{",
-            f'      fprintf(stderr, "{full}: wrong library\\n");',
+            f'      fprintf(stderr, {c_string(full + ": wrong library" + chr(10))});',
             "      return 1;",
             "    }",
             f"    if (call({full}, {full}_work, in, {len(args)}, out, {f.n_out()})) {{",
-            f'      fprintf(stderr, "{full} failed\\n");',
+            f'      fprintf(stderr, {c_string(full + " failed" + chr(10))});',
             "      failed = 1;",
             "    } else {",
         ]
         for k in f.name_in():
             if k != "p":
-                out.append(f'      print_vec("in", "{short}", "{k}", in_{k}, {inputs[k].size});')
+                out.append(f'      print_vec("in", {c_string(short)}, {c_string(k)}, in_{k}, {inputs[k].size});')
         for i in range(f.n_out()):
-            out.append(f'      print_vec("out", "{short}", "{f.name_out(i)}", out{i}, {f.numel_out(i)});')
+            out.append(f'      print_vec("out", {c_string(short)}, {c_string(f.name_out(i))}, out{i}, {f.numel_out(i)});')
         out += ["    }", "  }"]
     out += ["  return failed;", "}", ""]
     return "\n".join(out)
@@ -526,15 +508,15 @@ def _example_cpp(fns, inputs, prefix: str) -> str:
             out.append(f"    std::vector<double> {f.name_out(i)}({f.numel_out(i)});")
         args += [f"{f.name_out(i)}.data()" for i in range(f.n_out())]
         out += [f"    if ({full}_eval({', '.join(args)}) != 0) {{",
-                f'      std::fprintf(stderr, "{full} failed\\n");',
+                f'      std::fprintf(stderr, {c_string(full + " failed" + chr(10))});',
                 "      failed = 1;",
                 "    } else {"]
         for k in f.name_in():
             if k != "p":
-                out.append(f'      print_vec("in", "{short}", "{k}", {k}.data(), {k}.size());')
+                out.append(f'      print_vec("in", {c_string(short)}, {c_string(k)}, {k}.data(), {k}.size());')
         for i in range(f.n_out()):
             o = f.name_out(i)
-            out.append(f'      print_vec("out", "{short}", "{o}", {o}.data(), {o}.size());')
+            out.append(f'      print_vec("out", {c_string(short)}, {c_string(o)}, {o}.data(), {o}.size());')
         out += ["    }", "  }"]
     out += ["  return failed;", "}", ""]
     return "\n".join(out)
@@ -624,15 +606,30 @@ if __name__ == "__main__":
 # build files
 
 
+def _word(word: str, what: str) -> str:
+    """``word`` for a Makefile or CMake file: one plain word (:func:`arvcas.build.text.build_word`)."""
+    try:
+        return build_word(word, what)
+    except ValueError as e:
+        raise ExportError(f"export-c: {e}") from None
+
+
 def _flags():
-    """(library flags, compile flags, libraries) of the build cache, read from arvcas.build.codegen."""
+    """(library flags, compile flags, libraries) of the build cache, read from arvcas.build.codegen;
+    every one a plain word."""
     from arvcas.build import codegen
 
-    return list(codegen.BASE_FLAGS), [codegen.DEFAULT_OPT_LEVEL, *codegen.FIXED_FLAGS], list(codegen.LIBS)
+    flags = list(codegen.BASE_FLAGS), [codegen.DEFAULT_OPT_LEVEL, *codegen.FIXED_FLAGS], list(codegen.LIBS)
+    return tuple([_word(f, "compiler flag") for f in group] for group in flags)
+
+
+def _lib(prefix: str) -> str:
+    """The library's name (the prefix without its last ``_``), a plain word for the build files."""
+    return _word(prefix.rstrip("_"), "prefix")
 
 
 def _makefile(prefix: str) -> str:
-    lib = prefix.rstrip("_")
+    lib = _lib(prefix)
     base, cflags, libs = _flags()
     pic = [f for f in base if f != "-shared"]
     return f"""\
@@ -650,8 +647,11 @@ LDLIBS = {' '.join(libs)}
 
 all: lib{lib}.so example example_cpp
 
+# the library is the slow part (seconds at -O2): one progress line, "compiling lib{lib}.so ... 9 s"
 lib{lib}.so: {lib}.c
-\t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_LIBFLAGS) $(CFLAGS) -o $@ {lib}.c $(LDLIBS)
+\t@printf 'compiling lib{lib}.so ...\\n'; t0=$$(date +%s); \\
+\t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_LIBFLAGS) $(CFLAGS) -o $@ {lib}.c $(LDLIBS) && \\
+\tprintf 'compiling lib{lib}.so ... %s s\\n' $$(( $$(date +%s) - t0 ))
 
 example: example.c {lib}.h {lib}_params.h lib{lib}.so
 \t$(CC) $(ARVCAS_CFLAGS) $(ARVCAS_PIC) $(CFLAGS) -o $@ example.c -L. -l{lib} -Wl,-rpath,'$$ORIGIN' $(LDLIBS)
@@ -670,7 +670,7 @@ clean:
 
 
 def _cmake(prefix: str) -> str:
-    lib = prefix.rstrip("_")
+    lib = _lib(prefix)
     base, cflags, libs = _flags()
     unknown = [f for f in base if f not in ("-shared", "-fPIC")]
     options = " ".join(cflags + unknown)
@@ -723,7 +723,7 @@ endif()
 
 
 def _cmake_consumer(prefix: str) -> str:
-    lib = prefix.rstrip("_")
+    lib = _lib(prefix)
     _, cflags, libs = _flags()
     return f"""\
 # A project using the installed lib{lib} through its CMake package config:
@@ -745,11 +745,12 @@ def _readme(fns, opts, P, inputs, prefix: str) -> str:
     L = [
         f"# lib{lib}: the arvcas plant functions in C",
         "",
-        f"Generated by arvcas {__version__} with CasADi {ca.__version__}; model options `{opts!r}`"
-        f" (tag `{opts.tag()}`); default parameters from `{P.path}`.",
+        f"Generated by arvcas {__version__} with CasADi {ca.__version__}; model options `{markdown(repr(opts))}`"
+        f" (tag `{markdown(opts.tag())}`); default parameters from `{markdown(P.path)}`.",
         "",
         *([] if _is_haidou1(P.structure) else [
-            f"System `{P.structure.name}`: {P.description or P.structure.name}; {P.structure.n_thrusters}"
+            f"System `{markdown(P.structure.name)}`: {markdown(P.description or P.structure.name)};"
+            f" {P.structure.n_thrusters}"
             f" thrusters, {P.structure.n_joints} joints ({P.structure.arm} arm), {len(P)} parameters, so"
             f" `q` has {P.structure.n_joints} entries, `u` {P.structure.n_thrusters} and `p` {len(P)}.", ""]),
         "## Files",
@@ -797,7 +798,7 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, forc
     """Write the C library, headers, build files, examples and README into ``out_dir``.
 
     ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``params``: the
-    system, a :class:`arvcas.params.Params` (or a :class:`arvcas.system.System`): its layout sizes the
+    system, a :class:`arvcas.system.params.Params` (or a :class:`arvcas.system.System`): its layout sizes the
     functions (``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``) and its numbers are the defaults
     in ``<lib>_params.h`` (default: Haidou-1); ``prefix``: of every symbol (a C identifier ending in
     ``_``; the library is ``lib<prefix without the last _>.so``; default :func:`default_prefix`,
@@ -807,28 +808,23 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, forc
     """
     from arvcas.build.dynamics import jacobian_functions
     from arvcas.model.uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
-    from arvcas.params import Params, load
+    from arvcas.system.params import Params, load
     from arvcas.system import System
 
     P = load() if params is None else params
     if isinstance(P, System):
         P = P.params
     if not isinstance(P, Params):
-        raise ExportError(f"export-c: params must be arvcas.params.Params, got {type(P).__name__}")
-    if prefix is None:
-        prefix = default_prefix(P)
-    if not isinstance(prefix, str) or not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*_", prefix) or "__" in prefix:
-        raise ExportError(f"export-c: prefix: expected a C identifier ending in one '_' (like {DEFAULT_PREFIX}), got {prefix!r}")
+        raise ExportError(f"export-c: params must be arvcas.system.params.Params, got {type(P).__name__}")
+    prefix = check_prefix(default_prefix(P) if prefix is None else prefix, DEFAULT_PREFIX)
     if not isinstance(force, bool):
         raise ExportError(f"export-c: force: expected True or False, got {force!r}")
-    out = _check_out_dir(out_dir)
+    out = check_out_dir(out_dir)
     opts = ModelOptions() if opts is None else opts
     if not isinstance(opts, ModelOptions):
         raise ExportError(f"export-c: opts must be arvcas.model.uvms.ModelOptions, got {type(opts).__name__}")
     names = files(prefix)
-    manifest = _read_manifest(out, force) if out.exists() else {}
-    if out.exists():
-        _check_overwrite(out, names, manifest, force)
+    check_replaceable(out, names, force, "export-c")
 
     plant = plant_functions(opts, P.layout)  # sized by the system
     fns = {n: plant[n] for n in PUBLIC_FUNCTIONS}
@@ -856,15 +852,42 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, forc
         "README.md": _readme(fns, opts, P, inputs, prefix),
     }
     assert tuple(texts) + (MANIFEST,) == names
-    out.mkdir(exist_ok=True)
+    return write_package(out, texts, prefix, "export-c")
+
+
+def check_prefix(prefix, example: str, what: str = "export-c") -> str:
+    """``prefix`` if it is a C identifier ending in one ``_``; else a one-line :class:`ExportError`."""
+    if not isinstance(prefix, str) or not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*_", prefix) or "__" in prefix:
+        raise ExportError(f"{what}: prefix: expected a C identifier ending in one '_' (like {example}), got {prefix!r}")
+    return prefix
+
+
+def write_package(out: Path, texts: dict[str, str], prefix: str, what: str) -> list[Path]:
+    """Write an export's files (name -> text) into ``out`` (created if missing), each through the
+    atomic writer, then the manifest listing them with their sha256 (last, so it lists only finished
+    files). The caller has checked the directory (:func:`check_out_dir`) and that every file may be
+    replaced (:func:`check_replaceable`). Returns the paths, the manifest last."""
     from arvcas import __version__
 
+    out.mkdir(exist_ok=True)
     written = {}
     for name, text in texts.items():
         data = text.encode("utf-8")
-        _write(out, name, data)
+        _write(out, name, data, what)
         written[name] = _sha256(data)
-    m = {"format": MANIFEST_FORMAT, "written_by": f"arvcas {__version__} export-c", "prefix": prefix,
+    m = {"format": MANIFEST_FORMAT, "written_by": f"arvcas {__version__} {what}", "prefix": prefix,
          "files": written}
-    _write(out, MANIFEST, (json.dumps(m, indent=1) + "\n").encode("utf-8"))  # last: lists only finished files
-    return [out / n for n in names]
+    _write(out, MANIFEST, (json.dumps(m, indent=1) + "\n").encode("utf-8"), what)  # last: lists only finished files
+    return [out / n for n in (*texts, MANIFEST)]
+
+
+def check_replaceable(out: Path, names, force: bool, what: str) -> None:
+    """The one output policy (:func:`arvcas.io.files.check_outputs`, kind ``what``: the export's command):
+    a file in ``out`` is replaced only if that export wrote it and nobody changed it since (the
+    directory's manifest), or with ``force``; a subdirectory that is a symbolic link is refused even
+    with ``force``. One line, naming the file."""
+    from arvcas.io import files as _files
+
+    if out.exists():
+        _files.check_outputs([(f"{what}: DIR {out}", out / n, what, out) for n in names], force=force,
+                             error=ExportError)

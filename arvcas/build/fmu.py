@@ -25,14 +25,13 @@ import os
 import re
 import shutil
 import sys
-import tempfile
 import time
 import uuid
 import zipfile
 from importlib import resources
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
+from arvcas.build.text import xml_attr
 from arvcas.io import files
 
 import casadi as ca
@@ -203,9 +202,10 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
         for j in range(nj):
             add(f"{vec}[{j + 1}]", "input", "continuous", unit, f"{what} of joint {j + 1}", start=starts[j])
     add("payload", "input", "continuous", "1",
-        "payload fraction in [0, 1]: scales payload.mass and payload.volume at the tool point", start=0.0)
+        "payload fraction in [0, 1]: scales payload.mass and payload.volume at the tool point", start=0.0,
+        min=0.0, max=1.0)
     add("h_rk4", "parameter", "fixed", "s", "Co-Simulation only: the RK4 step (each communication step is "
-        "split into ceil(H / h_rk4) equal steps)", start=_H_RK4_DEFAULT, initial="exact")
+        "split into ceil(H / h_rk4) equal steps; > 0)", start=_H_RK4_DEFAULT, initial="exact", min=0.0)
     vals = P.vector()
     for i, name in enumerate(P.names()):  # the system's parameters, units from its layout
         unit, what, base = _parameter_unit(P, name)
@@ -215,14 +215,16 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
         display = None
         if unit in _DISPLAY and file_unit == _DISPLAY[unit][0]:
             display = file_unit
-        add(fmi_name(name), "parameter", "fixed", unit, desc, start=float(vals[i]), initial="exact",
-            display=display, **({"base": base} if base else {}))
+        # the loader's sign rule, > 0 (pos) or >= 0 (nonneg): declared, and checked at initialization
+        bounds = {"min": 0.0} if P.layout.rules[i] in ("pos", "nonneg") else {}
+        add(fmi_name(name), "parameter", "fixed", unit, desc, start=float(vals[i]), initial="exact", display=display,
+            **bounds, **({"base": base} if base else {}))
     assert len(V) == lay["vr_p"] + len(P)
     return V
 
 
 def _check_params(params):
-    from arvcas import params as params_mod
+    from arvcas.system import params as params_mod
     from arvcas.system import System, load_system
 
     if params is None:
@@ -232,7 +234,7 @@ def _check_params(params):
     if isinstance(params, (str, os.PathLike)):  # a shipped system's name or a system file
         return load_system(params).params
     if not isinstance(params, params_mod.Params):
-        raise FMUError(f"params: expected arvcas.params.Params, a system (name or file) or None, got "
+        raise FMUError(f"params: expected arvcas.system.params.Params, a system (name or file) or None, got "
                        f"{type(params).__name__}")
     return params
 
@@ -277,9 +279,9 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
     desc = (f"{what}, exactly coupled (arvcas uvms_rhs, "
             f"docs/model.md); inputs: {'body wrench tau' if inputs == 'wrench' else 'thruster commands u'}, "
             "q, qd, qdd, payload")
-    L.append(f'<fmiModelDescription fmiVersion="2.0" modelName="arvcas_uvms" guid={quoteattr(guid)} '
-             f'description={quoteattr(desc)} version={quoteattr(__version__)} '
-             f'generationTool={quoteattr("arvcas " + __version__)} generationDateAndTime="{stamp}" '
+    L.append(f'<fmiModelDescription fmiVersion="2.0" modelName="arvcas_uvms" guid={xml_attr(guid)} '
+             f'description={xml_attr(desc)} version={xml_attr(__version__)} '
+             f'generationTool={xml_attr("arvcas " + __version__)} generationDateAndTime="{stamp}" '
              'variableNamingConvention="structured" numberOfEventIndicators="0">')
     src = f'<SourceFiles><File name="{_WRAPPER_C}"/></SourceFiles>'
     L.append(f'  <ModelExchange modelIdentifier="{MODEL_IDENTIFIER}" needsExecutionTool="false" '
@@ -293,30 +295,33 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
              f'canSerializeFMUstate="true" providesDirectionalDerivative="false">{src}</CoSimulation>')
     L.append("  <UnitDefinitions>")
     for u in used:
-        base = "".join(f' {k}="{e}"' for k, e in bases[u].items())
+        base = "".join(f" {k}={xml_attr(e)}" for k, e in bases[u].items())
         disp = ""
         if u in _DISPLAY:
             dn, fac = _DISPLAY[u]
             disp = f'<DisplayUnit name="{dn}" factor="{_fmt(fac)}"/>'
-        L.append(f'    <Unit name="{u}"><BaseUnit{base}/>{disp}</Unit>')
+        L.append(f"    <Unit name={xml_attr(u)}><BaseUnit{base}/>{disp}</Unit>")
     L.append("  </UnitDefinitions>")
     L.append('  <LogCategories><Category name="logStatusError" description="errors"/>'
              '<Category name="logAll" description="everything"/></LogCategories>')
     L.append('  <DefaultExperiment startTime="0.0" stopTime="100.0" tolerance="1e-08" stepSize="0.01"/>')
     L.append("  <ModelVariables>")
     for i, v in enumerate(V):
-        attrs = [f"name={quoteattr(v['name'])}", f'valueReference="{i}"',
-                 f"description={quoteattr(v['description'])}", f'causality="{v["causality"]}"',
+        attrs = [f"name={xml_attr(v['name'])}", f'valueReference="{i}"',
+                 f"description={xml_attr(v['description'])}", f'causality="{v["causality"]}"',
                  f'variability="{v["variability"]}"']
         if v["initial"]:
             attrs.append(f'initial="{v["initial"]}"')
         real = []
         if v["unit"]:
-            real.append(f'unit="{v["unit"]}"')
+            real.append(f"unit={xml_attr(v['unit'])}")
         if v.get("display"):
-            real.append(f'displayUnit="{v["display"]}"')
+            real.append(f"displayUnit={xml_attr(v['display'])}")
         if v["start"] is not None:
             real.append(f'start="{_fmt(v["start"])}"')
+        for k in ("min", "max"):
+            if v.get(k) is not None:
+                real.append(f'{k}="{_fmt(v[k])}"')
         if v.get("derivative"):
             real.append(f'derivative="{v["derivative"]}"')
         L.append(f'    <ScalarVariable {" ".join(attrs)}><Real {" ".join(real)}/></ScalarVariable>'
@@ -364,6 +369,32 @@ def _rhs_function(opts, inputs: str, P) -> ca.Function:
                        ["x", "u", "q", "qd", "qdd", "payload", "p"], ["xdot"])
 
 
+def _check_tables(V: list[dict], lay: dict, P) -> str:
+    """C tables for the wrapper's checks: every variable's name (C string literals made by
+    :func:`arvcas.build.text.c_string`), each parameter's sign rule (the loader's: 0 any, 1 >= 0, 2 > 0),
+    the pairs that must be ordered (``u_min < u_max``, ``qmin < qmax``) and the stow angles within their
+    joint's limits, as value references."""
+    from arvcas.build.text import c_string
+    from arvcas.model.thrusters import limit_prefixes
+
+    vr = {v["name"]: i for i, v in enumerate(V)}
+    rules = {"any": 0, "nonneg": 1, "pos": 2}
+    order = [(vr[p + "u_min"], vr[p + "u_max"]) for p in limit_prefixes(P.structure)]
+    within = []
+    for j in range(1, P.structure.n_joints + 1):
+        order.append((vr[f"arm.joint{j}.qmin"], vr[f"arm.joint{j}.qmax"]))
+        within.append((vr[f"arm.joint{j}.qmin"], vr[f"arm.stow.q{j}"], vr[f"arm.joint{j}.qmax"]))
+    lines = ["static const char *const VNAME[NVR] = {"]
+    lines += [f"    {c_string(v['name'])}," for v in V]
+    lines += ["};", "static const signed char PRULE[NP] = {"]
+    lines += ["    " + ", ".join(str(rules[r]) for r in P.layout.rules[k:k + 32]) + "," for k in range(0, len(P), 32)]
+    lines += ["};", f"#define NORDER {len(order)}", f"#define NWITHIN {len(within)}",
+              "static const int PORDER[NORDER + 1][2] = {" + "".join(f"{{{a}, {b}}}, " for a, b in order) + "{-1, -1}};",
+              "static const int PWITHIN[NWITHIN + 1][3] = {" + "".join(f"{{{a}, {b}, {c}}}, " for a, b, c in within)
+              + "{-1, -1, -1}};"]
+    return "\n".join(lines)
+
+
 def _c_double(v: float) -> str:
     v = float(v)
     if not math.isfinite(v):
@@ -400,16 +431,17 @@ def _compile(src_dir: Path, out: Path) -> None:
 # the output file
 
 
-def _written_by_arvcas(path: Path) -> bool:
-    """True if ``path`` is a zip whose modelDescription.xml says generationTool="arvcas ..."."""
-    import xml.etree.ElementTree as ET
+KIND = "fmu"  # the kind of the file in the directory's manifest (arvcas.io.files)
 
-    try:
-        with zipfile.ZipFile(path) as zf:
-            root = ET.fromstring(zf.read("modelDescription.xml"))
-    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError, ValueError):
-        return False
-    return root.tag == "fmiModelDescription" and root.get("generationTool", "").startswith("arvcas ")
+
+def _refuse_replacing(p: Path) -> None:
+    """The output policy of :mod:`arvcas.io.files` for an existing ``p``, by the directory's manifest
+    (never by what the file claims inside, so a foreign file is not even opened)."""
+    kind = files.kind_of(p)
+    if kind is None:
+        raise FMUError(f"path: {p} exists and is not an FMU written by arvcas; pass force=True (--force) to replace it")
+    if kind and kind != KIND:
+        raise FMUError(f"path: {p} is an arvcas file of another kind ({kind}); pass force=True (--force) to replace it")
 
 
 def _check_path(path, force: bool) -> Path:
@@ -427,16 +459,17 @@ def _check_path(path, force: bool) -> Path:
             raise FMUError(f"path: {p} is a symbolic link; pass force=True (--force) to replace the link")
         if p.is_dir() or (p.exists() and not p.is_file()):
             raise FMUError(f"path: {p} exists and is not a regular file")
-        if not force and not _written_by_arvcas(p):
-            raise FMUError(f"path: {p} exists and is not an FMU written by arvcas; pass force=True (--force) to replace it")
+        if not force:
+            _refuse_replacing(p)
     return p
 
 
 def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = "wrench") -> Path:
     """Write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm to ``path``.
 
-    ``path`` must end in ``.fmu``; an existing file is replaced only if it is an FMU arvcas wrote, or
-    with ``force=True``. ``params``, the system (its :class:`arvcas.params.Params` or
+    ``path`` must end in ``.fmu``; an existing file is replaced only if arvcas recorded it as an FMU it
+    wrote (the directory's manifest, :mod:`arvcas.io.files`; nothing inside the file is trusted), or
+    with ``force=True``. ``params``, the system (its :class:`arvcas.system.params.Params` or
     :class:`arvcas.system.System`, a system file, or None for Haidou-1), sizes the FMU (:func:`layout`)
     and sets the parameters' start values; every one stays settable in the FMU. ``opts`` is
     an :class:`arvcas.model.uvms.ModelOptions` (n_quad of the link drag). ``inputs``: ``"wrench"``
@@ -464,9 +497,10 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
     model_c = cg.dump()
 
     start = ",\n".join("    " + _c_double(v["start"] if v["start"] is not None else 0.0) for v in V)
+    checks = _check_tables(V, lay, P)
     # the GUID: a digest of everything that defines the FMU's interface and behaviour
     h = hashlib.sha256()
-    for part in (model_c, start, repr([(v["name"], v["unit"]) for v in V]), inputs):
+    for part in (model_c, start, repr([(v["name"], v["unit"]) for v in V]), inputs, checks):
         h.update(part.encode())
         h.update(b"\0")
     guid = "{" + str(uuid.UUID(bytes=h.digest()[:16])) + "}"
@@ -475,13 +509,15 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
     fields = {"@MODEL_C@": _MODEL_C, "@NP@": len(V) - lay["vr_p"], "@GUID@": guid, "@RHS@": fn.name(),
               "@START@": start, "@IN@": "tau" if inputs == "wrench" else "u", "@NU@": lay["n_u"],
               "@NIN@": lay["n_in"], "@NJ@": lay["n_joints"], "@VR_H@": lay["vr_h"], "@VR_P@": lay["vr_p"],
-              "@U_Q@": lay["q"], "@U_QD@": lay["qd"], "@U_QDD@": lay["qdd"], "@U_PAYLOAD@": lay["payload"]}
+              "@U_Q@": lay["q"], "@U_QD@": lay["qd"], "@U_QDD@": lay["qdd"], "@U_PAYLOAD@": lay["payload"],
+              "@CHECKS@": checks}
     for k, v in fields.items():
         wrapper = wrapper.replace(k, str(v))
     assert not re.search(r"@[A-Z_]+@", wrapper), "an unfilled field in fmu_wrapper.c"
     md = _model_description(V, deps, guid, inputs, P)
 
-    work = Path(tempfile.mkdtemp(prefix=".arvcas-fmu-", dir=out.parent))
+    files.remove_stale_temps(out.parent)  # those of killed exports (and of every other writer)
+    work = files.temp_dir(out)
     try:
         src = work / "sources"
         src.mkdir()
@@ -498,11 +534,11 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
                 for f in sorted(src.iterdir()):
                     zf.write(f, f"sources/{f.name}")
 
-        if out.exists() and not force and not _written_by_arvcas(out):  # appeared meanwhile
-            raise FMUError(f"path: {out} exists and is not an FMU written by arvcas; pass force=True (--force) to replace it")
+        if out.exists() and not force:  # appeared meanwhile
+            _refuse_replacing(out)
         if os.path.lexists(out):  # checked above: an FMU arvcas wrote, or force
             files.permit_replace([out])
-        files.atomic_write(out, fill, FMUError)  # the one writer: recorded in the directory's manifest
+        files.atomic_write(out, fill, FMUError, KIND)  # the one writer: recorded in the directory's manifest
     finally:
-        shutil.rmtree(work, ignore_errors=True)
+        files.release_temp(work)
     return out

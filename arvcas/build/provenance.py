@@ -22,8 +22,8 @@ __all__ = ["model_hash", "model_files"]
 _PKG = Path(__file__).resolve().parents[1]
 # folders (every *.py and data file below them) and single files, relative to the package
 _TREES = ("model", "sim", "controllers", "data")
-_FILES = ("params.py", "tomlfile.py", "config.py", "build/codegen.py", "build/provenance.py", "__init__.py")
-_SUFFIXES = (".py", ".toml", ".urdf", ".json")
+_FILES = ("system/params.py", "system/tomlfile.py", "system/config.py", "build/codegen.py", "build/provenance.py", "__init__.py")
+_SUFFIXES = (".py", ".toml", ".urdf", ".json", ".csv")  # .csv: thrust tables (docs/system-file.md)
 
 _LOCK = threading.Lock()
 _MEMO: dict[tuple, str] = {}

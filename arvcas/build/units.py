@@ -1,6 +1,6 @@
 """The SI unit of each parameter of a system, for the exports (``export-c``'s params header, the FMU).
 
-A parameter's dimension comes from its system's layout (:attr:`arvcas.params.Layout.dims`). The one
+A parameter's dimension comes from its system's layout (:attr:`arvcas.system.params.Layout.dims`). The one
 dimension that is not a unit is ``per_rho``, the hydrodynamic derivatives: in a file whose derivatives
 are ``"per_rho"`` (Haidou-1's Table A1) the number is per unit density and has no single unit; in a
 file whose derivatives are ``"SI"`` the number is the SI coefficient of its term, whose unit follows
@@ -44,7 +44,7 @@ def _sub(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
 
 
 def hydro_exponents(term) -> dict[str, int]:
-    """Base-unit exponents of the SI coefficient of a :class:`arvcas.systemfile.HydroTerm`."""
+    """Base-unit exponents of the SI coefficient of a :class:`arvcas.system.systemfile.HydroTerm`."""
     out = dict(_FORCE if term.row < 3 else _MOMENT)
     if term.dot is not None:
         out = _sub(out, _acceleration(term.dot))
@@ -85,7 +85,7 @@ def si_exponents(params, name: str) -> dict[str, int] | None:
 def si_unit(params, name: str) -> str:
     """The SI unit of parameter ``name`` as the system files write units (``kg/m^3``, ``rad``, ``per_rho``,
     ``kg/m`` for an SI coefficient ``X_u_absu``)."""
-    from arvcas.params import UNITS
+    from arvcas.system.params import UNITS
 
     exps = si_exponents(params, name)
     if exps is not None:

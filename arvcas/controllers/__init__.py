@@ -10,10 +10,11 @@
 
 A controller of your own: subclass :class:`Controller`, declare ``name``, ``gains``, ``state``,
 ``signals`` and ``defaults`` (or ``defaults_block``), implement ``initial`` and ``step``, and call
-:func:`register` (docs/adding-a-controller.md).
+:func:`register` (docs/adding-a-controller.md); or leave the module to the plugin loader (``--plugin FILE.py``,
+a study's ``plugins``, an entry point of the group ``arvcas.controllers``: docs/plugins.md).
 """
 
-from arvcas.controllers.base import Controller, ControllerError, Gain, get, names, register, unregister
+from arvcas.controllers.base import Controller, ControllerError, Gain, available, get, names, register, unregister
 from arvcas.controllers import proposed, agsta, traditional, implicit, pid  # noqa: F401,E402  (registers them)
 
-__all__ = ["Controller", "ControllerError", "Gain", "get", "names", "register", "unregister"]
+__all__ = ["Controller", "ControllerError", "Gain", "available", "get", "names", "register", "unregister"]

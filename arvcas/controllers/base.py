@@ -28,9 +28,13 @@ import difflib
 import inspect
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
-__all__ = ["Gain", "Controller", "ControllerError", "register", "get", "names", "unregister"]
+from arvcas.io import plugins
+
+__all__ = ["Gain", "Controller", "ControllerError", "register", "get", "names", "available", "unregister", "adopt",
+           "origin", "provenance", "describe_provenance", "GROUP"]
 
 DOFS = ("x", "y", "z", "phi", "theta", "psi")
 
@@ -96,6 +100,29 @@ class Controller:
                 continue
         return sorted({f for f in out if f})
 
+    def own_source_files(self) -> list[str]:
+        """The files of this law's code outside the package (empty for the package's own laws): for each
+        class of its hierarchy defined elsewhere, its module's file, or every ``.py`` file of the
+        top-level package it is in (:func:`arvcas.io.plugins.source_files`). They key the compile cache."""
+        pkg = str(Path(__file__).resolve().parents[1])
+        out = set()
+        for cls in type(self).__mro__:
+            if cls is object or cls.__module__ == "arvcas" or cls.__module__.startswith("arvcas."):
+                continue
+            files = plugins.source_files(cls.__module__)
+            if not files:
+                try:
+                    f = inspect.getsourcefile(cls)
+                except TypeError:  # built in
+                    f = None
+                files = [f] if f else []
+            out.update(f for f in files if not str(Path(f).resolve()).startswith(pkg))
+        return sorted(out)
+
+    def source_digest(self) -> str:
+        """sha256 of :meth:`own_source_files` (what a front records of a law defined outside the package)."""
+        return plugins.digest(self.own_source_files())
+
     def identity(self) -> str:
         """A text that changes whenever the compiled law could: class, columns, state, signals."""
         cls = type(self)
@@ -112,7 +139,9 @@ class Controller:
 
 
 _REGISTRY: dict[str, Controller] = {}
+_ORIGIN: dict[str, object] = {}  # name -> the plugin (arvcas.io.plugins.Plugin) that registered it
 _LOCK = threading.Lock()
+GROUP = "arvcas.controllers"  # the entry-point group of controllers (docs/plugins.md)
 
 
 def _validate(c: Controller) -> None:
@@ -139,32 +168,150 @@ def _validate(c: Controller) -> None:
 def register(c: Controller, replace: bool = False) -> Controller:
     """Add ``c`` to the registry (``replace=True`` to redefine a name); returns it."""
     _validate(c)
+    origin = plugins.current()  # a plugin's code registering (its import, or the registry adopting it)
     with _LOCK:
         if c.name in _REGISTRY and not replace and _REGISTRY[c.name] is not c:
             raise ControllerError(f"register: a controller named {c.name!r} exists (pass replace=True to redefine it)")
         _REGISTRY[c.name] = c
+        if origin is not None:
+            _ORIGIN[c.name] = origin
+        else:
+            _ORIGIN.pop(c.name, None)
     return c
 
 
 def unregister(name: str) -> None:
     with _LOCK:
         _REGISTRY.pop(name, None)
+        _ORIGIN.pop(name, None)
 
 
 def names() -> tuple[str, ...]:
-    """Registered controller names, in registration order."""
+    """Registered controller names, in registration order (entry points not loaded yet are not
+    among them: :func:`available`)."""
     with _LOCK:
         return tuple(_REGISTRY)
 
 
+def available() -> tuple[tuple[str, ...], list[str]]:
+    """Every controller: the registered ones after loading every entry point of the group
+    ``arvcas.controllers``; and the one-line failures of the plugins that did not load."""
+    failed = plugins.load_group(GROUP)
+    return names(), failed
+
+
 def get(name) -> Controller:
-    """The controller ``name`` (a Controller instance is returned as is)."""
+    """The controller ``name`` (a Controller instance is returned as is). A name not registered is looked
+    for among the entry points of the group ``arvcas.controllers`` (those of that name first, then all)."""
     if isinstance(name, Controller):
         return name
     with _LOCK:
         c = _REGISTRY.get(name) if isinstance(name, str) else None
-        if c is None:
-            close = difflib.get_close_matches(str(name), list(_REGISTRY), n=1)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
-            raise ControllerError(f"controller: unknown '{name}'{hint} (allowed: {', '.join(_REGISTRY)})")
-        return c
+    if c is None and isinstance(name, str):
+        plugins.find(GROUP, name)  # an entry point of that name: loaded, or a one-line PluginError
+        with _LOCK:
+            c = _REGISTRY.get(name)
+        failed = plugins.load_group(GROUP) if c is None else []
+        with _LOCK:
+            c = _REGISTRY.get(name)
+    if c is None:
+        with _LOCK:
+            known = list(_REGISTRY)
+        close = difflib.get_close_matches(str(name), known, n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        broken = f"; plugins that failed to load: {' | '.join(failed)}" if isinstance(name, str) and failed else ""
+        raise ControllerError(f"controller: unknown '{name}'{hint} (allowed: {', '.join(known)}; a controller of "
+                              f"your own: --plugin FILE.py or an entry point, docs/plugins.md){broken}")
+    return c
+
+
+# ---- plugins: what a plugin defines, and where a law came from ---------------------------------------
+
+
+def adopt(obj) -> list[str]:
+    """Register the controllers ``obj`` defines (the registry's side of :mod:`arvcas.io.plugins`): a
+    Controller instance, a Controller subclass (instantiated), or a module: the subclasses with a
+    ``name`` defined in it (or, for a package, in its submodules) and the instances it holds. A law the
+    module registered itself is kept. Returns the names registered."""
+    import types
+
+    if isinstance(obj, types.ModuleType):
+        found, mod = [], obj.__name__
+        for v in list(vars(obj).values()):
+            if isinstance(v, Controller) or (isinstance(v, type) and issubclass(v, Controller) and v is not Controller
+                                             and (v.__module__ == mod or v.__module__.startswith(mod + "."))
+                                             and v.name):
+                found.append(v)
+        out = []
+        for v in found:
+            out += adopt(v)
+        return out
+    if isinstance(obj, type) and issubclass(obj, Controller):
+        with _LOCK:
+            have = _REGISTRY.get(obj.name)
+        if have is not None and type(have) is obj:
+            _claim(obj.name)
+            return [obj.name]
+        obj = obj()
+    if isinstance(obj, Controller):
+        with _LOCK:
+            have = _REGISTRY.get(obj.name)
+        if have is obj or (have is not None and type(have) is type(obj) and have.identity() == obj.identity()):
+            _claim(obj.name)
+            return [obj.name]
+        register(obj)
+        return [obj.name]
+    raise ControllerError(f"expected a Controller subclass or instance, or a module defining them, got "
+                          f"{type(obj).__name__}")
+
+
+def _claim(name: str) -> None:
+    origin = plugins.current()
+    if origin is not None:
+        with _LOCK:
+            _ORIGIN.setdefault(name, origin)
+
+
+def origin(name: str):
+    """The plugin (:class:`arvcas.io.plugins.Plugin`) that registered controller ``name``, or None (built
+    in, or registered from the user's own Python code)."""
+    with _LOCK:
+        return _ORIGIN.get(name)
+
+
+def provenance(c) -> dict:
+    """Where a law came from, for a front to record: empty for the package's own laws; else the
+    controller's name and class, the digest of its own source files (what keys its compiled library),
+    the files, and how to load it again (``kind``, ``spec``, ``entry_point``, ``distribution``: the
+    plugin; kind "python" for a law registered from the user's own code)."""
+    c = get(c)
+    own = c.own_source_files()
+    if not own:
+        return {}
+    cls = type(c)
+    out = {"controller": c.name, "class": f"{cls.__module__}.{cls.__qualname__}",
+           "digest": plugins.digest(own), "files": own}
+    p = origin(c.name)
+    if p is not None:
+        out |= p.record()
+    else:
+        script = cls.__module__ == "__main__"
+        out |= {"kind": "python", "spec": "" if script else own[0] if len(own) == 1 else cls.__module__,
+                "module": cls.__module__, "entry_point": "", "distribution": ""}
+    return out
+
+
+def describe_provenance(rec: dict) -> tuple[str, str]:
+    """``(where it came from, how to load it again)`` of a :func:`provenance` record, for one-line messages."""
+    kind, spec = rec.get("kind", ""), rec.get("spec", "")
+    if kind == "entry point":
+        p = plugins.Plugin(kind, spec, rec.get("module", ""), rec.get("entry_point", ""), rec.get("distribution", ""))
+        return p.describe(), p.hint()
+    if kind in ("file", "module"):
+        return f"plugin {kind} {spec}", f"load it with --plugin {spec}"
+    files = rec.get("files") or []
+    where = f"class {rec.get('class', '?')} registered from Python" + (f" ({files[0]})" if files else "")
+    return where, (f"load it with --plugin {spec}" if spec else "register it from Python before this command")
+
+
+plugins.add_registry(GROUP, adopt)

@@ -38,7 +38,7 @@ def _table(path=None) -> dict:
             with resources.files("arvcas").joinpath("data/gains.toml").open("rb") as f:
                 t = tomllib.load(f)
         else:
-            from arvcas import tomlfile
+            from arvcas.system import tomlfile
 
             t = tomlfile.parse(tomlfile.read_text(path, GainError, "gain table"), str(path), GainError)
         _TABLES[key] = t
@@ -94,9 +94,14 @@ def default_gains(controller, system=None) -> np.ndarray:
         return g.copy()
     path = None
     if system is not None:
+        from arvcas.system.params import default_layout
         from arvcas.system import resolve
 
-        path = resolve(system).params.default("gains")
+        sysm = resolve(system)
+        path = sysm.params.default("gains")
+        if path is None and sysm.structure != default_layout().structure:  # Haidou-1's gains would fit nothing
+            raise GainError(f"system '{sysm.name}' ({sysm.path}) names no gain table ([defaults] gains, "
+                            f"docs/system-file.md): give controller {c.name} its gains, or the system a gain table")
     where = str(path) if path is not None else "arvcas/data/gains.toml"
     block = _table(path).get(c.defaults_block)
     if block is None:
@@ -124,8 +129,10 @@ def check_gains(controller, gains, h: float | None = None, where: str = "gains")
     Every gain must be finite and > 0 (section 3: arbitrary positive constants) and below the limit
     a gain declares for the sampling period ``h`` (e.g. the explicit RESO: ``h * omega < 2``).
     """
+    from arvcas.build.calls import real_array
+
     c = get(controller)
-    g = np.asarray(gains, dtype=float)
+    g = real_array(gains, where, GainError)  # complex, bool, str, masked: refused by name
     n = n_gains(c)
     if g.ndim not in (1, 2) or g.shape[-1] != n:
         raise GainError(f"{where}: controller '{c.name}' takes {n} gains per set, got shape {g.shape}")

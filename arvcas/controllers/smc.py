@@ -28,7 +28,7 @@ from arvcas.sim.signals import DOFS, RATE_UNITS, WRENCH_UNITS, Signal
 __all__ = ["SlidingMode", "RESOCompensation", "NominalCompensation", "SMC_SIGNALS", "G_SURFACE", "G_GSTA",
            "G_ADAPT"]
 
-_K_NOTE = "dimensionless as in Table 2; k1 phi1(s) of eq. 21 is an acceleration (m/s^2, rad/s^2)"
+_K_NOTE = "dimensionless as the gains file gives it; k1 phi1(s) of eq. 21 is an acceleration (m/s^2, rad/s^2)"
 
 SMC_SIGNALS = (
     Signal("s", 6, RATE_UNITS, "{n}", DOFS, "sliding variable s = e_dot + c e (eq. 17), e = eta_hat - y1",

@@ -17,24 +17,27 @@ from arvcas.io import files
 from arvcas.io.results import ResultsError, atomic_write
 
 __all__ = ["atomic_write", "write_text", "write_figure", "write_result_dir", "stored_inputs", "provenance",
-           "prepare_dir", "target", "str_attr", "check_format"]
+           "prepare_dir", "target", "str_attr", "check_format", "controller_sources", "require_controllers"]
 
 
 def write_text(path: Path, text: str) -> Path:
     return files.write_text(path, text, ResultsError)
 
 
-def write_figure(path: Path, fig, dpi: int) -> Path:
-    return files.write_figure(path, fig, dpi, ResultsError)
+def write_figure(path: Path, fig, fmt: str | None = None) -> Path:
+    from arvcas.io import style
+
+    return style.write_figure(path, fig, fmt, ResultsError)
 
 
-def write_result_dir(out_dir, stem: str, result, write_h5, markdown, plot, dpi: int) -> dict[str, Path]:
+def write_result_dir(out_dir, stem: str, result, write_h5, markdown, plot, fmt: str = "png") -> dict[str, Path]:
     """``out_dir/<stem>.h5`` (``write_h5(result, path)``), ``<stem>.md`` (``markdown(result)``) and
-    ``<stem>.png`` (``plot(result)`` at ``dpi``), each written atomically; ``out_dir`` is created if missing."""
+    ``<stem>.<fmt>`` (``plot(result)``; png, pdf or svg), each written atomically; ``out_dir`` is created if
+    missing. The figure's key in the returned dict is ``"figure"``."""
     out = prepare_dir(out_dir, f"--out {out_dir}")
     written = {"h5": write_h5(result, out / f"{stem}.h5"), "md": write_text(out / f"{stem}.md", markdown(result))}
     fig = plot(result)
-    written["png"] = write_figure(out / f"{stem}.png", fig, dpi)
+    written["figure"] = write_figure(out / f"{stem}.{fmt}", fig, fmt)
     return written
 
 
@@ -45,7 +48,7 @@ def stored_inputs(path, config_text: str, params_vector, error: type[ValueError]
     the system's parameters (``error`` is raised when they do not fit); ``system``: the stored system
     (a shipped name or a system file; "" for Haidou-1). Returns ``(cfg, params)``.
     """
-    from arvcas.params import load as load_params
+    from arvcas.system.params import load as load_params
     from arvcas.sim import scenario
     from arvcas.system import load_system
 
@@ -60,7 +63,7 @@ def stored_inputs(path, config_text: str, params_vector, error: type[ValueError]
 
 def system_ref(params) -> str:
     """How a result file names the system of ``params``: "" for Haidou-1, a shipped name, or the file."""
-    from arvcas.params import default_layout
+    from arvcas.system.params import default_layout
     from arvcas.system import shipped
 
     st = params.structure
@@ -91,6 +94,36 @@ def provenance() -> dict[str, str]:
         "h5py_version": h5py.__version__,
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
+
+
+def controller_sources(controllers) -> str:
+    """JSON ``{name: record}`` of the controllers defined outside the package
+    (:func:`arvcas.controllers.base.provenance`: the plugin and the digest of its source); "" when none."""
+    import json
+
+    from arvcas.controllers.base import provenance
+
+    recs = {c: r for c in controllers for r in [provenance(c)] if r}
+    return json.dumps(recs, sort_keys=True) if recs else ""
+
+
+def require_controllers(path, controllers, sources: str) -> None:
+    """Before a file's runs are re-run: each controller is registered (an entry point of its name is
+    loaded), or a one-line ResultsError saying which plugin to load (``sources``: the file's
+    :func:`controller_sources`)."""
+    import json
+
+    from arvcas.controllers import base
+
+    recs = json.loads(sources) if sources else {}
+    for c in controllers:
+        try:
+            base.get(c)
+        except base.ControllerError as e:
+            if c not in recs:
+                raise ResultsError(f"{path}: {e}") from None
+            src, hint = base.describe_provenance(recs[c])
+            raise ResultsError(f"{path}: controller '{c}' is not registered; it came from {src}: {hint}") from None
 
 
 def prepare_dir(d, what: str) -> Path:

@@ -14,7 +14,8 @@ from pathlib import Path
 
 __all__ = ["add_sweep", "check_sweep", "run_sweep", "sweep_outputs", "add_montecarlo", "check_montecarlo",
            "run_montecarlo", "montecarlo_outputs", "add_robust", "check_robust", "run_robust", "robust_outputs",
-           "add_compare", "check_compare", "run_compare", "compare_outputs", "MAX_RUNS", "MAX_SEEDS"]
+           "add_compare", "check_compare", "run_compare", "compare_outputs", "add_explore", "check_explore", "run_explore", "explore_outputs",
+           "MAX_RUNS", "MAX_SEEDS"]
 
 MAX_RUNS = 1_000_000  # Monte Carlo draws per study (or per front member)
 MAX_SEEDS = 10_000  # noise seeds of a sweep
@@ -31,7 +32,7 @@ def _floats(text: str) -> list[float]:
 def _seeds(text: str) -> list[int]:
     """Seeds ``S1,S2,...`` or ``A..B`` (inclusive): each 0 <= s < 2**63, at most MAX_SEEDS (checked before
     the list is built)."""
-    from arvcas.cli import MAX_SEED
+    from arvcas.io.cliargs import MAX_SEED
 
     try:
         if ".." in text:  # a range A..B (inclusive)
@@ -52,13 +53,13 @@ def _seeds(text: str) -> list[int]:
 
 
 def _runs(text: str) -> int:
-    from arvcas.cli import count_arg
+    from arvcas.io.cliargs import count_arg
 
     return count_arg(1, MAX_RUNS, "--runs")(text)
 
 
 def _seed(text: str) -> int:
-    from arvcas.cli import seed_arg
+    from arvcas.io.cliargs import seed_arg
 
     return seed_arg(text)
 
@@ -89,13 +90,20 @@ def add_sweep(p: argparse.ArgumentParser) -> None:
                    help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
     p.add_argument("--check", type=Path, default=None, metavar="FILE.h5",
                    help="re-run a stored sweep from its file alone and compare bit for bit (no other option)")
+    _add_format(p)
+
+
+def _add_format(p: argparse.ArgumentParser) -> None:
+    from arvcas.io.cliargs import add_figure_format
+
+    add_figure_format(p)
 
 
 def check_sweep(a: argparse.Namespace) -> None:
-    from arvcas.cli import check_memory, refuse
+    from arvcas.io.cliargs import check_memory, refuse
 
     if a.check is not None:
-        refuse(a, ("h", "out", "controllers", "seeds", "noise_scale", "config", "params", "force"),
+        refuse(a, ("h", "out", "controllers", "seeds", "noise_scale", "config", "params", "force", "format"),
                "--check FILE re-runs the file's own configuration: give no other option")
         return
     if a.h is None or a.out is None:
@@ -116,7 +124,10 @@ def check_sweep(a: argparse.Namespace) -> None:
 
 
 def sweep_outputs(a: argparse.Namespace) -> list:
-    return [] if a.out is None else [(f"--out {a.out}", a.out / f"sweep.{e}") for e in ("h5", "md", "png")]
+    from arvcas.experiments.sweep import FORMAT
+
+    return [] if a.out is None else [(f"--out {a.out}", a.out / f"sweep.{e}", FORMAT if e == "h5" else None)
+                                     for e in ("h5", "md", a.format or "png")]
 
 
 def _report_check(path, diff: list[str], compared: str) -> int:
@@ -130,7 +141,7 @@ def _report_check(path, diff: list[str], compared: str) -> int:
 
 def run_sweep(a: argparse.Namespace) -> int:
     from arvcas.sim import scenario
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.experiments import _io
     from arvcas.experiments.sweep import CONTROLLERS, reproduce_sweep, run_sweep, sweep_markdown, write_sweep_dir
 
@@ -143,7 +154,7 @@ def run_sweep(a: argparse.Namespace) -> int:
     cfg = scenario.load_scenario(a.config if a.config is not None else params.default("scenario"))
     sw = run_sweep(a.h, a.controllers or CONTROLLERS, a.seeds or [0], cfg=cfg, params=params,
                    noise_scale=1.0 if a.noise_scale is None else a.noise_scale, progress=_say)
-    files = write_sweep_dir(sw, a.out)
+    files = write_sweep_dir(sw, a.out, a.format or "png")
     print(sweep_markdown(sw).split("\n## ", 1)[0])
     for p in files.values():
         print(f"wrote {p}")
@@ -181,7 +192,7 @@ _MC_BYTES_PER_RUN = (6 + 6 + 4 + 6 + 1) * 8 + 8  # chat, rmse, factors, phase, t
 
 
 def check_montecarlo(a: argparse.Namespace) -> None:
-    from arvcas.cli import check_memory, refuse
+    from arvcas.io.cliargs import check_memory, refuse
 
     if a.check is not None:
         refuse(a, ("controller", "runs", "out", "seed", "spread", "config", "params", "from_front", "index",
@@ -206,12 +217,14 @@ def check_montecarlo(a: argparse.Namespace) -> None:
 def montecarlo_outputs(a: argparse.Namespace) -> list:
     if a.out is None or a.check is not None or a.draws_toml:
         return []
-    return [("--out", a.out), ("--out (its Markdown summary)", a.out.with_suffix(".md"))]
+    from arvcas.experiments.montecarlo import FORMAT
+
+    return [("--out", a.out, FORMAT), ("--out (its Markdown summary)", a.out.with_suffix(".md"))]
 
 
 def run_montecarlo(a: argparse.Namespace) -> int:
     from arvcas.sim import scenario
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.experiments import _io
     from arvcas.experiments.montecarlo import read_montecarlo, reproduce, run_montecarlo, summary_markdown, write_montecarlo
 
@@ -273,6 +286,7 @@ def add_robust(r: argparse.ArgumentParser) -> None:
     r.add_argument("--out", type=Path, default=None, metavar="DIR", help="default: the front's directory")
     r.add_argument("--allow-model-change", action="store_true",
                    help="run even if the model code or parameters changed since the study (the file records it)")
+    _add_format(r)
 
 
 def _robust_dir(a: argparse.Namespace) -> Path:
@@ -283,11 +297,13 @@ def _robust_dir(a: argparse.Namespace) -> Path:
 
 def robust_outputs(a: argparse.Namespace) -> list:
     d = _robust_dir(a)
-    return [(f"--out {d}", d / f"robust.{e}") for e in ("h5", "md", "png")]
+    from arvcas.experiments.robust import FORMAT
+
+    return [(f"--out {d}", d / f"robust.{e}", FORMAT if e == "h5" else None) for e in ("h5", "md", a.format or "png")]
 
 
 def check_robust(a: argparse.Namespace) -> None:
-    from arvcas.cli import check_memory
+    from arvcas.io.cliargs import check_memory
 
     from arvcas.tuning.checkpoint import read_checkpoint
     from arvcas.tuning.front import resolve_front_path
@@ -300,17 +316,70 @@ def check_robust(a: argparse.Namespace) -> None:
 def run_robust(a: argparse.Namespace) -> int:
     from arvcas.experiments import _io
     from arvcas.experiments.robust import robust_front, robust_markdown, write_robust_dir
-    from arvcas.params import load
-    from arvcas.tuning.front import check_provenance
+    from arvcas.tuning import checkpoint as ck
+    from arvcas.tuning.front import check_provenance, resolve_front_path, system_params
 
     out = _robust_dir(a)
     _io.prepare_dir(out, f"--out {out}")
-    changed = check_provenance(a.file, load(), a.allow_model_change, "front robust")
+    params = system_params(ck.read_checkpoint(resolve_front_path(a.file)))  # the front's own system
+    changed = check_provenance(a.file, params, a.allow_model_change, "front robust")
     rf = robust_front(a.file, a.runs, a.seed, a.spread, progress=_say, model_change=changed or "")
-    files = write_robust_dir(rf, out)
+    files = write_robust_dir(rf, out, a.format or "png")
     print(robust_markdown(rf))
     for p in files.values():
         print(f"wrote {p}")
+    return 0
+
+
+# ---- front explore -----------------------------------------------------------------------------------
+
+
+def _members(text: str):
+    t = text.strip().lower()
+    if t in ("all", "knee"):
+        return t
+    from arvcas.io.cliargs import count_arg
+
+    return count_arg(1, 1_000_000, "--members")(text)
+
+
+def add_explore(p: argparse.ArgumentParser) -> None:
+    from arvcas.io.cliargs import count_arg
+
+    p.add_argument("fronts", type=Path, nargs="+", metavar="DIR",
+                   help="study output directories (every front in them) or front.h5 files, of one system")
+    p.add_argument("--out", type=Path, required=True, metavar="FILE.html", help="the page (self-contained HTML)")
+    p.add_argument("--members", type=_members, default="all", metavar="all|knee|N",
+                   help="whose time responses the page stores: every member (default), the knee, or N members "
+                        "spread along each front and its knee")
+    p.add_argument("--samples", type=count_arg(2, 100_000, "--samples"), default=None, metavar="N",
+                   help="samples kept of each time response (default 300: every k-th controller sample)")
+    p.add_argument("--allow-model-change", action="store_true",
+                   help="write the page even if the model code or parameters changed since the studies (the page "
+                        "says whether the replays still reproduce the stored metrics)")
+
+
+def check_explore(a: argparse.Namespace) -> None:
+    if a.out.suffix.lower() not in (".html", ".htm"):
+        raise ValueError(f"--out {a.out}: the page is HTML; name it FILE.html")
+    try:
+        import plotly  # noqa: F401
+    except ImportError:
+        raise ValueError("front explore: needs the plotly package (pip install 'arvcas[explore]')") from None
+
+
+def explore_outputs(a: argparse.Namespace) -> list:
+    return [("--out", a.out)]
+
+
+def run_explore(a: argparse.Namespace) -> int:
+    from arvcas.experiments import _io
+    from arvcas.experiments.explore import DEFAULT_SAMPLES, write_page
+
+    _io.target(a.out, f"--out {a.out}")
+    out = write_page(a.fronts, a.out, members=a.members, samples=a.samples or DEFAULT_SAMPLES,
+                     allow_model_change=a.allow_model_change, say=_say)
+    print(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB)")
     return 0
 
 
@@ -319,6 +388,7 @@ def run_robust(a: argparse.Namespace) -> int:
 
 def _run_compare_mc(a: argparse.Namespace, kind: str) -> int:
     """``kind``: "montecarlo" (two Monte Carlo files) or "robust" (two robust.h5 of ``front robust``)."""
+    from arvcas.io.cliargs import figure_file
     from arvcas.experiments import _io
 
     if kind == "montecarlo":
@@ -329,22 +399,23 @@ def _run_compare_mc(a: argparse.Namespace, kind: str) -> int:
         from arvcas.experiments.robust import compare_robust_markdown as markdown, is_robust_file as is_kind
         from arvcas.experiments.robust import plot_compare_robust as plot, read_robust as read
         what = "robust-front file (front robust)"
-    for p in (a.a, a.b):
+    for p in a.fronts:
         if not is_kind(p):
-            raise ValueError(f"compare: {p} is not a {what} like the other; compare takes two fronts, two Monte "
+            raise ValueError(f"compare: {p} is not a {what} like the other; compare takes fronts, two Monte "
                              "Carlo files or two robust-front files")
     report = a.report
     for p in (report, a.plot):
         if p is not None:
             _io.target(p, f"{p}")
-    ma, mb = read(a.a), read(a.b)
+    fmt = figure_file(a.plot, a.format, f"--plot {a.plot}") if a.plot is not None else None
+    ma, mb = read(a.fronts[0]), read(a.fronts[1])
     text = markdown(ma, mb)
     print(text)
     if report is not None:
         print(f"wrote {_io.write_text(report, text)}")
     if a.plot is not None:
         fig = plot(ma, mb)
-        print(f"wrote {_io.write_figure(a.plot, fig, 130)}")
+        print(f"wrote {_io.write_figure(a.plot, fig, fmt)}")
     return 0
 
 
@@ -360,25 +431,30 @@ def _kind(a: argparse.Namespace) -> str:
     from arvcas.experiments.montecarlo import is_montecarlo_file
     from arvcas.experiments.robust import is_robust_file
 
-    if is_montecarlo_file(a.a) or is_montecarlo_file(a.b):
+    if any(is_montecarlo_file(p) for p in a.fronts):
         return "montecarlo"
-    if is_robust_file(a.a) or is_robust_file(a.b):
+    if any(is_robust_file(p) for p in a.fronts):
         return "robust"
     return "front"
 
 
 def check_compare(a: argparse.Namespace) -> None:
-    from arvcas.cli import refuse
+    from arvcas.io.cliargs import refuse
 
     if a.plot is None:
-        refuse(a, ("paper",), "only with --plot")
+        refuse(a, ("paper", "format"), "only with --plot")
     kind = _kind(a)
     if kind == "front":
         refuse(a, ("report",), "only for Monte Carlo or robust-front files")
+        if len(a.fronts) < 2:
+            raise ValueError(f"compare: needs two or more fronts, got {len(a.fronts)}")
     else:
         refuse(a, ("ref", "allow_model_change"), "only for fronts")
         if a.paper:
             raise ValueError("--paper: only for fronts")
+        if len(a.fronts) != 2:
+            raise ValueError(f"compare: Monte Carlo and robust-front files are compared two at a time, got "
+                             f"{len(a.fronts)}")
 
 
 def compare_outputs(a: argparse.Namespace) -> list:
@@ -386,7 +462,7 @@ def compare_outputs(a: argparse.Namespace) -> list:
 
 
 def run_compare(a: argparse.Namespace) -> int:
-    """Two fronts (the tuning package's comparison), two Monte Carlo files or two robust fronts."""
+    """Fronts (the tuning package's comparison), two Monte Carlo files or two robust fronts."""
     kind = _kind(a)
     if kind == "front":
         from arvcas.tuning.cli import run_compare as run_front_compare

@@ -1,5 +1,5 @@
 """The knees of a study's fronts, replayed: one traced run per controller, their result files, figures
-and a table (``arvcas knees STUDY_DIR --out DIR``).
+and a table (``arvcas knees STUDY_DIR --out DIR``; STUDY_DIR holds one front or one per controller).
 
 Each front's knee (pymoo's pseudo-weights, :func:`arvcas.tuning.front.knee_index`) is replayed with
 its gains, the study's noise seed and scenario and the system the study ran on (the checkpoint names
@@ -16,39 +16,40 @@ import numpy as np
 
 from arvcas.controllers.gains import DOFS
 
-__all__ = ["knee_fronts", "replay_knees", "output_files"]
+__all__ = ["front_controllers", "replay_knees", "output_files"]
 
 
-def knee_fronts(study_dir: str | Path) -> list[Path]:
-    """The ``front.h5`` of every controller in a study's output directory (sorted by name)."""
-    d = Path(study_dir)
-    fronts = sorted(d.glob("*/front.h5"))
-    if not fronts:
-        raise ValueError(f"{d}: no <controller>/front.h5 in this directory (the --out of arvcas tune)")
-    return fronts
+def front_controllers(study_dir: str | Path) -> list[str]:
+    """The controller of each front of a study directory (:func:`arvcas.tuning.front.front_paths`; read from
+    the files: a one-controller study's directory is named by the user)."""
+    from arvcas.tuning import checkpoint as ck
+    from arvcas.tuning.front import front_paths
+
+    return [ck.read_checkpoint(f).controller for f in front_paths(study_dir)]
 
 
-def output_files(out: str | Path, controllers) -> list[Path]:
+def output_files(out: str | Path, controllers, fmt: str = "png") -> list[Path]:
     out = Path(out)
-    return ([out / f"knee_{c}.h5" for c in controllers]
-            + [out / n for n in ("knees.md", "knees_states.png", "knees_errors.png", "knees_thrust.png")])
+    return ([out / f"knee_{c}.h5" for c in controllers] + [out / "knees.md"]
+            + [out / f"knees_{n}.{fmt}" for n in ("states", "errors", "thrust")])
 
 
-def replay_knees(study_dir: str | Path, out: str | Path, say=print) -> dict:
-    """Replay every front's knee; write ``knee_<controller>.h5``, ``knees.md`` and three figures."""
-    from arvcas.io import files, results
+def replay_knees(study_dir: str | Path, out: str | Path, say=print, fmt: str = "png") -> dict:
+    """Replay every front's knee; write ``knee_<controller>.h5``, ``knees.md`` and three figures (``fmt``:
+    png, pdf or svg)."""
+    from arvcas.io import files, results, style
     from arvcas.io.plots import plot_errors, plot_states
     from arvcas.model import thrusters
-    from arvcas.params import view
+    from arvcas.system.params import view
     from arvcas.sim.scenario import loads_scenario
     from arvcas.sim.simulation import simulate
     from arvcas.tuning import checkpoint as ck
-    from arvcas.tuning.front import member_gains, read_front, system_params
+    from arvcas.tuning.front import front_paths, member_gains, read_front, system_params
 
     out = Path(out)
     rows, runs = [], []
     system = None
-    for path in knee_fronts(study_dir):
+    for path in front_paths(study_dir):
         fr = read_front(path)
         k = fr.knee()
         c = ck.read_checkpoint(path)
@@ -67,32 +68,39 @@ def replay_knees(study_dir: str | Path, out: str | Path, say=print) -> dict:
         runs.append(r)
     lo, hi = thrusters.envelope(view(system))
     name = system.structure.name
-    files.write_figure(out / "knees_states.png", plot_states(runs, title=f"Vehicle states at the fronts' knees ({name})"))
-    files.write_figure(out / "knees_errors.png",
-                       plot_errors(runs, title=rf"State errors $e = \eta - y_1$ at the fronts' knees ({name})"))
-    files.write_figure(out / "knees_thrust.png", _thrust_figure(runs))
+    style.write_figure(out / f"knees_states.{fmt}",
+                       plot_states(runs, title=f"Vehicle states at the fronts' knees ({name})"), fmt)
+    style.write_figure(out / f"knees_errors.{fmt}",
+                       plot_errors(runs, title=rf"State errors $e = \eta - y_1$ at the fronts' knees ({name})"), fmt)
+    style.write_figure(out / f"knees_thrust.{fmt}", _thrust_figure(runs), fmt)
     files.write_text(out / "knees.md", _table(rows, system, lo, hi))
     return {c: r for c, *_, r in rows}
 
 
 def _thrust_figure(runs):
-    """Thrust of every thruster (one panel per run: the vehicle may have any number of thrusters)."""
-    from matplotlib.figure import Figure
+    """Thrust of every thruster (one panel per run: the vehicle may have any number of thrusters), named
+    as the system names them."""
+    from arvcas.io import style
+    from arvcas.io.plots import controller_label, thruster_names
 
-    from arvcas.io.plots import controller_label
+    @style.styled
+    def draw():
+        fig = style.figure("page", 1.9 * len(runs) + 0.5)
+        axes = fig.subplots(len(runs), 1, sharex=True, squeeze=False)[:, 0]
+        for ax, r in zip(axes, runs):
+            u = np.asarray(r.thrust)
+            for j, name in enumerate(thruster_names(r)):
+                style.trace(ax, r.t, u[:, j], color=style.color("", j), label=name)
+            ax.set_title(controller_label(r.controller))
+            ax.set_ylabel("thrust (N)")
+            ax.grid(True, alpha=0.5)
+            ax.margins(x=0)
+            ax.legend(ncol=min(8, u.shape[1]), loc="upper right", fontsize=6)
+        axes[-1].set_xlabel("time (s)")
+        fig.suptitle("Thrust per thruster at each front's knee")
+        return fig
 
-    fig = Figure(figsize=(8.0, 2.4 * len(runs)), layout="constrained")
-    axes = fig.subplots(len(runs), 1, sharex=True, squeeze=False)[:, 0]
-    for ax, r in zip(axes, runs):
-        u = np.asarray(r.thrust)
-        for j in range(u.shape[1]):
-            ax.plot(r.t, u[:, j], lw=0.8, label=f"T{j + 1}")
-        ax.set_title(controller_label(r.controller), fontsize="medium")
-        ax.set_ylabel("thrust (N)")
-        ax.legend(fontsize="x-small", ncol=min(8, u.shape[1]), loc="upper right")
-    axes[-1].set_xlabel("t (s)")
-    fig.suptitle("Thrust per thruster at each front's knee")
-    return fig
+    return draw()
 
 
 def _table(rows, params, lo, hi) -> str:

@@ -41,9 +41,10 @@ import numpy as np
 
 from arvcas.build import codegen
 from arvcas.controllers import gains as gains_mod
-from arvcas import metrics
+from arvcas.metrics import indices as metrics
 from arvcas.sim import scenario
-from arvcas.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
+from arvcas.io import style
 from arvcas.io.results import ResultsError
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.sim.simulation import run_function, simulate_many
@@ -165,7 +166,8 @@ def run_montecarlo(controller: str, runs: int, seed: int = 0, gains=None, spread
                    progress: Callable[[str], None] | None = None) -> MonteCarlo:
     """Draw ``runs`` (noise seed, factors, phases) from ``seed`` and run them as compiled batches.
 
-    ``gains`` defaults to Table 2. Diverged runs are results (``ok = False``), not errors.
+    ``gains`` defaults to the system's default gains (Haidou-1: Table 2). Diverged runs are results
+    (``ok = False``), not errors.
     """
     gains_mod.check_controller(controller)
     d = draw(runs, seed, spread)
@@ -186,12 +188,12 @@ def run_montecarlo(controller: str, runs: int, seed: int = 0, gains=None, spread
         c_, r_, o_, t_ = simulate_many(controller, g, d.noise_seed[a:b], uncertainty=d.factors[a:b],
                                        phase=d.phase[a:b], params=params, cfg=cfg, n_threads=n_threads, opts=opts)
         chat[a:b], rmse[a:b], ok[a:b], t_fail[a:b] = c_, r_, o_, t_
-    src = gains_source if gains_source is not None else ("Table 2" if gains is None else "given")
+    sysref = _io.system_ref(params)
+    src = gains_source if gains_source is not None else (metrics.defaults_name(sysref) if gains is None else "given")
     from arvcas.sim.simulation import compiled_run
 
     art = codegen.artifact_of(compiled_run(controller, params, cfg, opts).function(False)) or {}
     meta = {"artifact_key": str(art.get("key", "")), "scenario_file": cfg.path}
-    sysref = _io.system_ref(params)
     if sysref:  # another system: its name and its objectives' normalisation (docs/model.md §8)
         meta |= {"system": sysref, "param_names": params.names(), "reference": _io.system_reference(params, cfg)}
     return MonteCarlo(controller, g, d, chat, rmse, ok, t_fail, cfg.to_toml(), params.vector(), cfg.time_h,
@@ -225,6 +227,9 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
         "front_path": str(mc.meta.get("front_path", "")),
         **_io.provenance(),
     }
+    sources = _io.controller_sources([mc.controller])
+    if sources:  # a controller from a plugin: which, and its source's digest
+        attrs["controller_sources"] = sources
     if mc.meta.get("system"):  # another system: its name and the objectives' normalisation
         attrs["system"] = str(mc.meta["system"])
         ref = mc.meta.get("reference")
@@ -232,7 +237,7 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
             attrs["ref_chat"], attrs["ref_rmse"] = np.asarray(ref[0], float), np.asarray(ref[1], float)
 
     def fill(tmp: Path) -> None:
-        with h5py.File(tmp, "w") as f:
+        with _io.files.new_hdf5(tmp) as f:
             for k, v in attrs.items():
                 f.attrs[k] = v
             f.create_dataset("noise_seed", data=d.noise_seed.astype(np.int64))
@@ -245,7 +250,7 @@ def write_montecarlo(mc: MonteCarlo, path) -> Path:
             f["phase"].attrs["units"] = "rad"
             f["t_fail"].attrs["units"] = "s (NaN when the run completed)"
 
-    return _io.atomic_write(path, fill)
+    return _io.atomic_write(path, fill, FORMAT)
 
 
 def is_montecarlo_file(path) -> bool:
@@ -260,10 +265,8 @@ def read_montecarlo(path) -> MonteCarlo:
         a = f.attrs
         controller = _io.str_attr(a["controller"])
         names = [_io.str_attr(x) for x in np.asarray(a["gain_names"]).ravel()]
-        try:
-            expect = gains_mod.gain_names(controller)
-        except ValueError:
-            raise ResultsError(f"{path}: unknown controller '{controller}'") from None
+        _io.require_controllers(path, [controller], _io.str_attr(a["controller_sources"]) if "controller_sources" in a else "")
+        expect = gains_mod.gain_names(controller)
         if names != expect:
             raise ResultsError(f"{path}: gain_names do not match controller '{controller}' of this arvcas version")
         d = Draws(int(a["master_seed"]), float(a["spread"]), np.array(f["noise_seed"][()], dtype=np.int64),
@@ -361,7 +364,8 @@ def summary_markdown(mc: MonteCarlo, title: str | None = None) -> str:
         c, r = s["chat"][d], s["rmse"][d]
         L.append(f"| {_DOF_MD[i]} | {_ci(c['mean'])} | {' / '.join(f'{v:.4g}' for v in c['pct'])} "
                  f"| {_ci(r['mean'])} | {' / '.join(f'{v:.4g}' for v in r['pct'])} |")
-    L += ["", "docs/model.md §7 objectives (per-DOF value / paper's AGSTA value, averaged over the 6 DOF):", ""]
+    L += ["", f"docs/model.md §7 objectives (per-DOF value / {metrics.norm_name(mc.meta.get('system', ''))}, "
+              "averaged over the 6 DOF):", ""]
     for name, v in s["objectives"].items():
         L.append(f"- {name}: mean {_ci(v['mean'])}; median {_ci(v['median'])} (sign-test 95 % interval); "
                  f"p5 / p50 / p95 {' / '.join(f'{x:.4g}' for x in v['pct'])}")
@@ -480,34 +484,42 @@ def compare_markdown(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, na
 def plot_compare(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, name_b: str | None = None,
                  fig=None):
     """Four panels: per-DOF distributions of CHAT and RMSE for A and B (box: quartiles, whiskers:
-    5-95 %; each DOF divided by the paper's AGSTA value so the DOF share an axis), and A - B relative
+    5-95 %; each DOF divided by its reference value, the paper's AGSTA value for Haidou-1, so the DOF
+    share an axis), and A - B relative
     to B: for shared draws the median of the paired differences with its sign-test 95 % interval,
     otherwise the difference of means with Welch's interval."""
     from matplotlib.figure import Figure
 
+    return _plot_compare(a, b, name_a, name_b, fig)
+
+
+@style.styled
+def _plot_compare(a: MonteCarlo, b: MonteCarlo, name_a, name_b, fig):
     A, B = name_a or _label(a), name_b or _label(b)
     c = compare(a, b)
     if fig is None:
-        fig = Figure(figsize=(12.0, 7.5), layout="constrained")
+        fig = style.figure("page", 5.2)
     axs = fig.subplots(2, 2)
-    t3 = metrics.table3()
     x = np.arange(6)
-    for col, (key, ref) in enumerate((("chat", t3.chat_agsta), ("rmse", t3.rmse_agsta))):
+    ca, cb = style.color("tab:blue"), style.color("tab:red")
+    norm = metrics.norm_name(a.meta.get("system", ""))
+    for col, key in enumerate(("chat", "rmse")):
         ax = axs[0, col]
-        for off, mc, color in ((-0.18, a, "tab:blue"), (0.18, b, "tab:red")):
+        for off, mc, color in ((-0.18, a, ca), (0.18, b, cb)):
+            ref = metrics.reference_values(mc.meta.get("reference"))[col]
             data = [v[np.isfinite(v)] for v in (getattr(mc, key) / ref).T]
             bp = ax.boxplot(data, positions=x + off, widths=0.3, whis=(5, 95), showfliers=False, patch_artist=True,
                             medianprops={"color": "k"})
             for box in bp["boxes"]:
                 box.set_facecolor(color)
                 box.set_alpha(0.55)
-        ax.plot([], [], "s", color="tab:blue", alpha=0.55, label=A)
-        ax.plot([], [], "s", color="tab:red", alpha=0.55, label=B)
+        ax.plot([], [], "s", color=ca, alpha=0.55, label=A)
+        ax.plot([], [], "s", color=cb, alpha=0.55, label=B)
         ax.set_xticks(x, _DOF_MD)
-        ax.set_ylabel(f"{key.upper()} / paper's AGSTA {key.upper()} (per DOF)")
-        ax.set_title(f"{key.upper()} over the draws (box: quartiles, whiskers: 5-95 %)", fontsize=10)
+        ax.set_ylabel(f"{key.upper()} / {norm} (per DOF)")
+        ax.set_title(f"{key.upper()} over the draws (box: quartiles, whiskers: 5-95 %)")
         ax.grid(True, axis="y", alpha=0.3)
-        ax.legend(fontsize=8)
+        ax.legend()
         ax = axs[1, col]
         # paired: the median of the per-draw differences (sign-test interval), which a few extreme runs
         # cannot move; unpaired: the difference of means (Welch)
@@ -516,18 +528,17 @@ def plot_compare(a: MonteCarlo, b: MonteCarlo, name_a: str | None = None, name_b
         est = np.array([iv.estimate for iv in d]) / mb * 100
         lo = np.array([iv.lo for iv in d]) / mb * 100
         hi = np.array([iv.hi for iv in d]) / mb * 100
-        colors = ["tab:green" if h < 0 else "tab:red" if l > 0 else "0.5" for l, h in zip(lo, hi)]
+        colors = [style.color("tab:green") if h < 0 else cb if l > 0 else "0.5" for l, h in zip(lo, hi)]
         ax.bar(x, est, color=colors, alpha=0.7)
         ax.errorbar(x, est, yerr=[est - lo, hi - est], fmt="none", ecolor="k", capsize=4)
         ax.axhline(0, color="k", lw=0.8)
         ax.set_xticks(x, _DOF_MD)
         if c["paired"]:
             ax.set_ylabel(f"median of (A - B) per draw / median B, % of {key.upper()}")
-            ax.set_title(f"{key.upper()}: paired A - B, median, sign-test 95 % CI; green: A certainly lower",
-                         fontsize=10)
+            ax.set_title(f"{key.upper()}: paired A - B, median, sign-test 95 % CI; green: A certainly lower")
         else:
             ax.set_ylabel(f"(mean A - mean B) / mean B, % of {key.upper()}")
-            ax.set_title(f"{key.upper()}: A - B, means, Welch 95 % CI; green: A certainly lower", fontsize=10)
+            ax.set_title(f"{key.upper()}: A - B, means, Welch 95 % CI; green: A certainly lower")
         ax.grid(True, axis="y", alpha=0.3)
     fig.suptitle(f"A = {A}  vs  B = {B}  ({a.runs} / {b.runs} draws)")
     return fig

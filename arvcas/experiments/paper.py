@@ -6,7 +6,7 @@ random numbers), and writes into ``out_dir``::
 
     proposed.h5  agsta.h5  traditional.h5     result files (arvcas.io.results layout)
     table3.md                                 paper's Table 3 and ours, ratios, the docs/model.md §6 checks
-    fig05.png ... fig11.png                   the paper's Figures 5-11 (arvcas.io.plots)
+    fig05.png ... fig11.png                   the paper's Figures 5-11 (arvcas.io.plots; or .pdf, .svg)
 
 Every file is written atomically by :mod:`arvcas.io.files` (temporary name in ``out_dir``, then ``os.replace``).
 """
@@ -23,7 +23,7 @@ import numpy as np
 
 from arvcas import metrics
 from arvcas.controllers import gains as gains_mod
-from arvcas.io import files as _files, plots, results
+from arvcas.io import files as _files, plots, results, style
 from arvcas.sim import scenario
 from arvcas.io.results import ResultsError
 from arvcas.sim.scenario import ScenarioConfig
@@ -228,10 +228,10 @@ def _prepare_out_dir(out_dir) -> Path:
     return _files.prepare_dir(out, f"run_paper: out_dir {out}", ResultsError)
 
 
-def output_files(out_dir, ekf_study: bool = True) -> list[Path]:
+def output_files(out_dir, ekf_study: bool = True, fmt: str = "png") -> list[Path]:
     """Every file :func:`run_paper` writes into ``out_dir``."""
     out = Path(out_dir)
-    names = [f"{c}.h5" for c in CONTROLLERS] + ["table3.md"] + [f"{n}.png" for n in FIGURE_FILES]
+    names = [f"{c}.h5" for c in CONTROLLERS] + ["table3.md"] + [f"{n}.{fmt}" for n in FIGURE_FILES]
     return [out / n for n in names + (["ekf.md"] if ekf_study else [])]
 
 
@@ -280,7 +280,7 @@ def ekf_effect_markdown(cfg: ScenarioConfig, seed: int) -> str:
 
 
 def run_paper(out_dir, seed: int = 0, progress: Callable[[str], None] | None = print,
-              cfg: ScenarioConfig | None = None, ekf_study: bool = True) -> dict:
+              cfg: ScenarioConfig | None = None, ekf_study: bool = True, fmt: str = "png") -> dict:
     """Run the paper's experiment and write results, ``table3.md`` and Figures 5-11 to ``out_dir``.
 
     Args:
@@ -289,6 +289,7 @@ def run_paper(out_dir, seed: int = 0, progress: Callable[[str], None] | None = p
         progress: called with one line per step (``None``: silent).
         cfg: scenario (default: the packaged ``scenario.toml``); e.g. a shortened copy
             ``dataclasses.replace(cfg, time_duration=5.0)`` for tests.
+        fmt: the figures' format, ``png``, ``pdf`` or ``svg``.
 
     Returns:
         ``{"results": {controller: Result}, "files": {name: Path}, "checks": compare(...),
@@ -312,18 +313,19 @@ def run_paper(out_dir, seed: int = 0, progress: Callable[[str], None] | None = p
     files["table3"] = _files.write_text(out / "table3.md", text, ResultsError)
     say(f"  table -> {files['table3']}")
     p, a, t = runs["proposed"], runs["agsta"], runs["traditional"]
-    makers = {
-        "fig05": lambda: plots.plot_states([p, a]),
-        "fig06": lambda: plots.plot_errors([p, a]),
-        "fig07": lambda: plots.plot_thrusts([p, a]),
-        "fig08": lambda: plots.plot_sliding([p, a]),
-        "fig09": lambda: plots.plot_gains([p, a]),
-        "fig10": lambda: plots.plot_zigzag(t, p),
-        "fig11": lambda: plots.plot_disturbance(p),
+    est = f"Total disturbance: RESO estimate vs simulated (Fig. 11, {plots.controller_label(p.controller)})"
+    makers = {  # the paper's own figure numbers in the titles (only here)
+        "fig05": lambda: plots.plot_states([p, a], title="Vehicle states during station keeping (Fig. 5)"),
+        "fig06": lambda: plots.plot_errors([p, a], title=r"State errors $e = \eta - y_1$ (Fig. 6)"),
+        "fig07": lambda: plots.plot_thrusts([p, a], title="Thrust per thruster (Fig. 7)"),
+        "fig08": lambda: plots.plot_sliding([p, a], title=r"Sliding variables $s$ and $\pm\sigma$ bands (Fig. 8)"),
+        "fig09": lambda: plots.plot_gains([p, a], title=r"Adaptive gains $k_1$ (Fig. 9)"),
+        "fig10": lambda: plots.plot_zigzag(t, p, title=r"$k_1$: traditional vs proposed adaptive law (Fig. 10)"),
+        "fig11": lambda: plots.plot_disturbance(p, title=est),
     }
     for name in FIGURE_FILES:
         fig = makers[name]()
-        files[name] = _files.write_figure(out / f"{name}.png", fig, 150, ResultsError)
+        files[name] = style.write_figure(out / f"{name}.{fmt}", fig, fmt, ResultsError)
         say(f"  figure -> {files[name]}")
     if ekf_study:
         say("EKF process-noise study (docs/model.md §4: its effect on CHAT and RMSE) ...")

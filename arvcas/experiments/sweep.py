@@ -34,10 +34,11 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from arvcas.controllers import gains as gains_mod
+from arvcas.io import style
 from arvcas.io.plots import controller_color
-from arvcas import metrics
+from arvcas.metrics import indices as metrics
 from arvcas.sim import scenario
-from arvcas.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.sim.simulation import simulate
 from arvcas.experiments import _io
@@ -199,7 +200,7 @@ def write_sweep(sw: Sweep, path) -> Path:
     path = _io.target(path, str(path))
 
     def fill(tmp: Path) -> None:
-        with h5py.File(tmp, "w") as f:
+        with _io.files.new_hdf5(tmp) as f:
             a = f.attrs
             a["format"], a["format_version"] = FORMAT, FORMAT_VERSION
             a["hs"] = np.array(sw.hs)
@@ -219,6 +220,9 @@ def write_sweep(sw: Sweep, path) -> Path:
             a["zigzag_definition"] = __doc__.split("Zigzag of k1", 1)[1].split("Totals are", 1)[0].strip()
             for k, v in _io.provenance().items():
                 a[k] = v
+            sources = _io.controller_sources(sw.controllers)
+            if sources:  # controllers from plugins: which, and their sources' digests
+                a["controller_sources"] = sources
             for c, g in sw.gains.items():
                 ds = f.create_dataset(f"gains/{c}", data=g)
                 ds.attrs["names"] = np.array(gains_mod.gain_names(c), dtype=object)
@@ -232,7 +236,7 @@ def write_sweep(sw: Sweep, path) -> Path:
                     ds = f.create_dataset(f"k1/{c}/{j}", data=k1, compression="gzip", shuffle=True)
                     ds.attrs["h"] = sw.hs[j]
 
-    return _io.atomic_write(path, fill)
+    return _io.atomic_write(path, fill, FORMAT)
 
 
 def read_sweep(path) -> Sweep:
@@ -248,7 +252,8 @@ def read_sweep(path) -> Sweep:
             k1_seed0={c: [np.array(f[f"k1/{c}/{j}"][()]) for j in range(len(hs))] for c in ctrls},
             config_text=_io.str_attr(a["config"]), params_vector=np.array(a["params"], float),
             noise_scale=float(a["noise_scale"]),
-            meta={**{k: _io.str_attr(a[k]) for k in ("arvcas_version", "casadi_version", "created", "system") if k in a},
+            meta={**{k: _io.str_attr(a[k]) for k in ("arvcas_version", "casadi_version", "created", "system",
+                                                     "controller_sources") if k in a},
                   **({"param_names": [_io.str_attr(x) for x in a["param_names"]],
                       "reference": (tuple(np.array(a["ref_chat"], float)), tuple(np.array(a["ref_rmse"], float)))
                       if "ref_chat" in a else None} if "system" in a else {})},
@@ -261,6 +266,7 @@ def reproduce_sweep(path) -> tuple[Sweep, list[str]]:
     """Re-run the sweep stored in ``path`` from its stored configuration (scenario, parameters, gains,
     periods, seeds, noise scale); returns the new sweep and the fields that differ (empty: bit for bit)."""
     old = read_sweep(path)
+    _io.require_controllers(path, old.controllers, old.meta.get("controller_sources", ""))
     cfg, params = _io.stored_inputs(path, old.config_text, old.params_vector, ValueError, old.meta.get("system", ""))
     new = run_sweep(old.hs, old.controllers, old.seeds, cfg=cfg, params=params, gains=old.gains,
                     noise_scale=old.noise_scale)
@@ -300,13 +306,14 @@ def sweep_markdown(sw: Sweep) -> str:
     noise = ("sensor noise as in the scenario" if sw.noise_scale == 1.0 else
              "no sensor noise (noise scale 0; the EKF keeps its nominal covariance)" if sw.noise_scale == 0 else
              f"sensor noise scaled by {sw.noise_scale:g}")
+    system = sw.meta.get("system", "")
     L = ["# Sampling-period sweep", "",
-         f"Controllers {', '.join(sw.controllers)} with their Table 2 gains at h = "
+         f"Controllers {', '.join(sw.controllers)} with their {metrics.defaults_name(system)} at h = "
          f"{', '.join(f'{h:g}' for h in sw.hs)} s (controller, sensors, EKF, ATD, RESO, GSTA; the plant's RK4 step "
          f"{_plant_steps(cfg, sw.hs)}), {noise}, noise seeds {', '.join(map(str, sw.seeds))}; "
          "the scenario's disturbance phases and nominal-model factors. Values are means over the seeds "
          f"({ns} run(s) per cell) of the completed runs. f_chat, f_rmse: docs/model.md §7 objectives (per-DOF value / "
-         "paper's AGSTA value, averaged over the 6 DOF); CHAT is per controller sample, CHAT/h per second.", "",
+         f"{metrics.norm_name(system)}, averaged over the 6 DOF); CHAT is per controller sample, CHAT/h per second.", "",
          "Zigzag of k1 (arvcas/beyond/sweep.py): *reversals* = samples where k1 changes direction within one "
          "adaptation step l h of k1min, summed over the 6 DOF; *time* = reversals x h / run length, mean over "
          "DOF (the fraction of the run k1 spends zigzagging); *rises inside* = samples where k1 rises although "
@@ -366,8 +373,13 @@ def plot_sweep(sw: Sweep, fig: Figure | None = None, dof: int = 0,
     count, the zigzag step (mean |dk1| at reversals, relative to k1min); and k1 - k1min of DOF ``dof``
     over ``window`` (s) for the traditional law at the shortest and longest h and the proposed law
     at the longest h."""
+    return _plot_sweep(sw, fig, dof, window)
+
+
+@style.styled
+def _plot_sweep(sw: Sweep, fig, dof: int, window: tuple[float, float]) -> Figure:
     if fig is None:
-        fig = Figure(figsize=(15.0, 8.5), layout="constrained")
+        fig = style.figure("page", 5.4)
     axs = fig.subplots(2, 3)
     obj = sw.objectives()
     hs = np.array(sw.hs)
@@ -379,7 +391,7 @@ def plot_sweep(sw: Sweep, fig: Figure | None = None, dof: int = 0,
             v = obj[i, :, :, k] * (0.1 / hs[:, None] if k == 0 else 1.0)
             m = _nanmean(v, 1)
             lo, hi = np.nanmin(v, axis=1), np.nanmax(v, axis=1)
-            ax.errorbar(hs, m, yerr=[m - lo, hi - m], color=col, marker="o", capsize=3, label=c)
+            ax.errorbar(hs, m, yerr=[m - lo, hi - m], color=col, marker="o", capsize=2, label=c)
         rev = sw.reversals[i]
         if np.isnan(rev).all():
             continue
@@ -404,36 +416,38 @@ def plot_sweep(sw: Sweep, fig: Figure | None = None, dof: int = 0,
         ax.set_xticks(hs, [f"{h:g}" for h in hs])
         ax.minorticks_off()
         ax.set_xlabel("controller sampling period h (s)")
-        ax.grid(True, lw=0.4, alpha=0.5)
-        ax.legend(fontsize="small")
+        ax.grid(True, alpha=0.5)
+        ax.legend()
     axs[1, 0].set_yscale("symlog", linthresh=10.0)
     axs[1, 0].set_ylim(bottom=0.0)
     ax = axs[1, 2]
     jmin, jmax = int(np.argmin(hs)), int(np.argmax(hs))
-    for c, j, col, ls in (("traditional", jmin, "#fc8d59", "-"), ("traditional", jmax, "#7f0000", "-"),
-                          ("proposed", jmax, "tab:blue", "--")):
+    for c, j, col, ls in (("traditional", jmin, style.color("orange"), "-"),
+                          ("traditional", jmax, style.color("vermillion"), "-"),
+                          ("proposed", jmax, style.color("tab:blue"), "--")):
         if c not in sw.controllers:
             continue
         kmin = gains_mod.unpack(c, sw.gains[c])["k1min"][dof]
         k1 = sw.k1_seed0[c][j][:, dof]
         t = sw.hs[j] * np.arange(k1.size)
         sel = (t >= window[0]) & (t <= window[1])
-        ax.step(t[sel], k1[sel] - kmin, where="post", color=col, ls=ls, lw=1.2, label=f"{c}, h = {sw.hs[j]:g} s")
-    ax.axhline(0.0, color="0.3", ls=":", lw=0.9)
+        ax.step(t[sel], k1[sel] - kmin, where="post", color=col, ls=ls, label=f"{c}, h = {sw.hs[j]:g} s")
+    ax.axhline(0.0, color="0.3", ls=":", lw=0.8)
     ax.set_xlabel("time (s)")
     ax.set_ylabel(f"k1 - k1min, DOF {DOFS[dof]}")
     ax.set_title(f"k1 near k1min (DOF {DOFS[dof]}, seed {sw.seeds[0]})")
-    ax.grid(True, lw=0.4, alpha=0.5)
-    ax.legend(fontsize="small", loc="upper right")
+    ax.grid(True, alpha=0.5)
+    ax.legend(loc="upper right")
     ns = sw.noise_scale
     cfg = scenario.loads_scenario(sw.config_text) if sw.config_text else None
-    fig.suptitle(f"Sampling-period sweep: Table 2 gains, plant RK4 step {_plant_steps(cfg, sw.hs)}; "
-                 "f = mean over DOF of value / paper's AGSTA value"
+    system = sw.meta.get("system", "")
+    fig.suptitle(f"Sampling-period sweep: {metrics.defaults_name(system)}, plant RK4 step {_plant_steps(cfg, sw.hs)};"
+                 f" f = mean over DOF of value / {metrics.norm_name(system)}"
                  + ("" if ns == 1.0 else f", sensor noise x {ns:g}")
                  + f"; mean over {len(sw.seeds)} seed(s), bars min..max")
     return fig
 
 
-def write_sweep_dir(sw: Sweep, out_dir) -> dict[str, Path]:
-    """``out_dir/sweep.h5``, ``sweep.md`` and ``sweep.png`` (each written atomically)."""
-    return _io.write_result_dir(out_dir, "sweep", sw, write_sweep, sweep_markdown, plot_sweep, 130)
+def write_sweep_dir(sw: Sweep, out_dir, fmt: str = "png") -> dict[str, Path]:
+    """``out_dir/sweep.h5``, ``sweep.md`` and ``sweep.png`` (or ``.pdf``, ``.svg``; each written atomically)."""
+    return _io.write_result_dir(out_dir, "sweep", sw, write_sweep, sweep_markdown, plot_sweep, fmt)

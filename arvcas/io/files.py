@@ -11,33 +11,47 @@ Output directories (:func:`check_dir`, :func:`prepare_dir`, :func:`target`)
     An output directory must exist (or be creatable in an existing parent) and be writable; a
     directory without any write permission bit counts as read-only also for root.
 
-Writing (:func:`atomic_write`, :func:`write_text`, :func:`write_figure`)
+Writing (:func:`atomic_write`, :func:`write_text`; figures: :func:`arvcas.io.style.write_figure`)
     A file is built under a temporary name ``.<name>.arvcas-tmp-<pid>-<random>`` in its
     directory, fsync'ed and renamed over the final name (``os.replace``): an interrupted or failed
     write leaves the previous file untouched and no partial file under the final name. The temporary
     file is removed on any exception, including the :class:`Terminated` that
     :func:`install_signal_handlers` raises on SIGTERM and SIGHUP (as Python does on SIGINT);
     temporaries of killed processes (their pid no longer runs) are removed by
-    :func:`remove_stale_temps` before a command writes into a directory.
+    :func:`remove_stale_temps` before a command writes into a directory. Writers that need a
+    temporary directory beside their output (the FMU's build) name it the same way
+    (:func:`temp_dir`), so the same sweep removes it; work directories outside the output
+    (a private build, libraries shipped to a Dask worker) come from :func:`private_dir`, named with
+    the process's pid in the system's temporary directory and removed there when that process is gone.
 
-What arvcas wrote (:func:`written_by_arvcas`)
-    An existing file is replaced only if arvcas wrote it, unless the caller allowed it
-    (:func:`permit_replace`; the command line's ``--force``). arvcas's HDF5 files are recognised by
-    their own ``format`` attribute (``arvcas-result``, ``arvcas.tuning.front``, ``arvcas-montecarlo``,
-    ...). Every other file arvcas writes (CSV, JSON, Markdown, PNG) is recorded, after its rename, in
-    the manifest ``.arvcas-manifest.json`` of its directory (name -> size and sha256 of the bytes
-    written; updated under an ``flock`` of the directory): such a file counts as arvcas's only while
-    its bytes are still those arvcas wrote; a file edited since is the user's.
+What arvcas wrote, and of which kind (:func:`kind_of`, :func:`written_by_arvcas`)
+    An existing file is replaced only if arvcas wrote it *and* it is of the kind the writer writes,
+    unless the caller allowed it (:func:`permit_replace`; the command line's ``--force``): a tuning
+    checkpoint is never replaced by a result file, a Monte Carlo file by a front, an FMU or an
+    export-c file by a figure. arvcas's HDF5 files are recognised by their own ``format`` attribute,
+    which is their kind (``arvcas-result``, ``arvcas.tuning.front``, ``arvcas-montecarlo``, ...).
+    Every other file arvcas writes (CSV, JSON, Markdown, HTML, PNG, PDF, SVG, .mat, .fmu, export-c's
+    sources) is
+    recorded, after its rename, in the manifest ``.arvcas-manifest.json`` of its directory (name ->
+    size, sha256 of the bytes written and kind; updated under an ``flock`` of the directory): such a
+    file counts as arvcas's only while its bytes are still those arvcas wrote; a file edited since is
+    the user's. A writer names its kind (``kind=``); by default it is the file's suffix (``md``,
+    ``png``, ...). An entry recorded before kinds were has none (``""``) and is replaced as before.
+    The decision is never taken from a claim inside a file arvcas did not record
+    (an FMU's ``generationTool``), so no foreign file is opened to decide (no zip is unpacked).
+    Directories arvcas creates below an output directory (:func:`subdir`) are never symbolic links,
+    with or without ``--force``: nothing is written through a link out of the output directory.
 
 Output policy (:func:`check_outputs`)
     Before any work: no output may be one of the command's inputs (same resolved path, or same
     ``st_dev``/``st_ino``: symlinks and hard links), no two outputs may be the same file, an output
-    may not be a directory or a special file, and an existing output arvcas did not write is refused
-    unless ``force``.
+    may not be a directory or a special file, and an existing output arvcas did not write, or wrote as
+    another kind, is refused unless ``force``. An output is ``(label, path)`` or ``(label, path, kind)``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import fcntl
 import hashlib
@@ -52,8 +66,9 @@ from pathlib import Path
 
 __all__ = [
     "FileError", "Terminated", "MAX_TEXT_BYTES", "TMP_MARK", "MANIFEST", "check_input", "read_bytes", "read_text",
-    "check_dir", "prepare_dir", "target", "atomic_write", "write_text", "write_figure", "remove_stale_temps",
+    "check_dir", "prepare_dir", "target", "atomic_write", "write_text", "remove_stale_temps",
     "install_signal_handlers", "written_by_arvcas", "hdf5_format", "permit_replace", "check_outputs", "same_file",
+    "kind_of", "default_kind", "subdir", "temp_dir", "release_temp", "private_dir", "new_hdf5",
 ]
 
 MAX_TEXT_BYTES = 16 * 1024 * 1024  # parameter, scenario and study files are a few KiB
@@ -261,34 +276,49 @@ def _read_manifest(d: Path) -> dict:
     return files
 
 
-def written_by_arvcas(path) -> bool:
-    """Whether the existing file ``path`` is one arvcas wrote (see the module docstring)."""
+def default_kind(path) -> str:
+    """The kind of a file whose writer names none: its suffix (``md``, ``png``, ``csv``), else ``file``."""
+    return Path(path).suffix.lower().lstrip(".") or "file"
+
+
+def kind_of(path) -> str | None:
+    """The kind of the existing file ``path`` if arvcas wrote it (see the module docstring), else None."""
     p = Path(path)
     fmt = hdf5_format(p)
     if fmt is not None:
-        return fmt.startswith("arvcas")
+        return fmt if fmt.startswith("arvcas") else None
     try:
         entry = _read_manifest(p.parent).get(p.name)
     except FileError:
-        return False
+        return None
     if not isinstance(entry, dict):
-        return False
+        return None
     try:
-        return os.path.getsize(p) == entry.get("size") and _sha256(p) == entry.get("sha256")
+        if not (stat.S_ISREG(os.lstat(p).st_mode) and os.path.getsize(p) == entry.get("size")
+                and _sha256(p) == entry.get("sha256")):
+            return None
     except OSError:
-        return False
+        return None
+    kind = entry.get("kind")
+    return kind if isinstance(kind, str) else ""  # "": recorded before kinds were (any writer replaces it)
 
 
-def _record(path: Path) -> None:
+def written_by_arvcas(path) -> bool:
+    """Whether the existing file ``path`` is one arvcas wrote, of any kind (see the module docstring)."""
+    return kind_of(path) is not None
+
+
+def _record(path: Path, kind: str) -> None:
     """Add ``path`` (just renamed into place) to its directory's manifest, under a lock of the directory."""
     d = path.parent
     dfd = os.open(d, os.O_RDONLY | os.O_DIRECTORY)
     try:
         fcntl.flock(dfd, fcntl.LOCK_EX)
         files = _read_manifest(d)
-        files[path.name] = {"size": os.path.getsize(path), "sha256": _sha256(path)}
+        files[path.name] = {"size": os.path.getsize(path), "sha256": _sha256(path), "kind": kind}
         doc = {"format": _MANIFEST_FORMAT, "format_version": 1,
-               "note": "files arvcas wrote in this directory (name: size, sha256); arvcas replaces only these",
+               "note": "files arvcas wrote in this directory (name: size, sha256, kind); arvcas replaces only "
+                       "these, by the same kind of writer",
                "files": dict(sorted(files.items()))}
         _replace_with(d / MANIFEST, lambda t: t.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8"))
     finally:
@@ -331,14 +361,37 @@ def _replace_with(path: Path, write: Callable[[Path], None]) -> None:
             _LIVE.discard(tmp_name)
 
 
-def atomic_write(path, write: Callable[[Path], None], error: type[ValueError] = FileError) -> Path:
+def _refusal(path, kind: str) -> str | None:
+    """Why the existing ``path`` may not be replaced by a writer of ``kind`` without --force (None: it may)."""
+    have = kind_of(path)
+    if have is None:
+        p = Path(path)
+        try:
+            listed = hdf5_format(p) is None and isinstance(_read_manifest(p.parent).get(p.name), dict)
+        except FileError:
+            listed = False
+        if listed:
+            return f"{path}: was changed since arvcas wrote it (its bytes are not those recorded in " \
+                   f"{MANIFEST}); refusing to replace it (use --force)"
+        return f"{path}: exists and was not written by arvcas; refusing to replace it (use --force)"
+    if have and have != kind:
+        return (f"{path}: is an arvcas file of another kind ({have}); refusing to replace it with {kind} "
+                f"(use --force, or another name)")
+    return None
+
+
+def atomic_write(path, write: Callable[[Path], None], error: type[ValueError] = FileError,
+                 kind: str | None = None) -> Path:
     """Call ``write(tmp)`` on a temporary file next to ``path``, fsync it, then ``os.replace`` it.
 
-    Refuses (``error``, one line) to replace an existing file arvcas did not write unless
-    :func:`permit_replace` allowed it; an OSError (a full disk) becomes ``error`` naming ``path``.
-    Files other than arvcas HDF5 are recorded in the directory's manifest.
+    ``kind``: what the file is (an arvcas HDF5 file: its ``format``; default :func:`default_kind`).
+    Refuses (``error``, one line) to replace an existing file arvcas did not write, or wrote as another
+    kind, unless :func:`permit_replace` allowed it; an OSError (a full disk) becomes ``error`` naming
+    ``path``. Files other than arvcas HDF5 are recorded in the directory's manifest with their kind.
+    Temporaries of killed processes in the directory are removed first (:func:`remove_stale_temps`).
     """
     path = Path(path)
+    kind = default_kind(path) if kind is None else kind
     try:
         _read_manifest(path.parent)  # a damaged manifest is refused before writing, not after
     except FileError as e:
@@ -347,8 +400,10 @@ def atomic_write(path, write: Callable[[Path], None], error: type[ValueError] = 
         st = os.stat(path) if path.exists() else None
         if st is not None and not stat.S_ISREG(st.st_mode):
             raise error(f"{path}: is {_kind(st.st_mode)}; arvcas replaces only regular files")
-        if _key(path) not in _PERMITTED and not written_by_arvcas(path):
-            raise error(f"{path}: exists and was not written by arvcas; refusing to replace it (use --force)")
+        why = None if _key(path) in _PERMITTED else _refusal(path, kind)
+        if why:
+            raise error(why)
+    remove_stale_temps(path.parent)  # every writer cleans what killed writers left in its directory
     try:
         _replace_with(path, write)
     except OSError as e:
@@ -360,27 +415,39 @@ def atomic_write(path, write: Callable[[Path], None], error: type[ValueError] = 
     fmt = hdf5_format(path)
     if fmt is None or not fmt.startswith("arvcas"):
         try:
-            _record(path)
+            _record(path, kind)
         except OSError as e:
             raise error(f"{path}: written, but recording it in {path.parent / MANIFEST} failed ({e.strerror})") from None
     return path
 
 
-def write_text(path, text: str, error: type[ValueError] = FileError) -> Path:
+@contextlib.contextmanager
+def new_hdf5(tmp: Path):
+    """An HDF5 file built in memory and written to ``tmp`` (an :func:`atomic_write` temporary) by plain
+    file I/O when the block ends: the HDF5 library itself never writes to the disk, so a full disk is
+    one ``OSError`` (ENOSPC) here instead of HDF5's failed writes, which h5py reports as RuntimeErrors
+    while closing the file (and which have crashed the process)."""
+    import h5py
+
+    f = h5py.File(f"arvcas-image-{os.getpid()}-{id(tmp)}.h5", "w", driver="core", backing_store=False)
+    try:
+        yield f
+        f.flush()
+        image = f.id.get_file_image()
+    finally:
+        f.close()
+    with open(tmp, "wb") as fh:
+        fh.write(image)
+
+
+def write_text(path, text: str, error: type[ValueError] = FileError, kind: str | None = None) -> Path:
     """UTF-8 text, written atomically."""
-    return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"), error)
-
-
-def write_figure(path, fig, dpi: int = 150, error: type[ValueError] = FileError) -> Path:
-    """A matplotlib figure as PNG, written atomically."""
-    from arvcas import __version__
-
-    return atomic_write(path, lambda p: fig.savefig(p, format="png", dpi=dpi,
-                                                    metadata={"Software": f"arvcas {__version__}"}), error)
+    return atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"), error, kind)
 
 
 def remove_stale_temps(d) -> list[Path]:
-    """Remove temporaries of :func:`atomic_write` in ``d`` whose process no longer runs; returns them."""
+    """Remove temporaries of :func:`atomic_write` and :func:`temp_dir` in ``d`` whose process no longer
+    runs; returns them."""
     removed = []
     try:
         names = os.listdir(d)
@@ -389,23 +456,101 @@ def remove_stale_temps(d) -> list[Path]:
     for name in names:
         if TMP_MARK not in name or not name.startswith("."):
             continue
-        pid_txt = name.split(TMP_MARK, 1)[1].split("-", 1)[0]
-        if not pid_txt.isdigit():
-            continue
-        pid = int(pid_txt)
         p = Path(d) / name
-        if pid == os.getpid():
-            with _LIVE_LOCK:
-                if str(p) in _LIVE:
-                    continue
-        elif _alive(pid):
-            continue
-        try:
-            p.unlink()
+        if _stale(p, name.split(TMP_MARK, 1)[1]) and _remove(p):
             removed.append(p)
-        except OSError:
-            pass
     return removed
+
+
+def _stale(p: Path, rest: str) -> bool:
+    """Whether the temporary ``p``, whose name continues with ``<pid>-...`` after its mark, is stale."""
+    pid_txt = rest.split("-", 1)[0]
+    if not pid_txt.isdigit():
+        return False
+    pid = int(pid_txt)
+    if pid == os.getpid():
+        with _LIVE_LOCK:
+            return str(p) not in _LIVE
+    return not _alive(pid)
+
+
+def _remove(p: Path) -> bool:
+    """Remove a file, or a directory with its contents (never following a link); True if it is gone."""
+    import shutil
+
+    try:
+        if stat.S_ISDIR(os.lstat(p).st_mode):
+            shutil.rmtree(p)
+        else:
+            p.unlink()
+        return True
+    except OSError:
+        return False
+
+
+def temp_dir(beside: Path) -> Path:
+    """A new temporary directory next to the output ``beside`` (same filesystem), named like
+    :func:`atomic_write`'s temporaries so that :func:`remove_stale_temps` removes it if this process
+    dies; the caller removes it (``shutil.rmtree``) when done."""
+    beside = Path(beside)
+    d = Path(tempfile.mkdtemp(dir=beside.parent, prefix=f".{beside.name}{TMP_MARK}{os.getpid()}-"))
+    with _LIVE_LOCK:
+        _LIVE.add(str(d))
+    return d
+
+
+def release_temp(d: Path) -> None:
+    """Remove a :func:`temp_dir` (or :func:`private_dir`) and forget it."""
+    import shutil
+
+    shutil.rmtree(d, ignore_errors=True)
+    with _LIVE_LOCK:
+        _LIVE.discard(str(d))
+
+
+_PRIVATE_MARK = "arvcas-private-"
+
+
+def private_dir(tag: str) -> Path:
+    """A new directory ``arvcas-private-<pid>-<tag>-*`` in the system's temporary directory (never in a
+    cache or an output directory), for this process's own work (a build the cache cannot hold,
+    libraries shipped to a Dask worker). Those of processes that no longer run are removed first."""
+    base = Path(tempfile.gettempdir())
+    try:
+        for e in os.scandir(base):
+            if e.name.startswith(_PRIVATE_MARK) and e.is_dir(follow_symlinks=False) \
+                    and e.stat(follow_symlinks=False).st_uid == os.geteuid():
+                p = Path(e.path)
+                if _stale(p, e.name[len(_PRIVATE_MARK):]):
+                    _remove(p)
+    except OSError:
+        pass
+    d = Path(tempfile.mkdtemp(dir=base, prefix=f"{_PRIVATE_MARK}{os.getpid()}-{tag}-"))
+    with _LIVE_LOCK:
+        _LIVE.add(str(d))
+    return d
+
+
+def _check_below(root: Path, p: Path, label: str, error: type[ValueError]) -> None:
+    """Every existing directory between ``root`` and the file ``p`` is a real directory (not a link)."""
+    try:
+        rel = p.parent.relative_to(root)
+    except ValueError:
+        raise error(f"{label}: {p} is not below the output directory {root}") from None
+    cur = root
+    for part in rel.parts:
+        cur = cur / part
+        if os.path.islink(cur):
+            raise error(f"{label + ': ' if label else ''}{cur}: is a symbolic link ({os.readlink(cur)}); arvcas writes only into real "
+                        f"directories below its output directory, also with --force: move the link away")
+
+
+def subdir(root, name: str, error: type[ValueError] = FileError) -> Path:
+    """The directory ``root/name``, created if missing; refused (``error``) if it is a symbolic link or not
+    a directory, also with --force: arvcas never writes through a link out of its output directory."""
+    p = Path(root) / name
+    _check_below(Path(root), p / "-", "", error)
+    return prepare_dir(p, str(p), error)
 
 
 def _alive(pid: int) -> bool:
@@ -449,18 +594,28 @@ def check_outputs(outputs: Iterable[tuple[str, Path]], inputs: Iterable[tuple[st
                   force: bool = False, error: type[ValueError] = FileError) -> None:
     """The output policy (module docstring) for ``(label, path)`` pairs; raises ``error`` (one line).
 
-    With ``force``, existing files arvcas did not write may be replaced (:func:`permit_replace`);
+    ``outputs``: ``(label, path)``, ``(label, path, kind)`` (kind as :func:`atomic_write`'s) or
+    ``(label, path, kind, root)``: ``path`` is written below the output directory ``root``, and every
+    directory between them must be a real directory (:func:`subdir`), with or without ``force``.
+    With ``force``, existing files arvcas did not write, or wrote as another kind, may be replaced
+    (:func:`permit_replace`);
     an output that is an input, or two outputs that are one file, are refused even then.
     """
-    outputs, inputs = list(outputs), list(inputs)
-    for i, (lab, p) in enumerate(outputs):
+    outputs = [(o[0], Path(o[1]), o[2] if len(o) > 2 and o[2] else default_kind(o[1])) + tuple(o[3:4])
+               for o in outputs]
+    inputs = list(inputs)
+    for lab, p, _k, *root in outputs:
+        if root and root[0] is not None:
+            _check_below(Path(root[0]), p, lab, error)
+    outputs = [o[:3] for o in outputs]
+    for i, (lab, p, _) in enumerate(outputs):
         for ilab, q in inputs:
             if same_file(p, q):
                 raise error(f"{lab}: {p} is the input {ilab} ({q}); writing it would destroy the input")
-        for lab2, p2 in outputs[:i]:
+        for lab2, p2, _ in outputs[:i]:
             if same_file(p, p2):
                 raise error(f"{lab}: {p} is also the output {lab2}; the two would overwrite each other")
-    for lab, p in outputs:
+    for lab, p, kind in outputs:
         parent = Path(p).parent
         if parent.is_dir():
             try:
@@ -477,8 +632,8 @@ def check_outputs(outputs: Iterable[tuple[str, Path]], inputs: Iterable[tuple[st
             raise error(f"{lab}: cannot access {p} ({e.strerror})") from None
         if not stat.S_ISREG(st.st_mode):
             raise error(f"{lab}: {p} is {_kind(st.st_mode)}; arvcas writes only regular files")
-        if not written_by_arvcas(p):
+        why = _refusal(p, kind)
+        if why:
             if not force:
-                raise error(f"{lab}: {p} exists and was not written by arvcas; refusing to replace it "
-                            f"(use --force)")
+                raise error(f"{lab}: {why}")
             permit_replace([p])

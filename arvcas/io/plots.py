@@ -1,17 +1,21 @@
-"""The paper's Figures 5-11 from :class:`arvcas.sim.simulation.Result` objects.
+"""Figures of runs (the paper's Figures 5-11 and the same for any system) from
+:class:`arvcas.sim.simulation.Result` objects.
 
-Every function takes results and an optional ``fig`` (an empty :class:`matplotlib.figure.Figure`
-to draw into) and returns the Figure; nothing here calls ``pyplot`` (no global figure registry, no
-``show``): save with ``fig.savefig(...)``. Figures with one panel per DOF (or per thruster) have
-six axes in 3 rows x 2 columns: x, y, z (or thrusters 1-3) down the left column, phi, theta, psi
-(or thrusters 4-6) down the right one; ``fig.axes[i]`` is DOF (thruster) ``i``.
+Every function takes results, an optional ``fig`` (an empty :class:`matplotlib.figure.Figure`
+to draw into) and ``title``, and returns the Figure; nothing here calls ``pyplot`` (no global figure
+registry, no ``show``): write it with :func:`arvcas.io.style.write_figure` (PNG, PDF or SVG). Figures
+are drawn in the house style (:mod:`arvcas.io.style`: page width, journal font sizes, the
+colour-blind-safe palette; dense noisy series as min-max bands). Titles name no paper figure; `arvcas
+paper` passes its own ("(Fig. 5)"). Figures with one panel per DOF have six axes in 3 rows x 2 columns:
+x, y, z down the left column, phi, theta, psi down the right one; ``fig.axes[i]`` is DOF ``i``. The
+thrust figure has one panel per thruster of the run's system (its names), down the left column first.
 
 ==========  =======================  ==========================================================
 paper       function                 content
 ==========  =======================  ==========================================================
 Figure 5    :func:`plot_states`      eta of each run (solid) and the ATD reference y1 (dashed)
 Figure 6    :func:`plot_errors`      e = eta - eta_ref of each run
-Figure 7    :func:`plot_thrusts`     the six thrusts after saturation (limits drawn when reached)
+Figure 7    :func:`plot_thrusts`     the thrusts after saturation (limits drawn when reached)
 Figure 8    :func:`plot_sliding`     s of each run with its +-sigma band (Table 2)
 Figure 9    :func:`plot_gains`       k1 of each run (k1min dotted where the law has one)
 Figure 10   :func:`plot_zigzag`      k1, traditional vs proposed law, inset magnified near k1min
@@ -30,21 +34,20 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from arvcas.controllers import gains as gains_mod
-from arvcas.params import SCHEMA as PARAM_SCHEMA
-from arvcas.params import load as load_params
+from arvcas.io import style
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA
+from arvcas.system.params import load as load_params
+from arvcas.system.systemfile import HAIDOU1_THRUSTERS
 
 __all__ = [
     "plot_states", "plot_errors", "plot_thrusts", "plot_sliding", "plot_gains", "plot_zigzag",
-    "plot_disturbance", "FIGURES", "DOF_LABELS", "THRUSTER_LABELS",
+    "plot_disturbance", "FIGURES", "DOF_LABELS", "thruster_names", "controller_label", "controller_color",
 ]
 
 DOF_LABELS = (r"$x$", r"$y$", r"$z$", r"$\phi$", r"$\theta$", r"$\psi$")
 _LIN = ("m", "m", "m", "rad", "rad", "rad")
 _RATE = ("m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s")
 _FORCE = ("N", "N", "N", "N m", "N m", "N m")
-THRUSTER_LABELS = ("T1 stern left", "T2 stern right", "T3 side (bow)", "T4 side (stern)",
-                   "T5 vertical (port)", "T6 vertical (starboard)")
-
 
 
 def controller_label(name: str) -> str:
@@ -56,13 +59,29 @@ def controller_label(name: str) -> str:
 
 
 def controller_color(name: str, i: int = 0) -> str:
-    """A controller's colour (its ``color``, else matplotlib's cycle colour ``i``)."""
+    """A controller's colour in the house palette (its ``color`` through :func:`arvcas.io.style.color`,
+    else the palette's colour ``i``)."""
     try:
         c = gains_mod.get(name).color
     except ValueError:
         c = ""
-    return c or f"C{i % 10}"
-_FIGSIZE = (10.0, 8.0)
+    return style.color(c, i)
+
+
+_HEIGHT = 6.0  # in, six-panel figures at page width
+
+
+def thruster_names(r) -> tuple[str, ...]:
+    """The names of the run's thrusters in allocation order: from its system's parameters
+    (``thrusters.<name>.u_min``), else Haidou-1's six (a run of Haidou-1 records no parameter names)."""
+    n = np.asarray(r.thrust).shape[1]
+    names = [k.split(".")[1] for k in (r.meta.get("param_names") or ()) if k.startswith("thrusters.")
+             and k.endswith(".u_min") and k.count(".") == 2]
+    if len(names) == n:
+        return tuple(names)
+    if n == len(HAIDOU1_THRUSTERS):
+        return HAIDOU1_THRUSTERS
+    return tuple(f"T{j + 1}" for j in range(n))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -105,20 +124,23 @@ def _valid(r) -> np.ndarray:
     return np.flatnonzero(t <= r.t_fail + 1e-9)
 
 
-def _six(fig: Figure | None, title: str) -> tuple[Figure, list]:
+def _six(fig: Figure | None, title: str, n: int = 6) -> tuple[Figure, list]:
+    """``n`` panels in two columns (left column first: x, y, z then phi, theta, psi for six), shared time axis."""
+    rows = (n + 1) // 2
     if fig is None:
-        fig = Figure(figsize=_FIGSIZE, layout="constrained")
+        fig = style.figure("page", _HEIGHT * max(rows, 3) / 3)
     elif fig.axes:
-        raise ValueError("fig must be empty (the function adds its own 3 x 2 axes)")
-    # created in DOF order (so fig.axes[i] is DOF i): x, y, z down the left column, phi, theta, psi right
+        raise ValueError(f"fig must be empty (the function adds its own {rows} x 2 axes)")
+    # created in panel order (so fig.axes[i] is DOF or thruster i): down the left column, then the right one
     axes: list = []
-    for i, pos in enumerate((1, 3, 5, 2, 4, 6)):
-        ax = fig.add_subplot(3, 2, pos, sharex=axes[0] if axes else None)
-        if i in (2, 5):
+    for i in range(n):
+        col, row = divmod(i, rows)
+        ax = fig.add_subplot(rows, 2, 2 * row + col + 1, sharex=axes[0] if axes else None)
+        if row == rows - 1 or i == n - 1:  # the last panel of its column
             ax.set_xlabel("time (s)")
         else:
             ax.tick_params(labelbottom=False)
-        ax.grid(True, lw=0.4, alpha=0.5)
+        ax.grid(True, alpha=0.5)
         ax.margins(x=0)
         axes.append(ax)
     fig.suptitle(title)
@@ -133,7 +155,7 @@ def _legend(fig: Figure, axes) -> None:
             seen.setdefault(lab, h)
     handles, labels = list(seen.values()), list(seen)
     if handles:
-        fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), frameon=False)
+        fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 3), frameon=False)
 
 
 def _sub(i: int) -> str:
@@ -149,13 +171,19 @@ def _gain(r, name: str) -> np.ndarray | None:
     return np.asarray(gains_mod.unpack(r.controller, np.asarray(r.gains, dtype=float))[name], dtype=float)
 
 
-def _thrust_limits(r) -> tuple[float, float]:
+def _thrust_limits(r, j: int) -> tuple[float, float]:
+    """[u_min, u_max] of thruster ``j`` from the run's parameters (a shared pair for Haidou-1)."""
     pv = r.params_vector
     if pv is None:
         pv = load_params().vector()
-    names = list(r.meta.get("param_names") or PARAM_SCHEMA)  # the widest limits over the thrusters
-    return (min(float(pv[i]) for i, n in enumerate(names) if n.endswith("u_min")),
-            max(float(pv[i]) for i, n in enumerate(names) if n.endswith("u_max")))
+    names = list(r.meta.get("param_names") or PARAM_SCHEMA)
+    idx = {n: i for i, n in enumerate(names)}
+    own = thruster_names(r)[j]
+    lo = idx.get(f"thrusters.{own}.u_min", idx.get("thrusters.u_min"))
+    hi = idx.get(f"thrusters.{own}.u_max", idx.get("thrusters.u_max"))
+    if lo is None or hi is None:  # pragma: no cover - every system has limits
+        return -np.inf, np.inf
+    return float(pv[lo]), float(pv[hi])
 
 
 def _same_refs(rs) -> bool:
@@ -168,7 +196,8 @@ def _same_refs(rs) -> bool:
 # Figures 5-11
 
 
-def plot_states(results, fig: Figure | None = None, title: str = "Vehicle states during station-keeping (Fig. 5)") -> Figure:
+@style.styled
+def plot_states(results, fig: Figure | None = None, title: str = "Vehicle states during station keeping") -> Figure:
     """Figure 5: eta (solid, one line per run) and the ATD reference y1 (dashed) per DOF.
 
     Runs sharing one seed have the same reference (y1 starts at the EKF's first estimate); it is then
@@ -180,76 +209,85 @@ def plot_states(results, fig: Figure | None = None, title: str = "Vehicle states
     for i, ax in enumerate(axes):
         for j, r in enumerate(rs):
             k = _valid(r)
-            ax.plot(r.t[k], r.eta[k, i], color=_color(r, j), lw=1.0, label=_label(r), zorder=_z(j))
+            style.trace(ax, r.t[k], r.eta[k, i], color=_color(r, j), label=_label(r), zorder=_z(j))
         for j, r in enumerate(rs[:1] if shared else rs):
             k = _valid(r)
             lab = "ATD reference $y_1$" if shared else f"reference $y_1$ ({controller_label(r.controller)})"
-            ax.plot(r.t[k], r.eta_ref[k, i], ls="--", lw=1.0, color="k" if shared else _color(r, j), label=lab)
+            ax.plot(r.t[k], r.eta_ref[k, i], ls="--", color="k" if shared else _color(r, j), label=lab)
         ax.set_ylabel(f"{DOF_LABELS[i]} ({_LIN[i]})")
     _legend(fig, axes)
     return fig
 
 
-def plot_errors(results, fig: Figure | None = None, title: str = r"State errors $e = \eta - y_1$ (Fig. 6)") -> Figure:
+@style.styled
+def plot_errors(results, fig: Figure | None = None, title: str = r"State errors $e = \eta - y_1$") -> Figure:
     """Figure 6: tracking error e = eta - eta_ref per DOF (m, rad; {n}), one line per run."""
     rs = _as_list(results)
     fig, axes = _six(fig, title)
     for i, ax in enumerate(axes):
         for j, r in enumerate(rs):
             k = _valid(r)
-            ax.plot(r.t[k], (r.eta - r.eta_ref)[k, i], color=_color(r, j), lw=0.9, label=_label(r), zorder=_z(j))
+            style.trace(ax, r.t[k], (r.eta - r.eta_ref)[k, i], color=_color(r, j), label=_label(r), zorder=_z(j))
         ax.axhline(0.0, color="0.3", lw=0.5)
         ax.set_ylabel(f"$e_{{{_sub(i)}}}$ ({_LIN[i]})")
     _legend(fig, axes)
     return fig
 
 
-def plot_thrusts(results, fig: Figure | None = None) -> Figure:
-    """Figure 7: thrust per thruster after saturation (N), one line per run.
+@style.styled
+def plot_thrusts(results, fig: Figure | None = None, title: str = "Thrust per thruster") -> Figure:
+    """Figure 7: thrust per thruster after saturation (N), one panel per thruster of the runs' system
+    (its names, :func:`thruster_names`), one line per run.
 
     The saturation limits [u_min, u_max] (from each run's parameters) are drawn as dotted grey lines
     on the panels where some run reaches them.
     """
     rs = _as_list(results)
-    fig, axes = _six(fig, "Thrust per thruster (Fig. 7)")
+    names = thruster_names(rs[0])
+    if any(thruster_names(r) != names for r in rs[1:]):
+        raise ValueError("plot_thrusts: the runs have different thrusters (runs of one system only)")
+    fig, axes = _six(fig, title, len(names))
     for i, ax in enumerate(axes):
         hit = set()
         for j, r in enumerate(rs):
             k = _valid(r)
             u = np.asarray(r.thrust)[k, i]
-            ax.plot(r.t[k], u, color=_color(r, j), lw=0.8, label=_label(r), zorder=_z(j))
-            lo, hi = _thrust_limits(r)
+            style.trace(ax, r.t[k], u, color=_color(r, j), label=_label(r), zorder=_z(j))
+            lo, hi = _thrust_limits(r, i)
             if u.size and u.min() <= lo + 1e-6:
                 hit.add(lo)
             if u.size and u.max() >= hi - 1e-6:
                 hit.add(hi)
         for lim in sorted(hit):
-            ax.axhline(lim, color="0.2", ls=":", lw=1.2, label="saturation limit")
+            ax.axhline(lim, color="0.2", ls=":", lw=1.0, label="saturation limit")
         ax.set_ylabel("thrust (N)")
-        ax.set_title(THRUSTER_LABELS[i], fontsize="medium")
+        ax.set_title(names[i])
     _legend(fig, axes)
     return fig
 
 
-def plot_sliding(results, fig: Figure | None = None) -> Figure:
+@style.styled
+def plot_sliding(results, fig: Figure | None = None,
+                 title: str = r"Sliding variables $s$ and $\pm\sigma$ bands") -> Figure:
     """Figure 8: sliding variable s per DOF (m/s, rad/s; {n}), with each run's band |s| <= sigma.
 
-    sigma comes from the run's own gains (Table 2 column ``sigma``) and is drawn as a shaded band in
+    sigma comes from the run's own gains (its ``sigma`` column) and is drawn as a shaded band in
     the run's colour; the y-range is symmetric and holds the whole series and every band.
     """
     rs = _as_list(results)
-    fig, axes = _six(fig, r"Sliding variables $s$ and $\pm\sigma$ bands (Fig. 8)")
+    fig, axes = _six(fig, title)
     for i, ax in enumerate(axes):
         ymax = 0.0
         for j, r in enumerate(rs):
             k = _valid(r)
             c = _color(r, j)
             s = np.asarray(r.s)[k, i]
-            ax.plot(r.t[k], s, color=c, lw=0.8, label=_label(r), zorder=_z(j))
+            style.trace(ax, r.t[k], s, color=c, label=_label(r), zorder=_z(j))
             sig = _gain(r, "sigma")
             if sig is not None:
                 name = controller_label(r.controller)
-                ax.axhspan(-sig[i], sig[i], facecolor=(c, 0.13), edgecolor=c, ls="--", lw=0.8, zorder=1, label=rf"$\pm\sigma$ ({name})")
+                ax.axhspan(-sig[i], sig[i], facecolor=(c, 0.13), edgecolor=c, ls="--", lw=0.6, zorder=1,
+                           label=rf"$\pm\sigma$ ({name})")
                 ymax = max(ymax, 1.5 * sig[i])
             finite = s[np.isfinite(s)]
             if finite.size:
@@ -261,22 +299,23 @@ def plot_sliding(results, fig: Figure | None = None) -> Figure:
     return fig
 
 
-def plot_gains(results, fig: Figure | None = None) -> Figure:
-    """Figure 9: adaptive gain k1 per DOF (Table 2 units), one line per run.
+@style.styled
+def plot_gains(results, fig: Figure | None = None, title: str = r"Adaptive gains $k_1$") -> Figure:
+    """Figure 9: adaptive gain k1 per DOF (the gain's units), one line per run.
 
     For laws with a floor (proposed, traditional, implicit) the run's k1min is a dotted line.
     """
     rs = _as_list(results)
-    fig, axes = _six(fig, r"Adaptive gains $k_1$ (Fig. 9)")
+    fig, axes = _six(fig, title)
     for i, ax in enumerate(axes):
         for j, r in enumerate(rs):
             k = _valid(r)
             c = _color(r, j)
-            ax.plot(r.t[k], np.asarray(r.k1)[k, i], color=c, lw=1.0, label=_label(r), zorder=_z(j))
+            style.trace(ax, r.t[k], np.asarray(r.k1)[k, i], color=c, label=_label(r), zorder=_z(j))
             kmin = _gain(r, "k1min")
             if kmin is not None:
                 name = controller_label(r.controller)
-                ax.axhline(kmin[i], color=c, ls=":", lw=0.9, label=f"$k_{{1\\min}}$ ({name})")
+                ax.axhline(kmin[i], color=c, ls=":", lw=0.8, label=f"$k_{{1\\min}}$ ({name})")
         ax.set_ylabel(f"$k_{{1,{_sub(i)}}}$")
     _legend(fig, axes)
     return fig
@@ -310,15 +349,18 @@ def _zoom_window(t: np.ndarray, k1_trad: np.ndarray, kmin: float, step: float, s
     return t0, t1, lo, hi
 
 
-def plot_zigzag(traditional, proposed, fig: Figure | None = None, span: float = 5.0) -> Figure:
+@style.styled
+def plot_zigzag(traditional, proposed, fig: Figure | None = None, span: float = 5.0,
+                title: str = r"$k_1$: traditional vs proposed adaptive law") -> Figure:
     """Figure 10: k1 of the traditional decreasing law vs the proposed law (eq. 19), per DOF.
 
     Each panel has an inset magnifying ``span`` seconds where the traditional gain reaches k1min
     (k1min - 1.5 l h .. k1min + 3 l h vertically, l h being one step of the traditional law): the
     discretised traditional law zigzags there by +-l h per sample, the proposed one stops at k1min.
+    The inset draws every sample; the main panel draws a zigzag too dense for its width as a band.
     """
     tr, pr = _as_list(traditional)[0], _as_list(proposed)[0]
-    fig, axes = _six(fig, r"$k_1$: traditional vs proposed adaptive law (Fig. 10)")
+    fig, axes = _six(fig, title)
     kmin = _gain(tr, "k1min")
     kmin_p = _gain(pr, "k1min")
     ell = _gain(tr, "l")
@@ -331,8 +373,8 @@ def plot_zigzag(traditional, proposed, fig: Figure | None = None, span: float = 
             (pr.t[kpr], np.asarray(pr.k1)[kpr, i], _color(pr, 1), _label(pr)),
         ]
         for t, k1, c, lab in lines:
-            ax.plot(t, k1, color=c, lw=1.0, label=lab)
-        ax.axhline(kmin[i], color="0.3", ls=":", lw=0.9, label=r"$k_{1\min}$")
+            style.trace(ax, t, k1, color=c, label=lab)
+        ax.axhline(kmin[i], color="0.3", ls=":", lw=0.8, label=r"$k_{1\min}$")
         ax.set_ylabel(f"$k_{{1,{_sub(i)}}}$")
         step = float(ell[i]) * float(tr.h)
         t0, t1, lo, hi = _zoom_window(np.asarray(tr.t)[ktr], lines[0][1], float(kmin[i]), step, span)
@@ -340,28 +382,29 @@ def plot_zigzag(traditional, proposed, fig: Figure | None = None, span: float = 
             lo = min(lo, float(kmin_p[i]) - 1.5 * step)
         ins = ax.inset_axes([0.52, 0.42, 0.45, 0.52])
         for t, k1, c, _lab in lines:
-            ins.plot(t, k1, color=c, lw=0.9, marker=".", ms=2.5)
-        ins.axhline(kmin[i], color="0.3", ls=":", lw=0.9)
+            ins.plot(t, k1, color=c, lw=0.7, marker=".", ms=2.0)
+        ins.axhline(kmin[i], color="0.3", ls=":", lw=0.8)
         ins.set_xlim(t0, t1)
         ins.set_ylim(lo, hi)
-        ins.tick_params(labelsize="x-small")
-        ins.set_title("magnified", fontsize="x-small", pad=2)
+        ins.tick_params(labelsize=6)
+        ins.set_title("magnified", fontsize=6, pad=2)
         ax.indicate_inset_zoom(ins, edgecolor="0.4")
     _legend(fig, axes)
     return fig
 
 
-def plot_disturbance(result, fig: Figure | None = None) -> Figure:
+@style.styled
+def plot_disturbance(result, fig: Figure | None = None, title: str | None = None) -> Figure:
     """Figure 11: the controller's total-disturbance estimate f_hat (RESO: Mhat z2) against the true
-    total disturbance f_true of eq. 6, per DOF (N, N m; {n}), for one run (the proposed controller)."""
+    total disturbance f_true of eq. 6, per DOF (N, N m; {n}), for one run (the proposed controller).
+    ``title``: default "Total disturbance: <estimate> vs simulated (<controller>)"."""
     r = _as_list(result)[0]
     est = "RESO estimate" if r.controller != "agsta" else "nominal-model estimate"
-    fig, axes = _six(fig, f"Total disturbance: {est} vs simulated (Fig. 11, {controller_label(r.controller)})")
+    fig, axes = _six(fig, title or f"Total disturbance: {est} vs simulated ({controller_label(r.controller)})")
     k = _valid(r)
     for i, ax in enumerate(axes):
-        ax.plot(r.t[k], np.asarray(r.f_true)[k, i], color="k", lw=1.0, label="simulated $f$ (eq. 6)")
-        ax.plot(r.t[k], np.asarray(r.f_hat)[k, i], color=_color(r, 0), lw=1.0, ls="--",
-                label=rf"{est} $\hat f$")
+        style.trace(ax, r.t[k], np.asarray(r.f_true)[k, i], color="k", label="simulated $f$ (eq. 6)")
+        style.trace(ax, r.t[k], np.asarray(r.f_hat)[k, i], color=_color(r, 0), ls="--", label=rf"{est} $\hat f$")
         ax.set_ylabel(f"$f_{{{_sub(i)}}}$ ({_FORCE[i]})")
     _legend(fig, axes)
     return fig

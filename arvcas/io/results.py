@@ -38,7 +38,7 @@ import numpy as np
 
 from arvcas.controllers import gains as gains_mod
 from arvcas.io import files
-from arvcas.params import SCHEMA as PARAM_SCHEMA
+from arvcas.system.params import SCHEMA as PARAM_SCHEMA
 from arvcas.sim.signals import Signal
 from arvcas.sim.simulation import Result
 
@@ -173,9 +173,10 @@ def _put(f: h5py.File, name: str, data: np.ndarray, sig: Signal) -> None:
         ds.attrs["frame"] = sig.frame
 
 
-def atomic_write(path, write: Callable[[Path], None]) -> Path:
-    """:func:`arvcas.io.files.atomic_write` with errors as :class:`ResultsError`."""
-    return files.atomic_write(path, write, ResultsError)
+def atomic_write(path, write: Callable[[Path], None], kind: str | None = None) -> Path:
+    """:func:`arvcas.io.files.atomic_write` with errors as :class:`ResultsError`; ``kind``: the file's
+    ``format`` (an HDF5 file), else as files.atomic_write's."""
+    return files.atomic_write(path, write, ResultsError, kind)
 
 
 def write_result(result: Result, path) -> Path:
@@ -188,14 +189,14 @@ def write_result(result: Result, path) -> Path:
     data, attrs = _collect(result)
 
     def fill(tmp: Path) -> None:
-        with h5py.File(tmp, "w") as f:
+        with files.new_hdf5(tmp) as f:
             for k, v in attrs.items():
                 f.attrs[k] = v
             for name, (arr, sig) in data.items():
                 _put(f, name, arr, sig)
             f.flush()
 
-    return atomic_write(path, fill)
+    return atomic_write(path, fill, FORMAT)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -520,16 +520,25 @@ def trim_static(P, n_quad: int = 5):
     return tm[2], tm[3], tm[4]
 
 
+TRIM_FZ_ZERO = 1e-100  # N: a static weight in water below this is zero for the trim (no overflow of M / F_z)
+
+
 def trim_from_static(Fz, Mx, My, eta):
     """The fixed trim buoyancy of docs/model.md §3 in {b}, from the static wrench at q0.
 
     A world-vertical upward force F_z at r_t = [-M_y/F_z, M_x/F_z, 0]:
-    ``f_t = R' [0, 0, -F_z]``, ``m_t = r_t x f_t``.
+    ``f_t = R' [0, 0, -F_z]``, ``m_t = r_t x f_t``. Without the division: ``m_t = [-M_y, M_x, 0] x u``
+    with ``u = R' [0, 0, -1]``; for an arm whose static weight in water is zero (``|F_z| <``
+    :data:`TRIM_FZ_ZERO`, a neutrally buoyant arm) the moment is computed that way (the limit of a
+    vanishing force at a receding point: a pure couple), so the trim is finite for every arm; for any
+    other ``F_z`` the expression (and so every number) is the one above.
     """
-    r_t = ca.vertcat(-My / Fz, Mx / Fz, 0)
     R = Rzyx(eta[3], eta[4], eta[5])
+    Fs = ca.if_else(ca.fabs(Fz) < TRIM_FZ_ZERO, 1, Fz)  # = F_z exactly (F_z + 0) unless F_z is zero
+    r_t = ca.vertcat(-My / Fs, Mx / Fs, 0)
     f_t = ca.mtimes(R.T, ca.vertcat(0, 0, -Fz))
-    return ca.vertcat(f_t, ca.cross(r_t, f_t))
+    g_t = ca.mtimes(R.T, ca.vertcat(0, 0, -Fs))  # = f_t, or u for a neutral arm
+    return ca.vertcat(f_t, ca.cross(r_t, g_t))
 
 
 def has_trim(P) -> bool:

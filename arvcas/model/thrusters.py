@@ -125,7 +125,7 @@ def has_dynamics(P) -> bool:
 
 
 def thruster_maps(P) -> list:
-    """The map of each listed thruster (its :class:`arvcas.systemfile.ThrusterMap`), in thruster order."""
+    """The map of each listed thruster (its :class:`arvcas.system.systemfile.ThrusterMap`), in thruster order."""
     return [P.s.thruster_map(d.map) for d in P.s.thruster_dynamics]
 
 

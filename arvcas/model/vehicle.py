@@ -1,7 +1,7 @@
 """The vehicle in Fossen form (paper eq. 1, Appendix A, Table A1; docs/model.md §2; docs/system-file.md).
 
 ``M nu_dot + C(nu) nu + D(nu) nu + g(eta) = tau``, body frame {b} at the COB, SNAME notation.
-Every function takes ``P`` (a :func:`arvcas.params.view` of the parameter vector) and works on any
+Every function takes ``P`` (a :func:`arvcas.system.params.view` of the parameter vector) and works on any
 CasADi type, so the same code builds the compiled graphs and evaluates numbers in tests.
 """
 
@@ -12,7 +12,7 @@ import math
 import casadi as ca
 
 from arvcas.model.spatial import J, skew
-from arvcas.systemfile import HydroTerm
+from arvcas.system.systemfile import HydroTerm
 
 __all__ = ["r_G", "I_b", "M_RB", "M_A", "M", "C_RB", "C_A", "D", "g_vec", "delta_s_term", "rhs"]
 

@@ -31,16 +31,18 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from arvcas.controllers import atd
+from arvcas.controllers import atd, gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model import manipulator, thrusters, vehicle, water as water_mod
 from arvcas.sim import scenario, schedule, signals as signals_mod
-from arvcas.params import Layout as ParamLayout, default_layout, view
+from arvcas.system.params import Layout as ParamLayout, default_layout, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.spatial import J, J_dot, J_inv
 from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
 
-__all__ = ["Layout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "INPUTS"]
+__all__ = ["Layout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "nominal_inertia",
+           "controller_memory", "controller_sample", "ControllerSample", "arm_truth", "controller_functions",
+           "controller_diagnostics", "controller_sizes", "ControllerSizes", "controller_reads", "INPUTS"]
 
 _PSYM = [(i, j) for i in range(12) for j in range(i, 12)]  # the EKF covariance's upper triangle, row by row
 _PSYM_INDEX = {ij: k for k, ij in enumerate(_PSYM)}
@@ -79,9 +81,9 @@ def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int
     return Layout([
         ("x", 12),  # true plant state [eta; nu]
         *([("thr", n_thr), ("thr_T", n_thr)] if dyn else []),  # rotor states and their thrust at t_k
-        ("xh", 12), ("Pc", N_PSYM),  # EKF prior for this sample (covariance: upper triangle, row by row)
-        ("y1", 6), ("y2", 6), ("r0", 6),  # ATD reference
-        *[(f"c_{name}", n) for name, n in ctrl.state],  # the controller's state
+        # the controller's memory: EKF prior for this sample (covariance: upper triangle, row by row),
+        # ATD reference, the law's state
+        *controller_memory(ctrl),
         # previous command (CHAT); held realised thrust, or with dynamics the previous delivered wrench
         ("tau_prev", 6), ("tdel_prev", 6) if dyn else ("u_hold", n_thr),
         ("chat_sum", 6), ("chatd_sum", 6), ("e2_sum", 6), ("ok", 1), ("t_fail", 1),
@@ -98,7 +100,12 @@ def derived_constants(P, opts: ModelOptions):
         Fz = Mx = My = 0
     else:
         Fz, Mx, My = manipulator.trim_static(P, opts.n_quad)
-    return ca.vertcat(Fz, Mx, My, ca.diag(vehicle.M(P)))
+    return ca.vertcat(Fz, Mx, My, nominal_inertia(P))
+
+
+def nominal_inertia(P):
+    """Mhat = diag(M) (6): the controllers' nominal inertia (docs/model.md §5)."""
+    return ca.diag(vehicle.M(P))
 
 
 @dataclass(frozen=True)
@@ -413,6 +420,195 @@ def _trace_offset(spec: RunSpec, name: str) -> int:
             return i
         i += sig.n(st.n_thrusters, st.n_joints)
     raise KeyError(name)
+# the controller's own memory, in this order (the loop state's and the exported controller's)
+def controller_memory(law: Controller) -> list[tuple[str, int]]:
+    """The fields of a controller's memory from sample to sample: the EKF prior (``xh``, the covariance's
+    upper triangle ``Pc``), the ATD reference (``y1``, ``y2``, ``r0``) and the law's own state
+    (``c_<name>``); in the loop state's order (:func:`state_layout`)."""
+    return [("xh", 12), ("Pc", N_PSYM), ("y1", 6), ("y2", 6), ("r0", 6), *[(f"c_{name}", n) for name, n in law.state]]
+
+
+class ControllerSample:
+    """What :func:`controller_sample` returns: the context the law saw (``ctx``), the commanded body
+    wrench ``tau_v``, the allocated thrust ``u_cmd`` and the saturated thrust ``u_sat`` (N, per
+    thruster, the command the thrusters receive), and ``memory``: the controller's memory for the next
+    sample (name -> expression, :func:`controller_memory`'s fields)."""
+
+    def __init__(self, ctx, tau_v, u_cmd, u_sat, memory):
+        self.ctx, self.tau_v, self.u_cmd, self.u_sat, self.memory = ctx, tau_v, u_cmd, u_sat, memory
+
+
+def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, memory: dict, gains, unc, ekf, Mhat,
+                      eta_d, tau_arm) -> ControllerSample:
+    """One sample of the controller, from the measurement to the thrust: steps 2-5 of the module docstring.
+
+    The one definition of the controller: the run's sample (:func:`_controller_part`) and the exported
+    controller (:mod:`arvcas.io.export_controller`) both build their graphs with it, so they perform
+    the same operations in the same order. ``y``: the measurement ``[eta; nu] + noise`` (12);
+    ``tk``: t_k (s); ``first``: 1 at sample 0 (a constant: its branches fold away), when the EKF
+    starts from ``y`` and the reference and the law's state start; ``memory``: the controller's memory
+    (name -> expression, :func:`controller_memory`); ``gains`` (the law's flat vector), ``unc`` (nominal
+    factors [C, D, g, arm]), ``ekf`` ([q_eta, q_nu, var_position, var_attitude, var_velocity]),
+    ``Mhat`` (:func:`nominal_inertia`), ``eta_d`` (the set point), ``tau_arm`` (the arm's wrench on the
+    vehicle plus the trim, {b}: the run's true value, which only a nominal model reads).
+    """
+    cols = law.columns()
+    k = len(cols)
+    G = {c: ca.vertcat(*[gains[d * k + j] for d in range(6)]) for j, c in enumerate(cols)}
+    h = cfg.time_h
+    # 2. EKF update (H = I, R = sensor covariance); the first sample starts from y_0 with P = R
+    if ekf.shape[0] == 14:  # per-axis sensor variances (the scenario's var_eta, var_nu)
+        r_meas = ekf[2:14]
+    else:
+        r_meas = ca.vertcat(ca.repmat(ekf[2], 3, 1), ca.repmat(ekf[3], 3, 1), ca.repmat(ekf[4], 6, 1))
+    xh = ca.if_else(first, y, memory["xh"])
+    Pu = memory["Pc"]
+    Pc = [ca.if_else(first, r_meas[i] if i == j else 0, Pu[k]) for k, (i, j) in enumerate(_PSYM)]
+    xh, Pc = _ekf_update(xh, Pc, y, r_meas)
+    eta_hat, nu_hat = xh[0:6], xh[6:12]
+    eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
+
+    # 3. ATD reference (docs/model.md §5): y1(0) = eta_hat(0), y2(0) = 0, A = max(|eta_d - eta_hat(0)|, A_min)
+    r0_first, h0 = atd.atd_params(eta_d - eta_hat, cfg.atd_T, h, cfg.atd_A_min)
+    r0 = ca.if_else(first, r0_first, memory["r0"])
+    y1 = ca.if_else(first, eta_hat, memory["y1"])
+    y2 = ca.if_else(first, ca.DM.zeros(6), memory["y2"])
+    e = eta_hat - y1
+    e_dot = eta_dot_hat - y2
+
+    # 4. the controller: its state (initial values at the first sample), its step
+    ctx = StepContext(t=tk, h=h, first=first, P=P, Mhat=Mhat, unc=unc, eta_d=eta_d, eta_hat=eta_hat,
+                      nu_hat=nu_hat, eta_dot_hat=eta_dot_hat, eta_ref=y1, eta_ref_dot=y2, e=e, e_dot=e_dot,
+                      tau_arm=tau_arm)
+    init = law.initial(ctx, G)
+    xc = {name: ca.if_else(first, init[name], memory[f"c_{name}"]) for name, _ in law.state}
+    tau_v, xc_next = law.step(ctx, G, xc)
+
+    # 5. allocation and saturation
+    u_cmd = thrusters.allocate(P, tau_v)
+    u_sat = thrusters.saturate(P, u_cmd)
+    # (issue 22: a thruster command map, thrust -> the unit the thrusters take, belongs here, after the
+    # saturation, so that the run and the exported controller send the same commands)
+
+    y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
+    memory_next = {"xh": _ekf_f(xh, h), "Pc": _ekf_cov(xh, Pc, h, ekf[0], ekf[1]), "y1": y1n, "y2": y2n, "r0": r0,
+                   **{f"c_{name}": xc_next[name] for name, _ in law.state}}
+    assert list(memory_next) == [name for name, _ in controller_memory(law)]
+    return ControllerSample(ctx, tau_v, u_cmd, u_sat, memory_next)
+
+
+# ---- the controller alone (arvcas export-controller: arvcas.io.export_controller) ------------------------
+
+_BY_NAME = {s.name: s for s in signals_mod.COMMON}
+_DIAG_COMMON = (
+    _BY_NAME["eta_hat"],
+    signals_mod.Signal("nu_hat", 6, signals_mod.RATE_UNITS, "{b}", "u, v, w, p, q, r", "EKF estimate of nu (body velocity about the COB)",
+           lambda c: c.nu_hat),
+    _BY_NAME["eta_ref"],
+    signals_mod.Signal("eta_ref_dot", 6, signals_mod.RATE_UNITS, "{n}", "x, y, z, phi, theta, psi",
+           "reference rate y2 of the adaptive tracking differentiator (eq. 12-13)", lambda c: c.eta_ref_dot),
+    _BY_NAME["tau_cmd"],
+)
+
+
+def controller_diagnostics(law: Controller) -> tuple:
+    """The signals the controller alone gives after a sample (an exported controller's diagnostics), in
+    order: the estimate, the reference, the commanded wrench, then the law's own traced signals (the
+    run's signals of the same names)."""
+    return _DIAG_COMMON + tuple(law.signals)
+
+
+
+
+@dataclass(frozen=True)
+class ControllerSizes:
+    """Sizes of the controller alone (:func:`controller_functions`): its parameters' fields (gains, nominal
+    factors, EKF tuning, set point, model parameters), its memory, thrusters and diagnostics."""
+
+    n_gains: int
+    n_p: int
+    n_u: int
+    n_mem: int
+    n_diag: int
+    n_ekf: int = 5  # [q_eta, q_nu, 3 group variances], or with per-axis sensors [q_eta, q_nu, 12 variances]
+
+    @property
+    def params(self) -> dict[str, int]:
+        return {"gains": self.n_gains, "unc": 4, "ekf": self.n_ekf, "eta_d": 6, "p": self.n_p}
+
+    @property
+    def n_k(self) -> int:  # the params, then Mhat
+        return sum(self.params.values()) + 6
+
+
+def controller_sizes(law: Controller, layout, cfg: ScenarioConfig | None = None) -> ControllerSizes:
+    return ControllerSizes(n_ekf=5 if cfg is None else cfg.ekf_vector.size,
+                           n_gains=gains_mod.n_gains(law), n_p=len(layout), n_u=layout.structure.n_thrusters,
+                 n_mem=sum(n for _, n in controller_memory(law)),
+                 n_diag=sum(s.n(layout.structure.n_thrusters, layout.structure.n_joints) for s in controller_diagnostics(law)))
+
+
+def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> dict[str, ca.Function]:
+    """The controller alone as CasADi functions (names carry ``prefix``), for ``arvcas export-controller``:
+
+    * ``mhat(p) -> Mhat``: :func:`arvcas.sim.closedloop.nominal_inertia`, once per init (the run's
+      ``derived_constants``);
+    * ``prep0(k) -> kp0``, ``prep(k) -> kp``: the terms of sample 0's and sample k's step that depend on
+      ``k`` alone (the allocation's inverse, products of gains...), once per init;
+    * ``step0(mem, k, kp0, y, t, tau_arm)`` and ``step(mem, k, kp, y, t, tau_arm) -> (mem_next, u,
+      diag)``: one controller sample (:func:`controller_sample`); ``k`` = the parameters
+      (:attr:`ControllerSizes.params`) then Mhat; ``u`` the saturated thrust per thruster (N);
+      ``diag`` the signals of :func:`controller_diagnostics`.
+
+    Built with :func:`controller_sample`, as the run's sample: the same operations in the same order;
+    the terms of ``k`` alone are taken out (:func:`casadi.extract_parametric`), not changed.
+    """
+    law = get_controller(law)
+    sz = controller_sizes(law, layout, cfg)
+    p = ca.SX.sym("p", sz.n_p)
+    fns = {"mhat": ca.Function(prefix + "mhat", [p], [nominal_inertia(view(p, layout))], ["p"], ["Mhat"])}
+    for first in (True, False):
+        mem, k = ca.SX.sym("mem", sz.n_mem), ca.SX.sym("k", sz.n_k)
+        y, t, tau_arm = ca.SX.sym("y", 12), ca.SX.sym("t"), ca.SX.sym("tau_arm", 6)
+        f, i = {}, 0
+        for name, n in (*sz.params.items(), ("Mhat", 6)):
+            f[name] = k[i:i + n]
+            i += n
+        memory, i = {}, 0
+        for name, n in controller_memory(law):
+            memory[name] = mem[i:i + n]
+            i += n
+        cs = controller_sample(law, cfg, view(f["p"], layout), y, t, ca.SX(1.0 if first else 0.0), memory,
+                               f["gains"], f["unc"], f["ekf"], f["Mhat"], f["eta_d"], tau_arm)
+        ctx = cs.ctx
+        ctx.__dict__.update(tau_v=cs.tau_v, u_sat=cs.u_sat)
+        try:
+            diag = [sig.value(ctx) for sig in controller_diagnostics(law)]
+        except (AttributeError, KeyError) as e:
+            raise ExportError(f"{WHAT}: controller {law.name}: a traced signal needs the plant's truth ({e}); "
+                              f"only signals of the controller's own quantities can be exported") from None
+        outs = ca.cse([ca.vertcat(*cs.memory.values()), cs.u_sat, ca.vertcat(*diag)])
+        whole, syms, vals = ca.extract_parametric(ca.vertcat(*outs), k, {"prefix": "kp_"})
+        kp = ca.SX.sym("kp", 0) if not syms else ca.vertcat(*syms)
+        parts = ca.vertsplit(whole, list(np.cumsum([0] + [o.shape[0] for o in outs])))
+        tag = "0" if first else ""
+        fns["prep" + tag] = ca.Function(prefix + "prep" + tag, [k], [ca.vertcat(*vals) if vals else ca.SX(0, 1)],
+                                        ["k"], ["kp" + tag])
+        fns["step" + tag] = ca.Function(prefix + "step" + tag, [mem, k, kp, y, t, tau_arm], parts,
+                                        ["mem", "k", "kp" + tag, "y", "t", "tau_arm"], ["mem_next", "u", "diag"])
+    return fns
+
+
+def controller_reads(fns: dict[str, ca.Function], name: str) -> bool:
+    """Whether the controller's command or memory depends on the step input ``name`` (``tau_arm``, ``t``)
+    of :func:`controller_functions`."""
+    out = []
+    for key in ("step0", "step"):
+        f = fns[key]
+        sym = f.sx_in()
+        res = f.call(sym)
+        out.append(ca.depends_on(ca.vertcat(res[0], res[1]), sym[f.index_in(name)]))
+    return any(out)
 
 
 def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: bool) -> ca.Function:
@@ -423,15 +619,11 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
     allocation's saturated thrust per thruster (the lag, in the step, turns it into the delivered wrench),
     and ``C`` leaves out the thrusters' own state (the step puts it first)."""
     law, cfg, opts = spec.law, spec.cfg, spec.opts
-    cols = law.columns()
     noise = ca.SX.sym("noise", 12)
     lay = spec.lay
     Rec = schedule.records(lay)
     rec0_t, rec0_a = ca.SX.sym("rec0_time", Rec.time_size), ca.SX.sym("rec0_arm", Rec.arm_size)
     R0 = schedule.unpack(ca.vertcat(rec0_t, rec0_a), lay)  # the time table's record at t_k
-    g = L.get(S, "gains")
-    k = len(cols)
-    G = {c: ca.vertcat(*[g[d * k + j] for d in range(6)]) for j, c in enumerate(cols)}
     P = view(L.get(S, "p"), lay)
     consts = L.get(S, "consts")
     Fz, Mx, My, Mhat = consts[0], consts[1], consts[2], consts[3:9]
@@ -444,54 +636,20 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
     x = L.get(S, "x")
     # 1. sensors
     y = x + noise
-    # 2. EKF update (H = I, R = sensor covariance); the first sample starts from y_0 with P = R
-    ekf = L.get(S, "ekf")  # [q_eta, q_nu, var_position, var_attitude, var_velocity] or [q_eta, q_nu, 12 variances]
-    if cfg.per_axis_sensors:
-        r_meas = ekf[2:14]
-    else:
-        r_meas = ca.vertcat(ca.repmat(ekf[2], 3, 1), ca.repmat(ekf[3], 3, 1), ca.repmat(ekf[4], 6, 1))
-    xh = ca.if_else(first, y, L.get(S, "xh"))
-    Pu = L.get(S, "Pc")
-    Pc = [ca.if_else(first, r_meas[i] if i == j else 0, Pu[k]) for k, (i, j) in enumerate(_PSYM)]
-    xh, Pc = _ekf_update(xh, Pc, y, r_meas)
-    eta_hat, nu_hat = xh[0:6], xh[6:12]
-    eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
 
-    # 3. ATD reference (docs/model.md §5): y1(0) = eta_hat(0), y2(0) = 0, A = max(|eta_d - eta_hat(0)|, A_min)
-    r0_first, h0 = atd.atd_params(eta_d - eta_hat, cfg.atd_T, h, cfg.atd_A_min)
-    r0 = ca.if_else(first, r0_first, L.get(S, "r0"))
-    y1 = ca.if_else(first, eta_hat, L.get(S, "y1"))
-    y2 = ca.if_else(first, ca.DM.zeros(6), L.get(S, "y2"))
-    e = eta_hat - y1
-    e_dot = eta_dot_hat - y2
-
-    # the true state's coupled terms at t_k with the held thrust: f_true (eq. 6) and the arm's wrench
     q, pl = R0["q"], R0["payload"]
     eta, nu = x[0:6], x[6:12]
     dyn = lay.structure.has_thruster_dynamics
     # the thrust acting at t_k: the held realised thrust, or with dynamics the rotors' delivered thrust
     u_hold = L.get(S, "thr_T" if dyn else "u_hold")
-    tau_real_held = ca.mtimes(thrusters.B_T(P), u_hold)
-    trim = _trim(P, Fz, Mx, My, eta)
-    tau_dist = scenario.disturbance_tabulated(cfg, R0["dist_sin"], R0["dist_cos"], phase_cs)
-    if cfg.has_water:
-        current, tether = _water(cfg, P, L.get(S, "water"), tk, eta, nu)
-        nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist + tether, R0, trim, opts,
-                                                       current)
-    else:
-        nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist, R0, trim, opts)
+    tau_real_held, trim, nud_true, tau_m_true = _true_terms(cfg, opts, P, x, u_hold, R0, (Fz, Mx, My), phase_cs,
+                                                            L.get(S, "water"), tk)
 
-    # 4. the controller: its state (initial values at the first sample), its step
-    ctx = StepContext(t=tk, h=h, first=first, P=P, Mhat=Mhat, unc=unc, eta_d=eta_d, eta_hat=eta_hat,
-                      nu_hat=nu_hat, eta_dot_hat=eta_dot_hat, eta_ref=y1, eta_ref_dot=y2, e=e, e_dot=e_dot,
-                      tau_arm=tau_m_true + trim)
-    init = law.initial(ctx, G)
-    xc = {name: ca.if_else(first, init[name], L.get(S, f"c_{name}")) for name, _ in law.state}
-    tau_v, xc_next = law.step(ctx, G, xc)
-
-    # 5. allocation and saturation
-    u_cmd = thrusters.allocate(P, tau_v)
-    u_sat = thrusters.saturate(P, u_cmd)
+    # 2-5. the controller: EKF, reference, law, allocation and saturation
+    memory = {name: L.get(S, name) for name, _ in controller_memory(law)}
+    cs = controller_sample(law, cfg, P, y, tk, first, memory, L.get(S, "gains"), unc, L.get(S, "ekf"), Mhat, eta_d,
+                           tau_m_true + trim)
+    ctx, tau_v, u_sat, y1 = cs.ctx, cs.tau_v, cs.u_sat, cs.ctx.eta_ref
     tau_real = ca.mtimes(thrusters.B_T(P), u_sat)
 
     # f_true, eq. 6, at t_k: f = Mhat eta_ddot - tau_eta,real (eq. 5), eta_ddot = J nu_dot + Jdot nu
@@ -513,13 +671,10 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
     e2_sum = L.get(S, "e2_sum") + ca.if_else(last, 0, e_true**2)
     lim = ca.DM([cfg.limits_e_position] * 3 + [cfg.limits_e_attitude] * 3)
     ok_c = ca.logic_and(ok, ca.logic_and(ca.mmax(ca.fabs(e_true) / lim) < 1, ca.mmax(ca.fabs(tau_v)) < 1e12))
-    y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
     # the sample's new loop state except x (the plant's, set in finalize) and the run's constants
     # (never changed: the step passes them on itself)
     new = {
-        "xh": _ekf_f(xh, h), "Pc": _ekf_cov(xh, Pc, h, ekf[0], ekf[1]),
-        "y1": y1n, "y2": y2n, "r0": r0, **{f"c_{name}": xc_next[name] for name, _ in law.state},
-        "tau_prev": tau_v, **({"tdel_prev": tau_real_held} if dyn else {"u_hold": u_sat}),
+        **cs.memory, "tau_prev": tau_v, **({"tdel_prev": tau_real_held} if dyn else {"u_hold": u_sat}),
         "chat_sum": chat_sum, "chatd_sum": chatd_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
     }
     names = [n for n in L.slices if n not in ("thr", "thr_T")]  # the thrusters' state comes from the step
@@ -533,6 +688,44 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
         outs.append(ca.vertcat(*[sig.value(ctx) for sig in signals_mod.trace_signals(law, lay.structure)]))
     name = f"cl_ctrl_{law.name}" + ("_first" if first.is_one() else "") + ("_tr" if trace else "")
     return ca.Function(name, [*ins, tk, noise, rec0_t, rec0_a], ca.cse(outs))
+
+
+def _true_terms(cfg, opts, P, x, u_hold, R0, static, phase_cs, water=None, tk=None):
+    """The true state's coupled terms at t_k with the held thrust, for f_true (eq. 6) and the arm's
+    wrench: (B_T u_hold, the trim wrench, nu_dot, tau_m). ``static``: (F_z, M_x, M_y) of
+    :func:`derived_constants`; ``R0``: the time table's record at t_k; ``water``, ``tk``: the run's
+    current and tether at t_k (docs/model.md §10; needed when the scenario has them)."""
+    eta, nu = x[0:6], x[6:12]
+    tau_real_held = ca.mtimes(thrusters.B_T(P), u_hold)
+    trim = _trim(P, *static, eta)
+    tau_dist = scenario.disturbance_tabulated(cfg, R0["dist_sin"], R0["dist_cos"], phase_cs)
+    if cfg.has_water:
+        current, tether = _water(cfg, P, water, tk, eta, nu)
+        nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist + tether, R0, trim, opts,
+                                                       current)
+    else:
+        nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist, R0, trim, opts)
+    return tau_real_held, trim, nud_true, tau_m_true
+
+
+def arm_truth(spec: RunSpec) -> ca.Function:
+    """``(x, u_hold, rec_time, rec_arm, p, phase) -> tau_m + trim``: the run's true arm wrench on the
+    vehicle plus the trim at sample k (the ``tau_arm`` a controller's step sees: :class:`StepContext`),
+    from the true state, the held thrust and the time table's record at t_k; the run's operations."""
+    lay = spec.lay
+    if spec.cfg.has_water or lay.structure.has_thruster_dynamics:
+        raise ValueError("arm_truth: the run's current, tether or thruster dynamics (docs/model.md §9-§10) are not "
+                         "inputs of it")
+    Rec = schedule.records(lay)
+    x, u_hold = ca.SX.sym("x", 12), ca.SX.sym("u_hold", lay.structure.n_thrusters)
+    rt, ra = ca.SX.sym("rec_time", Rec.time_size), ca.SX.sym("rec_arm", Rec.arm_size)
+    p, phase = ca.SX.sym("p", len(lay)), ca.SX.sym("phase", 6)
+    P = view(p, lay)
+    consts = derived_constants(P, spec.opts)
+    _, trim, _, tau_m = _true_terms(spec.cfg, spec.opts, P, x, u_hold, schedule.unpack(ca.vertcat(rt, ra), lay),
+                                    (consts[0], consts[1], consts[2]), ca.vertcat(ca.cos(phase), ca.sin(phase)))
+    return ca.Function("arm_truth", [x, u_hold, rt, ra, p, phase], [tau_m + trim],
+                       ["x", "u_hold", "rec_time", "rec_arm", "p", "phase"], ["tau_arm"])
 
 
 def _sym_get(Pu, i, j):

@@ -19,7 +19,6 @@ toolchain, so a warm start only loads a shared library.
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,10 +29,11 @@ import numpy as np
 from arvcas import __version__
 from arvcas.build import calls, codegen
 from arvcas.controllers import gains as gains_mod
-from arvcas.controllers.base import Controller, get as get_controller
+from arvcas.controllers.base import Controller, get as get_controller, provenance
 from arvcas.model.uvms import ModelOptions
-from arvcas.params import Params, default_layout, system_tag
+from arvcas.system.params import Params, default_layout, system_tag
 from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
+from arvcas.sim.result import Result
 from arvcas.sim.scenario import ScenarioConfig
 
 __all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS", "CHAT_KINDS"]
@@ -41,6 +41,7 @@ __all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS", "CHAT_KINDS"]
 MAX_RUNS = 10_000_000  # runs in one batch call (the outputs alone take 100 bytes a run)
 # CHAT on the command (eq. 42, the paper's) or on the thrusters' delivered wrench: the run's output of each
 CHAT_KINDS = {"commanded": "chat", "delivered": "chat_delivered"}
+_OUT_BYTES = 2 * 8 * (6 + 6 + 1 + 1 + 6)  # a run's outputs (chat, rmse, ok, t_fail, chat_delivered) and copies
 
 
 class SimulationError(ValueError):
@@ -53,7 +54,7 @@ class Run:
 
     ``controller``: a registered name or a :class:`~arvcas.controllers.Controller`; ``scenario``: a
     :class:`~arvcas.sim.scenario.ScenarioConfig`, a scenario file, or None (the system's default);
-    ``params``: the system: :class:`~arvcas.params.Params`, an :class:`arvcas.system.System`, a shipped
+    ``params``: the system: :class:`~arvcas.system.params.Params`, an :class:`arvcas.system.System`, a shipped
     system's name (``arvcas systems``), a system file, or None (Haidou-1);
     ``options``: :class:`~arvcas.model.uvms.ModelOptions`.
     """
@@ -96,16 +97,6 @@ def _check_lag(cfg: ScenarioConfig, params: Params) -> None:
                                       f"(the thruster is then instantaneous: use params.instantaneous())")
 
 
-def _file_digest(paths) -> str:
-    h = hashlib.sha256()
-    for p in paths:
-        try:
-            h.update(Path(p).read_bytes())
-        except OSError:
-            h.update(f"<unreadable {p}>".encode())
-    return h.hexdigest()
-
-
 class CompiledRun:
     """A compiled closed-loop run (see the module docstring). Build it with :meth:`Run.compile`.
 
@@ -122,14 +113,14 @@ class CompiledRun:
         self.inputs = closedloop.INPUTS
         self._fns: dict[bool, ca.Function] = {}
         self._pv = params.vector()
+        self._source: dict | None = None
 
     # -- compiled functions ----------------------------------------------------------------------------
     def description(self, trace: bool) -> str:
         """What keys the compiled run in the cache (beside the package's model hash and the toolchain)."""
         law = self.controller
-        own = [f for f in law.source_files() if not f.startswith(str(Path(codegen.__file__).resolve().parents[1]))]
         system = system_tag(self.params.structure)
-        return (f"run controller={law.identity()} own_source={_file_digest(own)} trace={trace} "
+        return (f"run controller={law.identity()} own_source={law.source_digest()} trace={trace} "
                 f"scenario={self.cfg.graph_key()!r} options={self.opts!r}{system}")
 
     def function(self, trace: bool) -> ca.Function:
@@ -140,8 +131,9 @@ class CompiledRun:
             name = f"run_{self.controller.name}" + ("_trace" if trace else "")
             fn = _FUNCTIONS.get((name, self.description(trace)))
             if fn is None:
+                what = f"the run for {self.params.structure.name} / {self.controller.name}" + (" (traced)" if trace else "")
                 fn = codegen.build_described(name, self.description(trace), lambda: closedloop.build_run(spec, trace),
-                                             batch_loop=True)
+                                             batch_loop=True, label=what)
                 _FUNCTIONS[(name, self.description(trace))] = fn
             self._fns[trace] = fn
         return fn
@@ -177,8 +169,8 @@ class CompiledRun:
         return g
 
     def _unc_phase(self, uncertainty, phase):
-        unc = self.cfg.uncertainty if uncertainty is None else np.asarray(uncertainty, dtype=float)
-        ph = np.array(self.cfg.disturbance_phase) if phase is None else np.asarray(phase, dtype=float)
+        unc = self.cfg.uncertainty if uncertainty is None else calls.real_array(uncertainty, "uncertainty", SimulationError)
+        ph = np.array(self.cfg.disturbance_phase) if phase is None else calls.real_array(phase, "phase", SimulationError)
         if unc.shape != (4,) or not np.isfinite(unc).all():
             raise SimulationError(f"uncertainty: expected 4 finite factors [C, D, g, arm], got {unc}")
         if ph.shape != (6,) or not np.isfinite(ph).all():
@@ -197,10 +189,9 @@ class CompiledRun:
         ``noise_scale`` multiplies the drawn sensor noise (0: perfect measurements) while the EKF keeps
         the nominal sensor covariance: an analysis knob for how much noise reaches the thrusters.
         """
-        from arvcas.sim.simulation import Result
-
         g = self._gains(gains, batch=False)
-        if not (isinstance(noise_scale, (int, float)) and np.isfinite(noise_scale) and noise_scale >= 0):
+        if isinstance(noise_scale, bool) or not (isinstance(noise_scale, (int, float)) and np.isfinite(noise_scale)
+                                                 and noise_scale >= 0):
             raise SimulationError(f"noise_scale: must be a finite number >= 0, got {noise_scale!r}")
         noise = scenario.noise_sequence(self.cfg, seed) * float(noise_scale)
         unc, ph = self._unc_phase(uncertainty, phase)
@@ -216,6 +207,8 @@ class CompiledRun:
             i += w
         ok_b = bool(out["ok"].item() > 0.5)
         meta = self._meta(fn) | ({"noise_scale": float(noise_scale)} if noise_scale != 1.0 else {})
+        if not ok_b:
+            meta["failure"] = self._failure(series, float(out["t_fail"].item()))
         return Result(
             controller=self.controller.name, gains=np.asarray(g, dtype=float), seed=int(seed),
             chat=out["chat"].ravel(), rmse=out["rmse"].ravel(), ok=ok_b, chat_delivered=out["chat_delivered"].ravel(),
@@ -224,6 +217,26 @@ class CompiledRun:
             meta=meta, signals=self.signals, series=series,
         )
 
+    def _failure(self, series: dict, t_fail: float) -> str:
+        """Why a traced run stopped at ``t_fail`` (the closed loop's checks, in docs/model.md §6's order):
+        the tracking error beyond the scenario's limits, a controller command that is not finite (or
+        above 1e12), or else the plant's state that the step from ``t_fail`` made non-finite (or >= 1e6)."""
+        cfg = self.cfg
+        k = min(int(round(t_fail / cfg.time_h)), len(series["eta"]) - 1)
+        e = np.abs(series["eta"][k] - series["eta_ref"][k])
+        lim = np.array([cfg.limits_e_position] * 3 + [cfg.limits_e_attitude] * 3)
+        dofs = "x y z phi theta psi".split()
+        bad = [i for i in range(6) if not e[i] < lim[i]]
+        if bad and np.isfinite(e[bad[0]]):
+            i = bad[0]
+            return (f"tracking error of {dofs[i]} {e[i]:.3g} {'m' if i < 3 else 'rad'} reached "
+                    f"limits.{'e_position' if i < 3 else 'e_attitude'} ({lim[i]:g})")
+        tau = series["tau_cmd"][k]
+        if not (np.isfinite(tau).all() and np.abs(tau).max() < 1e12):
+            return "the controller's command is not finite or above 1e12 (gains or controller state)"
+        return (f"the plant's state became non-finite (NaN or inf) or reached 1e6 in the step after t = "
+                f"{t_fail:g} s: the model gives no finite motion there (check the system's numbers and inputs)")
+
     def _meta(self, fn: ca.Function) -> dict:
         art = codegen.artifact_of(fn) or {}
         meta = {"artifact_key": art.get("key"), "artifact_flags": art.get("flags"),
@@ -231,6 +244,10 @@ class CompiledRun:
         st = self.params.structure
         if st != default_layout().structure:  # another system: its name, file and parameter names
             meta |= {"system": st.name, "system_file": self.params.path, "param_names": self.params.names()}
+        if self._source is None:  # a law from outside the package: where it came from, its source's digest
+            self._source = provenance(self.controller)
+        if self._source:
+            meta["controller_source"] = self._source
         return meta
 
     def batch(self, gains, seed: int = 0, uncertainty=None, phase=None, n_threads: int | None = None,
@@ -255,10 +272,12 @@ class CompiledRun:
         None, (4,) or (n, 4); ``phase``: None, (6,) or (n, 6). Returns ``(chat, rmse, ok, t_fail)``;
         ``chat`` as :meth:`batch`.
         """
-        seeds = np.asarray(seeds)
+        seeds = calls.integer_array(seeds, "seeds", SimulationError, max_size=MAX_RUNS)
         if seeds.ndim != 1 or seeds.size == 0:
             raise SimulationError(f"seeds: expected a non-empty 1-D sequence of integers, got shape {seeds.shape}")
         n = seeds.size
+        if n > MAX_RUNS:
+            raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
         g = self._gains(gains, batch=True)
         if g.shape[0] not in (1, n):
             raise SimulationError(f"gains: {g.shape[0]} gain sets for {n} seeds (give 1 or {n})")
@@ -266,7 +285,7 @@ class CompiledRun:
         unc0, ph0 = self._unc_phase(None, None)
 
         def rows(v, default, k, name):
-            a = np.asarray(default if v is None else v, dtype=float)
+            a = calls.real_array(default if v is None else v, name, SimulationError)
             if a.shape == (k,):
                 a = np.broadcast_to(a, (n, k))
             if a.shape != (n, k) or not np.isfinite(a).all():
@@ -275,7 +294,15 @@ class CompiledRun:
 
         U = rows(uncertainty, unc0, 4, "uncertainty")
         PH = rows(phase, ph0, 6, "phase")
-        noise = np.hstack([scenario.noise_sequence(self.cfg, int(sd)) for sd in seeds])
+        first = scenario.noise_sequence(self.cfg, int(seeds[0]))  # every draw's noise block has its shape
+        k = first.shape[1]
+        # bounded before allocating: n noise blocks, the per-run inputs, the outputs (and their copies)
+        calls.check_memory(f"many: {n} runs", n * (first.nbytes + 8 * (G.shape[1] + 4 + 6) + _OUT_BYTES),
+                           error=SimulationError)
+        noise = np.empty((first.shape[0], n * k), order="F")  # as call_named reads it: no copy
+        noise[:, :k] = first
+        for i in range(1, n):
+            noise[:, i * k:(i + 1) * k] = scenario.noise_sequence(self.cfg, int(seeds[i]))
         return self._evaluate(n, {"gains": G.T, "noise": noise, "unc": U.T, "phase": PH.T},
                               {"gains", "noise", "unc", "phase"}, n_threads, chat)
 
@@ -286,6 +313,7 @@ class CompiledRun:
             raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
         if chat not in CHAT_KINDS:
             raise SimulationError(f"chat: expected one of {', '.join(CHAT_KINDS)}, got {chat!r}")
+        calls.check_memory(f"runs: {n}", n * _OUT_BYTES, error=SimulationError)
         fn = self.function(trace=False)
         out = calls.call_named(fn, {**varying, **self._shared()}, n=n, per_run=per_run,
                                n_threads=_n_threads(n_threads))

@@ -17,8 +17,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from arvcas import config, tomlfile
-from arvcas.config import ge, gt, le, quantity
+from arvcas.system import config, tomlfile
+from arvcas.system.config import ge, gt, le, quantity
 
 __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
@@ -416,9 +416,45 @@ def default_scenario_path() -> Path:
 
 
 def load_scenario(path: str | Path | None = None) -> ScenarioConfig:
-    """Load and validate the scenario file; one-line :class:`ScenarioError` naming file and key."""
+    """Load and validate the scenario file; one-line :class:`ScenarioError` naming file and key.
+
+    An event of the file that starts at or after its run's end is warned (:class:`ScenarioWarning`,
+    :func:`_check_within_run`): it changes nothing, likely a slip of units or of ``time.duration``, but a
+    shortened copy of a scenario (``to_toml`` of a replaced duration) has such events on purpose."""
     p = Path(path) if path is not None else default_scenario_path()
-    return loads_scenario(tomlfile.read_text(p, ScenarioError), str(p))
+    cfg = loads_scenario(tomlfile.read_text(p, ScenarioError), str(p))
+    _check_within_run(cfg, str(p))
+    return cfg
+
+
+def _check_within_run(cfg: ScenarioConfig, where: str) -> None:
+    """No event of the file starts at or after the run's end (it would change nothing: likely a slip of
+    units or of time.duration): an arm motion (its start), a payload event, the paper's reach, grasp
+    and return."""
+    T = cfg.time_duration
+    late = [(f"arm.waypoint[{j}].t", w.t) for j, w in enumerate(cfg.arm_waypoint or (), start=1)
+            if j > 1 and cfg.arm_waypoint[j - 2].t >= T]
+    late += [(f"payload.event[{j}].t", e.t) for j, e in enumerate(cfg.payload_event or (), start=1) if e.t >= T]
+    if cfg.arm_waypoint is None:
+        late += [(f"arm.{k}", getattr(cfg, "arm_" + k)) for k in ("hold_until", "payload_on", "return_start")
+                 if getattr(cfg, "arm_" + k) >= T]
+    if late:
+        import warnings
+
+        key, t = late[0]
+        more = f" (and {len(late) - 1} more)" if len(late) > 1 else ""
+        msg = (f"{where}: {key}: {t:g} s: this event starts at or after the run's end (time.duration {T:g} s), so "
+               f"it changes nothing{more}")
+        if msg not in _WARNED:  # once per process
+            _WARNED.add(msg)
+            warnings.warn(msg, ScenarioWarning, stacklevel=3)
+
+
+class ScenarioWarning(UserWarning):
+    """A scenario file's number that is allowed but changes nothing (an event after the run's end)."""
+
+
+_WARNED: set[str] = set()
 
 
 def loads_scenario(text: str, where: str = "<scenario text>") -> ScenarioConfig:
@@ -431,9 +467,45 @@ def loads_scenario(text: str, where: str = "<scenario text>") -> ScenarioConfig:
                            for w in arm["waypoint"]]
     loaded = config.load_doc(ScenarioFile, doc, where, ScenarioError, entries=True)
     values = {_field(leaf.key): _get(loaded.value, leaf.attrs) for leaf in _LEAVES}
-    cfg = ScenarioConfig(**values, text=text, path=where)
+    cfg = _wrap_angles(ScenarioConfig(**values, text=text, path=where), where)
     _check_consistency(cfg, where)
     return cfg
+
+
+def _wrap_angles(cfg: ScenarioConfig, where: str) -> ScenarioConfig:
+    """The initial pose's and the set-point's roll and yaw wrapped into [-pi, pi] (720 deg is 0 deg: the
+    controllers act on eta - eta_d, so an unwrapped set-point asks for whole turns); an angle already
+    in range is kept as it is. A pitch at or beyond +-90 deg is refused: the ZYX Euler angles are
+    singular there."""
+    out = {}
+    for key in ("initial_eta0", "initial_eta_d"):
+        eta = list(getattr(cfg, key))
+        label = key.replace("_", ".", 1)
+        if not abs(eta[4]) < math.pi / 2:
+            raise ScenarioError(f"{where}: {label}: pitch {math.degrees(eta[4]):g} deg is at or beyond +-90 deg, "
+                                f"where the Euler angles are singular")
+        for i in (3, 5):
+            if abs(eta[i]) > math.pi:
+                eta[i] = math.remainder(eta[i], 2 * math.pi)
+        out[key] = tuple(eta)
+    return replace(cfg, **out)
+
+
+def _check_motion_steps(cfg: ScenarioConfig, where: str) -> None:
+    """No arm motion is shorter than the plant step: a quintic between two RK4 stage times would move the
+    arm with no reaction on the vehicle."""
+    hp = cfg.time_h_plant
+    ws = cfg.arm_waypoint or ()
+    for j, w in enumerate(ws, start=1):
+        if j > 1 and w.t - ws[j - 2].t < hp - 1e-12:
+            raise ScenarioError(f"{where}: arm.waypoint[{j}].t: the motion from waypoint {j - 1} takes "
+                                f"{w.t - ws[j - 2].t:g} s, less than the plant step time.h_plant ({hp:g} s): the "
+                                f"plant would not see it")
+    if cfg.arm_waypoint is None and cfg.arm_return_end is not None:
+        for k0, k1 in (("hold_until", "reach_end"), ("return_start", "return_end")):
+            if getattr(cfg, "arm_" + k1) - getattr(cfg, "arm_" + k0) < hp - 1e-12:
+                raise ScenarioError(f"{where}: arm.{k1}: the motion from arm.{k0} is shorter than the plant step "
+                                    f"time.h_plant ({hp:g} s): the plant would not see it")
 
 
 def table_bytes(cfg: ScenarioConfig) -> int:
@@ -453,6 +525,7 @@ def _check_consistency(cfg: ScenarioConfig, where: str) -> None:
         raise ScenarioError(f"{where}: time.h: h / h_plant = {round(r)} plant steps per sample, at most "
                             f"{MAX_SUBSTEPS} (they are unrolled in the compiled sample step)")
     _check_motion(cfg, where)
+    _check_motion_steps(cfg, where)
     _check_current(cfg, where)
     if cfg.time_duration < cfg.time_h:
         raise ScenarioError(f"{where}: time.duration must be at least one sample time.h")

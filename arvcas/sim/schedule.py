@@ -34,7 +34,7 @@ from arvcas.build import calls, codegen
 from arvcas.model import manipulator, vehicle
 from arvcas.sim import scenario
 from arvcas.model.linalg import lu_nopivot, lu_pack, lu_unpack
-from arvcas.params import default_layout, system_tag, view
+from arvcas.system.params import default_layout, system_tag, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.uvms import ModelOptions
 
@@ -193,7 +193,8 @@ def _compiled(kind: str, key, make, structure=None) -> ca.Function:
     with _FUNCS_LOCK:
         f = _FUNCS.get((kind, key, structure))
         if f is None:
-            f = codegen.build_described(name, f"schedule {kind} {key!r} chunk={ARM_CHUNK}{st}", make)
+            what = f"the {kind} table for {(structure or default_layout().structure).name}"
+            f = codegen.build_described(name, f"schedule {kind} {key!r} chunk={ARM_CHUNK}{st}", make, label=what)
             _FUNCS[(kind, key, structure)] = f
         return f
 

@@ -107,7 +107,7 @@ THRUSTER_DYNAMICS: tuple[Signal, ...] = (
 
 def trace_signals(controller, structure=None) -> tuple[Signal, ...]:
     """The traced signals of a run of ``controller`` (an :class:`arvcas.controllers.Controller`) on a system
-    of ``structure`` (:class:`arvcas.systemfile.Structure`; None: instantaneous thrusters), in order."""
+    of ``structure`` (:class:`arvcas.system.systemfile.Structure`; None: instantaneous thrusters), in order."""
     dyn = THRUSTER_DYNAMICS if structure is not None and structure.has_thruster_dynamics else ()
     return COMMON + dyn + tuple(controller.signals)
 

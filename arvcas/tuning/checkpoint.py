@@ -15,7 +15,9 @@ study file), ``study_path``, ``identity`` (JSON of what shapes the search, see
 ``interrupted``, ``finished``), ``stop_reason``, ``n_gen``, ``n_eval``, ``rng_state`` (JSON),
 ``reference_point``, ``versions`` (JSON: arvcas, pymoo, casadi, numpy, h5py, python),
 ``artifact_key`` (content hash of the compiled run), ``engine`` (last session), ``created``,
-``updated`` (ISO 8601 UTC).
+``updated`` (ISO 8601 UTC); for a controller defined outside the package, ``plugin`` (JSON of
+:func:`arvcas.controllers.base.provenance`: the controller's class, the sha256 of its source files,
+and the plugin file, module or entry point and distribution it came from).
 
 =====================  ===========  =============================================================
 dataset                shape        content
@@ -62,7 +64,7 @@ from arvcas.io import files
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "HISTORY_FIELDS", "CheckpointError", "Checkpoint", "write_checkpoint",
     "read_checkpoint", "StudyLock", "check_out_dir", "front_indices", "versions", "FRONT_NAME",
-    "remove_stale_temps", "provenance_diff",
+    "remove_stale_temps", "provenance_diff", "controller_of",
 ]
 
 FORMAT = "arvcas.tuning.front"
@@ -140,6 +142,7 @@ class Checkpoint:
     system: str = ""  # the system the runs used: a shipped name or a system file ("": Haidou-1)
     ref_chat: np.ndarray | None = None  # the objectives' per-DOF normalisation (None: Table 3's AGSTA)
     ref_rmse: np.ndarray | None = None
+    plugin: dict = field(default_factory=dict)  # where a controller from outside the package came from
     engine: str = ""
     created: str = ""
     updated: str = ""
@@ -227,12 +230,37 @@ class StudyLock:
         self.release()
 
 
-def provenance_diff(c: Checkpoint, params_vector) -> list[str]:
+def controller_of(c, where: str):
+    """The registered controller of a checkpoint or front ``c`` (an entry point of its name is loaded);
+    for one from a plugin that is not loaded, a one-line :class:`CheckpointError` saying which plugin
+    to load (``where``: the file, for the message)."""
+    from arvcas.controllers import base
+
+    try:
+        return base.get(c.controller)
+    except base.ControllerError as e:
+        if not c.plugin:
+            raise CheckpointError(f"{where}: {e}") from None
+        src, hint = base.describe_provenance(c.plugin)
+        raise CheckpointError(f"{where}: controller '{c.controller}' is not registered; it came from {src} (source "
+                              f"sha256 {str(c.plugin.get('digest', ''))[:12]}): {hint}") from None
+
+
+def provenance_diff(c: Checkpoint, params_vector, where: str = "front") -> list[str]:
     """What differs between the code, data and parameters that computed ``c`` and this installation's
-    (``params_vector``): empty when a resume or replay under them reproduces the stored numbers."""
+    (``params_vector``): empty when a resume or replay under them reproduces the stored numbers. A
+    controller from a plugin must be registered (:func:`controller_of`); its source files are compared
+    with the digest the file records."""
     from arvcas.build.provenance import model_hash
 
     out = []
+    if c.plugin:
+        now = controller_of(c, where).source_digest()
+        if now != c.plugin.get("digest"):
+            from arvcas.controllers.base import describe_provenance
+
+            out.append(f"the source of controller '{c.controller}' changed ({describe_provenance(c.plugin)[0]}: sha256 "
+                       f"{str(c.plugin.get('digest', ''))[:12]} in the file, {now[:12]} now)")
     if not c.model_hash:
         out.append("the file records no model hash (written by an older arvcas)")
     elif c.model_hash != model_hash():
@@ -254,7 +282,7 @@ _POP = ("X", "gains", "F", "G", "rank", "crowding", "chat", "rmse", "ok", "t_fai
 _T2 = ("F", "G", "chat", "rmse", "ok", "t_fail")
 
 
-_GAIN_UNITS = "gain units of each variable (Table 2; see variables/names)"
+_GAIN_UNITS = "gain units of each variable (see variables/names and the controller's gain table)"
 _OBJ = "f_chat, f_rmse: mean over the 6 DOF of CHAT and RMSE / the paper's AGSTA values (dimensionless)"
 _CHAT_UNITS = "N (x, y, z), N m (phi, theta, psi)"
 _RMSE_UNITS = "m (x, y, z), rad (phi, theta, psi)"
@@ -267,7 +295,7 @@ DATASET_DOC: dict[str, tuple[str, str]] = {
     "draws/noise_seed": ("", "sensor-noise seed of each draw"),
     "draws/uncertainty": ("1", "nominal-model factors [C, D, g, arm] of each draw"),
     "draws/phase": ("rad", "disturbance phases of each draw (6 DOF)"),
-    "params": ("SI units of arvcas.params.SCHEMA, in its order", "parameter vector the runs used"),
+    "params": ("SI units of arvcas.system.params.SCHEMA, in its order", "parameter vector the runs used"),
     "X": ("log10 of the gain units", "decision vectors: log10 of the gains"),
     "gains": (_GAIN_UNITS, "gains = 10 ** X, the values the runs used"),
     "F": ("1", "objectives " + _OBJ + "; NaN when infeasible"),
@@ -291,15 +319,21 @@ DATASET_DOC: dict[str, tuple[str, str]] = {
 }
 
 
-def _doc(ds: h5py.Dataset) -> None:
-    """``units`` and ``description`` of a dataset, from :data:`DATASET_DOC`."""
+def _doc(ds: h5py.Dataset, system: str = "") -> None:
+    """``units`` and ``description`` of a dataset, from :data:`DATASET_DOC`; for another system than
+    Haidou-1 (``system``) the paper's tables are named as that system's defaults and normalisation."""
+    from arvcas.metrics.indices import defaults_name, norm_name
+
     name = ds.name.lstrip("/")
     group, _, leaf = name.rpartition("/")
     units, desc = DATASET_DOC[name] if name in DATASET_DOC else DATASET_DOC[leaf]
+    if system:
+        desc = (desc.replace("the paper's Table 2 gains", "the system's default gains")
+                .replace("the paper's AGSTA values", norm_name(system).replace("value", "values")))
     if group == "front":
         desc = "front members only: " + desc
     elif group == "table2":
-        desc = "the Table 2 gains on the same draws: " + desc
+        desc = f"the {defaults_name(system)} on the same draws: " + desc
     ds.attrs["units"] = units
     ds.attrs["description"] = desc
 
@@ -317,6 +351,8 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
     f.attrs["model_changes"] = json.dumps(list(c.model_changes))
     if c.system:
         f.attrs["system"] = c.system
+    if c.plugin:
+        f.attrs["plugin"] = json.dumps(c.plugin, sort_keys=True)
     if c.ref_chat is not None:
         f.attrs["ref_chat"] = np.asarray(c.ref_chat, dtype=float)
         f.attrs["ref_rmse"] = np.asarray(c.ref_rmse, dtype=float)
@@ -345,7 +381,7 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
         t = f.create_group("table2")
         for k in _T2:
             t.create_dataset(k, data=np.asarray(getattr(c, f"table2_{k}")))
-    f.visititems(lambda name, obj: _doc(obj) if isinstance(obj, h5py.Dataset) else None)
+    f.visititems(lambda name, obj: _doc(obj, c.system) if isinstance(obj, h5py.Dataset) else None)
 
 
 def write_checkpoint(c: Checkpoint, path: Path) -> Path:
@@ -358,13 +394,13 @@ def write_checkpoint(c: Checkpoint, path: Path) -> Path:
     if not c.created:
         c.created = c.updated
     try:
-        return files.atomic_write(path, lambda tmp: _write_file(tmp, c), CheckpointError)
+        return files.atomic_write(path, lambda tmp: _write_file(tmp, c), CheckpointError, FORMAT)
     except CheckpointError as e:
         raise CheckpointError(f"{e}; the previous one is kept") from None
 
 
 def _write_file(tmp: Path, c: Checkpoint) -> None:
-    with h5py.File(tmp, "w") as f:
+    with files.new_hdf5(tmp) as f:  # in memory, then plain I/O: a full disk is one OSError
         _write(f, c)
 
 
@@ -425,6 +461,7 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     kw["model_hash"] = _s(f.attrs["model_hash"]) if "model_hash" in f.attrs else ""
     kw["model_changes"] = _json_attr(f, "model_changes", path, list) if "model_changes" in f.attrs else []
     kw["system"] = _s(f.attrs["system"]) if "system" in f.attrs else ""
+    kw["plugin"] = _json_attr(f, "plugin", path, dict) if "plugin" in f.attrs else {}
     if "ref_chat" in f.attrs:
         kw["ref_chat"], kw["ref_rmse"] = np.asarray(f.attrs["ref_chat"], float), np.asarray(f.attrs["ref_rmse"], float)
     if "population" in f:
@@ -471,6 +508,31 @@ def _json_attr(f: h5py.File, name: str, path: Path, kind: type):
     return v
 
 
+def _validate_population(c: Checkpoint, path: Path) -> None:
+    """The population's values, not only its shapes (a resume feeds them to NSGA-II): numbers; the
+    decision variables X finite and within the study's bounds (log10 of lower, upper); the gains 10**X;
+    the constraint G finite; the objectives F finite for every feasible member (G <= 0)."""
+    def bad(k: str, why: str) -> CheckpointError:
+        return CheckpointError(f"{path}: damaged arvcas front file (population/{k}: {why})")
+
+    for k in ("X", "gains", "F", "G", "rank", "crowding", "chat", "rmse", "ok", "t_fail"):
+        if np.asarray(getattr(c, k)).dtype.kind not in "biuf":
+            raise bad(k, f"not numbers ({np.asarray(getattr(c, k)).dtype})")
+    if not (np.isfinite(c.lower).all() and np.isfinite(c.upper).all() and (c.lower > 0).all()
+            and (c.lower < c.upper).all()):
+        raise CheckpointError(f"{path}: damaged arvcas front file (variables/lower, upper are not 0 < lower < upper)")
+    lo, hi = np.log10(c.lower), np.log10(c.upper)
+    if not np.isfinite(c.X).all() or (c.X < lo - 1e-9).any() or (c.X > hi + 1e-9).any():
+        raise bad("X", "not finite or outside the study's bounds")
+    if not np.allclose(c.gains, 10.0 ** c.X, rtol=1e-12, atol=0.0):
+        raise bad("gains", "not 10**X")
+    if not np.isfinite(c.G).all():
+        raise bad("G", "not finite")
+    feasible = c.G[:, 0] <= 0
+    if not np.isfinite(c.F[feasible]).all():
+        raise bad("F", "not finite for a feasible member")
+
+
 def _validate(c: Checkpoint, path: Path) -> None:
     m = len(c.names)
     if c.lower.shape != (m,) or c.upper.shape != (m,) or c.table2.shape != (m,):
@@ -484,6 +546,7 @@ def _validate(c: Checkpoint, path: Path) -> None:
             if getattr(c, k).shape != shp:
                 raise CheckpointError(f"{path}: damaged arvcas front file (population/{k} has shape "
                                       f"{getattr(c, k).shape}, expected {shp})")
+        _validate_population(c, path)
     lens = {len(c.history[k]) for k in HISTORY_FIELDS}
     if len(lens) != 1 or lens.pop() != c.n_gen:
         raise CheckpointError(f"{path}: damaged arvcas front file (history does not cover {c.n_gen} generations)")

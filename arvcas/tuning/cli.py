@@ -19,7 +19,7 @@ __all__ = ["add_tune", "check_tune", "run_tune", "add_front_export", "run_front_
 
 
 def add_tune(p: argparse.ArgumentParser) -> None:
-    from arvcas.cli import count_arg, seconds_arg
+    from arvcas.io.cliargs import count_arg, seconds_arg
 
     p.add_argument("study", type=Path, help="study file (TOML), e.g. studies/quick.toml")
     p.add_argument("--out", type=Path, required=True, metavar="DIR",
@@ -45,7 +45,7 @@ def add_tune(p: argparse.ArgumentParser) -> None:
 
 def check_tune(a: argparse.Namespace) -> None:
     """Options that do not apply (the study's engine is checked in :func:`run_tune`, once it is read)."""
-    from arvcas.cli import refuse
+    from arvcas.io.cliargs import refuse
 
     if not a.resume:
         refuse(a, ("allow_model_change",), "only with --resume")
@@ -90,8 +90,8 @@ def run_tune(a: argparse.Namespace) -> int:
         print(f"{o.controller}: {o.status} after {o.n_gen} generations, {o.n_eval} runs, {o.front_size} on the front, "
               f"HV {o.hv:.6g}; {o.path}")
     done = [o for o in outs if o.status == "finished"]
-    if len(done) == 2:
-        print(format_comparison(compare_fronts(done[0].path, done[1].path)))
+    if len(done) >= 2:
+        print(format_comparison(compare_fronts(*[o.path for o in done])))
     if any(o.status == "interrupted" for o in outs):
         return 130
     return 0
@@ -108,9 +108,14 @@ def add_front_export(e: argparse.ArgumentParser) -> None:
 
 
 def add_front_plot(pl: argparse.ArgumentParser) -> None:
+    from arvcas.io.cliargs import add_figure_format
+
     pl.add_argument("file", type=Path, help="front.h5 (or a study output directory)")
-    pl.add_argument("--out", type=Path, default=None, metavar="PNG", help="default: next to FILE, front.png")
-    pl.add_argument("--paper", action="store_true", help="also mark the paper's Table 3 points (their simulator)")
+    pl.add_argument("--out", type=Path, default=None, metavar="FIGURE",
+                    help="a .png, .pdf or .svg file (default: next to FILE, front.png or front.<--format>)")
+    pl.add_argument("--paper", action="store_true",
+                    help="Haidou-1: also mark the paper's Table 3 points (their simulator)")
+    add_figure_format(pl)
 
 
 def check_front_export(a: argparse.Namespace) -> None:
@@ -141,21 +146,24 @@ def run_front_export(a: argparse.Namespace) -> int:
 
 
 def front_plot_outputs(a: argparse.Namespace) -> list:
+    from arvcas.io.cliargs import figure_file
     from arvcas.tuning.front import resolve_front_path
 
-    out = a.out if a.out is not None else resolve_front_path(a.file).with_suffix(".png")
+    out = a.out if a.out is not None else resolve_front_path(a.file).with_suffix(f".{a.format or 'png'}")
+    figure_file(out, a.format, f"--out {out}")
     return [("--out", out)]
 
 
 def run_front_plot(a: argparse.Namespace) -> int:
-    from arvcas.io import files
+    from arvcas.io.cliargs import figure_file
+    from arvcas.io import files, style
     from arvcas.tuning.front import plot_front, read_front
 
     fr = read_front(a.file)
     out = front_plot_outputs(a)[0][1]
     files.target(out, f"--out {out}")
     fig = plot_front(fr, paper=a.paper)
-    files.write_figure(out, fig, 150)
+    style.write_figure(out, fig, figure_file(out, a.format, f"--out {out}"))
     k = fr.knee()
     print(f"{fr.controller}: {fr.size} on the front, HV {fr.hv:.6g}; knee: member {k} "
           f"(f_chat {fr.F[k, 0]:.4g}, f_rmse {fr.F[k, 1]:.4g}); wrote {out}")
@@ -166,19 +174,26 @@ def run_front_plot(a: argparse.Namespace) -> int:
 
 
 def add_compare(p: argparse.ArgumentParser) -> None:
-    p.add_argument("a", type=Path, metavar="DIR_A", help="study output directory or front.h5")
-    p.add_argument("b", type=Path, metavar="DIR_B", help="study output directory or front.h5")
+    from arvcas.io.cliargs import add_figure_format
+
+    p.add_argument("fronts", type=Path, nargs="+", metavar="DIR",
+                   help="two or more study output directories or front.h5 files (or two Monte Carlo or robust-front "
+                        "files)")
     p.add_argument("--ref", default=None, metavar="F_CHAT,F_RMSE",
-                   help="common reference point (default: componentwise max of the two studies' points)")
-    p.add_argument("--plot", type=Path, default=None, metavar="PNG", help="both fronts in one figure")
-    p.add_argument("--paper", action="store_true", help="with --plot: also mark the paper's Table 3 points")
+                   help="common reference point (default: componentwise max of the studies' points)")
+    p.add_argument("--plot", type=Path, default=None, metavar="FIGURE",
+                   help="the fronts in one figure (.png, .pdf or .svg)")
+    add_figure_format(p, "--plot")
+    p.add_argument("--paper", action="store_true",
+                   help="with --plot, Haidou-1 fronts: also mark the paper's Table 3 points")
     p.add_argument("--allow-model-change", action="store_true",
                    help="compare fronts computed with different model code or parameters")
 
 
 def run_compare(a: argparse.Namespace) -> int:
-    """Two fronts (``compare`` on Monte Carlo files is :func:`arvcas.experiments.cli.run_compare`)."""
-    from arvcas.io import files
+    """Two or more fronts (``compare`` on Monte Carlo files is :func:`arvcas.experiments.cli.run_compare`)."""
+    from arvcas.io.cliargs import figure_file
+    from arvcas.io import files, style
     from arvcas.tuning.compare import compare_fronts, format_comparison
     from arvcas.tuning.front import check_same_model, plot_fronts, read_front
 
@@ -190,19 +205,22 @@ def run_compare(a: argparse.Namespace) -> int:
             ref = None
         if ref is None or len(ref) != 2:
             raise ValueError(f"--ref: expected two numbers 'f_chat,f_rmse', got {a.ref!r}")
-    fa, fb = read_front(a.a), read_front(a.b)
-    changed = check_same_model(fa.path, fb.path, a.allow_model_change)
+    frs = [read_front(p) for p in a.fronts]
+    changed = sorted({w for f in frs[1:] for w in [check_same_model(frs[0].path, f.path, a.allow_model_change)] if w})
     if changed:
-        print(f"note: the two fronts were computed with different models ({changed}); compared as allowed by "
+        print(f"note: the {'two ' if len(frs) == 2 else ''}fronts were computed with different models ({'; '.join(changed)}); compared as allowed by "
               f"--allow-model-change")
+    fmt = None
     if a.plot is not None:
         files.target(a.plot, f"--plot {a.plot}")
-    c = compare_fronts(fa, fb, ref)
+        fmt = figure_file(a.plot, a.format, f"--plot {a.plot}")
+    c = compare_fronts(*frs, ref=ref)
     print(format_comparison(c))
     if a.plot is not None:
-        fig = plot_fronts([fa, fb], labels=list(c.labels), paper=a.paper)
-        fig.axes[0].set_title(f"{c.labels[0]} vs {c.labels[1]}: HV {c.hv[0]:.4g} vs {c.hv[1]:.4g} "
-                              f"(ref {c.reference_point[0]:g}, {c.reference_point[1]:g})", fontsize=9)
-        files.write_figure(a.plot, fig, 150)
+        fig = plot_fronts(frs, labels=list(c.labels), paper=a.paper)
+        hv = " vs ".join(f"{h:.4g}" for h in c.hv)
+        fig.axes[0].set_title(f"{' vs '.join(c.labels)}: HV {hv} (ref {c.reference_point[0]:g}, "
+                              f"{c.reference_point[1]:g})", fontsize=7)
+        style.write_figure(a.plot, fig, fmt)
         print(f"wrote {a.plot}")
     return 0

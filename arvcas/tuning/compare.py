@@ -1,16 +1,19 @@
-"""Two fronts side by side: hypervolume against one common reference point, and who dominates where.
+"""Fronts side by side: hypervolume against one common reference point, and who dominates where.
 
-* Hypervolume: pymoo's HV indicator for both fronts against the same reference point: by default
-  the componentwise maximum of the two studies' reference points (a valid reference for both);
+Any number of fronts (two or more; A, B, C, ... in the order given):
+
+* Hypervolume: pymoo's HV indicator for every front against the same reference point: by default
+  the componentwise maximum of the studies' reference points (a valid reference for all);
   ``ref`` overrides it. Members that do not dominate the reference point add nothing.
-* Coverage (Zitzler's C metric): the fraction of B's members weakly dominated by some member of A,
-  and the other way round.
+* Coverage (Zitzler's C metric): for each pair, the fraction of one front's members weakly dominated
+  by some member of the other.
 * Where: along f_chat, the attainment curve of each front (the best f_rmse reachable at or below that
-  f_chat); the f_chat intervals where one front's curve lies strictly below the other's.
+  f_chat); the f_chat intervals where one front's curve lies strictly below all the others'.
 """
 
 from __future__ import annotations
 
+import string
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,18 +26,36 @@ __all__ = ["Comparison", "compare_fronts", "format_comparison"]
 
 @dataclass(frozen=True)
 class Comparison:
-    labels: tuple[str, str]
+    labels: tuple[str, ...]
     reference_point: np.ndarray
-    hv: tuple[float, float]
-    sizes: tuple[int, int]
-    coverage: tuple[float, float]  # (C(A, B), C(B, A))
-    regions: tuple  # ((f_chat_lo, f_chat_hi, "A" | "B" | "tie" | "A only" | "B only"), ...)
-    table2: tuple  # (F_A, F_B): each front's Table 2 point on its own draws
+    hv: tuple[float, ...]
+    sizes: tuple[int, ...]
+    coverage_matrix: tuple  # [i][j]: share of front j weakly dominated by some member of front i (diagonal 1)
+    regions: tuple  # ((f_chat_lo, f_chat_hi, "A" | "B" | ... | "tie" | "A only" | ... | "none"), ...)
+    defaults: tuple  # each front's point at its system's default gains (Table 2 for Haidou-1) on its own draws
+    systems: tuple = ()  # each front's system ("": Haidou-1)
+
+    @property
+    def coverage(self) -> tuple[float, float]:
+        """(C(A, B), C(B, A)) of the first two fronts."""
+        return self.coverage_matrix[0][1], self.coverage_matrix[1][0]
 
     @property
     def better(self) -> str:
-        a, b = self.hv
-        return self.labels[0] if a > b else self.labels[1] if b > a else "neither"
+        """The front with the largest hypervolume ("neither" on a tie for the largest)."""
+        best = max(self.hv)
+        winners = [lab for lab, h in zip(self.labels, self.hv) if h == best]
+        return winners[0] if len(winners) == 1 else "neither"
+
+    @property
+    def letters(self) -> str:
+        return _letters(len(self.labels))
+
+
+def _letters(n: int) -> str:
+    if n > len(string.ascii_uppercase):
+        raise ValueError(f"compare: at most {len(string.ascii_uppercase)} fronts, got {n}")
+    return string.ascii_uppercase[:n]
 
 
 def _coverage(A: np.ndarray, B: np.ndarray) -> float:
@@ -50,20 +71,21 @@ def _attain(F: np.ndarray, x: float) -> float:
     return float(F[m, 1].min()) if m.any() else np.inf
 
 
-def _regions(A: np.ndarray, B: np.ndarray) -> list:
-    xs = np.unique(np.concatenate([A[:, 0], B[:, 0]]))
+def _regions(*Fs: np.ndarray) -> list:
+    names = _letters(len(Fs))
+    xs = np.unique(np.concatenate([F[:, 0] for F in Fs]))
     out: list = []
     for j, x in enumerate(xs):
         hi = xs[j + 1] if j + 1 < len(xs) else np.inf
-        a, b = _attain(A, x), _attain(B, x)
-        if np.isinf(a) and np.isinf(b):
+        a = np.array([_attain(F, x) for F in Fs])
+        reach = np.flatnonzero(np.isfinite(a))
+        if reach.size == 0:
             who = "none"
-        elif np.isinf(b):
-            who = "A only"
-        elif np.isinf(a):
-            who = "B only"
+        elif reach.size == 1 and len(Fs) > 1:
+            who = f"{names[reach[0]]} only"
         else:
-            who = "A" if a < b else "B" if b < a else "tie"
+            best = np.flatnonzero(a == a.min())
+            who = names[best[0]] if best.size == 1 else "tie"
         if out and out[-1][2] == who:
             out[-1] = (out[-1][0], hi, who)
         else:
@@ -71,39 +93,55 @@ def _regions(A: np.ndarray, B: np.ndarray) -> list:
     return out
 
 
-def compare_fronts(a: Front | str, b: Front | str, ref=None) -> Comparison:
-    """Compare two fronts (objects, files or study directories); see the module docstring."""
-    fa = a if isinstance(a, Front) else read_front(a)
-    fb = b if isinstance(b, Front) else read_front(b)
+def compare_fronts(*fronts, ref=None) -> Comparison:
+    """Compare two or more fronts (objects, files or study directories); see the module docstring."""
+    if len(fronts) < 2:
+        raise ValueError(f"compare: needs at least two fronts, got {len(fronts)}")
+    frs = [f if isinstance(f, Front) else read_front(f) for f in fronts]
+    _letters(len(frs))
     if ref is None:
-        ref = np.maximum(fa.reference_point, fb.reference_point)
+        ref = np.max([f.reference_point for f in frs], axis=0)
     ref = np.asarray(ref, dtype=float)
     if ref.shape != (2,) or not np.isfinite(ref).all():
         raise ValueError(f"--ref: expected two finite numbers, got {ref}")
-    la, lb = fa.controller, fb.controller
-    if la == lb:
-        la, lb = f"{la} ({fa.path.parent.name})", f"{lb} ({fb.path.parent.name})"
+    names = [f.controller for f in frs]
+    labels = [f"{n} ({f.path.parent.name})" if names.count(n) > 1 else n for n, f in zip(names, frs)]
+    labels = [f"{lab} [{k}]" if labels.count(lab) > 1 else lab for lab, k in zip(labels, _letters(len(frs)))]
     return Comparison(
-        labels=(la, lb), reference_point=ref,
-        hv=(hypervolume(fa.F, fa.G, ref), hypervolume(fb.F, fb.G, ref)), sizes=(fa.size, fb.size),
-        coverage=(_coverage(fa.F, fb.F), _coverage(fb.F, fa.F)), regions=tuple(_regions(fa.F, fb.F)),
-        table2=(fa.table2_F, fb.table2_F),
+        labels=tuple(labels), reference_point=ref, hv=tuple(hypervolume(f.F, f.G, ref) for f in frs),
+        sizes=tuple(f.size for f in frs),
+        coverage_matrix=tuple(tuple(_coverage(fi.F, fj.F) for fj in frs) for fi in frs),
+        regions=tuple(_regions(*[f.F for f in frs])), defaults=tuple(f.table2_F for f in frs),
+        systems=tuple(f.system for f in frs),
     )
 
 
 def format_comparison(c: Comparison) -> str:
-    la, lb = c.labels
-    w = max(len(la), len(lb), 5)
+    n = len(c.labels)
+    letters = c.letters
+    w = max(*(len(x) for x in c.labels), 5)
+    dname = f"{'Table 2' if c.systems and not any(c.systems) else 'defaults'} (f_chat, f_rmse)"
     lines = [f"reference point (f_chat, f_rmse) = ({c.reference_point[0]:.6g}, {c.reference_point[1]:.6g})",
-             f"{'front':<{w}}  {'members':>7}  {'hypervolume':>12}  {'Table 2 (f_chat, f_rmse)':>26}"]
-    for lab, n, hv, t2 in zip(c.labels, c.sizes, c.hv, c.table2):
+             f"{'front':<{w}}  {'members':>7}  {'hypervolume':>12}  {dname:>26}"]
+    for lab, k, hv, t2 in zip(c.labels, c.sizes, c.hv, c.defaults):
         t2s = f"({t2[0]:.4g}, {t2[1]:.4g})" if np.isfinite(t2).all() else "diverged"
-        lines.append(f"{lab:<{w}}  {n:>7}  {hv:>12.6g}  {t2s:>26}")
-    lines.append(f"larger hypervolume: {c.better}")
-    lines.append(f"coverage: {c.coverage[0]:.0%} of {lb}'s front is weakly dominated by {la}'s; "
-                 f"{c.coverage[1]:.0%} of {la}'s by {lb}'s")
-    names = {"A": f"{la} lower RMSE", "B": f"{lb} lower RMSE", "tie": "equal", "A only": f"only {la} reaches",
-             "B only": f"only {lb} reaches", "none": "neither reaches"}
+        lines.append(f"{lab:<{w}}  {k:>7}  {hv:>12.6g}  {t2s:>26}")
+    lines.append(f"{'larger' if n == 2 else 'largest'} hypervolume: {c.better}")
+    if n == 2:
+        la, lb = c.labels
+        lines.append(f"coverage: {c.coverage[0]:.0%} of {lb}'s front is weakly dominated by {la}'s; "
+                     f"{c.coverage[1]:.0%} of {la}'s by {lb}'s")
+    else:
+        lines.append("coverage: share of each column's front weakly dominated by the row's")
+        lines.append(f"{'':<{w}}  " + "  ".join(f"{x:>6}" for x in letters))
+        for i, lab in enumerate(c.labels):
+            lines.append(f"{letters[i] + ' ' + lab:<{w + 2}}"
+                         + "  ".join(f"{'-' if i == j else format(c.coverage_matrix[i][j], '.0%'):>6}"
+                                     for j in range(n)))
+    names = {"tie": "equal", "none": "neither reaches" if n == 2 else "none reaches"}
+    for k, lab in zip(letters, c.labels):
+        names[k] = f"{lab} {'lower' if n == 2 else 'lowest'} RMSE"
+        names[f"{k} only"] = f"only {lab} reaches"
     lines.append("where (best f_rmse attainable at f_chat <= x):")
     for lo, hi, who in c.regions:
         his = "inf" if np.isinf(hi) else f"{hi:.4g}"

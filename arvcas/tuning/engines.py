@@ -10,7 +10,10 @@ client's own compiled code. The client ships it: the libraries of the run and of
 bytes with their sha256 (:func:`ship_bundle`, scattered once to every worker), which a worker loads
 without a C compiler or a compile cache (:func:`arvcas.build.codegen.preload`; a worker on another
 platform, or with other arvcas model code, refuses with a one-line error naming it). The engine still
-checks that every chunk reports the client's key. An error raised on a worker says which worker.
+checks that every chunk reports the client's key. An error raised on a worker says which worker. A
+controller from a plugin file or module is loaded on each worker from the same file or module
+(:attr:`EvalTask.plugins`; an entry point is found there by itself): the file must be at the same
+path on the workers' machines, and its source digest is part of the key they check.
 """
 
 from __future__ import annotations
@@ -22,8 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arvcas.params import Params
+from arvcas.system.params import Params
 from arvcas.sim.scenario import ScenarioConfig
+
+log = logging.getLogger(__name__)
 
 __all__ = ["EngineError", "EvalTask", "evaluate_rows", "run_key", "ship_bundle", "LocalEngine", "DaskEngine",
            "make_engine"]
@@ -42,6 +47,7 @@ class EvalTask:
     cfg: ScenarioConfig
     params: Params
     ref: tuple | None = None  # per-DOF (chat, rmse) normalisation; None: the paper's Table 3 AGSTA
+    plugins: tuple[str, ...] = ()  # plugin files or modules a worker loads first (the controller's)
     chat: str = "commanded"  # CHAT on the command (eq. 42) or on the delivered wrench ([objectives] chat)
 
 
@@ -117,6 +123,10 @@ def _chunk(task: EvalTask, gains: np.ndarray, n_threads: int, bundle: dict | Non
     from arvcas.build import codegen
 
     try:
+        from arvcas.io import plugins
+
+        for spec in task.plugins:
+            plugins.load(spec, what="plugin")
         if bundle is not None:
             codegen.preload(bundle)
         return evaluate_rows(task, gains, n_threads=n_threads)
@@ -133,10 +143,14 @@ class DaskEngine:
     The population is split into one chunk per worker thread (at most one row per chunk). Every wait
     is bounded: while a generation runs, a cluster with no worker (all lost) or a lost scheduler for
     more than ``timeout_s`` ends the generation with an :class:`EngineError` (the study keeps the last
-    checkpoint); a generation that merely takes long is not cut short.
+    checkpoint); a generation that merely takes long is not cut short. A generation that fails because
+    workers were lost while others remain (their tasks, or the shipped libraries they held, are gone) is
+    evaluated again, the libraries scattered anew to the workers there are, at most :data:`RETRIES` times:
+    every chunk is deterministic, so the numbers are the same.
     """
 
     POLL_S = 0.5
+    RETRIES = 3
 
     name = "dask"
 
@@ -153,6 +167,7 @@ class DaskEngine:
         self._cluster = None
         self._keys: dict = {}
         self._bundles: dict = {}
+        self._raw: dict = {}  # the bundles' bytes, to scatter again after a lost worker
         try:
             if scheduler is None:
                 n = workers or _cores()
@@ -191,28 +206,39 @@ class DaskEngine:
         k = (task.controller, task.cfg.graph_key(), task.params.structure)
         if k not in self._keys:
             self._keys[k] = run_key(task.controller, task.cfg, task.params)
-            b = ship_bundle(compiled_run(task.controller, task.params, task.cfg))
-            self._bundles[k] = self.client.scatter([b], broadcast=True, hash=False)[0]  # a list: one future
+            self._raw[k] = ship_bundle(compiled_run(task.controller, task.params, task.cfg))
+            self._scatter(k)
         return self._keys[k]
+
+    def _scatter(self, k) -> None:
+        """Send the bundle ``k`` to every worker there is now (again after a loss)."""
+        self._bundles[k] = self.client.scatter([self._raw[k]], broadcast=True, hash=False)[0]  # a list: one future
 
     def evaluate(self, task: EvalTask, gains: np.ndarray):
         key = self.prepare(task)
-        bundle = self._bundles[(task.controller, task.cfg.graph_key(), task.params.structure)]
+        k = (task.controller, task.cfg.graph_key(), task.params.structure)
         n = gains.shape[0]
-        n_chunks = max(1, min(n, sum(self.threads())))
-        blocks = [b for b in np.array_split(np.arange(n), n_chunks) if b.size]
-        try:
-            futures = self.client.map(_chunk, [task] * len(blocks), [gains[b] for b in blocks],
-                                      [1] * len(blocks), [bundle] * len(blocks), pure=False)
-            self._wait(futures)
-            parts = self.client.gather(futures)
-        except EngineError:
-            raise
-        except (ValueError, KeyboardInterrupt):
-            raise
-        except Exception as e:  # noqa: BLE001 - a lost worker or connection: one line, not a traceback
-            msg = " ".join(str(e).split())[:200] or "no message"
-            raise EngineError(f"engine dask: evaluating the generation failed ({type(e).__name__}: {msg})") from None
+        for attempt in range(self.RETRIES + 1):
+            try:
+                parts = self._evaluate_once(task, gains, self._bundles[k])
+                break
+            except EngineError:
+                raise
+            except (ValueError, KeyboardInterrupt):
+                raise
+            except Exception as e:  # noqa: BLE001 - a lost worker or connection: one line, not a traceback
+                msg = " ".join(str(e).split())[:200] or "no message"
+                if attempt < self.RETRIES and self.client.status == "running" and self.client.nthreads():
+                    log.warning("engine dask: generation lost work (%s: %s); evaluating it again on %d worker(s)",
+                                type(e).__name__, msg, len(self.client.nthreads()))
+                    try:
+                        self._scatter(k)
+                    except Exception:  # noqa: BLE001 - the next attempt (or the last error) says what is wrong
+                        pass
+                    continue
+                raise EngineError(f"engine dask: evaluating the generation failed ({type(e).__name__}: {msg})"
+                                  + (f" after {attempt} retries" if attempt else "")) from None
+        assert sum(p[0].shape[1] for p in parts) == n
         for p in parts:
             if p[4] != key:
                 raise EngineError(f"engine dask: a worker ran compiled code {p[4][:20] or '?'}, this process "
@@ -222,6 +248,15 @@ class DaskEngine:
         ok = np.concatenate([p[2] for p in parts], axis=1)
         t_fail = np.concatenate([p[3] for p in parts], axis=1)
         return chat, rmse, ok, t_fail
+
+    def _evaluate_once(self, task: EvalTask, gains: np.ndarray, bundle) -> list:
+        n = gains.shape[0]
+        n_chunks = max(1, min(n, sum(self.threads())))
+        blocks = [b for b in np.array_split(np.arange(n), n_chunks) if b.size]
+        futures = self.client.map(_chunk, [task] * len(blocks), [gains[b] for b in blocks],
+                                  [1] * len(blocks), [bundle] * len(blocks), pure=False)
+        self._wait(futures)
+        return self.client.gather(futures)
 
     def _wait(self, futures) -> None:
         """Until every future is done; EngineError once the cluster has had no worker (or no scheduler

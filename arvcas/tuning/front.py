@@ -26,7 +26,8 @@ from arvcas.metrics import DOFS, table3
 from arvcas.tuning import checkpoint as ck
 
 __all__ = ["Front", "read_front", "knee_index", "export_front", "plot_front", "plot_fronts", "member_gains",
-           "replay", "resolve_front_path", "check_provenance", "check_same_model"]
+           "member_index", "replay", "resolve_front_path", "front_paths", "check_provenance", "check_same_model",
+           "system_params"]
 
 
 def resolve_front_path(p: str | Path) -> Path:
@@ -42,6 +43,22 @@ def resolve_front_path(p: str | Path) -> Path:
                                      f"give one of {', '.join(str(s) for s in subs)}")
         raise ck.CheckpointError(f"{p}: no {ck.FRONT_NAME} in this directory")
     return p
+
+
+def front_paths(p: str | Path) -> list[Path]:
+    """Every ``front.h5`` of a study output directory (sorted by controller directory): the
+    ``<controller>/front.h5`` of a study of several controllers, or the ``front.h5`` of a study of one
+    (the directory itself, or that file)."""
+    p = Path(p)
+    if not p.is_dir():
+        return [p]
+    fronts = sorted(p.glob(f"*/{ck.FRONT_NAME}"))
+    if not fronts and (p / ck.FRONT_NAME).is_file():
+        return [p / ck.FRONT_NAME]
+    if not fronts:
+        raise ck.CheckpointError(f"{p}: no {ck.FRONT_NAME} and no <controller>/{ck.FRONT_NAME} in this directory "
+                                 "(the --out of arvcas tune)")
+    return fronts
 
 
 @dataclass(frozen=True)
@@ -82,6 +99,7 @@ class Front:
     study_text: str
     versions: dict
     system: str = ""  # the study's system ("": Haidou-1, objectives normalised by the paper's Table 3)
+    plugin: dict | None = None  # a controller from outside the package: where it came from (checkpoint.py)
 
     @property
     def size(self) -> int:
@@ -119,7 +137,7 @@ def read_front(path: str | Path) -> Front:
         table2_G=c.table2_G if c.table2_G is not None else np.full(1, np.nan),
         reference_point=c.reference_point, history=c.history, seed=c.seed, draw_seeds=c.draw_seeds,
         draw_uncertainty=c.draw_uncertainty, draw_phase=c.draw_phase, scenario_text=c.scenario_text,
-        study_text=c.study_text, versions=c.versions, system=c.system,
+        study_text=c.study_text, versions=c.versions, system=c.system, plugin=c.plugin or None,
     )
 
 
@@ -196,6 +214,8 @@ def export_front(path: str | Path, fmt: str) -> str:
         "knee": fr.knee() if fr.size else None, "gain_names": fr.names, "dofs": list(DOFS), "members": members,
         "versions": fr.versions,
     }
+    if fr.plugin:
+        doc["plugin"] = fr.plugin
     return json.dumps(doc, indent=1) + "\n"
 
 
@@ -213,54 +233,74 @@ def _paper_points():
 
 
 def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bool = False):
-    """Several fronts in one axes (f_chat vs f_rmse): fronts, Table 2 on the same draws, knees.
+    """Several fronts in one axes (f_chat vs f_rmse): fronts, the default gains on the same draws (Table 2
+    for Haidou-1), knees; in the house style (:mod:`arvcas.io.style`), column width.
 
     ``population``: the feasible members of the last population, faint; ``paper``: the paper's
-    Table 3 points (AGSTA = (1, 1) by construction, and the proposed controller), from its simulator.
+    Table 3 points (AGSTA = (1, 1) by construction, and the proposed controller), from its simulator
+    (Haidou-1's fronts only: the paper's table is of Haidou-1).
     """
-    if ax is None:  # a bare Figure: no pyplot state, no GUI backend (save with fig.savefig)
-        from matplotlib.figure import Figure
+    from arvcas.io import style
 
-        fig = Figure(figsize=(7.0, 5.2), layout="constrained")
-        ax = fig.add_subplot()
-    else:
-        fig = ax.figure
-    colors = ["tab:blue", "tab:orange", "tab:green", "tab:purple"]
-    for j, fr in enumerate(fronts):
-        col = colors[j % len(colors)]
-        lab = labels[j] if labels else fr.controller
-        if population:
-            feas = fr.population_G[:, 0] <= 0
-            P = fr.population_F[feas]
-            ax.scatter(P[:, 0], P[:, 1], s=8, color=col, alpha=0.25, linewidths=0)
-        if fr.size:
-            ax.plot(fr.F[:, 0], fr.F[:, 1], "-o", color=col, ms=3.5, lw=1.2,
-                    label=f"{lab}: front ({fr.size}), HV {fr.hv:.4g}")
-            k = fr.knee()
-            ax.plot(fr.F[k, 0], fr.F[k, 1], "D", color=col, ms=9, mec="k", mew=1.0,
-                    label=f"{lab}: knee ({fr.F[k, 0]:.3g}, {fr.F[k, 1]:.3g})")
-        if np.isfinite(fr.table2_F).all():
-            ax.plot(fr.table2_F[0], fr.table2_F[1], "*", color=col, ms=15, mec="k", mew=0.8,
-                    label=f"{lab}: {'default' if fr.system else 'Table 2'} gains, same draw(s)")
-    if paper:
-        a, p = _paper_points()
-        ax.plot(*a, "s", mfc="none", mec="0.3", ms=8, label="paper Table 3 AGSTA (their simulator)")
-        ax.plot(*p, "^", mfc="none", mec="0.3", ms=8, label="paper Table 3 proposed (their simulator)")
-    norm = "paper's AGSTA" if not any(fr.system for fr in fronts) else "AGSTA at the system's default gains"
-    ax.set_xlabel(f"f_chat: mean CHAT / {norm} CHAT")
-    ax.set_ylabel(f"f_rmse: mean RMSE / {norm} RMSE")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
-    return fig
+    fronts = list(fronts)
+    if paper and any(fr.system for fr in fronts):
+        raise ValueError("--paper: the paper's Table 3 points are Haidou-1's; these fronts are of "
+                         f"{', '.join(sorted({fr.system for fr in fronts if fr.system}))}")
+
+    @style.styled
+    def draw(ax):
+        from arvcas.io.plots import controller_color
+
+        own = ax is None
+        if own:  # a bare Figure: no pyplot state, no GUI backend
+            fig = style.figure("column", 3.0 + 0.35 * len(fronts) + (0.3 if paper else 0.0))
+            ax = fig.add_subplot()
+        else:
+            fig = ax.figure
+        distinct = len({fr.controller for fr in fronts}) == len(fronts)
+        dname = "default" if any(fr.system for fr in fronts) else "Table 2"
+        for j, fr in enumerate(fronts):
+            col = controller_color(fr.controller, j) if distinct else style.color("", j)
+            lab = labels[j] if labels else fr.controller
+            if population:
+                feas = fr.population_G[:, 0] <= 0
+                P = fr.population_F[feas]
+                ax.scatter(P[:, 0], P[:, 1], s=4, color=col, alpha=0.25, linewidths=0)
+            if fr.size:
+                ax.plot(fr.F[:, 0], fr.F[:, 1], "-o", color=col, ms=2.0, lw=0.8,
+                        label=f"{lab}: {fr.size} members, HV {fr.hv:.4g}")
+                k = fr.knee()
+                ax.plot(fr.F[k, 0], fr.F[k, 1], "D", color=col, ms=5, mec="k", mew=0.6,
+                        label=f"{lab}: knee ({fr.F[k, 0]:.3g}, {fr.F[k, 1]:.3g})")
+            if np.isfinite(fr.table2_F).all():
+                ax.plot(fr.table2_F[0], fr.table2_F[1], "*", color=col, ms=8, mec="k", mew=0.5,
+                        label=f"{lab}: {dname} gains")
+        if paper:
+            a, p = _paper_points()
+            ax.plot(*a, "s", mfc="none", mec="0.3", ms=5, label="paper Table 3 AGSTA (their simulator)")
+            ax.plot(*p, "^", mfc="none", mec="0.3", ms=5, label="paper Table 3 proposed (their simulator)")
+        norm = "paper's AGSTA" if not any(fr.system for fr in fronts) else "AGSTA at its defaults"
+        ax.set_xlabel(f"f_chat: CHAT / {norm}")
+        ax.set_ylabel(f"f_rmse: RMSE / {norm}")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        style.log_labels(ax)
+        ax.grid(True, which="both", alpha=0.3)
+        if own:  # below the axes, clear of the fronts
+            fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=2, fontsize=6)
+        else:
+            ax.legend(fontsize=6, loc="best")
+        return fig
+
+    return draw(ax)
 
 
 def plot_front(front: Front | str | Path, ax=None, **kw):
-    """One front: population (light), front, knee (diamond), Table 2 on the same draws (star)."""
+    """One front: population (light), front, knee (diamond), the default gains on the same draws (star)."""
     fr = front if isinstance(front, Front) else read_front(front)
     fig = plot_fronts([fr], ax=ax, **kw)
-    fig.axes[0].set_title(f"{fr.controller}: {fr.study_name}, {fr.n_gen} generations, {fr.n_eval} runs", fontsize=9)
+    fig.axes[0].set_title(f"{fr.controller}: {fr.study_name}, {fr.n_gen} generations, {fr.n_eval} runs",
+                          fontsize=7)
     return fig
 
 
@@ -269,7 +309,7 @@ def plot_front(front: Front | str | Path, ax=None, **kw):
 
 def system_params(c: ck.Checkpoint):
     """The parameters of the system a checkpoint's study ran on (Haidou-1's when it names none)."""
-    from arvcas.params import load
+    from arvcas.system.params import load
     from arvcas.system import load_system
 
     return load_system(c.system).params if c.system else load()
@@ -277,12 +317,12 @@ def system_params(c: ck.Checkpoint):
 
 def check_provenance(path: str | Path, params, allow: bool, what: str) -> str:
     """Refuse to re-run a front's members under other model code, data or parameters (``params``: a
-    :class:`arvcas.params.Params` or its vector) than the study's: the stored numbers would not be
+    :class:`arvcas.system.params.Params` or its vector) than the study's: the stored numbers would not be
     reproduced. With ``allow`` returns what differs (empty if nothing), for the output to record."""
     path = resolve_front_path(path)
     c = ck.read_checkpoint(path)
     vec = params.vector() if hasattr(params, "vector") else params
-    diff = ck.provenance_diff(c, vec)
+    diff = ck.provenance_diff(c, vec, str(path))
     if diff and not allow:
         raise ck.CheckpointError(f"{what} {path}: {'; '.join(diff)}; a re-run would not reproduce the study "
                                  f"(--allow-model-change to run anyway; the output records it)")
@@ -298,6 +338,9 @@ def check_same_model(a: str | Path, b: str | Path, allow: bool) -> str:
         why.append(f"model hash {ca.model_hash[:12] or 'none'} vs {cb.model_hash[:12] or 'none'}")
     if ca.params.shape != cb.params.shape or not np.array_equal(ca.params, cb.params):
         why.append("different parameter vectors")
+    da, db = ca.plugin.get("digest", ""), cb.plugin.get("digest", "")
+    if ca.controller == cb.controller and da != db:
+        why.append(f"controller {ca.controller} from different source (sha256 {da[:12] or 'none'} vs {db[:12] or 'none'})")
     if why and not allow:
         raise ck.CheckpointError(f"compare: {a} and {b} were computed with different models ({', '.join(why)}); "
                                  f"their objectives are not comparable (--allow-model-change to compare anyway)")
@@ -307,12 +350,18 @@ def check_same_model(a: str | Path, b: str | Path, allow: bool) -> str:
 # ---- replay ------------------------------------------------------------------------------------------
 
 
-def _member(fr: Front, index: int) -> int:
+def _member(fr: Front, index: int, what: str = "--index") -> int:
     if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
-        raise ValueError(f"--index: expected an integer, got {index!r}")
+        raise ValueError(f"{what}: expected an integer, got {index!r}")
     if not -fr.size <= index < fr.size:
-        raise ValueError(f"--index {index}: {fr.path} has {fr.size} front member(s) (0..{fr.size - 1})")
+        raise ValueError(f"{what} {index}: {fr.path} has {fr.size} front member(s) (0..{fr.size - 1})")
     return int(index) % fr.size
+
+
+def member_index(fr: Front, member, what: str = "--member") -> int:
+    """The front index of ``member``: ``"knee"`` (:meth:`Front.knee`, the rule of ``arvcas knees``) or an
+    integer (members sorted by f_chat; negative counts from the end)."""
+    return fr.knee() if member == "knee" else _member(fr, member, what)
 
 
 def member_gains(path: str | Path, index: int):
@@ -325,6 +374,7 @@ def member_gains(path: str | Path, index: int):
     """
     fr = read_front(path)
     i = _member(fr, index)
+    ck.controller_of(fr, str(fr.path))  # a plugin's controller: loaded, or which plugin to load
     if fr.draw_seeds.size != 1:
         raise ValueError(f"{fr.path}: the objectives average {fr.draw_seeds.size} draws; one simulate run cannot "
                          f"reproduce them (use arvcas.tuning.front.replay)")
@@ -343,7 +393,7 @@ def replay(path: str | Path, index: int, n_threads: int | None = None):
 
     Returns the :class:`~arvcas.tuning.problem.Evaluation` of that one member (F, G, per-DOF metrics).
     """
-    from arvcas.params import Params
+    from arvcas.system.params import Params
     from arvcas.sim.scenario import loads_scenario
     from arvcas.tuning.engines import EvalTask, LocalEngine
     from arvcas.tuning.run import evaluate_gains

@@ -43,6 +43,7 @@ from pymoo.operators.mutation.pm import PM
 from pymoo.operators.sampling.rnd import FloatRandomSampling
 
 from arvcas.build.provenance import model_hash
+from arvcas.controllers.base import provenance
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.engines import EngineError, EvalTask, make_engine
 from arvcas.tuning.problem import Evaluation, GainProblem, assemble, pymoo_F
@@ -172,8 +173,10 @@ def eval_task(study: Study, controller: str, params=None) -> EvalTask:
     cfg = study.scenario
     draws = tuple((d.noise_seed, *d.resolved(cfg)) for d in study.draws)
     params = params if params is not None else study.system_params()
+    src = provenance(controller)
+    ship = (src["spec"],) if src.get("kind") in ("file", "module") else ()  # an entry point is found by itself
     return EvalTask(controller=controller, draws=draws, cfg=cfg, params=params, ref=reference(study, params, draws),
-                    chat=study.objectives.chat)
+                    plugins=ship, chat=study.objectives.chat)
 
 
 def reference(study: Study, params, draws) -> tuple | None:
@@ -247,7 +250,7 @@ def _new_checkpoint(study: Study, controller: str, task: EvalTask) -> ck.Checkpo
         params=task.params.vector(), reference_point=np.asarray(study.objectives.reference_point, dtype=float),
         versions=ck.versions(), model_hash=model_hash(), system=_system_ref(study),
         ref_chat=None if task.ref is None else np.asarray(task.ref[0]),
-        ref_rmse=None if task.ref is None else np.asarray(task.ref[1]),
+        ref_rmse=None if task.ref is None else np.asarray(task.ref[1]), plugin=provenance(controller),
     )
 
 
@@ -363,7 +366,8 @@ def run_study(study: Study, out: str | Path, *, controllers: tuple[str, ...] | N
                 if diff:
                     raise TuningError(f"--resume: {study.path} differs from the study in {path} in {', '.join(diff)} "
                                       f"(only [termination] and [engine] may change between sessions)")
-                changed = ck.provenance_diff(existing, (params if params is not None else study.system_params()).vector())
+                changed = ck.provenance_diff(existing, (params if params is not None else study.system_params()).vector(),
+                                             str(path))
                 if changed and not allow_model_change:
                     raise TuningError(f"--resume {path}: {'; '.join(changed)}; continuing would mix two models in "
                                       f"one front (--allow-model-change to continue anyway; the checkpoint records it)")
@@ -372,6 +376,7 @@ def run_study(study: Study, out: str | Path, *, controllers: tuple[str, ...] | N
                         f"{ck._now()}: resumed at generation {existing.n_gen} with --allow-model-change: "
                         + "; ".join(changed)]
                     existing.model_hash = model_hash()
+                    existing.plugin = provenance(c)
                     existing.params = (params if params is not None else study.system_params()).vector()
             elif resume:
                 say(f"{c}: no checkpoint at {path}: starting the study")

@@ -6,12 +6,14 @@ stop, the objectives and the reference point of the hypervolume, the draws every
 evaluated on (common random numbers), and the engine. Every key is checked before any work:
 an unknown key (with the closest valid name), a missing key, a wrong type or a value out of range
 is a one-line :class:`StudyError` naming the file and the key. The schema is the dataclasses below
-(:mod:`arvcas.config`: each field's type and rule beside it), with upper bounds on every size a study
+(:mod:`arvcas.system.config`: each field's type and rule beside it), with upper bounds on every size a study
 asks for (``MAX_*``) and on the memory of one generation's tables.
 
 Layout (see ``studies/*.toml`` for commented examples)::
 
-    [study]        name, description?, controllers (str or list), seed (NSGA-II's generator)
+    [study]        name, description?, controllers (str or list), seed (NSGA-II's generator), plugins?
+                   (Python files, relative to the study file, or module names, loaded before the
+                   controllers are looked up: docs/plugins.md)
     [variables]    scale (> 1: default bounds [g / scale, g * scale] around each Table 2 gain g),
                    bounds? (table: column name "c" for every DOF, or gain name "x.c" -> [lower, upper])
     [algorithm]    name = "nsga2", population (>= 4), offspring?, include_table2?, crossover_prob?,
@@ -39,8 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from arvcas import config, tomlfile
-from arvcas.config import Choices, Count, Equals, Invalid, Unique, ge, gt, le, quantity, setting
+from arvcas.system import config, tomlfile
+from arvcas.system.config import Choices, Count, Equals, Invalid, Unique, ge, gt, le, quantity, setting
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim import scenario as scenario_mod
 
@@ -56,7 +58,7 @@ CHAT_KINDS = ("commanded", "delivered")  # what CHAT is computed on (arvcas.sim.
 ALGORITHMS = ("nsga2",)
 
 # Sizes a study may ask for (each is a rule on its field; the tables of one generation are also held
-# under arvcas.config.MEMORY_CAP_BYTES, see _check_memory).
+# under arvcas.system.config.MEMORY_CAP_BYTES, see _check_memory).
 MAX_POPULATION = 100_000  # candidates of one generation (population, offspring)
 MAX_GENERATIONS = 1_000_000  # a checkpoint keeps a history row per generation
 MAX_GENERATIONS_PER_VARIABLE = 10_000  # x 66 gains = 660,000 generations
@@ -70,7 +72,7 @@ class StudyError(ValueError):
     """One-line error naming the study file and the key at fault."""
 
 
-# ---- dataclasses (each field's rule beside it: arvcas.config) --------------------------------------
+# ---- dataclasses (each field's rule beside it: arvcas.system.config) --------------------------------------
 
 
 @dataclass(frozen=True)
@@ -210,12 +212,13 @@ class Study:
     path: str = ""
     system: str | None = None  # evaluation.system as written (None: Haidou-1)
     params: object = dataclasses.field(repr=False, compare=False, default=None)  # the system's Params
+    plugins: tuple[str, ...] = ()  # study.plugins as written (loaded when the file was read)
 
     def system_params(self):
         """The parameters the study's runs use (its system's; Haidou-1's by default)."""
         if self.params is not None:
             return self.params
-        from arvcas.params import load
+        from arvcas.system.params import load
 
         return load()
 
@@ -264,6 +267,7 @@ class _StudySection:
                                            scalar_ok=True)
     seed: int = setting(ge(0))  # NSGA-II's generator
     description: str = setting(default="")
+    plugins: tuple[str, ...] = setting(Unique(), scalar_ok=True, default=())  # files (relative) or modules
 
 
 @dataclass(frozen=True)
@@ -297,11 +301,14 @@ def load_study(path: str | Path) -> Study:
 
 
 def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | None = None) -> Study:
-    """Validate study TOML text; ``base_dir`` resolves a relative ``evaluation.scenario`` path."""
-    f = config.load_text(_StudyFile, text, where, StudyError).value
+    """Validate study TOML text; ``base_dir`` resolves a relative ``evaluation.scenario`` path (and the
+    study's plugin files)."""
+    doc = tomlfile.parse(text, where, StudyError)
+    _load_plugins(doc, where, base_dir)
+    f = config.load_doc(_StudyFile, doc, where, StudyError).value
     params = None
     if f.evaluation.system is not None:
-        from arvcas.params import ParamsError
+        from arvcas.system.params import ParamsError
         from arvcas.system import shipped, load_system
 
         ref = f.evaluation.system
@@ -333,8 +340,33 @@ def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | N
         name=f.study.name, description=f.study.description, controllers=controllers, seed=f.study.seed,
         variables=variables, algorithm=f.algorithm, termination=f.termination, objectives=f.objectives,
         draws=f.evaluation.draws, engine=f.engine, scenario=cfg, scenario_path=scen_rel, text=text, path=where,
-        system=f.evaluation.system, params=params,
+        system=f.evaluation.system, params=params, plugins=f.study.plugins,
     )
+
+
+def _load_plugins(doc: dict, where: str, base_dir) -> None:
+    """Before the file is validated (its controllers must be registered by then): load ``study.plugins``
+    and look up, among the installed entry points, the controllers it names that are not registered."""
+    from arvcas.controllers import base
+    from arvcas.io import plugins
+
+    sec = doc.get("study") if isinstance(doc.get("study"), dict) else {}
+    if "plugins" in sec:
+        specs = config.check_value(_StudyFile, "study.plugins", sec["plugins"], where, StudyError)
+        for spec in (specs,) if isinstance(specs, str) else specs:
+            try:
+                plugins.load(spec, base_dir, what=f"{where}: study.plugins:")
+            except plugins.PluginError as e:
+                raise StudyError(str(e)) from None
+    names = sec.get("controllers")
+    for n in (names,) if isinstance(names, str) else names if isinstance(names, list) else ():
+        if isinstance(n, str) and n not in base.names():
+            try:
+                base.get(n)
+            except plugins.PluginError as e:  # an entry point of that name that does not load
+                raise StudyError(f"{where}: study.controllers: {e}") from None
+            except base.ControllerError:
+                pass  # not a plugin's either: the validation names it with the allowed ones
 
 
 def _variables(sec: _VariablesSection, controllers: tuple[str, ...], cfg, where: str, params=None) -> Variables:
@@ -346,7 +378,7 @@ def _variables(sec: _VariablesSection, controllers: tuple[str, ...], cfg, where:
         w = f"{where}: variables.bounds.{key}"
         if key not in valid:
             raise StudyError(f"{where}: unknown key 'variables.bounds.{key}'{config.closest(key, valid, 0.5)} "
-                             f"(a Table 2 column such as 'c' or a gain such as 'x.c' of {', '.join(controllers)})")
+                             f"(a gain column such as 'c' or a gain such as 'x.c' of {', '.join(controllers)})")
         if a <= 0:
             raise StudyError(f"{w}: lower bound must be > 0 (the search is on a log scale), got {a}")
         if a >= b:
@@ -359,8 +391,9 @@ def _variables(sec: _VariablesSection, controllers: tuple[str, ...], cfg, where:
             if not lo[i] <= g0[i] <= hi[i]:
                 col = n.split(".", 1)[1]
                 key = n if any(k == n for k, _, _ in bounds) else col
+                which = "Table 2" if params is None else "the default gains"
                 raise StudyError(f"{where}: variables.bounds.{key}: [{lo[i]:g}, {hi[i]:g}] does not contain "
-                                 f"Table 2's {c} {n} = {g0[i]:g} (bounds must contain Table 2)")
+                                 f"{which}'s {c} {n} = {g0[i]:g} (bounds must contain {which})")
         lims = gains_mod.upper_limits(c, cfg.time_h)  # the limits the controller's gains declare for h
         for i, n in enumerate(names):
             if hi[i] >= lims[i]:

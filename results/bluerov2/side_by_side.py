@@ -85,7 +85,7 @@ def main() -> str:
           "|---|---|---|---|---|---|"]
     from arvcas import metrics
     from arvcas.model import thrusters
-    from arvcas.params import view
+    from arvcas.system.params import view
     from arvcas.system import load_system
     import casadi as ca
 

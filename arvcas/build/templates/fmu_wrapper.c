@@ -35,12 +35,18 @@
 #define NVR (VR_P + NP)
 #define GUID "@GUID@"
 
+#define MAX_RK4_STEPS 1000000.0  /* per fmi2DoStep: about 4e6 model evaluations, a few seconds */
+#define MAX_RK4_STEPS_TEXT "1000000"
+
 #define RHS @RHS@
 #define RHS_WORK @RHS@_work
 
 static const double START[NVR] = {
 @START@
 };
+
+/* the checks' tables: names, the parameters' sign rules, ordered pairs, stow angles within limits */
+@CHECKS@
 
 typedef enum { S_INSTANTIATED, S_INIT, S_EVENT, S_CONT, S_STEP, S_TERMINATED, S_ERROR } Mode;
 
@@ -78,6 +84,41 @@ static void logmsg(Inst *c, fmi2Status status, const char *fmt, ...) {
 static fmi2Status fail(Inst *c, const char *fn, const char *why) {
     logmsg(c, fmi2Error, "%s: %s", fn, why);
     return fmi2Error;
+}
+
+/* fail with "<variable>: <why> (<value>)" */
+static fmi2Status fail_var(Inst *c, const char *fn, size_t vr, const char *why, double v) {
+    logmsg(c, fmi2Error, "%s: %s = %.17g: %s", fn, VNAME[vr], v, why);
+    return fmi2Error;
+}
+
+/* the value v of variable vr is acceptable: states and inputs finite, the payload in [0, 1] */
+static fmi2Status check_value(Inst *c, const char *fn, size_t vr, double v) {
+    if (vr < VR_U + NU && !isfinite(v)) return fail_var(c, fn, vr, "not a finite number", v);
+    if (vr == VR_U + @U_PAYLOAD@ && !(v >= 0.0 && v <= 1.0)) return fail_var(c, fn, vr, "outside [0, 1]", v);
+    return fmi2OK;
+}
+
+/* the parameters by the system loader's rules: finite, their sign rule, ordered limits, stow within limits
+   (the loader's matrix checks, positive definite inertias and a rank-6 thruster layout, are done at export) */
+static fmi2Status check_parameters(Inst *c, const char *fn) {
+    int i;
+    const double *p = c->r + VR_P;
+    for (i = 0; i < NP; i++) {
+        if (!isfinite(p[i])) return fail_var(c, fn, VR_P + i, "not a finite number", p[i]);
+        if (PRULE[i] == 1 && !(p[i] >= 0.0)) return fail_var(c, fn, VR_P + i, "must be >= 0", p[i]);
+        if (PRULE[i] == 2 && !(p[i] > 0.0)) return fail_var(c, fn, VR_P + i, "must be > 0", p[i]);
+    }
+    for (i = 0; i < NORDER; i++)
+        if (!(c->r[PORDER[i][0]] < c->r[PORDER[i][1]]))
+            return fail_var(c, fn, PORDER[i][0], "must be below its upper limit", c->r[PORDER[i][0]]);
+    for (i = 0; i < NWITHIN; i++)
+        if (!(c->r[PWITHIN[i][0]] <= c->r[PWITHIN[i][1]] && c->r[PWITHIN[i][1]] <= c->r[PWITHIN[i][2]]))
+            return fail_var(c, fn, PWITHIN[i][1], "outside its joint's limits", c->r[PWITHIN[i][1]]);
+    for (i = 0; i < VR_U + NU; i++)
+        if (i < VR_DX || i >= VR_DX + NX)
+            if (check_value(c, fn, (size_t)i, c->r[i]) != fmi2OK) return fmi2Error;
+    return fmi2OK;
 }
 
 #define CHECK(c, fn) do { if (!(c)) return fmi2Error; \
@@ -197,6 +238,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     CHECK_MODE(c, "fmi2ExitInitializationMode", S_INIT, "not in initialization mode");
     if (!(c->r[VR_H] > 0.0) || !isfinite(c->r[VR_H]))
         return fail(c, "fmi2ExitInitializationMode", "h_rk4 must be a finite number > 0");
+    if (check_parameters(c, "fmi2ExitInitializationMode") != fmi2OK) return fmi2Error;
     c->dirty = 1;
     c->mode = c->type == fmi2ModelExchange ? S_EVENT : S_STEP;
     return fmi2OK;
@@ -251,6 +293,7 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
             return fail(c, "fmi2SetReal", "the states eta, nu are set before initialization only (Model Exchange: fmi2SetContinuousStates)");
         if (k >= VR_H && !before_init)
             return fail(c, "fmi2SetReal", "parameters are fixed: set them before fmi2ExitInitializationMode");
+        if (check_value(c, "fmi2SetReal", k, value[i]) != fmi2OK) return fmi2Error;
         if (k >= VR_U && k < VR_U + NU) c->du[0][k - VR_U] = c->du[1][k - VR_U] = 0.0;  /* held unless derivatives follow */
         c->r[k] = value[i];
     }
@@ -435,8 +478,11 @@ fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
 
 fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
     Inst *c = (Inst *)comp;
+    size_t i;
     CHECK_ME(c, "fmi2SetContinuousStates");
     if (nx != NX || !x) return fail(c, "fmi2SetContinuousStates", "expected 12 states [eta; nu]");
+    for (i = 0; i < NX; i++)
+        if (check_value(c, "fmi2SetContinuousStates", VR_X + i, x[i]) != fmi2OK) return fmi2Error;
     memcpy(c->r + VR_X, x, NX * sizeof(double));
     c->dirty = 1;
     return fmi2OK;
@@ -490,6 +536,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueRefere
         if (vr[i] < VR_U || vr[i] >= VR_U + NU) return fail(c, "fmi2SetRealInputDerivatives", "not an input");
         if (order[i] != 1 && order[i] != 2)
             return fail(c, "fmi2SetRealInputDerivatives", "only first and second derivatives (order 1, 2) are supported");
+        if (!isfinite(value[i])) return fail_var(c, "fmi2SetRealInputDerivatives", vr[i], "its derivative is not finite", value[i]);
         c->du[order[i] - 1][vr[i] - VR_U] = value[i];
     }
     return fmi2OK;
@@ -516,6 +563,13 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real tc, fmi2Real H, fmi2Boolean n
     CHECK_CS(c, "fmi2DoStep");
     if (c->mode != S_STEP) return fail(c, "fmi2DoStep", "not initialized");
     if (!(H > 0.0) || !isfinite(H)) return fail(c, "fmi2DoStep", "communicationStepSize must be a finite number > 0");
+    if (!isfinite(tc) || fabs(tc - c->t) > 1e-9 * (1.0 + fabs(c->t)))
+        return fail(c, "fmi2DoStep", "currentCommunicationPoint is not the instance's current time "
+                                     "(the end of its last step, or the start time)");
+    /* bounded before any work: H / h_rk4 RK4 steps, at most MAX_RK4_STEPS in one call */
+    if (!(ceil(H / c->r[VR_H] - 1e-9) <= MAX_RK4_STEPS))
+        return fail(c, "fmi2DoStep", "communicationStepSize / h_rk4 asks for more than " MAX_RK4_STEPS_TEXT
+                                     " RK4 steps in one fmi2DoStep; use a smaller communication step or a larger h_rk4");
     n = (long)ceil(H / c->r[VR_H] - 1e-9);
     if (n < 1) n = 1;
     dt = H / (double)n;

@@ -1,0 +1,93 @@
+"""The whole benchmark: every section in one process, then bench.json and bench.md.
+
+Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable
+
+from arvcas.build import codegen
+from arvcas.sim import scenario
+from arvcas.system.params import load as load_params
+from benchmarks.bench.closed_loop import _bench_closed_loop
+from benchmarks.bench.common import Settings, _CpuMeter, _default_opt_level, _machine, _wait_for_load
+from benchmarks.bench.compiling import _bench_compile, _recommend
+from benchmarks.bench.controller import _bench_controller
+from benchmarks.bench.identification import _bench_identification
+from benchmarks.bench.plant import _Driver, _bench_plant
+from benchmarks.bench.report import render_markdown
+from benchmarks.bench.startup import _bench_startup
+from benchmarks.bench.systems import _bench_systems
+from benchmarks.bench.targets import _bench_targets
+
+def run(out: str | Path | None = "results", quick: bool = False, wait_load: float | None = None,
+        wait_max_s: float = 900.0, log: Callable[[str], None] | None = None) -> dict:
+    """Measure everything once; write ``bench.json`` and ``bench.md`` to ``out`` (unless None).
+
+    ``quick``: tiny repetition counts, the opt sweep only at -O0 (checks that everything works; its
+    figures are not for the record). ``wait_load``: first wait (at most ``wait_max_s``) until the
+    1-min load average is at most this. Returns the result dictionary.
+    """
+    s = Settings.quick() if quick else Settings.full()
+    log = log or (lambda m: print(f"bench: {m}", file=sys.stderr, flush=True))
+    waited = _wait_for_load(wait_load, wait_max_s, log) if wait_load is not None else 0.0
+    machine = _machine()
+    machine["load_avg_start"] = [round(x, 2) for x in os.getloadavg()]
+    machine["waited_for_load_s"] = round(waited, 1)
+    meter = _CpuMeter()
+    t_start = time.perf_counter()
+    cfg = scenario.load_scenario()
+    P = load_params()
+    sections: dict[str, dict] = {}
+    work = Path(tempfile.mkdtemp(prefix="arvcas-bench-"))
+    try:
+        driver = _Driver(work, _default_opt_level())
+        machine["driver_flags"] = " ".join(driver.flags)
+        machine["codegen_flags"] = " ".join([*codegen.BASE_FLAGS, _default_opt_level(), *codegen.FIXED_FLAGS, *codegen.isa_flags()])
+        res: dict = {"schema": 1, "mode": s.mode, "machine": machine, "settings": s.__dict__ | {"opt_levels": list(s.opt_levels)}}
+        for key, fn in (
+            ("plant", lambda: _bench_plant(s, driver, work, P, log)),
+            ("closed_loop", lambda: _bench_closed_loop(s, cfg, P, log)),
+            ("targets", lambda: _bench_targets(s, cfg, P, log)),
+            ("compile", lambda: _bench_compile(s, cfg, P, driver, work, log)),
+            ("startup", lambda: _bench_startup(s, log)),
+            ("systems", lambda: _bench_systems(s, log)),
+            ("identification", lambda: _bench_identification(s, log)),
+            ("controller", lambda: _bench_controller(s, log)),
+        ):
+            m = _CpuMeter()
+            t0 = time.perf_counter()
+            res[key] = fn()
+            sections[key] = {"wall_s": time.perf_counter() - t0, "other_cpu_share": m.share(),
+                             "load_avg_end": [round(x, 2) for x in os.getloadavg()]}
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    res["recommendation"] = _recommend(res["compile"])
+    machine["load_avg_end"] = [round(x, 2) for x in os.getloadavg()]
+    machine["other_cpu_share"] = meter.share()
+    machine["sections"] = sections
+    machine["total_wall_s"] = time.perf_counter() - t_start
+    if out is not None:
+        write(res, out)
+    return res
+
+
+def write(res: dict, out: str | Path) -> tuple[Path, Path]:
+    """Write ``bench.json`` and ``bench.md`` into the directory ``out`` (created if its parent exists),
+    atomically and only over files arvcas wrote (:mod:`arvcas.io.files`)."""
+    from arvcas.io import files
+
+    d = files.prepare_dir(Path(out), f"bench: --out {out}")
+    pj, pm = d / "bench.json", d / "bench.md"
+    text_json = json.dumps(res, indent=1, allow_nan=False) + "\n"
+    files.write_text(pj, text_json)
+    files.write_text(pm, render_markdown(res))
+    return pj, pm
