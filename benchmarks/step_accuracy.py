@@ -250,10 +250,23 @@ def _rk4_states_lag(cfg, pv, x0, targets, phase, h_plant, n_samples, opts, lay):
     n = min(len(targets), scenario_n(cfg) - 1) if n_samples is None else int(n_samples)
     xk, sk = np.asarray(x0, float), np.zeros(len(maps))
     out = [xk]
+    # one time constant and no rate limit (the BlueROV2's T200s): s(t) = y + (s0 - y) exp(-t / tau) in NumPy;
+    # otherwise the closed form of arvcas.model.thrusters.lag_states, evaluated on numbers
+    simple = not any(d.asymmetric or d.rate_limit for d in lay.structure.thruster_dynamics)
+    if simple:
+        taus = np.array([float(ca.DM(thrusters.time_constants(P, i)[0])) for i in range(len(maps))])
+        Es = np.exp(-np.asarray(offs)[None, :] / taus[:, None])
+    tables = {m.name: tuple(np.array(ca.DM(a)).ravel() for a in thrusters.map_table(P, m))
+              for m in lay.structure.thruster_maps if m.kind == "table"}
     for k in range(n):
-        S = thrusters.lag_states(P, ca.DM(sk), ca.DM(np.asarray(targets[k], float)), E, offs, cfg.time_h)
-        srows = np.array([[float(ca.DM(v)) for v in row] for row in S])  # (n_thr, stages)
-        T = np.array([np.array(ca.DM(thrusters.map_thrust(P, maps[i], ca.DM(srows[i])))).ravel()
+        y = np.asarray(targets[k], float)
+        if simple:
+            srows = y[:, None] + (sk - y)[:, None] * Es
+        else:
+            S = thrusters.lag_states(P, ca.DM(sk), ca.DM(y), E, offs, cfg.time_h)
+            srows = np.array([[float(ca.DM(v)) for v in row] for row in S])  # (n_thr, stages)
+        T = np.array([thrusters._pchip_np(*tables[maps[i].name], srows[i]) if maps[i].kind == "table" else
+                      np.array(ca.DM(thrusters.map_thrust(P, maps[i], ca.DM(srows[i])))).ravel()
                       for i in range(len(maps))])
         W = B @ T  # (6, stages)
         base = np.r_[k * cfg.time_h, np.asarray(phase, float), cfg.water_vector, pv_inst]

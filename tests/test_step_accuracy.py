@@ -97,11 +97,14 @@ def test_quick_study_per_system(system):
     base = res["table"][0]
     # with thruster dynamics (the BlueROV2's T200s) 0.01 s is far from the rule: the rotors sweep the thrust
     # table within a step (its tight check, at the scenario's 0.0025 s: tests/test_thruster_loop.py)
-    bound = 1e-4 if sysm.structure.has_thruster_dynamics else 1e-7
+    dyn = sysm.structure.has_thruster_dynamics
+    bound = 1e-4 if dyn else 1e-7
     assert base["open_loop_vs_cvodes"]["position_m"] < bound and base["open_loop_vs_cvodes"]["angle_rad"] < bound
     assert res["convergence"]["closed_loop_vs_textbook_rk4"] < 1e-12
     assert res["reference_check"]["difference"]["position_m"] < 1e-10
     assert res["table"][1]["metric_runs"] > 0 and res["table"][1]["status_changed"] == 0
     assert res["fronts"]["proposed"]["path"].startswith("results/tuning/paper" if system == "haidou1" else "results/bluerov2")
     text = sa.markdown(res)
-    assert f"--system {system}" in text and "Recommended default step" in text
+    # with thruster dynamics neither 0.01 nor 0.1 s passes, and the quick mode goes no finer
+    assert f"--system {system}" in text and ("Recommended default step" in text or
+                                             (dyn and "No step of the table passes the rule" in text))
