@@ -62,7 +62,7 @@ def test_an_arm_motion_shorter_than_the_plant_step_is_refused(tmp_path):
     reaction on the vehicle."""
     p = scenario_variant(tmp_path, 't = { value = 19.0, unit = "s"', 't = { value = 5.001, unit = "s"')
     with pytest.raises(ScenarioError, match=r"arm.waypoint\[2\].t: the motion from waypoint 1 takes 0.001 s, less "
-                                            r"than the plant step time.h_plant \(0.005 s\)") as e:
+                                            r"than the plant step time.h_plant \(0.0025 s\)") as e:
         load_scenario(p)
     assert "\n" not in str(e.value)
 
