@@ -79,8 +79,44 @@ static inline ln_vd ln_sign(ln_vd x) {{
 """
 
 
+def _sincos_pairs(body: list[str]) -> dict[int, tuple[int, bool]]:
+    """Statements computing ``sin(aX)`` and ``cos(aX)`` of the same value (``aX`` not assigned between):
+    line index -> (pair number, whether it is the pair's first statement). The scalar code's compiler
+    turns such pairs into one ``sincos`` call (GCC's sincos pass); the lane code puts them side by side, one
+    call per lane (``sin`` and ``cos`` of one double side by side, which the compiler merges as it does
+    in the scalar code). glibc's ``sincos`` gives the bits of ``sin`` and ``cos`` (its sincos shares their
+    code; 3e7 arguments from 0 to 1e6 compared), so the choice cannot change a result there, and the
+    lane tests compare every output to the scalar run's bits on whatever libm the machine has."""
+    open_: dict[tuple[str, str], int] = {}  # (function, argument) -> its statement, while the argument holds
+    pairs: dict[int, tuple[int, bool]] = {}
+    n = 0
+    for i, s in enumerate(body):
+        m = re.fullmatch(r"(a\d+)=(sin|cos)\((a\d+)\);", s)
+        if m:
+            a, f, x = m.groups()
+            other = open_.pop(("cos" if f == "sin" else "sin", x), None)
+            if other is not None:
+                pairs[other], pairs[i] = (n, True), (n, False)
+                n += 1
+            else:
+                open_[(f, x)] = i
+        else:
+            m = re.fullmatch(r"(a\d+)=.*;", s)
+            a = m.group(1) if m else None
+        if a is not None:  # an assignment ends every pending pair on that variable
+            for key in [k for k in open_ if k[1] == a]:
+                del open_[key]
+    return pairs
+
+
 def _per_lane_helpers(names1: set[str], names2: set[str]) -> str:
     out = []
+    if "sincos" in names1:
+        names1 = names1 - {"sincos"}
+        # sin and cos of one double side by side: the compiler's sincos pass makes them one call, as in
+        # the scalar code
+        out.append("static inline void ln_sincos(ln_vd x, ln_vd* s, ln_vd* c) { for (int l = 0; l < LN_W; ++l) "
+                   "{ const double v = x[l]; (*s)[l] = sin(v); (*c)[l] = cos(v); } }")
     for f in sorted(names1):
         out.append(f"static inline ln_vd ln_{f}(ln_vd x) {{ ln_vd r; for (int l = 0; l < LN_W; ++l) r[l] = {f}(x[l]); "
                    f"return r; }}")
@@ -125,10 +161,22 @@ def _lane_function(fn: ca.Function, c_name: str, shared, used1: set, used2: set)
     if not fn.is_a("SXFunction"):
         raise LaneError(f"lanes: {fn.name()}: only SX functions can be rewritten, got {fn.class_name()}")
     shared = list(shared) + [False] * (fn.n_in() - len(shared))
+    body = [ln.strip() for ln in _body(fn)]
+    pairs = _sincos_pairs(body)
     out = [f"static void {c_name}(const double* const* arg, double* const* res) {{"]
-    for ln in _body(fn):
-        s = ln.strip()
+    if pairs:
+        out.append("  ln_vd " + ", ".join(f"ln_s{k}, ln_c{k}" for k in sorted({k for k, _ in pairs.values()})) + ";")
+    for i, s in enumerate(body):
         if not s or s == "return 0;":
+            continue
+        if i in pairs:  # sin and cos of one value: one sincos per lane (see _sincos_pairs)
+            k, first = pairs[i]
+            m = re.fullmatch(r"(a\d+)=(sin|cos)\((a\d+)\);", s)
+            a, f, x = m.groups()
+            if first:
+                used1.add("sincos")
+                out.append(f"  ln_sincos({x},&ln_s{k},&ln_c{k});")
+            out.append(f"  {a}=ln_{f[0]}{k};")
             continue
         if s.startswith("casadi_real "):
             out.append("  " + s.replace("casadi_real", "ln_vd", 1))

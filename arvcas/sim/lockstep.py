@@ -70,6 +70,14 @@ def _main_function(name: str, spec: closedloop.RunSpec, parts: closedloop.StepPa
                        ["gains", "unc", "phase", "ekf", "p", "Sf"], ["S0", "K", "chat", "rmse", "ok", "t_fail"])
 
 
+def _check_keep(keep: ca.Function) -> None:
+    """The loop writes the controller part's C and the last plant step's x_next where the new state goes
+    instead of calling cl_keep: so cl_keep must be exactly vertcat(x_next, C)."""
+    C, S, xn, t = keep.sx_in()
+    if not ca.is_equal(keep.call([C, S, xn, t])[0], ca.vertcat(xn, C), 1):
+        raise AssertionError("lockstep: cl_keep is no longer vertcat(x_next, C); update the loop (arvcas.sim.lockstep)")
+
+
 def loop_c(name: str, spec: closedloop.RunSpec, parts: closedloop.StepParts, main: ca.Function, W: int) -> str:
     """The C of the lockstep loop (see the module docstring), appended to ``main``'s generated code."""
     cfg, L = spec.cfg, parts.layout
@@ -80,12 +88,12 @@ def loop_c(name: str, spec: closedloop.RunSpec, parts: closedloop.StepParts, mai
     off = {k: L.slices[k].start - NS for k in ("p", "consts", "phase_cs", "pc")}
     c0, c1 = parts.ctrls
     pre = f"{name}_ln"
+    _check_keep(parts.keep)
     fns = lanes.lane_functions([
         (c0, f"{pre}_ctrl0", [False, False, True, False, True, True]),
         (c1, f"{pre}_ctrl", [False, False, True, False, True, True]),
         (parts.rk4, f"{pre}_rk4", [False, True, True, False, False, False, False, False]),
         (parts.ok, f"{pre}_ok", [False, False]),
-        (parts.keep, f"{pre}_keep", [False, False, False, True]),
         (parts.freeze, f"{pre}_freeze", [False, False, False, True]),
     ])
     n = scenario.n_samples(cfg)
@@ -100,8 +108,8 @@ CASADI_SYMBOL_EXPORT int {name}{ENTRY}(long long int n, long long int chunk, lon
   enum {{ W = LN_W, NS = {NS}, NK = {NK}, NC = {NC}, NSAMP = {n}, NSUB = {parts.n_sub}, TS = {TS}, AS = {AS},
          RT = {ns * TS}, RA = {ns * AS}, IOK = {i_ok} }};
   static const double h = {h!r};
-  double S[NS * W], K[NK * W + 1], C[NC * W], X[2][12 * W], TAU[6 * W], NZ[12 * W], OKV[W], SK[NS * W],
-         SF[NS * W], s0[NS], k0[NK + 1];
+  double SB[2][NS * W], K[NK * W + 1], X[2][12 * W], TAU[6 * W], NZ[12 * W], OKV[W], SF[NS * W], s0[NS], k0[NK + 1];
+  double *S, *Sn;
   const double* arg[{sz_arg}];
   double* res[{sz_res}];
   long long int run[W], i0;
@@ -113,6 +121,8 @@ CASADI_SYMBOL_EXPORT int {name}{ENTRY}(long long int n, long long int chunk, lon
     i0 = __atomic_fetch_add(next, (long long int)W, __ATOMIC_RELAXED);
     if (i0 >= n) return 0;
     m = n - i0 < W ? (int)(n - i0) : W;
+    S = SB[0];
+    Sn = SB[1];
     for (l = 0; l < W; ++l) {{
       run[l] = i0 + (l < m ? l : m - 1);  /* a short last group: copies of its last run */
       arg[0] = a[0] + run[l] * sa[0]; arg[1] = a[2] + run[l] * sa[2]; arg[2] = a[3] + run[l] * sa[3];
@@ -131,34 +141,35 @@ CASADI_SYMBOL_EXPORT int {name}{ENTRY}(long long int n, long long int chunk, lon
         const double* nz = a[1] + run[l] * sa[1] + k * 12;
         for (j = 0; j < 12; ++j) NZ[j * W + l] = nz[j];
       }}
-      {{
+      {{  /* the controller part: C (the new state after x) straight into Sn: cl_keep is vertcat(x_next, C) */
         const double* ca_[6] = {{S, K, &tk, NZ, st, sm}};
-        double* cr[2] = {{C, TAU}};
+        double* cr[2] = {{Sn + 12 * W, TAU}};
         if (k == 0) {pre}_ctrl0(ca_, cr); else {pre}_ctrl(ca_, cr);
       }}
-      for (int i = 0; i < NSUB; ++i) {{
+      for (int i = 0; i < NSUB; ++i) {{  /* the last plant step writes x_next into Sn */
         const double* ra[8] = {{xin, st + 2 * i * TS, sm + 2 * i * AS, TAU, K + {off['p']} * W, K + {off['consts']} * W,
                                K + {off['phase_cs']} * W, K + {off['pc']} * W}};
-        double* rr[1] = {{X[i & 1]}};
+        double* rr[1] = {{i == NSUB - 1 ? Sn : X[i & 1]}};
         {pre}_rk4(ra, rr);
-        xin = X[i & 1];
+        xin = rr[0];
       }}
       {{
-        const double* oa[2] = {{C, xin}};
+        const double* oa[2] = {{Sn + 12 * W, Sn}};
         double* orr[1] = {{OKV}};
-        const double* fa[4] = {{C, S, xin, &tk}};
-        double* kr[1] = {{SK}};
-        double* fr[1] = {{SF}};
         {pre}_ok(oa, orr);
-        {pre}_keep(fa, kr);
+      }}
+      int going = 0, frozen = 0;
+      for (l = 0; l < W; ++l) frozen |= !(long long int)OKV[l];  /* cl_finalize's test */
+      if (frozen) {{  /* cl_freeze for the runs that stop (or stopped): the old state, ok = 0, t_fail */
+        const double* fa[4] = {{Sn + 12 * W, S, Sn, &tk}};
+        double* fr[1] = {{SF}};
         {pre}_freeze(fa, fr);
+        for (l = 0; l < W; ++l)
+          if (!(long long int)OKV[l])
+            for (j = 0; j < NS; ++j) Sn[j * W + l] = SF[j * W + l];
       }}
-      int going = 0;
-      for (l = 0; l < W; ++l) {{
-        const double* src = (long long int)OKV[l] ? SK : SF;  /* cl_finalize's test */
-        for (j = 0; j < NS; ++j) S[j * W + l] = src[j * W + l];
-        going |= S[IOK * W + l] != 0;
-      }}
+      {{ double* t_ = S; S = Sn; Sn = t_; }}
+      for (l = 0; l < W; ++l) going |= S[IOK * W + l] != 0;
       if (!going) break;  /* every run of the group diverged: frozen states, the same outputs */
     }}
     for (l = 0; l < m; ++l) {{
@@ -178,7 +189,7 @@ fail:
 """
 
 
-def build(run, W: int | None = None) -> LockstepRun:
+def build(run, W: int | None = None, flags: tuple[str, ...] = ()) -> LockstepRun:
     """The lockstep library of a :class:`arvcas.sim.run.CompiledRun` (metrics only), W lanes (default
     :func:`arvcas.build.lanes.lane_width`), from the compile cache when it is there."""
     W = lanes.lane_width() if W is None else W
@@ -194,6 +205,6 @@ def build(run, W: int | None = None) -> LockstepRun:
         extra["c"] = loop_c(name, spec, parts, main, W)
         return main
 
-    fn = codegen.build_described(name, desc, make, extra_c=lambda f: extra["c"],
+    fn = codegen.build_described(name, desc, make, extra_c=lambda f: extra["c"], flags=flags,
                                  label=f"the lockstep run for {run.params.structure.name} / {law.name} (W = {W})")
     return LockstepRun(fn, W)
