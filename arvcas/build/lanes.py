@@ -33,12 +33,13 @@ _CODEGEN_OPTS = {"casadi_real": "double", "casadi_int": "long long int", "with_h
 # functions called lane by lane (one libm call per lane, as the scalar code makes it); CasADi's own
 # helpers map to what they call in C99 (casadi_fmax -> fmax...).
 _PER_LANE_1 = {"sqrt", "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh",
-               "atanh", "exp", "log", "log10", "log1p", "expm1", "floor", "ceil", "erf", "erfinv", "round"}
-_PER_LANE_2 = {"fmax", "fmin", "pow", "atan2", "fmod", "hypot", "copysign"}
+               "atanh", "exp", "log", "log10", "log1p", "expm1", "floor", "ceil", "erf", "cbrt"}
+_PER_LANE_2 = {"fmax", "fmin", "pow", "atan2", "fmod", "remainder", "hypot", "copysign"}
 _ALIASES = {"casadi_fmax": "fmax", "casadi_fmin": "fmin", "casadi_log1p": "log1p", "casadi_expm1": "expm1",
             "casadi_hypot": "hypot"}
 
-_OPND = r"(a\d+|-?\d+\.?\d*(?:e[-+]?\d+)?)"
+_OPND = r"(a\d+|-?\d+\.?\d*(?:e[-+]?\d+)?|casadi_inf|casadi_nan)"
+_SPECIAL = {"casadi_inf": "INFINITY", "casadi_nan": "NAN"}
 _NUM = re.compile(r"-?\d+\.?\d*(?:e[-+]?\d+)?$")
 
 
@@ -82,9 +83,8 @@ static inline ln_vd ln_sign(ln_vd x) {{
 def _sincos_pairs(body: list[str]) -> dict[int, tuple[int, bool]]:
     """Statements computing ``sin(aX)`` and ``cos(aX)`` of the same value (``aX`` not assigned between):
     line index -> (pair number, whether it is the pair's first statement). The scalar code's compiler
-    turns such pairs into one ``sincos`` call (GCC's sincos pass); the lane code puts them side by side, one
-    call per lane (``sin`` and ``cos`` of one double side by side, which the compiler merges as it does
-    in the scalar code). glibc's ``sincos`` gives the bits of ``sin`` and ``cos`` (its sincos shares their
+    turns such pairs into one ``sincos`` call (GCC's sincos pass); the lane code calls ``sincos`` for
+    them, once per lane. glibc's ``sincos`` gives the bits of ``sin`` and ``cos`` (its sincos shares their
     code; 3e7 arguments from 0 to 1e6 compared), so the choice cannot change a result there, and the
     lane tests compare every output to the scalar run's bits on whatever libm the machine has."""
     open_: dict[tuple[str, str], int] = {}  # (function, argument) -> its statement, while the argument holds
@@ -110,19 +110,29 @@ def _sincos_pairs(body: list[str]) -> dict[int, tuple[int, bool]]:
 
 
 def _per_lane_helpers(names1: set[str], names2: set[str]) -> str:
-    out = []
+    """The per-lane calls. Each goes to the libm symbol under another C name (an ``asm`` label), so the
+    compiler knows nothing of what it computes and calls it once per lane, as the scalar code does:
+    with its builtin knowledge GCC vectorised ``fmax`` over the lanes into an inline sequence that
+    returns +0 for fmax(+0, -0), where libm (and so the scalar code) returns -0. ``sqrt`` is the
+    exception: correctly rounded in IEEE 754, it becomes the vector square root (what the scalar
+    code's ``sqrtsd`` is lane by lane)."""
+    out = ["#define LN_S2(x) #x", "#define LN_S(x) LN_S2(x)",
+           "#define LN_LIBM(f) __asm__(LN_S(__USER_LABEL_PREFIX__) #f)"]
     if "sincos" in names1:
         names1 = names1 - {"sincos"}
-        # sin and cos of one double side by side: the compiler's sincos pass makes them one call, as in
-        # the scalar code
+        out.append("extern void ln_libm_sincos(double, double*, double*) LN_LIBM(sincos);")
         out.append("static inline void ln_sincos(ln_vd x, ln_vd* s, ln_vd* c) { for (int l = 0; l < LN_W; ++l) "
-                   "{ const double v = x[l]; (*s)[l] = sin(v); (*c)[l] = cos(v); } }")
+                   "{ double s_, c_; ln_libm_sincos(x[l], &s_, &c_); (*s)[l] = s_; (*c)[l] = c_; } }")
     for f in sorted(names1):
-        out.append(f"static inline ln_vd ln_{f}(ln_vd x) {{ ln_vd r; for (int l = 0; l < LN_W; ++l) r[l] = {f}(x[l]); "
+        call = f"{f}(x[l])" if f == "sqrt" else f"ln_libm_{f}(x[l])"
+        if f != "sqrt":
+            out.append(f"extern double ln_libm_{f}(double) LN_LIBM({f});")
+        out.append(f"static inline ln_vd ln_{f}(ln_vd x) {{ ln_vd r; for (int l = 0; l < LN_W; ++l) r[l] = {call}; "
                    f"return r; }}")
     for f in sorted(names2):
+        out.append(f"extern double ln_libm_{f}(double, double) LN_LIBM({f});")
         out.append(f"static inline ln_vd ln_{f}(ln_vd x, ln_vd y) {{ ln_vd r; for (int l = 0; l < LN_W; ++l) "
-                   f"r[l] = {f}(x[l], y[l]); return r; }}")
+                   f"r[l] = ln_libm_{f}(x[l], y[l]); return r; }}")
     return "\n".join(out)
 
 
@@ -140,6 +150,8 @@ def _body(fn: ca.Function) -> list[str]:
 
 
 def _v(x: str) -> str:
+    if x in _SPECIAL:
+        return f"ln_bc({_SPECIAL[x]})"
     return f"ln_bc({x})" if _NUM.match(x) else x
 
 

@@ -189,9 +189,12 @@ fail:
 """
 
 
-def build(run, W: int | None = None, flags: tuple[str, ...] = ()) -> LockstepRun:
+def build(run, W: int | None = None, flags: tuple[str, ...] = (), opt_level: str = codegen.DEFAULT_OPT_LEVEL
+          ) -> LockstepRun:
     """The lockstep library of a :class:`arvcas.sim.run.CompiledRun` (metrics only), W lanes (default
-    :func:`arvcas.build.lanes.lane_width`), from the compile cache when it is there."""
+    :func:`arvcas.build.lanes.lane_width`), from the compile cache when it is there. ``flags`` and
+    ``opt_level``: the compiler's, as for :func:`arvcas.build.codegen.build_described` (no level or
+    instruction set changes a result: tests/test_lockstep.py compares the bits)."""
     W = lanes.lane_width() if W is None else W
     law = run.controller
     name = f"lanes_{law.name}"
@@ -206,5 +209,6 @@ def build(run, W: int | None = None, flags: tuple[str, ...] = ()) -> LockstepRun
         return main
 
     fn = codegen.build_described(name, desc, make, extra_c=lambda f: extra["c"], flags=flags,
+                                 opt_level=opt_level,
                                  label=f"the lockstep run for {run.params.structure.name} / {law.name} (W = {W})")
     return LockstepRun(fn, W)

@@ -19,6 +19,7 @@ toolchain, so a warm start only loads a shared library.
 
 from __future__ import annotations
 
+import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,9 +37,15 @@ from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
 from arvcas.sim.result import Result
 from arvcas.sim.scenario import ScenarioConfig
 
-__all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS"]
+__all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS", "LOCKSTEP_MIN_RUNS"]
+
+log = logging.getLogger(__name__)
 
 MAX_RUNS = 10_000_000  # runs in one batch call (the outputs alone take 100 bytes a run)
+# A batch of at least this many runs goes through the lockstep library (arvcas.sim.lockstep) unless asked
+# otherwise: compiling it once per machine and run description (5-15 s) costs about a thousand runs.
+LOCKSTEP_MIN_RUNS = 64
+LOCKSTEP_ENV = "ARVCAS_LOCKSTEP"
 _OUT_BYTES = 2 * 8 * (6 + 6 + 1 + 1)  # a run's outputs (chat, rmse, ok, t_fail) and their returned copies
 
 
@@ -94,6 +101,8 @@ class CompiledRun:
         self._fns: dict[bool, ca.Function] = {}
         self._pv = params.vector()
         self._source: dict | None = None
+        self._lockstep = None
+        self._lockstep_failed = False
 
     # -- compiled functions ----------------------------------------------------------------------------
     def description(self, trace: bool) -> str:
@@ -230,24 +239,27 @@ class CompiledRun:
         return meta
 
     def batch(self, gains, seed: int = 0, uncertainty=None, phase=None, n_threads: int | None = None,
-              return_status: bool = False):
+              return_status: bool = False, lockstep: bool | None = None):
         """Many gain sets (n x n_gains) on the same noise (``seed``), uncertainty and disturbance.
 
         Returns ``(chat (n x 6), rmse (n x 6))``; with ``return_status`` also ``(ok (n,), t_fail (n,))``.
-        A diverged run has ``ok = False`` and NaN metrics.
+        A diverged run has ``ok = False`` and NaN metrics. ``lockstep``: run W runs at once per core
+        (:mod:`arvcas.sim.lockstep`; the same bits); None: when :meth:`uses_lockstep` says so.
         """
         g = self._gains(gains, batch=True)
         unc, ph = self._unc_phase(uncertainty, phase)
         noise = scenario.noise_sequence(self.cfg, seed)
         chat, rmse, ok, t_fail = self._evaluate(g.shape[0], {"gains": g.T, "noise": noise, "unc": unc, "phase": ph},
-                                                {"gains"}, n_threads)
+                                                {"gains"}, n_threads, lockstep)
         return (chat, rmse, ok, t_fail) if return_status else (chat, rmse)
 
-    def many(self, gains, seeds, uncertainty=None, phase=None, n_threads: int | None = None):
+    def many(self, gains, seeds, uncertainty=None, phase=None, n_threads: int | None = None,
+             lockstep: bool | None = None):
         """n draws: row i has its own gains (or shared), noise seed, uncertainty factors and phases.
 
         ``gains``: (n_gains,) or (n, n_gains); ``seeds``: (n,) non-negative integers; ``uncertainty``:
         None, (4,) or (n, 4); ``phase``: None, (6,) or (n, 6). Returns ``(chat, rmse, ok, t_fail)``.
+        ``lockstep``: as for :meth:`batch`.
         """
         seeds = calls.integer_array(seeds, "seeds", SimulationError, max_size=MAX_RUNS)
         if seeds.ndim != 1 or seeds.size == 0:
@@ -281,17 +293,69 @@ class CompiledRun:
         for i in range(1, n):
             noise[:, i * k:(i + 1) * k] = scenario.noise_sequence(self.cfg, int(seeds[i]))
         return self._evaluate(n, {"gains": G.T, "noise": noise, "unc": U.T, "phase": PH.T},
-                              {"gains", "noise", "unc", "phase"}, n_threads)
+                              {"gains", "noise", "unc", "phase"}, n_threads, lockstep)
 
-    def _evaluate(self, n: int, varying: dict, per_run: set, n_threads):
+    # -- lockstep ----------------------------------------------------------------------------------------
+    def lockstep(self):
+        """The lockstep run (:class:`arvcas.sim.lockstep.LockstepRun`: W runs per core, the same bits),
+        built on first use or loaded from the compile cache."""
+        if self._lockstep is None:
+            from arvcas.sim import lockstep
+
+            self._lockstep = lockstep.build(self)
+        return self._lockstep
+
+    def uses_lockstep(self, n: int, lockstep: bool | None = None) -> bool:
+        """Whether n runs go through :meth:`lockstep`: ``lockstep`` if given (True: its build errors are
+        raised); else (None) when n >= :data:`LOCKSTEP_MIN_RUNS` (its library, compiled once per machine
+        and run description, costs about as much as a thousand runs) unless ``ARVCAS_LOCKSTEP=0``, and
+        when it can be built here (a Dask worker without a compiler runs one at a time)."""
+        if lockstep is not None:
+            if not isinstance(lockstep, bool):
+                raise SimulationError(f"lockstep: expected True, False or None, got {lockstep!r}")
+            return lockstep
+        mode = os.environ.get(LOCKSTEP_ENV, "auto")
+        if mode not in ("auto", "0", "1"):
+            raise SimulationError(f"{LOCKSTEP_ENV}={mode!r}: expected 0 (never), 1 (always) or auto (n >= "
+                                  f"{LOCKSTEP_MIN_RUNS})")
+        if mode == "0" or (mode == "auto" and n < LOCKSTEP_MIN_RUNS) or self._lockstep_failed:
+            return False
+        try:
+            self.lockstep()
+        except (codegen.CompileError, codegen.CacheError) as e:
+            log.info("lockstep runs unavailable (%s): one run at a time", e)
+            self._lockstep_failed = True
+            return False
+        return True
+
+    def _evaluate(self, n: int, varying: dict, per_run: set, n_threads, lockstep: bool | None = None):
         """n metrics-only runs on the thread pool; the inputs in ``per_run`` have a column block per run,
         the others and the time table are shared. NaN metrics for a diverged run."""
         if n > MAX_RUNS:
             raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
         calls.check_memory(f"runs: {n}", n * _OUT_BYTES, error=SimulationError)
-        fn = self.function(trace=False)
-        out = calls.call_named(fn, {**varying, **self._shared()}, n=n, per_run=per_run,
-                               n_threads=_n_threads(n_threads))
+        nt = _n_threads(n_threads)
+        if self.uses_lockstep(n, lockstep):
+            ls, names = self.lockstep(), closedloop.INPUTS
+            shapes = {"gains": (len(self.gain_names()), 1), "noise": (12, scenario.n_samples(self.cfg)), "unc": (4, 1),
+                      "phase": (6, 1), "ekf": (5, 1), "p": (len(self._pv), 1)}
+            inputs = {**varying, **self._shared()}
+            bound = []
+            for k in names:
+                a = inputs[k]
+                if k in shapes:
+                    r, c = shapes[k]
+                    a = calls.fortran(a, (r, c * n if k in per_run else c))
+                else:
+                    a = calls.fortran(a, a.shape)
+                bound.append(a)
+            outs = [np.empty((6, n), order="F"), np.empty((6, n), order="F"), np.empty((1, n), order="F"),
+                    np.empty((1, n), order="F")]
+            ls.evaluate(n, bound, set(per_run), outs, nt)
+            out = dict(zip(("chat", "rmse", "ok", "t_fail"), outs))
+        else:
+            fn = self.function(trace=False)
+            out = calls.call_named(fn, {**varying, **self._shared()}, n=n, per_run=per_run, n_threads=nt)
         ok = out["ok"].ravel() > 0.5
         chat, rmse = out["chat"].T.copy(), out["rmse"].T.copy()
         chat[~ok] = np.nan
