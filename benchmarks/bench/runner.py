@@ -22,6 +22,7 @@ from benchmarks.bench.common import Settings, _CpuMeter, _default_opt_level, _ma
 from benchmarks.bench.compiling import _bench_compile, _recommend
 from benchmarks.bench.controller import _bench_controller
 from benchmarks.bench.identification import _bench_identification
+from benchmarks.bench.lanes import _bench_lanes
 from benchmarks.bench.plant import _Driver, _bench_plant
 from benchmarks.bench.report import render_markdown
 from benchmarks.bench.startup import _bench_startup
@@ -62,6 +63,7 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
             ("systems", lambda: _bench_systems(s, log)),
             ("identification", lambda: _bench_identification(s, log)),
             ("controller", lambda: _bench_controller(s, log)),
+            ("lanes", lambda: _bench_lanes(s, log)),
         ):
             m = _CpuMeter()
             t0 = time.perf_counter()
