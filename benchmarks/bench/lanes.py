@@ -32,35 +32,26 @@ from arvcas.sim.run import Run
 from benchmarks.bench.common import CONTROLLER, Settings, _stat
 from benchmarks.bench.targets import _env
 
-STUDY = """\
-[study]
-name = "bench_lanes"
-controllers = "{controller}"
-seed = 2021
+PAPER_STUDY = Path(__file__).resolve().parents[2] / "studies" / "paper.toml"
 
-[variables]
-scale = 3.0
 
-[algorithm]
-name = "nsga2"
-population = {population}
-include_table2 = true
+def _study_text(controller: str, population: int, generations: int) -> str:
+    """studies/paper.toml for one controller, ``population`` and exactly ``generations`` generations (no
+    stall stop), 2 threads."""
+    import re
 
-[termination]
-max_generations = {generations}
+    t = PAPER_STUDY.read_text(encoding="utf-8")
+    for pat, rep in ((r"(?m)^controllers = .*$", f'controllers = "{controller}"'),
+                     (r"(?m)^population = \d+", f"population = {population}"),
+                     (r"(?m)^max_generations = \d+", f"max_generations = {generations}"),
+                     (r"(?m)^stall_generations = .*$", ""), (r"(?m)^ftol = .*$", ""),
+                     (r'(?m)^name = "local"$', 'name = "local"\nthreads = 2')):
+        t, n = re.subn(pat, rep, t)
+        if n != 1:
+            raise RuntimeError(f"lanes: {PAPER_STUDY}: expected one match of {pat!r}, found {n}")
+    return t
 
-[objectives]
-names = ["chat", "rmse"]
-reference_point = [300.0, 4.0]
 
-[evaluation]
-[[evaluation.draws]]
-noise_seed = 0
-
-[engine]
-name = "local"
-threads = 2
-"""
 STUDY_POP, STUDY_GENERATIONS = 80, 500
 TARGETS = {"rtf_per_core_haidou1": 50_000.0, "study_s": 45.0}
 
@@ -130,7 +121,7 @@ def _study(pop: int, generations: int, lockstep: bool, stop_after: int | None) -
 
     with tempfile.TemporaryDirectory(prefix="arvcas-bench-study-") as td:
         p = Path(td) / "study.toml"
-        p.write_text(STUDY.format(controller=CONTROLLER, population=pop, generations=generations))
+        p.write_text(_study_text(CONTROLLER, pop, generations))
         gen_s: dict[int, float] = {}
 
         def say(msg: str) -> None:
