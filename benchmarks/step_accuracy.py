@@ -74,7 +74,8 @@ SYSTEMS = {
                 "agsta": ROOT / "results/tuning/paper/agsta/front.h5"},
         controllers=None, mc=("proposed", "agsta"), out=ROOT / "results" / "step", label="Haidou-1"),
     "bluerov2_heavy_alpha5": dict(
-        fronts={c: ROOT / f"results/bluerov2/{c}/front.h5" for c in ("proposed", "agsta", "pid")},
+        # the fronts tuned on the current plant (T200 dynamics, issue 22; results/bluerov2/<c> are issue 12's)
+        fronts={c: ROOT / f"results/bluerov2/t200/{c}/front.h5" for c in ("proposed", "agsta", "pid")},
         controllers=("proposed", "agsta", "pid"), mc=("proposed", "agsta"),
         out=ROOT / "results" / "step" / "bluerov2_heavy_alpha5", label="BlueROV2 Heavy + Reach Alpha 5"),
 }
@@ -84,35 +85,78 @@ FRONTS = SYSTEMS["haidou1"]["fronts"]
 # ---- the reference: CVODES on the plant with the thrust held per sample ---------------------------------
 
 def _plant_ode(cfg, opts=None, layout=None):
-    """(x, s, par, xdot): the plant over one sample, local time ``s`` in [0, h], ``par = [tau (6); t_k; phase (6); p]``.
+    """(x, s, par, xdot): the plant over one sample, local time ``s`` in [0, h], ``par = [u; t_k; phase (6); water; p]``.
 
-    ``tau`` is the held body wrench of the thrusters; ``t = t_k + s``. The right-hand side is the SX
-    plant function ``uvms_rhs`` (direct Newton-Euler arm wrench, the trim of docs/model.md §3 at q0) with the scenario's
-    joint trajectory, payload ramp and eq. 41's disturbance as functions of ``t``. ``layout``: the system's
-    :class:`arvcas.system.params.Layout` (default Haidou-1's); ``p`` is its parameter vector.
+    ``u`` is the held body wrench of the thrusters (6); with thruster dynamics (docs/model.md §9) it is each
+    rotor's held target (one per thruster) and the rotor states join ``x`` (12 + n_thrusters), following the
+    textbook lag ``ds/dt = clip((y - s) / tau, -r, r)`` (tau the spin-up constant while ``|s|`` grows, the
+    spin-down one while it shrinks) through the map's table (CasADi's linear interpolant) or rotor law,
+    here integrated with the plant: an independent implementation of the closed loop's closed form.
+    ``t = t_k + s``. The right-hand side is the plant with the direct Newton-Euler arm wrench
+    (``uvms_xdot``, the function behind ``uvms_rhs``; the trim of docs/model.md §3 at q0), the scenario's
+    joint trajectory, payload ramp, eq. 41's disturbance, current and tether as functions of ``t``.
+    ``layout``: the system's :class:`arvcas.system.params.Layout` (default Haidou-1's); ``p`` is its parameter vector.
     """
-    from arvcas.model import manipulator
-    from arvcas.model.uvms import ModelOptions, plant_functions
+    from arvcas.model import manipulator, thrusters
+    from arvcas.model.uvms import ModelOptions, uvms_xdot
     from arvcas.system.params import default_layout, view
-    from arvcas.sim import scenario
+    from arvcas.sim import closedloop, scenario
 
     lay = layout or default_layout()
-    uvms = plant_functions(opts or ModelOptions(), layout=lay)["uvms_rhs"]
-    npar = len(lay)
-    x, s, par = ca.SX.sym("x", 12), ca.SX.sym("s"), ca.SX.sym("par", 13 + npar)
-    tau, tk, ph, p = par[0:6], par[6], par[7:13], par[13:]
+    st = lay.structure
+    dyn = st.has_thruster_dynamics
+    npar, nw = len(lay), cfg.water_vector.size
+    nu_in = st.n_thrusters if dyn else 6
+    x, s, par = ca.SX.sym("x", 12 + (st.n_thrusters if dyn else 0)), ca.SX.sym("s"), ca.SX.sym("par", nu_in + 7 + nw + npar)
+    u, tk, ph, w, p = par[0:nu_in], par[nu_in], par[nu_in + 1:nu_in + 7], par[nu_in + 7:nu_in + 7 + nw], par[nu_in + 7 + nw:]
+    P = view(p, lay)
     t = tk + s
-    q, qd, qdd = scenario.joint_trajectory(cfg, manipulator.stow_pose(view(p, lay)), t)
+    q, qd, qdd = scenario.joint_trajectory(cfg, manipulator.stow_pose(P), t)
     pl = scenario.payload_profile(cfg, t)
-    xdot = uvms(x, tau + scenario.disturbance(cfg, t, ph), q, qd, qdd, pl, p)
-    return x, s, par, xdot
+    extra = []
+    if dyn:
+        sr = x[12:]
+        T, sdot = [], []
+        for i, d in enumerate(st.thruster_dynamics):
+            m = st.thruster_map(d.map)
+            up, down, rate = thrusters.time_constants(P, i)
+            tau = ca.if_else(sr[i] * (u[i] - sr[i]) >= 0, up, down)
+            v = (u[i] - sr[i]) / tau
+            sdot.append(v if rate is None else ca.fmin(ca.fmax(v, -rate), rate))
+            T.append(thrusters.map_thrust(P, m, sr[i]))
+        wrench = ca.mtimes(thrusters.B_T(P), ca.vertcat(*T))
+        extra = [ca.vertcat(*sdot)]
+    else:
+        wrench = u
+    eta, nu = x[0:6], x[6:12]
+    current, tether = closedloop._water(cfg, P, w, t, eta, nu) if cfg.has_water else (None, 0)
+    xdot = uvms_xdot(P, x[0:12], wrench + scenario.disturbance(cfg, t, ph) + tether, q, qd, qdd, pl, opts or ModelOptions(),
+                     current=current)
+    return x, s, par, ca.vertcat(xdot, *extra)
 
 
-def _par_columns(cfg, pv, taus, phase):
-    """The per-sample ``par`` columns for samples k = 0 .. min(len(taus), N) - 1 (taus: a row per sample)."""
-    n = min(len(taus), scenario_n(cfg) - 1)
-    return np.vstack([np.asarray(taus, float)[:n].T, (np.arange(n) * cfg.time_h)[None, :],
-                      np.tile(np.asarray(phase, float)[:, None], (1, n)), np.tile(np.asarray(pv, float)[:, None], (1, n))])
+def _par_columns(cfg, pv, inputs, phase):
+    """The per-sample ``par`` columns for samples k = 0 .. min(len(inputs), N) - 1 (inputs: a row per sample)."""
+    n = min(len(inputs), scenario_n(cfg) - 1)
+    w = cfg.water_vector
+    return np.vstack([np.asarray(inputs, float)[:n].T, (np.arange(n) * cfg.time_h)[None, :],
+                      np.tile(np.asarray(phase, float)[:, None], (1, n)), np.tile(w[:, None], (1, n)),
+                      np.tile(np.asarray(pv, float)[:, None], (1, n))])
+
+
+def plant_inputs(pv, r, layout=None) -> np.ndarray:
+    """The reference's input per sample of a traced run ``r``: the held wrench of its saturated thrust, or with
+    thruster dynamics each rotor's target, the inverse map of the allocation's thrust (``r.thrust_cmd``)."""
+    from arvcas.model import thrusters
+    from arvcas.system.params import default_layout, view
+
+    lay = layout or default_layout()
+    if not lay.structure.has_thruster_dynamics:
+        return held_wrench(pv, r.thrust, lay)
+    P = view(ca.DM(np.asarray(pv, float)), lay)
+    maps = thrusters.thruster_maps(P)
+    return np.array([[float(thrusters.map_inverse(P, maps[i], ca.DM(row[i]))) for i in range(len(maps))]
+                     for row in r.thrust_cmd])
 
 
 def scenario_n(cfg) -> int:
@@ -131,9 +175,17 @@ def held_wrench(pv, thrust, layout=None) -> np.ndarray:
     return np.asarray(thrust, float) @ B.T
 
 
+def _x0(x0, x):
+    """The reference's initial state: the vehicle's, and the rotors at rest (the run's first sample)."""
+    x0 = np.asarray(x0, float)
+    return np.r_[x0, np.zeros(x.shape[0] - x0.size)]
+
+
 def cvodes_states(cfg, pv, x0, taus, phase, tol: float = CVODES_TOL, n_samples: int | None = None, opts=None,
                   layout=None):
-    """Plant states at t_k, k = 0..n (rows, (n+1, 12)) under the held wrenches ``taus[k]`` over [t_k, t_k + h].
+    """Plant states at t_k, k = 0..n (rows, (n+1, 12)) under the held inputs ``taus[k]`` over [t_k, t_k + h]
+    (:func:`plant_inputs`: wrenches, or the rotors' targets with thruster dynamics, whose states are integrated
+    with the plant and left out of the rows).
 
     CVODES (Adams, functional iteration: the plant is not stiff, and the AD Jacobian of the drag term
     is NaN at zero relative velocity), abstol = reltol = ``tol``, restarted at every sample.
@@ -144,15 +196,22 @@ def cvodes_states(cfg, pv, x0, taus, phase, tol: float = CVODES_TOL, n_samples: 
     F = ca.integrator("ref", "cvodes", {"x": x, "p": par, "t": s, "ode": xdot}, 0.0, [cfg.time_h], o)
     P = _par_columns(cfg, pv, taus, phase)
     n = P.shape[1] if n_samples is None else int(n_samples)
-    X = np.array(F.mapaccum(n)(x0=np.asarray(x0, float), p=P[:, :n])["xf"]).T
-    return np.vstack([np.asarray(x0, float)[None, :], X])
+    X = np.array(F.mapaccum(n)(x0=_x0(x0, x), p=P[:, :n])["xf"]).T
+    return np.vstack([_x0(x0, x)[None, :], X])[:, :12]
 
 
 def rk4_states(cfg, pv, x0, taus, phase, h_plant: float, n_samples: int | None = None, opts=None, layout=None):
-    """The textbook RK4 of the same ODE (same held wrenches), ``h / h_plant`` steps per sample; (n+1, 12).
+    """The textbook RK4 of the same ODE (same held inputs), ``h / h_plant`` steps per sample; (n+1, 12).
 
     An independent RK4 (no time table, the direct plant function) that checks the reference machinery.
+    With thruster dynamics the rotors are not RK4 states: their closed form (docs/model.md §9) gives the
+    thrust at every stage, as in the closed loop, here evaluated in NumPy sample by sample.
     """
+    from arvcas.system.params import default_layout
+
+    lay = layout or default_layout()
+    if lay.structure.has_thruster_dynamics:
+        return _rk4_states_lag(cfg, pv, x0, taus, phase, h_plant, n_samples, opts, lay)
     x, s, par, xdot = _plant_ode(cfg, opts, layout)
     f = ca.Function("f", [x, s, par], [xdot])
     m = int(round(cfg.time_h / h_plant))
@@ -168,8 +227,60 @@ def rk4_states(cfg, pv, x0, taus, phase, h_plant: float, n_samples: int | None =
     step = ca.Function("rk4_sample", [x, par], [xk])
     P = _par_columns(cfg, pv, taus, phase)
     n = P.shape[1] if n_samples is None else int(n_samples)
-    X = np.array(step.mapaccum(n)(np.asarray(x0, float), P[:, :n])).T
-    return np.vstack([np.asarray(x0, float)[None, :], X])
+    X = np.array(step.mapaccum(n)(_x0(x0, x), P[:, :n])).T
+    return np.vstack([_x0(x0, x)[None, :], X])[:, :12]
+
+
+def _rk4_states_lag(cfg, pv, x0, targets, phase, h_plant, n_samples, opts, lay):
+    """:func:`rk4_states` with thruster dynamics: the vehicle's RK4 driven by the wrench ``B F(s(t))`` at its
+    stages, ``s(t)`` the lag's closed form from each sample's rotor states towards its ``targets``."""
+    from arvcas.model import thrusters
+    from arvcas.system.params import layout_for, view
+
+    inst = layout_for(lay.structure.instantaneous())
+    pv_inst = np.asarray(pv, float)[[lay.index[n] for n in inst.names]]
+    x, s, par, xdot = _plant_ode(cfg, opts, inst)  # the plant with a wrench input
+    f = ca.Function("f", [x, s, par], [xdot])
+    P = view(ca.DM(np.asarray(pv, float)), lay)
+    maps = thrusters.thruster_maps(P)
+    B = np.array(ca.DM(thrusters.B_T(P)))
+    m = int(round(cfg.time_h / h_plant))
+    offs = [j * 0.5 * h_plant for j in range(2 * m + 1)]
+    E = thrusters.lag_constants(P, offs)
+    n = min(len(targets), scenario_n(cfg) - 1) if n_samples is None else int(n_samples)
+    xk, sk = np.asarray(x0, float), np.zeros(len(maps))
+    out = [xk]
+    # one time constant and no rate limit (the BlueROV2's T200s): s(t) = y + (s0 - y) exp(-t / tau) in NumPy;
+    # otherwise the closed form of arvcas.model.thrusters.lag_states, evaluated on numbers
+    simple = not any(d.asymmetric or d.rate_limit for d in lay.structure.thruster_dynamics)
+    if simple:
+        taus = np.array([float(ca.DM(thrusters.time_constants(P, i)[0])) for i in range(len(maps))])
+        Es = np.exp(-np.asarray(offs)[None, :] / taus[:, None])
+    tables = {m.name: tuple(np.array(ca.DM(a)).ravel() for a in thrusters.map_table(P, m))
+              for m in lay.structure.thruster_maps if m.kind == "table"}
+    for k in range(n):
+        y = np.asarray(targets[k], float)
+        if simple:
+            srows = y[:, None] + (sk - y)[:, None] * Es
+        else:
+            S = thrusters.lag_states(P, ca.DM(sk), ca.DM(y), E, offs, cfg.time_h)
+            srows = np.array([[float(ca.DM(v)) for v in row] for row in S])  # (n_thr, stages)
+        T = np.array([thrusters._pchip_np(*tables[maps[i].name], srows[i]) if maps[i].kind == "table" else
+                      np.array(ca.DM(thrusters.map_thrust(P, maps[i], ca.DM(srows[i])))).ravel()
+                      for i in range(len(maps))])
+        W = B @ T  # (6, stages)
+        base = np.r_[k * cfg.time_h, np.asarray(phase, float), cfg.water_vector, pv_inst]
+        fx = lambda xx, j: np.array(f(xx, offs[j], np.r_[W[:, j], base])).ravel()  # noqa: E731
+        for i in range(m):
+            a = 2 * i
+            k1 = fx(xk, a)
+            k2 = fx(xk + h_plant / 2 * k1, a + 1)
+            k3 = fx(xk + h_plant / 2 * k2, a + 1)
+            k4 = fx(xk + h_plant * k3, a + 2)
+            xk = xk + h_plant / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        sk = srows[:, -1]
+        out.append(xk)
+    return np.vstack(out)
 
 
 def _state_err(A, B) -> dict:
@@ -242,7 +353,7 @@ def _run_and_reference(sysm, cfg, c, g, seed, unc, ph, tol):
                                                                                 phase=ph)
     n = min(_valid(r, cfg.time_h), scenario_n(cfg)) - 1
     X = np.hstack([r.eta, r.nu])[:n + 1]
-    taus = held_wrench(sysm.params.vector(), r.thrust, sysm.layout)
+    taus = plant_inputs(sysm.params.vector(), r, sysm.layout)
     return r, n, X, taus, cvodes_states(cfg, sysm.params.vector(), X[0], taus, r.phase, tol=tol, n_samples=n,
                                         layout=sysm.layout)
 
@@ -309,7 +420,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
             X = np.hstack([r.eta, r.nu])[:nv]
             states[(label, hp)] = X
             metrics[(label, hp)] = (r.chat[None, :], r.rmse[None, :], np.array([r.ok]))
-            taus = held_wrench(pv, r.thrust, lay)
+            taus = plant_inputs(pv, r, lay)
             t0 = time.perf_counter()
             Xc = cvodes_states(cfg, pv, X[0], taus, r.phase, tol=tol, n_samples=min(nv, scenario_n(cfg)) - 1,
                                layout=lay)
@@ -382,7 +493,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
     label0 = traced[0][0]
     cfg_b = dataclasses.replace(cfg0, time_h_plant=BASE)
     r0 = arvcas.Run(controller=traced[0][1], scenario=cfg_b, params=sysm).compile().simulate()
-    taus0 = held_wrench(pv, r0.thrust, lay)
+    taus0 = plant_inputs(pv, r0, lay)
     X0 = np.hstack([r0.eta, r0.nu])[0]
     n0 = min(_valid(r0, cfg_b.time_h), scenario_n(cfg_b)) - 1
     ref_a = cvodes_states(cfg_b, pv, X0, taus0, r0.phase, tol=tol, n_samples=n0, layout=lay)

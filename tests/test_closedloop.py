@@ -30,7 +30,8 @@ def test_compiled_run_equals_vm(cfg):
     P = load_params()
     F = closedloop.build_run(closedloop.RunSpec("proposed", cfg), trace=False)
     args = (gains.default_gains("proposed"), scenario.noise_sequence(cfg, 1), cfg.uncertainty,
-            np.array(cfg.disturbance_phase), cfg.ekf_vector, P.vector(), *schedule.table(cfg, P.vector()))
+            np.array(cfg.disturbance_phase), cfg.ekf_vector, cfg.water_vector, P.vector(),
+            *schedule.table(cfg, P.vector()))
     vm = calls.call(F, *args)
     cc = calls.call(codegen.build(F), *args)
     for a, b in zip(vm, cc):
@@ -205,7 +206,7 @@ def test_isa_flags_leave_every_output_bitwise_equal(cfg, monkeypatch):
     oks = []
     for gs in (g, bad):
         args = (gs, scenario.noise_sequence(cfg, 2), cfg.uncertainty, np.array(cfg.disturbance_phase),
-                cfg.ekf_vector, P.vector(), *schedule.table(cfg, P.vector()))
+                cfg.ekf_vector, cfg.water_vector, P.vector(), *schedule.table(cfg, P.vector()))
         out_fast, out_base = calls.call(fast, *args), calls.call(base, *args)
         for a, b in zip(out_fast, out_base):
             np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))

@@ -575,8 +575,9 @@ def _x0_of(system):
 
 
 def test_bluerov2_validation_and_description(bluerov2_fmu, bluerov2):
-    """The FMU is sized by the system: 6 + 3 * 4 + 1 inputs, the 239 parameters with their SI units
-    (an SI hydrodynamic coefficient with its term's unit), h_rk4 and the parameters after the inputs."""
+    """The FMU is sized by the system: 6 + 3 * 4 + 1 inputs, its parameters with their SI units (an SI
+    hydrodynamic coefficient with its term's unit; the thrust table's points as arrays), h_rk4 and the
+    parameters after the inputs."""
     assert validate_fmu(str(bluerov2_fmu)) == []
     md = fmpy.read_model_description(str(bluerov2_fmu))
     P, names = bluerov2.params, _input_names(bluerov2)
@@ -587,7 +588,8 @@ def test_bluerov2_validation_and_description(bluerov2_fmu, bluerov2):
     assert [u.variable.name for u in md.outputs] == STATES
     assert [d.variable.name for d in md.derivatives] == [f"der({n})" for n in STATES]
     params = [v for v in md.modelVariables if v.causality == "parameter" and v.name != "h_rk4"]
-    assert [v.name for v in params] == P.names() and len(params) == len(P) == 239
+    assert [v.name for v in params] == [fmu_mod.fmi_name(n) for n in P.names()] and len(params) == len(P) == 649
+    assert by["thrusters.map.t200_16v.thrust[200]"].unit == "N" and by["thrusters.T1.time_constant"].unit == "s"
     assert [float(v.start) for v in params] == list(P.vector())
     lay = fmu_mod.layout(P)
     assert lay["vr_h"] == by["h_rk4"].valueReference == 24 + 19 and params[0].valueReference == lay["vr_p"]

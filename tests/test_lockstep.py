@@ -2,7 +2,7 @@
 
 The lane rewrite (arvcas/build/lanes.py) on every operation it handles, at special values (signed zeros,
 subnormals, infinities, NaN, large arguments), against CasADi's scalar code; then whole runs: every
-controller on Haidou-1 and some on the BlueROV2 systems, with running and diverging members, a group
+controller on Haidou-1 and some on the BlueROV2 systems (with the T200 dynamics, current and tether), with running and diverging members, a group
 whose runs all diverge (it stops early) and a short last group, through the public batch/many path.
 The run tests build both libraries at -O0 (no optimisation level changes a result: -ffp-contract=off;
 one test compares -O2 lanes with the -O2 scalar run) and a 3 s scenario, to keep their compile time small.
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -78,17 +79,24 @@ def test_lane_rewrite_refuses_what_it_does_not_know():
 
 
 def _short_run(system: str, law: str, duration: float = 3.0, limit: float | None = None):
-    r = Run(controller=law, params=system).compile()
+    # hinsdale_bluerov2_alpha5 (validation only) has no scenario of its own: the BlueROV2's (with its current
+    # and tether; instantaneous thrusters)
+    scen = str(SYSTEMS / "bluerov2_heavy_alpha5.scenario.toml") if system == "hinsdale_bluerov2_alpha5" else None
+    r = Run(controller=law, params=system, scenario=scen).compile()
     cfg = dataclasses.replace(r.cfg, time_duration=duration)
     if limit is not None:  # tracking-error bounds that some members cross (a stop by the error bound)
         cfg = dataclasses.replace(cfg, limits_e_position=limit, limits_e_attitude=limit)
     return Run(controller=law, params=system, scenario=cfg).compile()
 
 
+SYSTEMS = Path(closedloop.__file__).resolve().parents[1] / "data"
+
+
 def _members(run, n_run: int = 5, n_div: int = 4, seed: int = 0):
     """Gain sets: running members around the defaults, 4 that diverge (100x the defaults, below the gains'
     limits), a row of 0.02x; per-run seeds, uncertainty factors and phases."""
-    g0 = run.default_gains()
+    name = run.params.structure.name
+    g0 = gains_mod.default_gains(run.controller, "bluerov2_heavy_alpha5" if name == "hinsdale_bluerov2_alpha5" else run.params)
     up = gains_mod.upper_limits(run.controller, run.cfg.time_h) * 0.95
     rng = np.random.default_rng(seed)
     run_rows = np.minimum(g0 * rng.uniform(0.7, 1.4, (n_run, g0.size)), up)
@@ -104,7 +112,7 @@ def _members(run, n_run: int = 5, n_div: int = 4, seed: int = 0):
 # not diverge at any allowed gain within 3 s: its members stop by a tighter error bound
 CASES = [("haidou1", law, None, True) for law in ("proposed", "agsta", "traditional", "implicit")] + [
     ("haidou1", "pid", 0.02, False), ("bluerov2_heavy_alpha5", "proposed", None, True),
-    ("bluerov2_heavy_alpha5", "pid", None, False)]
+    ("bluerov2_heavy_alpha5", "pid", None, False), ("hinsdale_bluerov2_alpha5", "agsta", None, False)]
 
 
 @pytest.mark.parametrize("system,law,limit,group", CASES)
@@ -120,6 +128,8 @@ def test_lockstep_runs_equal_scalar_runs_bitwise(system, law, limit, group):
     got = run.many(G, seeds, uncertainty=U, phase=PH, n_threads=2, lockstep=True)
     for a, b, name in zip(ref, got, ("chat", "rmse", "ok", "t_fail")):
         assert a.tobytes() == b.tobytes(), f"{system} / {law}: {name} differs: {a} vs {b}"
+    ref_d, got_d = (run.many(G, seeds, uncertainty=U, phase=PH, chat="delivered", lockstep=lock)[0] for lock in (False, True))
+    assert ref_d.tobytes() == got_d.tobytes(), f"{system} / {law}: chat_delivered differs: {ref_d} vs {got_d}"
     ok = ref[2]
     assert ok.any() and not ok.all(), f"{system} / {law}: expected running and diverging members, ok = {ok}"
     assert not group or not ok[4:8].any(), f"{system} / {law}: rows 4-7 should all diverge: {ok}"

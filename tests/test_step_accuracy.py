@@ -8,8 +8,9 @@ agrees with CVODES to 1e-9 at h_plant = 0.01 s, and its error falls ~16x per hal
 its own controller, matches CVODES on its first 2 s: to 1e-9 at h_plant = 0.01 s, and to 1e-8 at the
 packaged step 0.05 s (results/step: 1.6e-8 m worst over 100 s and 52 runs; the issue's rule 1e-6).
 (3) the study itself in its quick mode, for each shipped system, on a 3 s horizon: its reference
-machinery (CVODES at two tolerances, the textbook RK4 against the closed loop's own trajectory, the
-closed loop against CVODES at 0.01 s) agrees and the report renders.
+machinery (CVODES at two tolerances, the textbook RK4 against the closed loop's own trajectory, with
+thruster dynamics driven by the lag's closed form, the closed loop against CVODES at 0.01 s) agrees and the
+report renders.
 Accuracy only: no timing is asserted.
 """
 
@@ -94,10 +95,16 @@ def test_quick_study_per_system(system):
     assert res["system"] == sysm.name and res["n_thrusters"] == sysm.n_thrusters and res["duration"] == 3.0
     assert [row["h_plant"] for row in res["table"]] == [0.01, 0.1]
     base = res["table"][0]
-    assert base["open_loop_vs_cvodes"]["position_m"] < 1e-7 and base["open_loop_vs_cvodes"]["angle_rad"] < 1e-7
+    # with thruster dynamics (the BlueROV2's T200s) 0.01 s is far from the rule: the rotors sweep the thrust
+    # table within a step (its tight check, at the scenario's 0.0025 s: tests/test_thruster_loop.py)
+    dyn = sysm.structure.has_thruster_dynamics
+    bound = 1e-4 if dyn else 1e-7
+    assert base["open_loop_vs_cvodes"]["position_m"] < bound and base["open_loop_vs_cvodes"]["angle_rad"] < bound
     assert res["convergence"]["closed_loop_vs_textbook_rk4"] < 1e-12
     assert res["reference_check"]["difference"]["position_m"] < 1e-10
     assert res["table"][1]["metric_runs"] > 0 and res["table"][1]["status_changed"] == 0
     assert res["fronts"]["proposed"]["path"].startswith("results/tuning/paper" if system == "haidou1" else "results/bluerov2")
     text = sa.markdown(res)
-    assert f"--system {system}" in text and "Recommended default step" in text
+    # with thruster dynamics neither 0.01 nor 0.1 s passes, and the quick mode goes no finer
+    assert f"--system {system}" in text and ("Recommended default step" in text or
+                                             (dyn and "No step of the table passes the rule" in text))

@@ -75,6 +75,14 @@ _DIM_UNIT = {
     "angle": "rad",
     "force": "N",
     "per_rho": None,
+    # thruster dynamics (docs/model.md §9): parameters the FMU carries but does not use
+    "time": "s",
+    "angular_velocity": "rad/s",
+    "angular_acceleration": "rad/s2",
+    "pwm": None,  # an ESC's PWM pulse width in microseconds: a command, not an SI quantity
+    "pwm_rate": None,
+    "rate": None,
+    "rotor_constant": None,
 }
 _STATE_DESCRIPTIONS = (
     "x: north position of the COB in {n} (NED)",
@@ -115,12 +123,21 @@ def layout(params=None, inputs: str = "wrench") -> dict[str, int]:
                 vr_h=VR_U + n_u, vr_p=VR_U + n_u + 1, n_p=len(P))
 
 
+def fmi_name(name: str) -> str:
+    """A parameter's FMU variable name: its name, a table's point index as an array index
+    (``thrusters.map.t200_16v.thrust.7`` -> ``thrusters.map.t200_16v.thrust[7]``: FMI's structured names
+    do not start a part with a digit)."""
+    return re.sub(r"\.(\d+)$", r"[\1]", name)
+
+
 def _parameter_unit(P, name: str) -> tuple[str | None, str, dict | None]:
     """(FMI unit or None, description prefix, base-unit exponents of a derived unit or None) of
     parameter ``name`` of the system of ``P``."""
     from arvcas.build.units import si_exponents, unit_text
 
     dim = P.layout.dims[P.layout.index[name]]
+    if ".map." in name or name.endswith((".time_constant", ".time_constant_up", ".time_constant_down", ".rate_limit")):
+        return _DIM_UNIT[dim], "thruster dynamics, not used by the FMU (docs/fmu.md); ", None
     if dim != "per_rho":
         return _DIM_UNIT[dim], "", None
     exps = si_exponents(P, name)
@@ -200,8 +217,8 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
             display = file_unit
         # the loader's sign rule, > 0 (pos) or >= 0 (nonneg): declared, and checked at initialization
         bounds = {"min": 0.0} if P.layout.rules[i] in ("pos", "nonneg") else {}
-        add(name, "parameter", "fixed", unit, desc, start=float(vals[i]), initial="exact", display=display, **bounds,
-            **({"base": base} if base else {}))
+        add(fmi_name(name), "parameter", "fixed", unit, desc, start=float(vals[i]), initial="exact", display=display,
+            **bounds, **({"base": base} if base else {}))
     assert len(V) == lay["vr_p"] + len(P)
     return V
 

@@ -23,7 +23,7 @@ _PKG = Path(__file__).resolve().parents[1]
 # folders (every *.py and data file below them) and single files, relative to the package
 _TREES = ("model", "sim", "controllers", "data")
 _FILES = ("system/params.py", "system/tomlfile.py", "system/config.py", "build/codegen.py", "build/lanes.py", "build/provenance.py", "__init__.py")
-_SUFFIXES = (".py", ".toml", ".urdf", ".json")
+_SUFFIXES = (".py", ".toml", ".urdf", ".json", ".csv")  # .csv: thrust tables (docs/system-file.md)
 
 _LOCK = threading.Lock()
 _MEMO: dict[tuple, str] = {}

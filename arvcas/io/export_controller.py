@@ -163,7 +163,7 @@ class _Info:
     def __init__(self, d: _Design, fns: dict[str, ca.Function], work: dict[str, dict[str, int]]):
         self.d, self.fns, self.work = d, fns, work
         P, law = d.params, d.law
-        self.sz = controller_sizes(law, P.layout)
+        self.sz = controller_sizes(law, P.layout, d.cfg)
         self.n_kp0 = fns["prep0"].numel_out(0)
         self.n_kp = fns["prep"].numel_out(0)
         self.sz_w = max(w["sz_w"] for w in work.values())
@@ -210,7 +210,8 @@ _PARAM_DOC = {
     "gains": "the law's gains, DOF by DOF (x .. psi), each DOF in the law's column order",
     "unc": "nominal-model factors [C, D, g, arm] (1): the fraction of each term a nominal model knows",
     "ekf": "EKF tuning [q_eta (m^2, rad^2), q_nu (m^2/s^2, rad^2/s^2): process noise per sample; var_position "
-           "(m^2), var_attitude (rad^2), var_velocity (m^2/s^2, rad^2/s^2): the sensor variances R assumes]",
+           "(m^2), var_attitude (rad^2), var_velocity (m^2/s^2, rad^2/s^2): the sensor variances R assumes; with "
+           "per-axis sensors the 12 variances of [eta; nu] instead of the three]",
     "eta_d": "set point eta_d in {n} (m, rad): where the vehicle is held",
     "p": "the model parameters, SI (names, units and indices in the _params.h header)",
 }
@@ -373,7 +374,7 @@ static int {cas}finite(const double* v, int n) {{
 void {pre}default_params({pre}params* prm) {{
   static const double gains[{sz.n_gains}] = {{{_doubles(I.defaults["gains"])}}};
   static const double unc[4] = {{{_doubles(I.defaults["unc"])}}};
-  static const double ekf[5] = {{{_doubles(I.defaults["ekf"])}}};
+  static const double ekf[{sz.n_ekf}] = {{{_doubles(I.defaults["ekf"])}}};
   static const double eta_d[6] = {{{_doubles(I.defaults["eta_d"])}}};
   memcpy(prm->gains, gains, sizeof gains);
   memcpy(prm->unc, unc, sizeof unc);
@@ -395,7 +396,7 @@ int {pre}init({pre}state* s, const {pre}params* prm) {{
   for (i = 0; i < {sz.n_gains} && bad < 0; ++i)
     if (!(prm->gains[i] > 0.0 && prm->gains[i] < {cas}upper[i])) {{ bad = {off['gains']} + i; rc = {up}E_GAIN; }}
   if (bad < 0 && (i = {cas}finite(prm->unc, 4)) >= 0) {{ bad = {off['unc']} + i; rc = {up}E_PARAM; }}
-  for (i = 0; i < 5 && bad < 0; ++i)
+  for (i = 0; i < {sz.n_ekf} && bad < 0; ++i)
     if (!(prm->ekf[i] - prm->ekf[i] == 0.0) || (i < 2 ? prm->ekf[i] < 0.0 : prm->ekf[i] <= 0.0)) {{
       bad = {off['ekf']} + i; rc = {up}E_PARAM;
     }}
@@ -855,6 +856,10 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     from arvcas.sim import scenario, schedule
 
     cfg, P = run.cfg, run.params
+    if P.structure.has_thruster_dynamics or cfg.has_water:
+        raise ExportError(f"{WHAT}: close_loop integrates the exported plant (arvcas export-c), which has no thruster "
+                          f"dynamics, current or tether (docs/model.md §9-§10): give a run with "
+                          f"Params.instantaneous() and a scenario without [current] and [tether]")
     lay = P.layout
     p = P.vector()
     rhs = rhs or (lambda f: lambda x, tau, q, qd, qdd, pl: f(x, tau, q, qd, qdd, pl))(dynamics("uvms_rhs", P))

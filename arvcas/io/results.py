@@ -51,7 +51,8 @@ _V1_DATASETS = ("t", "eta", "nu", "eta_hat", "eta_ref", "tau_cmd", "thrust", "s"
 
 _DOFS = "x, y, z, phi, theta, psi"
 
-_ROOT_ARRAYS_OPTIONAL = {"params": "params_vector", "uncertainty": "uncertainty", "phase": "phase"}
+_ROOT_ARRAYS_OPTIONAL = {"params": "params_vector", "uncertainty": "uncertainty", "phase": "phase",
+                         "chat_delivered": "chat_delivered"}
 
 
 class ResultsError(ValueError):
@@ -151,6 +152,10 @@ def _collect(result: Result) -> tuple[dict[str, np.ndarray], dict[str, object]]:
         attrs["uncertainty"] = _vector(result, "uncertainty", 4, "uncertainty")
     if result.phase is not None:
         attrs["phase"] = _vector(result, "phase", 6, "phase")
+    if result.chat_delivered is not None:
+        attrs["chat_delivered"] = _vector(result, "chat_delivered", 6, "chat_delivered")
+        attrs["chat_delivered_units"] = ("N (x, y, z), N m (phi, theta, psi) per controller sample; eq. 42 on the "
+                                         "thrusters' delivered body wrench")
     try:
         attrs["meta"] = json.dumps(result.meta, sort_keys=True, allow_nan=True)
     except (TypeError, ValueError) as e:

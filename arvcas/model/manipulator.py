@@ -238,15 +238,19 @@ def _base_motion(P, nu, nud):
     return ca.mtimes(RT, w0), ca.mtimes(RT, wd0), ca.mtimes(RT, v0), ca.mtimes(RT, a0)
 
 
-def arm_wrench(P, eta, nu, nud, q, qd, qdd, payload, n_quad: int = 5):
+def arm_wrench(P, eta, nu, nud, q, qd, qdd, payload, n_quad: int = 5, v_c_b=None):
     """tau_m of eq. 11: the arm's wrench on the vehicle in {b} about the COB (docs/model.md §3 sign).
 
     ``nud`` is Fossen's nu_dot (time derivative of the body-frame velocity components). Zero for a
-    system without an arm.
+    system without an arm. ``v_c_b``: the current's velocity in {b} (docs/model.md §10): the links' drag
+    acts on the flow relative to the water.
     """
     if n_joints(P) == 0:
         return ca.DM.zeros(6)
     w0, wd0, v0, a0 = _base_motion(P, nu, nud)
+    if v_c_b is not None:  # only the drag reads v: the water's velocity comes off every point's velocity
+        _, Rb0 = mount(P)
+        v0 = v0 - (v_c_b if Rb0 is None else ca.mtimes(Rb0.T, v_c_b))
     R = Rzyx(eta[3], eta[4], eta[5])
     g0 = ca.mtimes(R.T, ca.vertcat(0, 0, P["env.g"]))
     _, Rb0 = mount(P)
@@ -453,17 +457,20 @@ def _to_cob(P, f1, n1, R1, p1):
     return ca.vertcat(f0, n0 + ca.cross(pb0, f0))
 
 
-def drag_wrench(P, nu, frames, n_quad: int = 5):
+def drag_wrench(P, nu, frames, n_quad: int = 5, v_c_b=None):
     """The water's drag on the whole arm as a wrench at the COB in {b} (eq. 9 by quadrature, docs/model.md §3).
 
     Everything in {b}: link i turns at ``w_i = w + Omega_i`` and its origin moves at
     ``v + w x r_i + V_i`` (the vehicle's ``nu = [v; w]`` plus the joint motion); the normal velocity
     along the link, in the basis ``e1, e2``, is affine in x and integrated by
     :func:`arvcas.model.hydro.planar_drag`. ``frames``: the ``drag_frames`` of :func:`arm_schedule`.
-    Equals the drag in :func:`rnea` (test_schedule.py).
+    Equals the drag in :func:`rnea` (test_schedule.py). ``v_c_b``: the current in {b}, taken off the
+    velocity of every point (the relative flow, docs/model.md §10).
     """
     rho = P["env.rho"]
     v_b, w_b = nu[0:3], nu[3:6]
+    if v_c_b is not None:
+        v_b = v_b - v_c_b
     s_list = link_vectors(P) if P.s.arm == "dh" else None
     F, N = 0, 0
     for j, i in enumerate(drag_links(P)):
@@ -484,7 +491,7 @@ def drag_wrench(P, nu, frames, n_quad: int = 5):
     return ca.vertcat(F, N)
 
 
-def arm_wrench_scheduled(P, sched: dict, eta, nu, n_quad: int = 5):
+def arm_wrench_scheduled(P, sched: dict, eta, nu, n_quad: int = 5, v_c_b=None):
     """tau_m at ``nu_dot = 0`` from the time-only terms of :func:`arm_schedule` and the vehicle state.
 
     Equal to ``arm_wrench(P, eta, nu, 0, q, qd, qdd, payload)`` up to round-off, at a fraction of its
@@ -498,7 +505,7 @@ def arm_wrench_scheduled(P, sched: dict, eta, nu, n_quad: int = 5):
     nu_x_h = ca.vertcat(ca.cross(w, h[0:3]), ca.cross(w, h[3:6]) + ca.cross(v, h[0:3]))
     inertial = ca.mtimes(sched["M_arm_dot"], nu) + sched["b_q"] + nu_x_h
     weight = ca.vertcat(sched["W"] * g_b, ca.cross(sched["S"], g_b))
-    return weight + drag_wrench(P, nu, sched["drag_frames"], n_quad) - inertial
+    return weight + drag_wrench(P, nu, sched["drag_frames"], n_quad, v_c_b) - inertial
 
 
 def stow_pose(P):

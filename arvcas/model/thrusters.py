@@ -8,6 +8,7 @@ the minimum-norm ``B' (B B')^-1 tau`` for more; then each thrust is clipped to i
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 __all__ = ["B_T", "allocate", "saturate", "thrust", "limit_prefixes", "limits", "envelope"]
 
@@ -85,8 +86,6 @@ def envelope(P):
     ``hi_k e_k`` whose allocation stays within every thruster's limits (allocation is linear, so beyond
     them a thruster saturates). Numbers (NumPy), from a view of numeric parameters: ``(lo (6,), hi (6,))``.
     """
-    import numpy as np
-
     B = np.array(ca.evalf(B_T(P)), dtype=float)
     A = np.linalg.inv(B) if B.shape[1] == 6 else np.linalg.pinv(B)
     umin, umax = (np.broadcast_to(np.array(ca.evalf(ca.DM(x) if not isinstance(x, ca.SX) else x), dtype=float).ravel(),
@@ -101,3 +100,233 @@ def envelope(P):
     hi = np.array([reach(A[:, k]) for k in range(6)])
     lo = np.array([reach(-A[:, k]) for k in range(6)])
     return lo, hi
+
+
+# ---- thruster dynamics: command maps and the first-order lag (docs/model.md §9) ---------------------------
+#
+# A thruster with dynamics has one state, its rotor state ``s`` in the units of its command (PWM
+# microseconds, a normalised command or rotor speed) counted from the edge of its dead band: ``s = 0``
+# is the rotor at rest, and the command the autopilot sends for ``s`` is ``c = c_hi + s`` (s > 0) or
+# ``c_lo + s`` (s < 0), [c_lo, c_hi] the dead band. Its steady thrust is ``F(s)``: the monotone cubic
+# (PCHIP) through the map's table with the dead band's flat run taken out (strictly increasing through
+# (0, 0); smooth, so that the RK4 stages see no kinks as the rotor sweeps the table), or the quadratic
+# rotor law ``k s |s|``. The state follows the held command ``y`` by ``ds/dt = clip((y - s) / tau, -r, r)`` with
+# ``tau`` the spin-up constant while |s| grows and the spin-down constant while it shrinks; over a
+# sample the command is held, so the solution is written in closed form (:func:`lag_states`).
+
+__all__ += ["has_dynamics", "thruster_maps", "map_grid", "map_table", "pchip_slopes", "hermite", "map_thrust",
+            "map_inverse", "map_range", "command_of", "time_constants", "lag_constants", "lag_states", "LAG_EXP_LIMIT"]
+
+LAG_EXP_LIMIT = 700.0  # h / tau above this would overflow the closed form's exp(h / tau) (refused before a run)
+
+
+def has_dynamics(P) -> bool:
+    return P.s.thruster_dynamics is not None
+
+
+def thruster_maps(P) -> list:
+    """The map of each listed thruster (its :class:`arvcas.system.systemfile.ThrusterMap`), in thruster order."""
+    return [P.s.thruster_map(d.map) for d in P.s.thruster_dynamics]
+
+
+def _mp(m, key):
+    return f"thrusters.map.{m.name}.{key}"
+
+
+def map_grid(P, m):
+    """A table map as ``(s, F)``: the rotor-state grid (command minus the dead band's edge) and the
+    thrust (N), both strictly increasing through (0, 0)."""
+    i0, i1 = m.zero
+    c = [P[_mp(m, f"command.{i}")] for i in range(m.n)]
+    T = [P[_mp(m, f"thrust.{i}")] for i in range(m.n)]
+    s = [c[i] - c[i0] for i in range(i0 + 1)] + [c[i] - c[i1] for i in range(i1 + 1, m.n)]
+    return ca.vertcat(*s), ca.vertcat(*(T[:i0 + 1] + T[i1 + 1:]))
+
+
+def _edge_slope(h0, h1, m0, m1):
+    """An end point's slope (SciPy's PchipInterpolator): the three-point estimate, set to 0 where its sign
+    differs from the end secant's and limited to 3 times it where the secants change sign."""
+    d = ((2 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+    d = ca.if_else(ca.sign(d) != ca.sign(m0), 0, d)
+    return ca.if_else(ca.logic_and(ca.sign(m0) != ca.sign(m1), ca.fabs(d) > 3 * ca.fabs(m0)), 3 * m0, d)
+
+
+def pchip_slopes(g, v):
+    """The Fritsch-Carlson slopes of the monotone cubic through the points ``(g_i, v_i)`` (the same as
+    SciPy's PchipInterpolator): the weighted harmonic mean of the neighbouring secants, 0 where they
+    differ in sign. Any CasADi type; a column."""
+    n = g.shape[0]
+    h = [g[i + 1] - g[i] for i in range(n - 1)]
+    m = [(v[i + 1] - v[i]) / h[i] for i in range(n - 1)]
+    d = [_edge_slope(h[0], h[1], m[0], m[1])]
+    for k in range(1, n - 1):
+        w1, w2 = 2 * h[k] + h[k - 1], h[k] + 2 * h[k - 1]
+        d.append(ca.if_else(m[k - 1] * m[k] > 0, (w1 + w2) / (w1 / m[k - 1] + w2 / m[k]), 0))
+    d.append(_edge_slope(h[-1], h[-2], m[-1], m[-2]))
+    return ca.vertcat(*d)
+
+
+def map_table(P, m):
+    """A table map as ``(s, F, dF/ds)``: :func:`map_grid` and the monotone cubic's slopes at its points."""
+    g, v = map_grid(P, m)
+    return g, v, pchip_slopes(g, v)
+
+
+def hermite(g0, g1, v0, v1, d0, d1, x):
+    """The cubic of one interval ``[g0, g1]`` with values ``v0, v1`` and slopes ``d0, d1`` at ``x``."""
+    h = g1 - g0
+    t = (x - g0) / h
+    t2 = t * t
+    t3 = t2 * t
+    return (2 * t3 - 3 * t2 + 1) * v0 + (t3 - 2 * t2 + t) * h * d0 + (3 * t2 - 2 * t3) * v1 + (t3 - t2) * h * d1
+
+
+def _is_symbolic(*xs) -> bool:
+    return any(isinstance(x, (ca.SX, ca.MX)) for x in xs)
+
+
+def _np(x):
+    return np.array(ca.DM(x), dtype=float).ravel()
+
+
+def _pchip_np(g, v, d, x):
+    i = np.clip(np.searchsorted(g, x, side="right") - 1, 0, g.size - 2)
+    return hermite(g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1], x)
+
+
+def _pchip_sx(g, v, d, x):
+    """The monotone cubic at a symbolic ``x``: every interval's cubic, selected (the closed loop looks the
+    interval up in MX instead, :func:`arvcas.sim.closedloop._pchip`); beyond the ends, the end cubics."""
+    n = g.shape[0]
+    out = 0
+    for i in range(n - 1):
+        inside = ca.logic_and(x >= g[i] if i > 0 else 1, x < g[i + 1] if i < n - 2 else 1)
+        out = out + ca.if_else(inside, hermite(g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1], x), 0)
+    return out
+
+
+def map_thrust(P, m, s):
+    """Steady thrust F(s) (N) of map ``m`` at rotor states ``s`` (a column): a table's monotone cubic
+    through its points (PCHIP, docs/model.md §9), or the rotor law ``k s |s|``."""
+    if m.kind == "table":
+        g, v, d = map_table(P, m)
+        if _is_symbolic(g, v, s):
+            return ca.vertcat(*[_pchip_sx(g, v, d, s[i]) for i in range(s.shape[0])])
+        return ca.DM(_pchip_np(_np(g), _np(v), _np(d), _np(s)))
+    return P[_mp(m, "rotor_constant")] * s * ca.fabs(s)
+
+
+def map_inverse(P, m, u):
+    """The rotor state whose steady thrust is ``u`` (a column, N, within the map's range); a table's by
+    bisection on its monotone cubic (numbers only: the closed loop inverts in MX)."""
+    if m.kind == "table":
+        g, v, d = (_np(x) for x in map_table(P, m))
+        u = _np(u)
+        i = np.clip(np.searchsorted(v, u, side="right") - 1, 0, g.size - 2)
+        lo, hi = g[i].copy(), g[i + 1].copy()
+        for _ in range(64):  # a monotone interval: bisection to the last bit
+            mid = 0.5 * (lo + hi)
+            below = hermite(g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1], mid) < u
+            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        return ca.DM(0.5 * (lo + hi))
+    return ca.sign(u) * ca.sqrt(ca.fabs(u) / P[_mp(m, "rotor_constant")])
+
+
+def map_range(P, m):
+    """(s_min, s_max) of map ``m``'s rotor state: the table's ends, or the command limits beyond the dead band."""
+    if m.kind == "table":
+        i0, i1 = m.zero
+        return (P[_mp(m, "command.0")] - P[_mp(m, f"command.{i0}")],
+                P[_mp(m, f"command.{m.n - 1}")] - P[_mp(m, f"command.{i1}")])
+    db = P[_mp(m, "dead_band")]
+    return P[_mp(m, "command_min")] + db, P[_mp(m, "command_max")] - db
+
+
+def command_of(P, m, s):
+    """The command the autopilot sends for rotor state ``s`` (map units): beyond the dead band's edge, the
+    dead band's middle at rest."""
+    if m.kind == "table":
+        i0, i1 = m.zero
+        lo, hi = P[_mp(m, f"command.{i0}")], P[_mp(m, f"command.{i1}")]
+    else:
+        hi = P[_mp(m, "dead_band")]
+        lo = -hi
+    return ca.if_else(s > 0, hi + s, ca.if_else(s < 0, lo + s, 0.5 * (lo + hi)))
+
+
+def time_constants(P, i: int):
+    """(tau_up, tau_down, rate limit or None) of listed thruster ``i`` (s, s, command units / s)."""
+    n, d = P.s.thrusters[i], P.s.thruster_dynamics[i]
+    if d.asymmetric:
+        up, down = P[f"thrusters.{n}.time_constant_up"], P[f"thrusters.{n}.time_constant_down"]
+    else:
+        up = down = P[f"thrusters.{n}.time_constant"]
+    return up, down, (P[f"thrusters.{n}.rate_limit"] if d.rate_limit else None)
+
+
+def lag_constants(P, offsets) -> ca.SX:
+    """The closed form's per-run constants: ``exp(-t / tau)`` at each time offset ``t`` of a sample, per
+    thruster (spin-up, then spin-down for an asymmetric one), stacked in thruster order."""
+    out = []
+    for i, d in enumerate(P.s.thruster_dynamics):
+        up, down, _ = time_constants(P, i)
+        out += [ca.exp(-t / up) for t in offsets]
+        if d.asymmetric:
+            out += [ca.exp(-t / down) for t in offsets]
+    return ca.vertcat(*out)
+
+
+def _phase(xs, z, tau, r, ts, Es, h, t0=None):
+    """The solution of ``dx/dt = clip((z - x) / tau, -r, r)`` from ``x(t0) = xs`` at the times ``ts``
+    (``Es[j] = exp(-ts[j] / tau)``): a ramp at the rate limit while ``|z - x| > r tau``, then the
+    exponential approach. ``exp(min(t0 + t_ramp, h) / tau)`` carries the delayed start (the tail is
+    used only for times after it, all <= h)."""
+    d = z - xs
+    if r is None:
+        if t0 is None:
+            return [z - d * E for E in Es]
+        G = ca.exp(ca.fmin(t0, h) / tau)
+        return [z - d * E * G for E in Es]
+    t0 = 0 if t0 is None else t0
+    a, sg = ca.fabs(d), ca.sign(d)
+    tr = ca.fmax(0, a / r - tau)
+    m = ca.fmin(a, r * tau)
+    G = ca.exp(ca.fmin(t0 + tr, h) / tau)
+    return [ca.if_else(t - t0 <= tr, xs + sg * r * (t - t0), z - sg * m * E * G) for t, E in zip(ts, Es)]
+
+
+def lag_states(P, s0, y, consts, offsets, h):
+    """Each thruster's rotor state at the time offsets of a sample (``offsets[j]`` s after its start, the
+    last one ``<= h``), from ``s0`` with the command ``y`` held: a list over thrusters of lists over offsets.
+
+    Exact for the lag of :func:`time_constants`: with one time constant, :func:`_phase` over the whole
+    sample; with spin-up and spin-down constants, spin-up while moving away from rest, spin-down while
+    moving towards the target on the same side, and for a reversal spin-down until the rotor stops (at
+    ``t_c``) then spin-up from rest. ``consts``: :func:`lag_constants`.
+    """
+    k, out, m = 0, [], len(offsets)
+    for i, d in enumerate(P.s.thruster_dynamics):
+        up, down, r = time_constants(P, i)
+        Eu = [consts[k + j] for j in range(m)]
+        k += m
+        if not d.asymmetric:
+            out.append(_phase(s0[i], y[i], up, r, offsets, Eu, h))
+            continue
+        Ed = [consts[k + j] for j in range(m)]
+        k += m
+        x, z = s0[i], y[i]
+        grow = x * (z - x) >= 0  # at rest or moving away from it: spin-up all sample
+        cross = x * z < 0  # a reversal: spin-down to rest, then spin-up
+        PU = _phase(x, z, up, r, offsets, Eu, h)
+        PA = _phase(x, z, down, r, offsets, Ed, h)
+        a = ca.fabs(x) + ca.fabs(z)
+        if r is None:
+            tc = down * ca.log(a / ca.fabs(z))
+        else:
+            tra = ca.fmax(0, a / r - down)
+            t_zero = ca.fabs(x) / r
+            tc = ca.if_else(t_zero <= tra, t_zero, tra + down * ca.log(ca.fmin(a, r * down) / ca.fabs(z)))
+        PB = _phase(0, z, up, r, offsets, Eu, h, t0=tc)
+        out.append([ca.if_else(grow, pu, ca.if_else(ca.logic_and(cross, t >= tc), pb, pa))
+                    for t, pu, pa, pb in zip(offsets, PU, PA, PB)])
+    return out

@@ -44,43 +44,47 @@ class ModelOptions:
         return opts
 
 
-def coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions):
+def coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions, current=None):
     """(nu_dot, tau_m) of the exactly coupled vehicle + arm (paper eq. 1 with eq. 11, docs/model.md §3).
 
     ``tau``: body wrench at the COB (thrust + disturbance); ``tau_extra``: further body wrench (the
     trim buoyancy of docs/model.md §3). ``tau_m`` is the arm's wrench on the vehicle at this acceleration.
+    ``current``: ``(nu_c, nu_c_dot)`` of :func:`arvcas.model.water.relative_current` (docs/model.md §10).
     """
-    tm0 = manipulator.arm_wrench(P, eta, nu, ca.DM.zeros(6), q, qd, qdd, payload, opts.n_quad)
+    v_c_b = None if current is None else current[0][0:3]
+    tm0 = manipulator.arm_wrench(P, eta, nu, ca.DM.zeros(6), q, qd, qdd, payload, opts.n_quad, v_c_b)
     Mb = manipulator.base_inertia(P, q, payload)  # tau_m = tm0 - M_arm nu_dot, exact
-    b = tau + tm0 + tau_extra - vehicle.forces(P, eta, nu)
+    b = tau + tm0 + tau_extra - vehicle.forces(P, eta, nu, current)
     nud = solve_nopivot(vehicle.M(P) + Mb, b)  # M + M_arm is diagonally dominant
     return nud, tm0 - ca.mtimes(Mb, nud)
 
 
-def coupled_terms_scheduled(P, eta, nu, tau, rec: dict, tau_extra, opts: ModelOptions):
+def coupled_terms_scheduled(P, eta, nu, tau, rec: dict, tau_extra, opts: ModelOptions, current=None):
     """:func:`coupled_terms` from a record of the run's time table (:func:`arvcas.sim.schedule.unpack`).
 
     The same equations: the arm's wrench from its time-only terms and the vehicle state
     (:func:`arvcas.model.manipulator.arm_wrench_scheduled`), and ``(M + M_arm) nu_dot = b`` by the tabulated
     LU factors. Equal to :func:`coupled_terms` to round-off.
     """
-    tm0 = manipulator.arm_wrench_scheduled(P, rec, eta, nu, opts.n_quad)
-    b = tau + tm0 + tau_extra - vehicle.forces(P, eta, nu)
+    v_c_b = None if current is None else current[0][0:3]
+    tm0 = manipulator.arm_wrench_scheduled(P, rec, eta, nu, opts.n_quad, v_c_b)
+    b = tau + tm0 + tau_extra - vehicle.forces(P, eta, nu, current)
     nud = lu_solve(*rec["lu"], b)
     return nud, tm0 - ca.mtimes(rec["M_arm"], nud)
 
 
-def coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions):
+def coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts: ModelOptions, current=None):
     """nu_dot of the exactly coupled vehicle + arm (see :func:`coupled_terms`)."""
-    return coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts)[0]
+    return coupled_terms(P, eta, nu, tau, q, qd, qdd, payload, tau_extra, opts, current)[0]
 
 
-def uvms_xdot(P, x, tau, q, qd, qdd, payload, opts: ModelOptions, trim=None):
-    """xdot = [J(eta) nu; nu_dot] of the coupled system; ``trim`` defaults to docs/model.md §3 trim at q0."""
+def uvms_xdot(P, x, tau, q, qd, qdd, payload, opts: ModelOptions, trim=None, current=None):
+    """xdot = [J(eta) nu; nu_dot] of the coupled system; ``trim`` defaults to docs/model.md §3 trim at q0;
+    ``current``: ``(nu_c, nu_c_dot)`` (docs/model.md §10; the public ``uvms_rhs`` has none)."""
     eta, nu = x[0:6], x[6:12]
     if trim is None:
         trim = manipulator.trim_wrench(P, eta, opts.n_quad)
-    nud = coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, trim, opts)
+    nud = coupled_accel(P, eta, nu, tau, q, qd, qdd, payload, trim, opts, current)
     return ca.vertcat(ca.mtimes(J(eta), nu), nud)
 
 

@@ -158,10 +158,23 @@ def g_vec(P, eta):
     )
 
 
-def forces(P, eta, nu):
-    """C(nu) nu + D(nu) nu + g(eta): the vehicle's velocity- and pose-dependent generalised force."""
-    C = C_RB(P, nu) + C_A(P, nu) if P.s.coriolis_added_mass else C_RB(P, nu)
-    return ca.mtimes(C, nu) + ca.mtimes(D(P, nu), nu) + g_vec(P, eta)
+def forces(P, eta, nu, current=None):
+    """C(nu) nu + D(nu) nu + g(eta): the vehicle's velocity- and pose-dependent generalised force.
+
+    ``current = (nu_c, nu_c_dot)`` (:func:`arvcas.model.water.relative_current`): the water moves, and the
+    hydrodynamic terms act on ``nu_r = nu - nu_c`` (Fossen 2011, ch. 10, docs/model.md §10):
+    ``C_RB(nu) nu + C_A(nu_r) nu_r + D(nu_r) nu_r + g(eta) - M_A nu_c_dot``, so that ``M nu_dot = tau - forces``
+    is ``M_RB nu_dot + M_A nu_r_dot + ... = tau``.
+    """
+    if current is None:
+        C = C_RB(P, nu) + C_A(P, nu) if P.s.coriolis_added_mass else C_RB(P, nu)
+        return ca.mtimes(C, nu) + ca.mtimes(D(P, nu), nu) + g_vec(P, eta)
+    nu_c, nud_c = current
+    nu_r = nu - nu_c
+    out = ca.mtimes(C_RB(P, nu), nu) + ca.mtimes(D(P, nu_r), nu_r) + g_vec(P, eta) - ca.mtimes(M_A(P), nud_c)
+    if P.s.coriolis_added_mass:
+        out = out + ca.mtimes(C_A(P, nu_r), nu_r)
+    return out
 
 
 def rhs(P, x, tau):

@@ -34,7 +34,7 @@ import numpy as np
 
 from arvcas.controllers import atd, gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller
-from arvcas.model import manipulator, thrusters, vehicle
+from arvcas.model import manipulator, thrusters, vehicle, water as water_mod
 from arvcas.sim import scenario, schedule, signals as signals_mod
 from arvcas.system.params import Layout as ParamLayout, default_layout, view
 from arvcas.sim.scenario import ScenarioConfig
@@ -50,7 +50,8 @@ _PSYM_INDEX = {ij: k for k, ij in enumerate(_PSYM)}
 N_PSYM = len(_PSYM)
 
 # the run's inputs, in the order of the compiled function (everything else binds them by name)
-INPUTS: tuple[str, ...] = ("gains", "noise", "unc", "phase", "ekf", "p", "sched_time", "sched_arm")
+INPUTS: tuple[str, ...] = ("gains", "noise", "unc", "phase", "ekf", "water", "p", "sched_time", "sched_arm")
+OUTPUTS: tuple[str, ...] = ("chat", "rmse", "ok", "t_fail", "chat_delivered")
 
 
 class Layout:
@@ -71,18 +72,26 @@ class Layout:
         return ca.vertcat(*[values[name] for name in self.slices])
 
 
-def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int) -> Layout:
-    """The loop state: the plant, EKF and reference; the controller's own state; the metrics and
-    status; then the run's constants (carried through the loop, never changed)."""
+def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int, n_ekf: int = 5,
+                 n_water: int = 0, thr_consts: tuple[int, int] | None = None) -> Layout:
+    """The loop state: the plant (with the thrusters' rotor states and delivered thrust when they have
+    dynamics), EKF and reference; the controller's own state; the metrics and status; then the run's
+    constants (carried through the loop, never changed). ``thr_consts``: the sizes of the thruster
+    dynamics' per-run constants (:func:`thruster_constants`), None for instantaneous thrusters."""
+    dyn = thr_consts is not None
     return Layout([
         ("x", 12),  # true plant state [eta; nu]
+        *([("thr", n_thr), ("thr_T", n_thr)] if dyn else []),  # rotor states and their thrust at t_k
         # the controller's memory: EKF prior for this sample (covariance: upper triangle, row by row),
         # ATD reference, the law's state
         *controller_memory(ctrl),
-        ("tau_prev", 6), ("u_hold", n_thr),  # previous command (CHAT) and held realised thrust
-        ("chat_sum", 6), ("e2_sum", 6), ("ok", 1), ("t_fail", 1),
+        # previous command (CHAT); held realised thrust, or with dynamics the previous delivered wrench
+        ("tau_prev", 6), ("tdel_prev", 6) if dyn else ("u_hold", n_thr),
+        ("chat_sum", 6), ("chatd_sum", 6), ("e2_sum", 6), ("ok", 1), ("t_fail", 1),
         # constants of the run carried through the loop
-        ("gains", n_gains), ("unc", 4), ("phase_cs", 12), ("ekf", 5), ("p", n_p), ("consts", 9), ("pc", n_pc),
+        ("gains", n_gains), ("unc", 4), ("phase_cs", 12), ("ekf", n_ekf), ("water", n_water), ("p", n_p),
+        ("consts", 9), ("pc", n_pc),
+        *([("thr_E", thr_consts[0]), ("thr_tab", thr_consts[1])] if dyn else []),
     ])
 
 
@@ -118,6 +127,33 @@ class RunSpec:
         return self.layout or default_layout()
 
 
+def stage_offsets(cfg: ScenarioConfig) -> list[float]:
+    """The times of a sample's RK4 stages after its start, ``j h_plant / 2`` (the last one is ``h``)."""
+    return [j * 0.5 * cfg.time_h_plant for j in range(schedule.n_stages(cfg))]
+
+
+def thruster_constants(P, cfg: ScenarioConfig):
+    """Per-run constants of the thruster dynamics, from p: the lag's ``exp(-t / tau)`` at the stage offsets
+    (:func:`arvcas.model.thrusters.lag_constants`) and each table map's rotor-state grid, thrust and slopes
+    (:func:`arvcas.model.thrusters.map_table`). ``(E, tables)``."""
+    E = thrusters.lag_constants(P, stage_offsets(cfg))
+    tabs = [ca.vertcat(*thrusters.map_table(P, m)) for m in P.s.thruster_maps if m.kind == "table"]
+    return E, (ca.vertcat(*tabs) if tabs else ca.DM.zeros(0, 1))
+
+
+def _water(cfg: ScenarioConfig, P, water, t, eta, nu):
+    """The water's terms at time ``t`` (docs/model.md §10): ``(current, tether wrench)`` with ``current`` the
+    ``(nu_c, nu_c_dot)`` of :func:`arvcas.model.water.relative_current` (None without a current) and the
+    tether's wrench in {b} (0 without one)."""
+    cur = scenario.current_at(cfg, water, t, eta[2])
+    current = None if cur is None else water_mod.relative_current(eta, nu, *cur)
+    teth = scenario.tether_of(cfg, water)
+    if teth is None:
+        return current, 0
+    v_c = cur[0] if cur is not None else ca.DM.zeros(3)
+    return current, water_mod.tether_wrench(P["env.rho"], eta, v_c, *teth)
+
+
 def _trim(P, Fz, Mx, My, eta):
     """The trim wrench of docs/model.md §3 from the run's constants (zero without an arm or its trim)."""
     if not manipulator.has_trim(P):
@@ -146,15 +182,20 @@ class StepContext:
 def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     """One RK4 substep of the plant, and the function of its per-run constants.
 
-    ``cl_rk4(x, recs_time, recs_arm, tau, p, consts, phase_cs, pc) -> x_next``: the time table's
-    records (time parts, arm parts) at the stage times t, t + hp/2, t + hp. Subexpressions of p (and the run constants) alone, such as
-    the links' lengths or sin/cos of the DH twists, are taken out by ``casadi.extract_parametric``
-    and computed once per run by ``cl_rk4_consts(p, consts, phase_cs) -> pc``.
+    ``cl_rk4(x, recs_time, recs_arm, tau, p, consts, phase_cs, pc, water, t) -> x_next``: the time table's
+    records (time parts, arm parts) at the stage times t, t + hp/2, t + hp; ``tau`` the body wrench of the
+    thrusters, held over the substep (6), or with thruster dynamics their wrench at the three stage times
+    (18); ``water`` the run's current and tether (docs/model.md §10), ``t`` the substep's start time.
+    Subexpressions of p (and the run constants) alone, such as the links' lengths or sin/cos of the DH
+    twists, are taken out by ``casadi.extract_parametric`` and computed once per run by
+    ``cl_rk4_consts(p, consts, phase_cs, water) -> pc``.
     """
     cfg, opts, lay = spec.cfg, spec.opts, spec.lay
     hp = cfg.time_h_plant
-    xs, tr_s = ca.SX.sym("x", 12), ca.SX.sym("tau", 6)
+    dyn = lay.structure.has_thruster_dynamics
+    xs, tr_s = ca.SX.sym("x", 12), ca.SX.sym("tau", 18 if dyn else 6)
     p_s, c_s, ph_s = ca.SX.sym("p", len(lay)), ca.SX.sym("consts", 9), ca.SX.sym("phase_cs", 12)
+    w_s, t_s = ca.SX.sym("water", cfg.water_vector.size), ca.SX.sym("t")
     R = schedule.records(lay)
     TS, AS = R.time_size, R.arm_size
     recs_t, recs_a = ca.SX.sym("recs_time", 3 * TS), ca.SX.sym("recs_arm", 3 * AS)
@@ -165,7 +206,12 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
         ee, nn = xx[0:6], xx[6:12]
         tr = _trim(Ps, c_s[0], c_s[1], c_s[2], ee)
         dist = scenario.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
-        nud, _ = coupled_terms_scheduled(Ps, ee, nn, tr_s + dist, rec, tr, opts)
+        thrust = tr_s[6 * j:6 * j + 6] if dyn else tr_s
+        if not cfg.has_water:
+            nud, _ = coupled_terms_scheduled(Ps, ee, nn, thrust + dist, rec, tr, opts)
+        else:
+            current, tether = _water(cfg, Ps, w_s, t_s + j * 0.5 * hp, ee, nn)
+            nud, _ = coupled_terms_scheduled(Ps, ee, nn, thrust + dist + tether, rec, tr, opts, current)
         return ca.vertcat(ca.mtimes(J(ee), nn), nud)
 
     k_1 = f_plant(xs, 0)
@@ -173,13 +219,101 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     k_3 = f_plant(xs + 0.5 * hp * k_2, 1)
     k_4 = f_plant(xs + hp * k_3, 2)
     x_next = ca.cse(xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4))
-    x_next, pc_syms, pc_vals = ca.extract_parametric(x_next, ca.vertcat(p_s, c_s, ph_s), {"prefix": "pc_"})
+    x_next, pc_syms, pc_vals = ca.extract_parametric(x_next, ca.vertcat(p_s, c_s, ph_s, w_s), {"prefix": "pc_"})
     pc_s = ca.vertcat(*pc_syms) if pc_syms else ca.SX(0, 1)
-    rk4 = ca.Function("cl_rk4", [xs, recs_t, recs_a, tr_s, p_s, c_s, ph_s, pc_s], [x_next],
-                      ["x", "recs_time", "recs_arm", "tau", "p", "consts", "phase_cs", "pc"], ["x_next"])
-    pc_fn = ca.Function("cl_rk4_consts", [p_s, c_s, ph_s], [ca.vertcat(*pc_vals) if pc_vals else ca.SX(0, 1)],
-                        ["p", "consts", "phase_cs"], ["pc"])
+    rk4 = ca.Function("cl_rk4", [xs, recs_t, recs_a, tr_s, p_s, c_s, ph_s, pc_s, w_s, t_s], [x_next],
+                      ["x", "recs_time", "recs_arm", "tau", "p", "consts", "phase_cs", "pc", "water", "t"], ["x_next"])
+    pc_fn = ca.Function("cl_rk4_consts", [p_s, c_s, ph_s, w_s], [ca.vertcat(*pc_vals) if pc_vals else ca.SX(0, 1)],
+                        ["p", "consts", "phase_cs", "water"], ["pc"])
     return rk4, pc_fn
+
+
+def _pchip(g, v, d, x, mode: str):
+    """The monotone cubic through ``(g_i, v_i)`` with slopes ``d_i`` at a column ``x`` (MX: the interval by
+    ``casadi.low``, ``"exact"`` for a uniform grid, ``"binary"`` otherwise; then one cubic)."""
+    i = ca.low(g, x, {"lookup_mode": mode})  # within [0, n - 2]
+    return thrusters.hermite(g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1], x)
+
+
+def _pchip_inverse(g, v, d, u, iterations: int = 8):
+    """The ``x`` at which the monotone cubic equals ``u`` (a column, MX): its interval by ``casadi.low`` on
+    the values, then Newton's method on that interval's cubic from the secant's guess, kept in the
+    interval (quadratic convergence from a guess within a few percent: 8 steps reach round-off)."""
+    i = ca.low(v, u, {"lookup_mode": "binary"})
+    g0, g1, v0, v1, d0, d1 = g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
+    h = g1 - g0
+    t = ca.fmin(ca.fmax((u - v0) / (v1 - v0), 0), 1)
+    for _ in range(iterations):
+        t2 = t * t
+        p = (2 * t * t2 - 3 * t2 + 1) * v0 + (t * t2 - 2 * t2 + t) * h * d0 + (3 * t2 - 2 * t * t2) * v1 + (t * t2 - t2) * h * d1
+        dp = (6 * t2 - 6 * t) * (v0 - v1) + (3 * t2 - 4 * t + 1) * h * d0 + (3 * t2 - 2 * t) * h * d1
+        t = ca.fmin(ca.fmax(t - (p - u) / ca.fmax(dp, 1e-12 * (v1 - v0)), 0), 1)
+    return g0 + t * h
+
+
+def _thruster_functions(spec: RunSpec):
+    """The SX parts of a sample's thruster dynamics (docs/model.md §9):
+
+    ``cl_thr_lag(s0, u, y_tab, E, p) -> (s, command)``: each rotor state's target (a table map's from
+    ``y_tab``, the inverse looked up in MX; a quadratic map's here), the lag's closed form at every stage
+    offset of the sample (``s``: thruster-major, n_thr x n_stages) and the command sent;
+    ``cl_thr_wrench(T_tab, s, p) -> (W, T_end)``: each thruster's thrust at the stages (a table map's from
+    ``T_tab``, looked up in MX), the thrusters' body wrench at each stage (6 x n_stages, stage-major) and
+    the thrust at the sample's end.
+    """
+    cfg, lay = spec.cfg, spec.lay
+    st = lay.structure
+    n, offs = st.n_thrusters, stage_offsets(spec.cfg)
+    m_off = len(offs)
+    p_s = ca.SX.sym("p", len(lay))
+    P = view(p_s, lay)
+    maps = thrusters.thruster_maps(P)
+    s0, u, y_tab = ca.SX.sym("s0", n), ca.SX.sym("u", n), ca.SX.sym("y_tab", n)
+    E = ca.SX.sym("E", thrusters.lag_constants(P, offs).shape[0])
+    y = ca.vertcat(*[y_tab[i] if m.kind == "table" else thrusters.map_inverse(P, m, u[i]) for i, m in enumerate(maps)])
+    S = thrusters.lag_states(P, s0, y, E, offs, cfg.time_h)
+    cmd = ca.vertcat(*[thrusters.command_of(P, m, y[i]) for i, m in enumerate(maps)])
+    lag = ca.Function("cl_thr_lag", [s0, u, y_tab, E, p_s], [ca.vertcat(*[ca.vertcat(*row) for row in S]), cmd],
+                      ["s0", "u", "y_tab", "E", "p"], ["s", "command"])
+    s_all, T_tab = ca.SX.sym("s", n * m_off), ca.SX.sym("T_tab", n * m_off)
+    T = [[T_tab[i * m_off + j] if m.kind == "table" else thrusters.map_thrust(P, m, s_all[i * m_off + j])
+          for j in range(m_off)] for i, m in enumerate(maps)]
+    B = thrusters.B_T(P)
+    W = ca.vertcat(*[ca.mtimes(B, ca.vertcat(*[T[i][j] for i in range(n)])) for j in range(m_off)])
+    wrench = ca.Function("cl_thr_wrench", [T_tab, s_all, p_s], [W, ca.vertcat(*[T[i][-1] for i in range(n)])],
+                         ["T_tab", "s", "p"], ["W", "T_end"])
+    return lag, wrench
+
+
+def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, E, tabs, p):
+    """One sample of the thruster dynamics in MX: the inverse maps (table lookups and Newton), the lag, the
+    maps at every stage (table lookups), the wrenches. Returns ``(W (6 n_stages), s_end, T_end, command)``."""
+    st = spec.lay.structure
+    n, m_off = st.n_thrusters, schedule.n_stages(spec.cfg)
+    maps = [st.thruster_map(d.map) for d in st.thruster_dynamics]
+    grids, k = {}, 0
+    for m in st.thruster_maps:
+        if m.kind == "table":
+            n_g = m.n - (m.zero[1] - m.zero[0])
+            grids[m.name] = (tabs[k:k + n_g], tabs[k + n_g:k + 2 * n_g], tabs[k + 2 * n_g:k + 3 * n_g],
+                             "exact" if m.uniform else "binary")
+            k += 3 * n_g
+    y_tab = [ca.MX(1, 1)] * n
+    for name, (g, v, d, _) in grids.items():
+        idx = [i for i, m in enumerate(maps) if m.name == name]
+        ys = _pchip_inverse(g, v, d, ca.vertcat(*[u[i] for i in idx]))  # thrust -> rotor state
+        for r, i in enumerate(idx):
+            y_tab[i] = ys[r]
+    s_all, cmd = lag(s0, u, ca.vertcat(*y_tab), E, p)
+    T_tab = [ca.MX.zeros(m_off, 1)] * n
+    for name, (g, v, d, mode) in grids.items():
+        idx = [i for i, m in enumerate(maps) if m.name == name]
+        Ts = _pchip(g, v, d, ca.vertcat(*[s_all[i * m_off:(i + 1) * m_off] for i in idx]), mode)
+        for r, i in enumerate(idx):
+            T_tab[i] = Ts[r * m_off:(r + 1) * m_off]
+    W, T_end = wrench(ca.vertcat(*T_tab), s_all, p)
+    s_end = ca.vertcat(*[s_all[(i + 1) * m_off - 1] for i in range(n)])
+    return W, s_end, T_end, cmd
 
 
 def build_step(spec: RunSpec, trace: bool = True, first: bool = False) -> tuple[ca.Function, Layout, ca.Function]:
@@ -215,6 +349,16 @@ class StepParts(NamedTuple):
     pc_fn: ca.Function
     layout: Layout
     n_sub: int
+    thr: tuple | None  # (cl_thr_lag, cl_thr_wrench) with thruster dynamics (:func:`_thruster_step`), else None
+
+
+def _thr_const_sizes(spec: RunSpec) -> tuple[int, int] | None:
+    """Sizes of the thruster dynamics' per-run constants (E, tables), None without dynamics."""
+    if not spec.lay.structure.has_thruster_dynamics:
+        return None
+    P = view(ca.SX.sym("p", len(spec.lay)), spec.lay)
+    E, tabs = thruster_constants(P, spec.cfg)
+    return E.shape[0], tabs.shape[0]
 
 
 def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
@@ -224,7 +368,9 @@ def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     ng = 6 * len(cols)
     rk4, pc_fn = _plant_substep(spec)
     n_thr = lay.structure.n_thrusters
-    L = state_layout(law, ng, n_thr, pc_fn.size1_out(0), len(lay))
+    dyn = lay.structure.has_thruster_dynamics
+    L = state_layout(law, ng, n_thr, pc_fn.size1_out(0), len(lay), cfg.ekf_vector.size, cfg.water_vector.size,
+                     _thr_const_sizes(spec))
     i_x1, i_ok, i_const = L.slices["x"].stop, L.slices["ok"].start, L.slices["gains"].start  # constants follow t_fail
     Sd, Kc = ca.SX.sym("S", i_const), ca.SX.sym("K", L.size - i_const)
     S = ca.vertcat(Sd, Kc)
@@ -232,7 +378,7 @@ def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     ctrls = [_controller_part(spec, L, S, [Sd, Kc], tk, first, trace) for first in firsts]
 
     # finalize: a run that diverges (non-finite state, error bound) is frozen with ok = 0, t_fail set
-    # (C: the controller part's new loop state without x). A branch, not an element-wise select:
+    # (C: the sample's new loop state without x). A branch, not an element-wise select:
     # cl_ok decides, then one of two copies runs (cl_keep: the new state; cl_freeze: the old one with
     # ok = 0 and t_fail), so a sample pays for one copy of the state instead of three operations per entry.
     Cs, Ss, xn, tks = ca.SX.sym("C", i_const - i_x1), ca.SX.sym("S", i_const), ca.SX.sym("xn", 12), ca.SX.sym("t")
@@ -240,7 +386,8 @@ def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     keep = ca.Function("cl_keep", [Cs, Ss, xn, tks], [ca.vertcat(xn, Cs)])
     Sfail = ca.vertcat(Ss[:i_ok], 0, ca.if_else(L.get(Ss, "ok"), tks, L.get(Ss, "t_fail")))
     freeze = ca.Function("cl_freeze", [Cs, Ss, xn, tks], [Sfail])
-    return StepParts(ctrls, rk4, ok_fn, keep, freeze, pc_fn, L, cfg.substeps)
+    thr = _thruster_functions(spec) if dyn else None
+    return StepParts(ctrls, rk4, ok_fn, keep, freeze, pc_fn, L, cfg.substeps, thr)
 
 
 def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.Function]:
@@ -258,22 +405,46 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
     TS, AS, ns = Rec.time_size, Rec.arm_size, schedule.n_stages(cfg)
     Sm, Km, tkm, nm = ca.MX.sym("S", i_const), ca.MX.sym("K", L.size - i_const), ca.MX.sym("t"), ca.MX.sym("noise", 12)
     sch_t, sch_a = ca.MX.sym("sched_time", ns * TS), ca.MX.sym("sched_arm", ns * AS)
-    kslice = {name: slice(L.slices[name].start - i_const, L.slices[name].stop - i_const)
-              for name in ("p", "consts", "phase_cs", "pc")}
-    pm, cm, phm, pcm = (Km[kslice[name]] for name in ("p", "consts", "phase_cs", "pc"))
+    dyn, n_thr = parts.thr is not None, lay.structure.n_thrusters
+    names = ("p", "consts", "phase_cs", "pc", "water") + (("thr_E", "thr_tab") if dyn else ())
+    kslice = {name: slice(L.slices[name].start - i_const, L.slices[name].stop - i_const) for name in names}
+    pm, cm, phm, pcm, wm = (Km[kslice[name]] for name in ("p", "consts", "phase_cs", "pc", "water"))
+    if dyn:
+        lag, wrench = parts.thr
+        i_cmd = _trace_offset(spec, "command")
+    hp = cfg.time_h_plant
     steps = []
     for first, ctrl in zip(firsts, ctrls):
         res = ctrl(Sm, Km, tkm, nm, sch_t[0:TS], sch_a[0:AS])
-        Cm, tau_m_real = res[0], res[1]
+        Cm, thrust_out = res[0], res[1]
+        outs = list(res[2:])
+        if dyn:  # thrust_out: the allocation's thrust per thruster; the lag gives the stage wrenches
+            W, s_end, T_end, cmd = _thruster_step(spec, lag, wrench, thrust_out, Sm[L.slices["thr"]],
+                                                  Km[kslice["thr_E"]], Km[kslice["thr_tab"]], pm)
+            Cm = ca.vertcat(s_end, T_end, Cm)
+            if trace:  # the command rows of the trace: the command sent (known once the map is inverted)
+                tr = outs[0]
+                outs[0] = ca.vertcat(tr[:i_cmd], cmd, tr[i_cmd + n_thr:])
         xm = Sm[L.slices["x"]]
         for i in range(n_sub):
-            xm = rk4(xm, sch_t[2 * i * TS:(2 * i + 3) * TS], sch_a[2 * i * AS:(2 * i + 3) * AS], tau_m_real, pm, cm, phm, pcm)
+            tau_i = W[12 * i:12 * i + 18] if dyn else thrust_out
+            xm = rk4(xm, sch_t[2 * i * TS:(2 * i + 3) * TS], sch_a[2 * i * AS:(2 * i + 3) * AS], tau_i, pm, cm, phm, pcm,
+                     wm, tkm + i * hp)
         steps.append(ca.Function(f"cl_step_{law.name}" + ("_first" if first else ""), [Sm, Km, tkm, nm, sch_t, sch_a],
-                                 [fin(Cm, Sm, xm, tkm)] + list(res[2:]), ["S", "K", "t", "noise", "sched_time", "sched_arm"],
+                                 [fin(Cm, Sm, xm, tkm)] + outs, ["S", "K", "t", "noise", "sched_time", "sched_arm"],
                                  ["S_next"] + (["trace"] if trace else [])))
     return steps, L, pc_fn
 
 
+def _trace_offset(spec: RunSpec, name: str) -> int:
+    """The first trace row of signal ``name``."""
+    st = spec.lay.structure
+    i = 0
+    for sig in signals_mod.trace_signals(spec.law, st):
+        if sig.name == name:
+            return i
+        i += sig.n(st.n_thrusters, st.n_joints)
+    raise KeyError(name)
 # the controller's own memory, in this order (the loop state's and the exported controller's)
 def controller_memory(law: Controller) -> list[tuple[str, int]]:
     """The fields of a controller's memory from sample to sample: the EKF prior (``xh``, the covariance's
@@ -311,7 +482,10 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
     G = {c: ca.vertcat(*[gains[d * k + j] for d in range(6)]) for j, c in enumerate(cols)}
     h = cfg.time_h
     # 2. EKF update (H = I, R = sensor covariance); the first sample starts from y_0 with P = R
-    r_meas = ca.vertcat(ca.repmat(ekf[2], 3, 1), ca.repmat(ekf[3], 3, 1), ca.repmat(ekf[4], 6, 1))
+    if ekf.shape[0] == 14:  # per-axis sensor variances (the scenario's var_eta, var_nu)
+        r_meas = ekf[2:14]
+    else:
+        r_meas = ca.vertcat(ca.repmat(ekf[2], 3, 1), ca.repmat(ekf[3], 3, 1), ca.repmat(ekf[4], 6, 1))
     xh = ca.if_else(first, y, memory["xh"])
     Pu = memory["Pc"]
     Pc = [ca.if_else(first, r_meas[i] if i == j else 0, Pu[k]) for k, (i, j) in enumerate(_PSYM)]
@@ -381,18 +555,20 @@ class ControllerSizes:
     n_u: int
     n_mem: int
     n_diag: int
+    n_ekf: int = 5  # [q_eta, q_nu, 3 group variances], or with per-axis sensors [q_eta, q_nu, 12 variances]
 
     @property
     def params(self) -> dict[str, int]:
-        return {"gains": self.n_gains, "unc": 4, "ekf": 5, "eta_d": 6, "p": self.n_p}
+        return {"gains": self.n_gains, "unc": 4, "ekf": self.n_ekf, "eta_d": 6, "p": self.n_p}
 
     @property
     def n_k(self) -> int:  # the params, then Mhat
         return sum(self.params.values()) + 6
 
 
-def controller_sizes(law: Controller, layout) -> ControllerSizes:
-    return ControllerSizes(n_gains=gains_mod.n_gains(law), n_p=len(layout), n_u=layout.structure.n_thrusters,
+def controller_sizes(law: Controller, layout, cfg: ScenarioConfig | None = None) -> ControllerSizes:
+    return ControllerSizes(n_ekf=5 if cfg is None else cfg.ekf_vector.size,
+                           n_gains=gains_mod.n_gains(law), n_p=len(layout), n_u=layout.structure.n_thrusters,
                  n_mem=sum(n for _, n in controller_memory(law)),
                  n_diag=sum(s.n(layout.structure.n_thrusters, layout.structure.n_joints) for s in controller_diagnostics(law)))
 
@@ -413,7 +589,7 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
     the terms of ``k`` alone are taken out (:func:`casadi.extract_parametric`), not changed.
     """
     law = get_controller(law)
-    sz = controller_sizes(law, layout)
+    sz = controller_sizes(law, layout, cfg)
     p = ca.SX.sym("p", sz.n_p)
     fns = {"mhat": ca.Function(prefix + "mhat", [p], [nominal_inertia(view(p, layout))], ["p"], ["Mhat"])}
     for first in (True, False):
@@ -462,7 +638,11 @@ def controller_reads(fns: dict[str, ca.Function], name: str) -> bool:
 
 def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: bool) -> ca.Function:
     """The controller part of one sample (sample 0 if ``first``): (S, K, t_k, noise_k, rec0_time, rec0_arm)
-    -> (C, tau_real[, trace_k]); ``S`` the SX loop state and constants stacked, ``ins`` its two symbols."""
+    -> (C, thrust[, trace_k]); ``S`` the SX loop state and constants stacked, ``ins`` its two symbols.
+
+    ``thrust``: the realised body wrench ``B sat(u)`` held over the sample; with thruster dynamics the
+    allocation's saturated thrust per thruster (the lag, in the step, turns it into the delivered wrench),
+    and ``C`` leaves out the thrusters' own state (the step puts it first)."""
     law, cfg, opts = spec.law, spec.cfg, spec.opts
     noise = ca.SX.sym("noise", 12)
     lay = spec.lay
@@ -484,8 +664,11 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
 
     q, pl = R0["q"], R0["payload"]
     eta, nu = x[0:6], x[6:12]
-    tau_real_held, trim, nud_true, tau_m_true = _true_terms(cfg, opts, P, x, L.get(S, "u_hold"), R0, (Fz, Mx, My),
-                                                            phase_cs)
+    dyn = lay.structure.has_thruster_dynamics
+    # the thrust acting at t_k: the held realised thrust, or with dynamics the rotors' delivered thrust
+    u_hold = L.get(S, "thr_T" if dyn else "u_hold")
+    tau_real_held, trim, nud_true, tau_m_true = _true_terms(cfg, opts, P, x, u_hold, R0, (Fz, Mx, My), phase_cs,
+                                                            L.get(S, "water"), tk)
 
     # 2-5. the controller: EKF, reference, law, allocation and saturation
     memory = {name: L.get(S, name) for name, _ in controller_memory(law)}
@@ -502,6 +685,12 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
     # metrics (docs/model.md §6) and divergence of the controller part
     e_true = eta - y1
     chat_sum = L.get(S, "chat_sum") + ca.if_else(first, 0, ca.fabs(tau_v - L.get(S, "tau_prev")))
+    # CHAT on the delivered wrench (what the water sees): the realised B sat(u) of each sample, or with
+    # dynamics the rotors' wrench at each sample time (docs/model.md §6)
+    if dyn:
+        chatd_sum = L.get(S, "chatd_sum") + ca.if_else(first, 0, ca.fabs(tau_real_held - L.get(S, "tdel_prev")))
+    else:
+        chatd_sum = L.get(S, "chatd_sum") + ca.if_else(first, 0, ca.fabs(tau_real - tau_real_held))
     # RMSE over k = 0..N-1 (eq. 43); the last sample k = N only closes CHAT's last difference
     last = tk > cfg.time_duration - 0.5 * h
     e2_sum = L.get(S, "e2_sum") + ca.if_else(last, 0, e_true**2)
@@ -510,29 +699,37 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
     # the sample's new loop state except x (the plant's, set in finalize) and the run's constants
     # (never changed: the step passes them on itself)
     new = {
-        **cs.memory, "tau_prev": tau_v, "u_hold": u_sat,
-        "chat_sum": chat_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
+        **cs.memory, "tau_prev": tau_v, **({"tdel_prev": tau_real_held} if dyn else {"u_hold": u_sat}),
+        "chat_sum": chat_sum, "chatd_sum": chatd_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
     }
-    names = list(L.slices)
+    names = [n for n in L.slices if n not in ("thr", "thr_T")]  # the thrusters' state comes from the step
     assert names.index("x") == 0 and list(new) == names[1:names.index("gains")]
     C = ca.vertcat(*new.values())
-    outs = [C, tau_real]
+    outs = [C, u_sat if dyn else tau_real]
     if trace:
-        ctx.__dict__.update(tau_v=tau_v, u_sat=u_sat, f_true=f_true, eta=eta, nu=nu, q=q, payload=pl)
-        outs.append(ca.vertcat(*[sig.value(ctx) for sig in signals_mod.trace_signals(law)]))
+        ctx.__dict__.update(tau_v=tau_v, u_sat=u_hold if dyn else u_sat, u_cmd=u_sat, tau_del=tau_real_held,
+                            command=ca.DM.zeros(lay.structure.n_thrusters), f_true=f_true, eta=eta, nu=nu, q=q,
+                            payload=pl)
+        outs.append(ca.vertcat(*[sig.value(ctx) for sig in signals_mod.trace_signals(law, lay.structure)]))
     name = f"cl_ctrl_{law.name}" + ("_first" if first.is_one() else "") + ("_tr" if trace else "")
     return ca.Function(name, [*ins, tk, noise, rec0_t, rec0_a], ca.cse(outs))
 
 
-def _true_terms(cfg, opts, P, x, u_hold, R0, static, phase_cs):
+def _true_terms(cfg, opts, P, x, u_hold, R0, static, phase_cs, water=None, tk=None):
     """The true state's coupled terms at t_k with the held thrust, for f_true (eq. 6) and the arm's
     wrench: (B_T u_hold, the trim wrench, nu_dot, tau_m). ``static``: (F_z, M_x, M_y) of
-    :func:`derived_constants`; ``R0``: the time table's record at t_k."""
+    :func:`derived_constants`; ``R0``: the time table's record at t_k; ``water``, ``tk``: the run's
+    current and tether at t_k (docs/model.md §10; needed when the scenario has them)."""
     eta, nu = x[0:6], x[6:12]
     tau_real_held = ca.mtimes(thrusters.B_T(P), u_hold)
     trim = _trim(P, *static, eta)
     tau_dist = scenario.disturbance_tabulated(cfg, R0["dist_sin"], R0["dist_cos"], phase_cs)
-    nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist, R0, trim, opts)
+    if cfg.has_water:
+        current, tether = _water(cfg, P, water, tk, eta, nu)
+        nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist + tether, R0, trim, opts,
+                                                       current)
+    else:
+        nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist, R0, trim, opts)
     return tau_real_held, trim, nud_true, tau_m_true
 
 
@@ -541,6 +738,9 @@ def arm_truth(spec: RunSpec) -> ca.Function:
     vehicle plus the trim at sample k (the ``tau_arm`` a controller's step sees: :class:`StepContext`),
     from the true state, the held thrust and the time table's record at t_k; the run's operations."""
     lay = spec.lay
+    if spec.cfg.has_water or lay.structure.has_thruster_dynamics:
+        raise ValueError("arm_truth: the run's current, tether or thruster dynamics (docs/model.md §9-§10) are not "
+                         "inputs of it")
     Rec = schedule.records(lay)
     x, u_hold = ca.SX.sym("x", 12), ca.SX.sym("u_hold", lay.structure.n_thrusters)
     rt, ra = ca.SX.sym("rec_time", Rec.time_size), ca.SX.sym("rec_arm", Rec.arm_size)
@@ -607,14 +807,18 @@ def _ekf_cov(xh, Pu, h, q_eta, q_nu):
 
 
 def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
-    """The whole run as one MX Function of (gains, noise 12x(N+1), unc[4], phase[6], ekf[5], p, sched_time, sched_arm).
+    """The whole run as one MX Function of (gains, noise 12x(N+1), unc[4], phase[6], ekf, water, p, sched_time,
+    sched_arm).
 
-    ``ekf = [q_eta, q_nu, var_position, var_attitude, var_velocity]``: EKF process noise per step and
-    the sensor variances its R assumes (the noise input itself is drawn outside). ``sched_time`` and
+    ``ekf = [q_eta, q_nu, var_position, var_attitude, var_velocity]`` (or with per-axis sensors
+    ``[q_eta, q_nu, 12 variances]``): EKF process noise per step and the sensor variances its R assumes (the
+    noise input itself is drawn outside). ``water``: the scenario's current and tether
+    (:attr:`arvcas.sim.scenario.ScenarioConfig.water_vector`, empty without them). ``sched_time`` and
     ``sched_arm`` are the time table of (scenario, p) from :func:`arvcas.sim.schedule.table` (the same for
     every gain set, seed and controller, so a batch computes it once).
 
-    ``trace=False``: outputs (chat[6], rmse[6], ok, t_fail); ``trace=True``: also the per-sample trace.
+    ``trace=False``: outputs (chat[6], rmse[6], ok, t_fail, chat_delivered[6]) (:data:`OUTPUTS`);
+    ``trace=True``: also the per-sample trace.
     """
     (step0, step), L, pc_fn = _build_steps(spec, trace, (True, False))
     cfg, law = spec.cfg, spec.law
@@ -624,19 +828,20 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     noise = ca.MX.sym("noise", 12, n)
     unc = ca.MX.sym("unc", 4)
     phase = ca.MX.sym("phase", 6)
-    ekf = ca.MX.sym("ekf", 5)
+    ekf = ca.MX.sym("ekf", cfg.ekf_vector.size)
+    water = ca.MX.sym("water", cfg.water_vector.size)
     p = ca.MX.sym("p", len(spec.lay))
     Rec = schedule.records(spec.lay)
     sched_t = ca.MX.sym("sched_time", schedule.n_stages(cfg) * Rec.time_size, n)
     sched_a = ca.MX.sym("sched_arm", schedule.n_stages(cfg) * Rec.arm_size, n)
-    S0, K = run_start(spec, L, pc_fn, G, unc, phase, ekf, p)
+    S0, K = run_start(spec, L, pc_fn, G, unc, phase, ekf, water, p)
     tgrid = ca.DM(sample_times(cfg)).T
     out = _chain(f"run_{law.name}_loop", [step0] + _levels(step, n - 1)).call([S0, K, tgrid, noise, sched_t, sched_a])
     outs = list(run_end(L, out[0], n - 1)) + ([out[1]] if trace else [])
-    names = ["chat", "rmse", "ok", "t_fail"] + (["trace"] if trace else [])
+    names = list(OUTPUTS) + (["trace"] if trace else [])
     name = f"run_{law.name}" + ("_trace" if trace else "")
-    ins = {"gains": G, "noise": noise, "unc": unc, "phase": phase, "ekf": ekf, "p": p, "sched_time": sched_t,
-           "sched_arm": sched_a}
+    ins = {"gains": G, "noise": noise, "unc": unc, "phase": phase, "ekf": ekf, "water": water, "p": p,
+           "sched_time": sched_t, "sched_arm": sched_a}
     return ca.Function(name, [ins[k] for k in INPUTS], outs, list(INPUTS), names)
 
 
@@ -645,7 +850,7 @@ def sample_times(cfg: ScenarioConfig) -> np.ndarray:
     return np.arange(scenario.n_samples(cfg)) * cfg.time_h
 
 
-def run_start(spec: RunSpec, L: Layout, pc_fn: ca.Function, G, unc, phase, ekf, p):
+def run_start(spec: RunSpec, L: Layout, pc_fn: ca.Function, G, unc, phase, ekf, water, p):
     """The run's first loop state S0 and its constants K (the step's inputs ``S`` and ``K``) from the
     run's inputs (MX): the one definition :func:`build_run` and the lockstep runs share."""
     consts = _consts_fn(spec.opts, spec.lay)(p)
@@ -653,16 +858,18 @@ def run_start(spec: RunSpec, L: Layout, pc_fn: ca.Function, G, unc, phase, ekf, 
     phase_cs = ca.vertcat(ca.cos(phase), ca.sin(phase))
     i_ok = L.slices["ok"].start  # every loop state before "ok" starts at zero (sample 0's step sets its values)
     S0 = ca.vertcat(x0, ca.MX.zeros(i_ok - 12), ca.MX(1), ca.MX(-1))
-    K = ca.vertcat(G, unc, phase_cs, ekf, p, consts, pc_fn(p, consts, phase_cs))
+    K = ca.vertcat(G, unc, phase_cs, ekf, water, p, consts, pc_fn(p, consts, phase_cs, water))
+    if spec.lay.structure.has_thruster_dynamics:
+        K = ca.vertcat(K, *_thr_consts_fn(spec)(p))
     assert S0.shape[0] + K.shape[0] == L.size
     return S0, K
 
 
 def run_end(L: Layout, Sf, N: int):
-    """(chat, rmse, ok, t_fail) from the last loop state ``Sf`` after N samples (MX)."""
+    """The run's outputs (:data:`OUTPUTS`) from the last loop state ``Sf`` after N samples (MX)."""
     chat = Sf[L.slices["chat_sum"]] / N
     rmse = ca.sqrt(Sf[L.slices["e2_sum"]] / N)
-    return chat, rmse, Sf[L.slices["ok"]], Sf[L.slices["t_fail"]]
+    return chat, rmse, Sf[L.slices["ok"]], Sf[L.slices["t_fail"]], Sf[L.slices["chatd_sum"]] / N
 
 
 def _levels(f: ca.Function, n: int, base: int = 10) -> list:
@@ -702,6 +909,11 @@ def _chain(name: str, funcs) -> ca.Function:
             lst.append(v)
     return ca.Function(name, [S, K] + [ca.horzcat(*v) for v in per_in], [s] + [ca.horzcat(*v) for v in per_out],
                        f0.name_in(), f0.name_out())
+
+
+def _thr_consts_fn(spec: RunSpec) -> ca.Function:
+    p = ca.SX.sym("p", len(spec.lay))
+    return ca.Function("thruster_constants", [p], list(thruster_constants(view(p, spec.lay), spec.cfg)))
 
 
 def _consts_fn(opts: ModelOptions, layout: ParamLayout | None = None) -> ca.Function:

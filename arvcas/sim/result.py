@@ -22,16 +22,18 @@ class Result:
     ``tau_cmd``, ``thrust``, ``f_true``, ``q``, ``payload`` and the controller's own, e.g. ``s``,
     ``k1``, ``k2``, ``f_hat``) is an attribute and an item (``r.eta``, ``r["eta"]``), an array of shape
     (N+1,) or (N+1, width) over samples t_k = k h, k = 0..N, in the signal's units and frame
-    (``r.signals`` describes them). ``chat`` (eq. 42) and ``rmse`` (eq. 43) have shape (6,).
+    (``r.signals`` describes them). ``chat`` (eq. 42) and ``rmse`` (eq. 43) have shape (6,);
+    ``chat_delivered`` (6,) is eq. 42 on the thrusters' delivered wrench (docs/model.md §6; None for a
+    result read from a file written before it existed).
     """
 
     FIELDS = ("controller", "gains", "seed", "chat", "rmse", "ok", "t_fail", "config_text", "params_vector",
-              "uncertainty", "phase", "h", "version", "meta")
+              "uncertainty", "phase", "h", "version", "meta", "chat_delivered")
 
     def __init__(self, controller: str, gains, seed: int, chat, rmse, ok: bool, t_fail: float | None,
                  config_text: str = "", params_vector=None, uncertainty=None, phase=None, h: float = 0.1,
                  version: str = __version__, meta: dict | None = None, signals=None, series: dict | None = None,
-                 **named_series):
+                 chat_delivered=None, **named_series):
         given = locals()
         self.__dict__.update({k: given[k] for k in self.FIELDS})
         self.meta = {} if meta is None else meta

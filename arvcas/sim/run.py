@@ -37,16 +37,18 @@ from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
 from arvcas.sim.result import Result
 from arvcas.sim.scenario import ScenarioConfig
 
-__all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS", "LOCKSTEP_MIN_RUNS"]
+__all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS", "CHAT_KINDS", "LOCKSTEP_MIN_RUNS"]
 
 log = logging.getLogger(__name__)
 
 MAX_RUNS = 10_000_000  # runs in one batch call (the outputs alone take 100 bytes a run)
+# CHAT on the command (eq. 42, the paper's) or on the thrusters' delivered wrench: the run's output of each
+CHAT_KINDS = {"commanded": "chat", "delivered": "chat_delivered"}
 # A batch of at least this many runs goes through the lockstep library (arvcas.sim.lockstep) unless asked
 # otherwise: compiling it once per machine and run description (5-15 s) costs about a thousand runs.
 LOCKSTEP_MIN_RUNS = 64
 LOCKSTEP_ENV = "ARVCAS_LOCKSTEP"
-_OUT_BYTES = 2 * 8 * (6 + 6 + 1 + 1)  # a run's outputs (chat, rmse, ok, t_fail) and their returned copies
+_OUT_BYTES = 2 * 8 * (6 + 6 + 1 + 1 + 6)  # a run's outputs (chat, rmse, ok, t_fail, chat_delivered) and copies
 
 
 class SimulationError(ValueError):
@@ -81,7 +83,25 @@ class Run:
         if not isinstance(self.options, ModelOptions):
             raise SimulationError(f"options: expected arvcas.model.uvms.ModelOptions, got {type(self.options).__name__}")
         scenario.check_joint_limits(cfg, params)
+        _check_lag(cfg, params)
         return CompiledRun(with_law, cfg, params, self.options)
+
+
+def _check_lag(cfg: ScenarioConfig, params: Params) -> None:
+    """The thruster lag's closed form holds ``exp(h / tau)``: a time constant below ``h / 700`` is refused
+    (one line naming the parameter) before anything is built (docs/model.md §9)."""
+    st = params.structure
+    if not st.has_thruster_dynamics:
+        return
+    from arvcas.model.thrusters import LAG_EXP_LIMIT
+
+    for n, d in zip(st.thrusters, st.thruster_dynamics):
+        for key in (("time_constant_up", "time_constant_down") if d.asymmetric else ("time_constant",)):
+            tau = params[f"thrusters.{n}.{key}"]
+            if cfg.time_h / tau > LAG_EXP_LIMIT:
+                raise SimulationError(f"{params.path}: thrusters.{n}.{key}: {tau:g} s is below h / {LAG_EXP_LIMIT:g} = "
+                                      f"{cfg.time_h / LAG_EXP_LIMIT:g} s for the sample time h = {cfg.time_h:g} s "
+                                      f"(the thruster is then instantaneous: use params.instantaneous())")
 
 
 class CompiledRun:
@@ -96,7 +116,7 @@ class CompiledRun:
         self.cfg = cfg
         self.params = params
         self.opts = opts
-        self.signals = signals_mod.trace_signals(controller)
+        self.signals = signals_mod.trace_signals(controller, params.structure)
         self.inputs = closedloop.INPUTS
         self._fns: dict[bool, ca.Function] = {}
         self._pv = params.vector()
@@ -168,7 +188,8 @@ class CompiledRun:
 
     def _shared(self) -> dict[str, np.ndarray]:
         tab = self.table
-        return {"ekf": self.cfg.ekf_vector, "p": self._pv, "sched_time": tab.time, "sched_arm": tab.arm}
+        return {"ekf": self.cfg.ekf_vector, "water": self.cfg.water_vector, "p": self._pv, "sched_time": tab.time,
+                "sched_arm": tab.arm}
 
     # -- running ---------------------------------------------------------------------------------------
     def simulate(self, gains=None, seed: int = 0, uncertainty=None, phase=None, noise_scale: float = 1.0):
@@ -199,7 +220,7 @@ class CompiledRun:
             meta["failure"] = self._failure(series, float(out["t_fail"].item()))
         return Result(
             controller=self.controller.name, gains=np.asarray(g, dtype=float), seed=int(seed),
-            chat=out["chat"].ravel(), rmse=out["rmse"].ravel(), ok=ok_b,
+            chat=out["chat"].ravel(), rmse=out["rmse"].ravel(), ok=ok_b, chat_delivered=out["chat_delivered"].ravel(),
             t_fail=None if ok_b else float(out["t_fail"].item()),
             config_text=self.cfg.to_toml(), params_vector=self._pv.copy(), uncertainty=unc, phase=ph, h=self.cfg.time_h,
             meta=meta, signals=self.signals, series=series,
@@ -239,27 +260,28 @@ class CompiledRun:
         return meta
 
     def batch(self, gains, seed: int = 0, uncertainty=None, phase=None, n_threads: int | None = None,
-              return_status: bool = False, lockstep: bool | None = None):
+              return_status: bool = False, chat: str = "commanded", lockstep: bool | None = None):
         """Many gain sets (n x n_gains) on the same noise (``seed``), uncertainty and disturbance.
 
         Returns ``(chat (n x 6), rmse (n x 6))``; with ``return_status`` also ``(ok (n,), t_fail (n,))``.
-        A diverged run has ``ok = False`` and NaN metrics. ``lockstep``: run W runs at once per core
-        (:mod:`arvcas.sim.lockstep`; the same bits); None: when :meth:`uses_lockstep` says so.
+        A diverged run has ``ok = False`` and NaN metrics. ``chat``: ``"commanded"`` (eq. 42 on tau_v) or
+        ``"delivered"`` (on the thrusters' delivered wrench, docs/model.md §6). ``lockstep``: run W runs at
+        once per core (:mod:`arvcas.sim.lockstep`; the same bits); None: when :meth:`uses_lockstep` says so.
         """
         g = self._gains(gains, batch=True)
         unc, ph = self._unc_phase(uncertainty, phase)
         noise = scenario.noise_sequence(self.cfg, seed)
         chat, rmse, ok, t_fail = self._evaluate(g.shape[0], {"gains": g.T, "noise": noise, "unc": unc, "phase": ph},
-                                                {"gains"}, n_threads, lockstep)
+                                                {"gains"}, n_threads, chat, lockstep)
         return (chat, rmse, ok, t_fail) if return_status else (chat, rmse)
 
-    def many(self, gains, seeds, uncertainty=None, phase=None, n_threads: int | None = None,
+    def many(self, gains, seeds, uncertainty=None, phase=None, n_threads: int | None = None, chat: str = "commanded",
              lockstep: bool | None = None):
         """n draws: row i has its own gains (or shared), noise seed, uncertainty factors and phases.
 
         ``gains``: (n_gains,) or (n, n_gains); ``seeds``: (n,) non-negative integers; ``uncertainty``:
-        None, (4,) or (n, 4); ``phase``: None, (6,) or (n, 6). Returns ``(chat, rmse, ok, t_fail)``.
-        ``lockstep``: as for :meth:`batch`.
+        None, (4,) or (n, 4); ``phase``: None, (6,) or (n, 6). Returns ``(chat, rmse, ok, t_fail)``;
+        ``chat`` and ``lockstep`` as :meth:`batch`.
         """
         seeds = calls.integer_array(seeds, "seeds", SimulationError, max_size=MAX_RUNS)
         if seeds.ndim != 1 or seeds.size == 0:
@@ -293,7 +315,7 @@ class CompiledRun:
         for i in range(1, n):
             noise[:, i * k:(i + 1) * k] = scenario.noise_sequence(self.cfg, int(seeds[i]))
         return self._evaluate(n, {"gains": G.T, "noise": noise, "unc": U.T, "phase": PH.T},
-                              {"gains", "noise", "unc", "phase"}, n_threads, lockstep)
+                              {"gains", "noise", "unc", "phase"}, n_threads, chat, lockstep)
 
     # -- lockstep ----------------------------------------------------------------------------------------
     def lockstep(self):
@@ -328,17 +350,21 @@ class CompiledRun:
             return False
         return True
 
-    def _evaluate(self, n: int, varying: dict, per_run: set, n_threads, lockstep: bool | None = None):
+    def _evaluate(self, n: int, varying: dict, per_run: set, n_threads, chat: str = "commanded",
+                  lockstep: bool | None = None):
         """n metrics-only runs on the thread pool; the inputs in ``per_run`` have a column block per run,
         the others and the time table are shared. NaN metrics for a diverged run."""
         if n > MAX_RUNS:
             raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
+        if chat not in CHAT_KINDS:
+            raise SimulationError(f"chat: expected one of {', '.join(CHAT_KINDS)}, got {chat!r}")
         calls.check_memory(f"runs: {n}", n * _OUT_BYTES, error=SimulationError)
         nt = _n_threads(n_threads)
         if self.uses_lockstep(n, lockstep):
             ls, names = self.lockstep(), closedloop.INPUTS
             shapes = {"gains": (len(self.gain_names()), 1), "noise": (12, scenario.n_samples(self.cfg)), "unc": (4, 1),
-                      "phase": (6, 1), "ekf": (5, 1), "p": (len(self._pv), 1)}
+                      "phase": (6, 1), "ekf": (self.cfg.ekf_vector.size, 1), "water": (self.cfg.water_vector.size, 1),
+                      "p": (len(self._pv), 1)}
             inputs = {**varying, **self._shared()}
             bound = []
             for k in names:
@@ -349,15 +375,14 @@ class CompiledRun:
                 else:
                     a = calls.fortran(a, a.shape)
                 bound.append(a)
-            outs = [np.empty((6, n), order="F"), np.empty((6, n), order="F"), np.empty((1, n), order="F"),
-                    np.empty((1, n), order="F")]
+            outs = [np.empty((ls.function.size1_out(k), n), order="F") for k in closedloop.OUTPUTS]
             ls.evaluate(n, bound, set(per_run), outs, nt)
-            out = dict(zip(("chat", "rmse", "ok", "t_fail"), outs))
+            out = dict(zip(closedloop.OUTPUTS, outs))
         else:
             fn = self.function(trace=False)
             out = calls.call_named(fn, {**varying, **self._shared()}, n=n, per_run=per_run, n_threads=nt)
         ok = out["ok"].ravel() > 0.5
-        chat, rmse = out["chat"].T.copy(), out["rmse"].T.copy()
+        chat, rmse = out[CHAT_KINDS[chat]].T.copy(), out["rmse"].T.copy()
         chat[~ok] = np.nan
         rmse[~ok] = np.nan
         return chat, rmse, ok, np.where(ok, np.nan, out["t_fail"].ravel())

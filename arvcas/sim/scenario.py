@@ -36,6 +36,7 @@ _POSE = ("length",) * 3 + ("angle",) * 3  # x, y, z, phi, theta, psi
 _RATE = ("velocity",) * 3 + ("angular_velocity",) * 3  # u, v, w, p, q, r
 _WRENCH = ("force",) * 3 + ("torque",) * 3  # X, Y, Z, K, M, N
 MAX_SUBSTEPS = 1000  # h / h_plant: the plant's RK4 steps of one sample are unrolled in the compiled graph
+MAX_CURRENT_POINTS = 10_000
 
 
 @dataclass(frozen=True)
@@ -102,9 +103,62 @@ class _Disturbance:
 
 @dataclass(frozen=True)
 class _Sensors:
-    var_position: float = quantity("length^2", ge(0))
-    var_attitude: float = quantity("angle^2", ge(0))
-    var_velocity: float = quantity("velocity^2 or angular_velocity^2", ge(0))
+    """Sensor noise variances: one per group (position, attitude, body velocity), or one per axis
+    (``var_eta`` for x y z phi theta psi, ``var_nu`` for u v w p q r)."""
+
+    var_position: float | None = quantity("length^2", ge(0), default=None)
+    var_attitude: float | None = quantity("angle^2", ge(0), default=None)
+    var_velocity: float | None = quantity("velocity^2 or angular_velocity^2", ge(0), default=None)
+    var_eta: tuple[float, ...] | None = quantity(("length^2",) * 3 + ("angle^2",) * 3, ge(0), default=None)
+    var_nu: tuple[float, ...] | None = quantity(("velocity^2",) * 3 + ("angular_velocity^2",) * 3, ge(0),
+                                                default=None)
+
+    def _config_check(self, given: frozenset[str]) -> None:
+        group = [k for k in ("var_position", "var_attitude", "var_velocity") if k in given]
+        axis = [k for k in ("var_eta", "var_nu") if k in given]
+        if group and axis:
+            raise config.Invalid(axis[0], "give the group variances (var_position, var_attitude, var_velocity) "
+                                          "or the per-axis ones (var_eta, var_nu), not both")
+        if axis and len(axis) != 2:
+            raise config.Invalid("var_nu" if "var_eta" in axis else "var_eta",
+                                 "missing: per-axis variances need var_eta and var_nu")
+        if not axis and len(group) != 3:
+            missing = next(k for k in ("var_position", "var_attitude", "var_velocity") if k not in group)
+            raise config.Invalid(missing, "missing (or give per-axis var_eta and var_nu)")
+
+
+@dataclass(frozen=True)
+class _CurrentPoint:
+    """One point of a current table: the current's velocity in {n} at time ``t`` and depth ``depth``."""
+
+    t: float = quantity("time", ge(0))
+    depth: float = quantity("length")
+    velocity: tuple[float, ...] = quantity("velocity", n=3)
+
+
+@dataclass(frozen=True)
+class _Current:
+    """The water's velocity in {n} (north, east, down), irrotational: constant, or a table in time and depth
+    (every depth at every time; linear in between, held beyond the ends)."""
+
+    velocity: tuple[float, ...] | None = quantity("velocity", n=3, default=None)
+    point: tuple[_CurrentPoint, ...] | None = config.setting(config.Count(1, MAX_CURRENT_POINTS), default=None)
+
+    def _config_check(self, given: frozenset[str]) -> None:
+        if ("velocity" in given) == ("point" in given):
+            raise config.Invalid("velocity", "give a constant velocity or a table of [[current.point]], one of them")
+
+
+@dataclass(frozen=True)
+class _Tether:
+    """A quasi-static tether from the surface to ``attachment`` (body frame): half the drag of its ``length``
+    in the current, normal to a vertical cable, plus a steady ``pull`` in {n} (docs/model.md §10)."""
+
+    attachment: tuple[float, ...] = quantity("length", n=3)
+    length: float = quantity("length", ge(0))
+    diameter: float = quantity("length", ge(0))
+    Cn: float = quantity("1", ge(0))
+    pull: tuple[float, ...] = quantity("force", n=3)
 
 
 @dataclass(frozen=True)
@@ -147,6 +201,8 @@ class ScenarioFile:
     atd: _Atd = config.setting()
     limits: _Limits = config.setting()
     payload: _Payload | None = config.setting(default=None)  # events, with [[arm.waypoint]]
+    current: _Current | None = config.setting(default=None)  # the water's velocity (docs/model.md §10)
+    tether: _Tether | None = config.setting(default=None)
 
 
 _LEAVES = config.leaves(ScenarioFile)
@@ -179,9 +235,11 @@ class ScenarioConfig:
     disturbance_amplitude: tuple
     disturbance_freq: tuple
     disturbance_phase: tuple
-    sensors_var_position: float
-    sensors_var_attitude: float
-    sensors_var_velocity: float
+    sensors_var_position: float | None
+    sensors_var_attitude: float | None
+    sensors_var_velocity: float | None
+    sensors_var_eta: tuple | None
+    sensors_var_nu: tuple | None
     ekf_q_eta: float
     ekf_q_nu: float
     uncertainty_C_factor: float
@@ -192,6 +250,13 @@ class ScenarioConfig:
     atd_A_min: float
     limits_e_position: float
     limits_e_attitude: float
+    current_velocity: tuple | None = None
+    current_point: tuple | None = None
+    tether_attachment: tuple | None = None
+    tether_length: float | None = None
+    tether_diameter: float | None = None
+    tether_Cn: float | None = None
+    tether_pull: tuple | None = None
     text: str = ""  # the file's text, stored in result files
     path: str = ""
 
@@ -208,10 +273,69 @@ class ScenarioConfig:
                          self.uncertainty_g_factor, self.uncertainty_arm_factor])
 
     @property
+    def per_axis_sensors(self) -> bool:
+        """The sensor variances are given per axis (``var_eta``, ``var_nu``), not per group."""
+        return self.sensors_var_eta is not None
+
+    @property
     def sensor_variances(self) -> np.ndarray:
         """12 variances of [eta; nu] measurement noise (section 4.1)."""
+        if self.per_axis_sensors:
+            return np.array(self.sensors_var_eta + self.sensors_var_nu, dtype=float)
         return np.array([self.sensors_var_position] * 3 + [self.sensors_var_attitude] * 3
                         + [self.sensors_var_velocity] * 6)
+
+    # the water (docs/model.md §10): a run input, ``water`` -------------------------------------------
+    @property
+    def current(self) -> str:
+        """``"none"``, ``"constant"`` or ``"table"``."""
+        return "constant" if self.current_velocity is not None else "table" if self.current_point else "none"
+
+    @property
+    def current_grid(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """The current table's distinct times and depths, increasing."""
+        pts = self.current_point or ()
+        return tuple(sorted({p.t for p in pts})), tuple(sorted({p.depth for p in pts}))
+
+    @property
+    def has_tether(self) -> bool:
+        return self.tether_length is not None
+
+    @property
+    def has_water(self) -> bool:
+        return self.current != "none" or self.has_tether
+
+    @property
+    def water_vector(self) -> np.ndarray:
+        """The run's ``water`` input (:meth:`water_names`): the current (a constant velocity in {n}, or the
+        table's times, depths and velocities, time-major), then the tether's numbers."""
+        v: list[float] = []
+        if self.current == "constant":
+            v += list(self.current_velocity)
+        elif self.current == "table":
+            ts, zs = self.current_grid
+            at = {(p.t, p.depth): p.velocity for p in self.current_point}
+            v += list(ts) + list(zs)
+            for t in ts:
+                for z in zs:
+                    v += list(at[(t, z)])
+        if self.has_tether:
+            v += [*self.tether_attachment, self.tether_length, self.tether_diameter, self.tether_Cn, *self.tether_pull]
+        return np.array(v, dtype=float)
+
+    def water_names(self) -> list[str]:
+        """Names of the ``water`` input's entries (SI units)."""
+        out: list[str] = []
+        if self.current == "constant":
+            out += [f"current.velocity.{c}" for c in "NED"]
+        elif self.current == "table":
+            ts, zs = self.current_grid
+            out += [f"current.t.{i}" for i in range(len(ts))] + [f"current.depth.{j}" for j in range(len(zs))]
+            out += [f"current.velocity.{i}.{j}.{c}" for i in range(len(ts)) for j in range(len(zs)) for c in "NED"]
+        if self.has_tether:
+            out += [f"tether.attachment.{c}" for c in "xyz"] + ["tether.length", "tether.diameter", "tether.Cn"]
+            out += [f"tether.pull.{c}" for c in "NED"]
+        return out
 
     def to_toml(self) -> str:
         """The effective configuration as scenario TOML (SI values): ``loads_scenario`` gives it back.
@@ -243,16 +367,34 @@ class ScenarioConfig:
 
     @property
     def ekf_vector(self) -> np.ndarray:
-        """[q_eta, q_nu, var_position, var_attitude, var_velocity]: the run's ``ekf`` input."""
+        """The run's ``ekf`` input: [q_eta, q_nu, var_position, var_attitude, var_velocity], or with
+        per-axis sensors [q_eta, q_nu, the 12 variances]."""
+        if self.per_axis_sensors:
+            return np.array([self.ekf_q_eta, self.ekf_q_nu, *self.sensor_variances])
         return np.array([self.ekf_q_eta, self.ekf_q_nu, self.sensors_var_position,
                          self.sensors_var_attitude, self.sensors_var_velocity])
 
     def graph_key(self) -> "ScenarioConfig":
-        """The fields that shape the compiled graph (values that are run inputs zeroed)."""
-        return replace(self, text="", path="", ekf_q_eta=0.0, ekf_q_nu=0.0, sensors_var_position=0.0,
-                       sensors_var_attitude=0.0, sensors_var_velocity=0.0, disturbance_phase=(0.0,) * 6,
+        """The fields that shape the compiled graph (values that are run inputs zeroed; the current table's
+        points become their grid indices, so that only its shape keys the graph)."""
+        z6 = (0.0,) * 6
+        group = not self.per_axis_sensors
+        water = {}
+        if self.current == "constant":
+            water["current_velocity"] = (0.0,) * 3
+        elif self.current == "table":
+            ts, zs = self.current_grid
+            water["current_point"] = tuple(_CurrentPoint(float(ts.index(p.t)), float(zs.index(p.depth)), (0.0,) * 3)
+                                           for p in sorted(self.current_point, key=lambda p: (p.t, p.depth)))
+        if self.has_tether:
+            water |= {"tether_attachment": (0.0,) * 3, "tether_length": 0.0, "tether_diameter": 0.0,
+                      "tether_Cn": 0.0, "tether_pull": (0.0,) * 3}
+        return replace(self, text="", path="", ekf_q_eta=0.0, ekf_q_nu=0.0,
+                       sensors_var_position=0.0 if group else None, sensors_var_attitude=0.0 if group else None,
+                       sensors_var_velocity=0.0 if group else None, sensors_var_eta=None if group else z6,
+                       sensors_var_nu=None if group else z6, disturbance_phase=z6,
                        uncertainty_C_factor=0.0, uncertainty_D_factor=0.0, uncertainty_g_factor=0.0,
-                       uncertainty_arm_factor=0.0)
+                       uncertainty_arm_factor=0.0, **water)
 
     def with_h(self, h: float) -> "ScenarioConfig":
         """The same scenario at another controller sampling period.
@@ -384,10 +526,30 @@ def _check_consistency(cfg: ScenarioConfig, where: str) -> None:
                             f"{MAX_SUBSTEPS} (they are unrolled in the compiled sample step)")
     _check_motion(cfg, where)
     _check_motion_steps(cfg, where)
+    _check_current(cfg, where)
     if cfg.time_duration < cfg.time_h:
         raise ScenarioError(f"{where}: time.duration must be at least one sample time.h")
     config.check_memory(table_bytes(cfg), f"the run's time table ({n_samples(cfg)} samples of "
                         f"{cfg.substeps} plant steps)", where, "time.duration", ScenarioError)
+
+
+def _check_current(cfg: ScenarioConfig, where: str) -> None:
+    """A current table covers every depth at every time, once (no gaps, no duplicates)."""
+    if cfg.current != "table":
+        return
+    ts, zs = cfg.current_grid
+    seen: dict = {}
+    for j, p in enumerate(cfg.current_point, start=1):
+        if (p.t, p.depth) in seen:
+            raise ScenarioError(f"{where}: current.point[{j}]: t = {p.t:g} s, depth = {p.depth:g} m is also point "
+                                f"{seen[(p.t, p.depth)]}")
+        seen[(p.t, p.depth)] = j
+    for t in ts:
+        for z in zs:
+            if (t, z) not in seen:
+                raise ScenarioError(f"{where}: current.point: a gap: no point at t = {t:g} s, depth = {z:g} m (the "
+                                    f"table has times {', '.join(f'{x:g}' for x in ts)} s and depths "
+                                    f"{', '.join(f'{x:g}' for x in zs)} m: every depth at every time)")
 
 
 def _num(v) -> str:
@@ -508,6 +670,57 @@ def disturbance_tabulated(cfg: ScenarioConfig, dist_sin, dist_cos, phase_cs):
     """
     off, amp = ca.DM(cfg.disturbance_offset), ca.DM(cfg.disturbance_amplitude)
     return off + amp * (dist_sin * phase_cs[0:6] + dist_cos * phase_cs[6:12])
+
+
+def _ramps(xs, fs, x):
+    """Piecewise-linear ``f(x)`` through the points ``(xs[i], fs[i])``, held beyond the ends (symbolic xs)."""
+    out = fs[0]
+    for i in range(len(xs) - 1):
+        out = out + (fs[i + 1] - fs[i]) * ca.fmin(ca.fmax((x - xs[i]) / (xs[i + 1] - xs[i]), 0), 1)
+    return out
+
+
+def current_at(cfg: ScenarioConfig, water, t, z):
+    """``(v_c, dv_c/dt, dv_c/dz)`` of the scenario's current at time ``t`` and depth ``z`` (3-vectors in {n};
+    the rates None for a constant current), from the run's ``water`` input; None without a current.
+
+    A table is bilinear in time and depth (the current's value is linear between its points, held beyond the
+    first and last time and depth); its rates are those of the cell the point is in.
+    """
+    if cfg.current == "none":
+        return None
+    if cfg.current == "constant":
+        return water[0:3], None, None
+    ts, zs = cfg.current_grid
+    nt, nz = len(ts), len(zs)
+    T = [water[i] for i in range(nt)]
+    Z = [water[nt + j] for j in range(nz)]
+    V = [[water[nt + nz + 3 * (i * nz + j): nt + nz + 3 * (i * nz + j) + 3] for j in range(nz)] for i in range(nt)]
+    tt, zz = ca.SX.sym("t"), ca.SX.sym("z")
+    by_depth = [_ramps(T, [V[i][j] for i in range(nt)], tt) if nt > 1 else V[0][j] for j in range(nz)]
+    v = _ramps(Z, by_depth, zz) if nz > 1 else by_depth[0]
+    dt = ca.jacobian(v, tt) if nt > 1 else None
+    dz = ca.jacobian(v, zz) if nz > 1 else None
+    outs = [x for x in (v, dt, dz) if x is not None]
+    if any(isinstance(x, ca.SX) for x in (water, t, z)):
+        vals = ca.substitute(outs, [tt, zz], [ca.SX(t), ca.SX(z)])
+    else:
+        vals = ca.Function("current", [tt, zz], outs).call([t, z])
+    v = vals[0]
+    dt = vals[1] if nt > 1 else None
+    dz = vals[-1] if nz > 1 else None
+    return v, dt, dz
+
+
+def tether_of(cfg: ScenarioConfig, water):
+    """``(attachment, length, diameter, Cn, pull)`` of the scenario's tether from the ``water`` input, or None."""
+    if not cfg.has_tether:
+        return None
+    k = {"none": 0, "constant": 3}.get(cfg.current)
+    if k is None:
+        ts, zs = cfg.current_grid
+        k = len(ts) + len(zs) + 3 * len(ts) * len(zs)
+    return water[k:k + 3], water[k + 3], water[k + 4], water[k + 5], water[k + 6:k + 9]
 
 
 def noise_sequence(cfg: ScenarioConfig, seed: int, n: int | None = None) -> np.ndarray:

@@ -20,8 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable
 
-__all__ = ["Signal", "COMMON", "DOFS", "POSE_UNITS", "RATE_UNITS", "WRENCH_UNITS", "ACCEL_UNITS", "label",
-           "trace_signals", "check_signals"]
+__all__ = ["Signal", "COMMON", "THRUSTER_DYNAMICS", "DOFS", "POSE_UNITS", "RATE_UNITS", "WRENCH_UNITS", "ACCEL_UNITS",
+           "label", "trace_signals", "check_signals"]
 
 DOFS = "x, y, z, phi, theta, psi"
 POSE_UNITS = "m, m, m, rad, rad, rad"
@@ -80,8 +80,8 @@ COMMON: tuple[Signal, ...] = (
            "commanded body wrench tau_v (eq. 20: J(eta_hat)^T tau_eta), before allocation and saturation; CHAT's input",
            lambda c: c.tau_v),
     Signal("thrust", "thrusters", "N", "", "",
-           "thrust per thruster after saturation to [u_min, u_max], held over the sample (Appendix B)",
-           lambda c: c.u_sat),
+           "thrust per thruster after saturation to [u_min, u_max], held over the sample (Appendix B); with "
+           "thruster dynamics the thrust each delivers at t_k", lambda c: c.u_sat),
     Signal("f_true", 6, WRENCH_UNITS, "{n}", DOFS,
            "true total disturbance of eq. 6: Mhat eta_ddot - J^-T tau_v,realised", lambda c: c.f_true),
     Signal("q", "joints", "rad", "", "", "manipulator joint angles (prescribed trajectory)",
@@ -91,9 +91,25 @@ COMMON: tuple[Signal, ...] = (
 )
 
 
-def trace_signals(controller) -> tuple[Signal, ...]:
-    """The traced signals of a run of ``controller`` (an :class:`arvcas.controllers.Controller`), in order."""
-    return COMMON + tuple(controller.signals)
+# the signals of a system whose thrusters have dynamics (docs/model.md §9), after COMMON
+THRUSTER_DYNAMICS: tuple[Signal, ...] = (
+    Signal("thrust_cmd", "thrusters", "N", "", "",
+           "thrust the allocation asks of each thruster at t_k, saturated to [u_min, u_max] (the lag's target)",
+           lambda c: c.u_cmd),
+    Signal("command", "thrusters", "map unit", "", "",
+           "command sent to each thruster at t_k, in its map's unit (PWM us, normalised, rad/s): the inverse map "
+           "of thrust_cmd", lambda c: c.command),
+    Signal("tau_delivered", 6, WRENCH_UNITS, "{b}", "X, Y, Z, K, M, N",
+           "body wrench the thrusters deliver at t_k (B times thrust); CHAT on it is chat_delivered",
+           lambda c: c.tau_del),
+)
+
+
+def trace_signals(controller, structure=None) -> tuple[Signal, ...]:
+    """The traced signals of a run of ``controller`` (an :class:`arvcas.controllers.Controller`) on a system
+    of ``structure`` (:class:`arvcas.system.systemfile.Structure`; None: instantaneous thrusters), in order."""
+    dyn = THRUSTER_DYNAMICS if structure is not None and structure.has_thruster_dynamics else ()
+    return COMMON + dyn + tuple(controller.signals)
 
 
 def check_signals(signals) -> None:

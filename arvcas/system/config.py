@@ -79,6 +79,13 @@ UNITS: dict[str, tuple[str, float]] = {
     "(m/s)^2": ("velocity^2", 1.0),
     "(rad/s)^2": ("angular_velocity^2", 1.0),
     "(deg/s)^2": ("angular_velocity^2", (math.pi / 180.0) ** 2),
+    # thrusters (docs/system-file.md): an autopilot's command and the thrust it gives
+    "kgf": ("force", 9.80665),  # kilogram-force (Blue Robotics' T200 tables), exact by definition
+    "us": ("pwm", 1.0),  # an ESC's PWM pulse width in microseconds: a command, kept in its own unit
+    "us/s": ("pwm_rate", 1.0),
+    "1/s": ("rate", 1.0),  # a normalised command per second
+    "rad/s^2": ("angular_acceleration", 1.0),
+    "N*s^2/rad^2": ("rotor_constant", 1.0),  # thrust per squared rotor speed (uuv_simulator's rotorConstant)
     # hydrodynamic derivative per unit density: the model's coefficient is rho * value (paper App. A)
     "per_rho": ("per_rho", 1.0),
 }

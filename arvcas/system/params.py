@@ -76,7 +76,7 @@ def layout_for(structure: systemfile.Structure) -> Layout:
     cls = systemfile.schema_for(structure)
     names, dims, rules, leaf = [], [], [], []
     for lf in config.leaves(cls):
-        keys = ([f"{lf.key}.{e}" for e in systemfile.VECTOR_ELEMENTS[lf.key.rsplit(".", 1)[-1]]]
+        keys = ([f"{lf.key}.{e}" for e in systemfile.element_labels(lf.key, lf.n)]
                 if lf.kind == "floats" else [lf.key])
         for k in keys:
             names.append(k)
@@ -178,6 +178,18 @@ class Params:
             srcs[i] = "replaced at run time"
         return Params(tuple(vals), self._units, tuple(srcs), self.path, self.layout, self.description, self.defaults)
 
+    def instantaneous(self) -> "Params":
+        """The same system with thrusters that deliver their (saturated) command at once: the thruster
+        dynamics and command maps of the file left out (every other number unchanged, same names)."""
+        st = self.structure
+        if not st.has_thruster_dynamics:
+            return self
+        lay = layout_for(st.instantaneous())
+        idx = [self.layout.index[n] for n in lay.names]
+        pick = lambda seq: tuple(seq[i] for i in idx)  # noqa: E731
+        return Params(pick(self._values), pick(self._units), pick(self._sources), self.path, lay, self.description,
+                      self.defaults)
+
     def _index(self, name: str, where: str) -> int:
         try:
             return self.layout.index[name]
@@ -195,7 +207,7 @@ def read_doc(path: Path) -> tuple[dict, str]:
         from arvcas.system import urdf
 
         doc = urdf.convert(doc, path, ParamsError)
-    return doc, where
+    return systemfile.read_tables(doc, path, ParamsError), where
 
 
 def load(path: str | Path | None = None) -> Params:
@@ -300,6 +312,8 @@ def check_physical(values: Mapping[str, float], where: str, layout: Layout | Non
             raise _fail(where, [pre + "u_min", pre + "u_max"], f"u_min ({lo:g} N) must be < u_max ({hi:g} N)")
     for name in st.thrusters or ():
         _check_unit(values, f"thrusters.{name}.direction", where, "thrust direction")
+    if st.has_thruster_dynamics:
+        _check_maps(P, values, where)
     B = np.array(thrusters.B_T(P), dtype=float)
     sv = np.linalg.svd(B, compute_uv=False)
     rank = int(np.sum(sv > 1e-9 * sv[0]))
@@ -341,6 +355,35 @@ def check_physical(values: Mapping[str, float], where: str, layout: Layout | Non
                                 f"link {i}'s drag segment has zero length (drag_diameter "
                                 f"{values[f'arm.link{i}.drag_diameter']:g} m): omit the drag entries for a "
                                 f"link without drag")
+
+
+def _check_maps(P, values: Mapping[str, float], where: str) -> None:
+    """A quadratic map's command range straddles its dead band; each thruster's thrust limits lie within
+    the thrust its map gives over its command range (no allocation may ask for a command outside it)."""
+    import casadi as ca
+
+    from arvcas.model import thrusters
+
+    for m in P.s.thruster_maps:
+        if m.kind == "quadratic":
+            k = f"thrusters.map.{m.name}"
+            db, lo, hi = values[f"{k}.dead_band"], values[f"{k}.command_min"], values[f"{k}.command_max"]
+            if not (lo < -db and db < hi):
+                raise _fail(where, [f"{k}.dead_band"], f"the dead band +-{db:g} covers the command range "
+                                                      f"[{lo:g}, {hi:g}]")
+    for i, name in enumerate(P.s.thrusters):
+        m = P.s.thruster_map(P.s.thruster_dynamics[i].map)
+        s_lo, s_hi = thrusters.map_range(P, m)
+        ends = ca.DM(ca.vertcat(s_lo, s_hi))
+        f_lo, f_hi = (float(x) for x in np.array(ca.DM(thrusters.map_thrust(P, m, ends))).ravel())
+        c_lo, c_hi = (float(x) for x in np.array(ca.DM(thrusters.command_of(P, m, ends))).ravel())
+        for key, u, ok, end in (("u_min", values[f"thrusters.{name}.u_min"], lambda u: u >= f_lo - 1e-12, (c_lo, f_lo)),
+                                ("u_max", values[f"thrusters.{name}.u_max"], lambda u: u <= f_hi + 1e-12, (c_hi, f_hi))):
+            if not ok(u):
+                raise _fail(where, [f"thrusters.{name}.{key}"],
+                            f"{u:g} N needs a command outside the range of its map {m.name} "
+                            f"({end[1]:.6g} N at command {end[0]:.6g} {m.unit}); the map gives "
+                            f"[{f_lo:.6g}, {f_hi:.6g}] N")
 
 
 def _check_tensor(I: np.ndarray, where: str, keys: list[str], what: str) -> None:

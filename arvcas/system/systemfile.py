@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Any
 
 from arvcas.system import config
-from arvcas.system.config import ge, gt, quantity
+from arvcas.system.config import ge, gt, lt, quantity
 
 __all__ = [
-    "HydroTerm", "Structure", "parse_term", "structure_of", "schema_for", "MAX_JOINTS", "VECTOR_ELEMENTS",
-    "HYDRO_ALIASES", "FORMS",
+    "HydroTerm", "Structure", "ThrusterMap", "ThrusterDynamics", "parse_term", "structure_of", "schema_for",
+    "MAX_JOINTS", "VECTOR_ELEMENTS", "HYDRO_ALIASES", "FORMS", "COMMAND_UNITS", "element_labels", "read_tables",
 ]
 
 MAX_JOINTS = 7
@@ -39,6 +39,12 @@ HYDRO_ALIASES = {
     "M_dsds": "M_w_ds2_absw",
 }
 
+# a thruster command map's command units (docs/system-file.md): PWM pulse width, normalised, rotor speed;
+# each with the dimension of the command and of its rate (arvcas.system.config.UNITS)
+COMMAND_UNITS = {"us": ("pwm", "pwm_rate"), "1": ("1", "rate"), "rad/s": ("angular_velocity", "angular_acceleration")}
+TABLE_VECTORS = ("command", "thrust")  # a table map's two columns: parameters <key>.0 .. <key>.<n-1>
+MAX_TABLE_POINTS = 10_000
+
 # Haidou-1's parametric layout (Appendix B): its six thrusters in the order of B's columns
 # (arvcas.model.thrusters: stern left and right, rotatable; side thrusters at the bow and the stern; verticals)
 HAIDOU1_THRUSTERS = ("T1 stern left", "T2 stern right", "T3 side (bow)", "T4 side (stern)", "T5 vertical (port)",
@@ -53,6 +59,15 @@ VECTOR_ELEMENTS = {
 
 class _Bad(ValueError):
     pass
+
+
+def element_labels(key: str, n: int) -> tuple[str, ...]:
+    """The labels of a vector entry's elements (parameter ``<key>.<label>``): x y z ... or, for a thrust
+    table's columns, the point's index 0 .. n-1."""
+    last = key.rsplit(".", 1)[-1]
+    if last in TABLE_VECTORS and ".map." in key:
+        return tuple(str(i) for i in range(n))
+    return VECTOR_ELEMENTS[last]
 
 
 @dataclass(frozen=True)
@@ -129,12 +144,24 @@ class Structure:
     link_drag: tuple[bool, ...]  # chain: the link has a drag segment
     link_cd: tuple[bool, ...]  # chain: the link has its own Cd
     arm_trim: bool = True  # docs/model.md §3's trim buoyancy for the stowed arm (``[arm] trim = false``: none)
+    thruster_maps: tuple["ThrusterMap", ...] = ()  # command maps, [thrusters.map.<name>]
+    thruster_dynamics: tuple["ThrusterDynamics", ...] | None = None  # per listed thruster, or None: instantaneous
 
     @property
     def n_thrusters(self) -> int:
         return 6 if self.thrusters is None else len(self.thrusters)
 
     @property
+    def has_thruster_dynamics(self) -> bool:
+        return self.thruster_dynamics is not None
+
+    def thruster_map(self, name: str) -> "ThrusterMap":
+        return next(m for m in self.thruster_maps if m.name == name)
+
+    def instantaneous(self) -> "Structure":
+        """The same system with thrusters that deliver their (saturated) command at once."""
+        return dataclasses.replace(self, thruster_maps=(), thruster_dynamics=None)
+
     def thruster_names(self) -> tuple[str, ...]:
         """The thrusters' names in allocation order (the columns of B): the list's, or Haidou-1's six."""
         return HAIDOU1_THRUSTERS if self.thrusters is None else self.thrusters
@@ -142,6 +169,33 @@ class Structure:
     def key(self) -> str:
         """A stable text of the structure, for compile-cache keys."""
         return repr(self)
+
+
+@dataclass(frozen=True)
+class ThrusterMap:
+    """A command map (docs/system-file.md): from the command the autopilot sends to steady thrust.
+
+    ``kind``: ``"table"`` (points ``command.i -> thrust.i``, the monotone cubic through them; its run of zero
+    thrust is the dead band, ``zero = (first, last)`` index of that run) or ``"quadratic"`` (uuv_simulator's rotor law
+    ``T = k s |s|`` on the command ``s`` beyond a dead band). ``unit``: the command's unit (COMMAND_UNITS).
+    """
+
+    name: str
+    kind: str
+    unit: str
+    n: int = 0  # table points
+    zero: tuple[int, int] = (0, 0)  # table: first and last index of the zero-thrust run (the dead band)
+    uniform: bool = False  # table: its commands are evenly spaced (a lookup is one division)
+
+
+@dataclass(frozen=True)
+class ThrusterDynamics:
+    """One thruster's dynamics: its map, a first-order lag (one time constant, or one for spin-up and one
+    for spin-down: ``asymmetric``) and an optional rate limit (docs/model.md §9)."""
+
+    map: str
+    asymmetric: bool
+    rate_limit: bool
 
 
 # ---- reading the structure --------------------------------------------------------------------------
@@ -246,9 +300,10 @@ def _structure(doc: dict, default_name: str) -> Structure:
     thr = _table(doc, "thrusters", "")
     if "unit" in thr:
         units_list = thr["unit"]
-        extra = [k for k in thr if k != "unit"]
+        extra = [k for k in thr if k not in ("unit", "map")]
         if extra:
-            raise _Bad(f"thrusters.{extra[0]}: a thruster list ([[thrusters.unit]]) takes no other keys")
+            raise _Bad(f"thrusters.{extra[0]}: a thruster list ([[thrusters.unit]]) takes no other keys than "
+                       f"[thrusters.map.<name>] command maps")
         if not isinstance(units_list, list) or not all(isinstance(u, dict) for u in units_list):
             raise _Bad("thrusters.unit: expected an array of tables [[thrusters.unit]]")
         names = []
@@ -256,17 +311,26 @@ def _structure(doc: dict, default_name: str) -> Structure:
             n = _thruster_name(u.get("name"), i)
             if n in names:
                 raise _Bad(f"thrusters.unit[{i}].name: '{n}' is used twice")
+            if n == "map":
+                raise _Bad(f"thrusters.unit[{i}].name: 'map' names the command maps ([thrusters.map.<name>])")
             names.append(n)
         if len(names) < 6:
             raise _Bad(f"thrusters.unit: {len(names)} thrusters cannot produce every wrench (at least 6)")
+        maps = _maps(thr.get("map", {}))
+        dyn = _dynamics(units_list, names, maps)
         thrusters: tuple[str, ...] | None = tuple(names)
         if any(f in ("ds", "ds2") for t in terms for f in t.factors):
             bad = next(t.name for t in terms if any(f in ("ds", "ds2") for f in t.factors))
             raise _Bad(f"hydro.{bad}: the stern-angle factor ds needs Haidou-1's thruster layout "
                        f"(thrusters.delta_sL, delta_sR)")
     else:
-        thrusters = None
+        thrusters, maps, dyn = None, (), None
     vehicle_only = (name, "excess" if has_ex else "volume", tuple(terms), per_rho, cam, thrusters)
+    extra = {"thruster_maps": maps, "thruster_dynamics": dyn}
+    return dataclasses.replace(_with_arm(doc, vehicle_only), **extra)
+
+
+def _with_arm(doc: dict, vehicle_only: tuple) -> Structure:
     arm = doc.get("arm")
     if arm is None:
         return Structure(*vehicle_only, "none", 0, False, (), ())
@@ -305,6 +369,184 @@ def _structure(doc: dict, default_name: str) -> Structure:
             drag.append(bool(have))
             cd.append("Cd" in lk)
     return Structure(*vehicle_only, form, nj, bool(rpy), tuple(drag), tuple(cd), trim)
+
+
+_DYN_KEYS = ("map", "time_constant", "time_constant_up", "time_constant_down", "rate_limit")
+_MAP_NAME_RE = re.compile(r"^[a-z][a-z0-9_]{0,63}$")
+
+
+def _maps(table: Any) -> tuple[ThrusterMap, ...]:
+    """The command maps of ``[thrusters.map.<name>]`` (a table: ``command`` and ``thrust`` vectors, written
+    inline or read from ``table = "file.csv"`` by :func:`read_tables`; or the quadratic rotor law)."""
+    if not isinstance(table, dict):
+        raise _Bad("thrusters.map: expected tables [thrusters.map.<name>]")
+    out = []
+    for name, m in table.items():
+        key = f"thrusters.map.{name}"
+        if not _MAP_NAME_RE.match(name):
+            raise _Bad(f"{key}: a map's name must match [a-z][a-z0-9_]*")
+        if not isinstance(m, dict):
+            raise _Bad(f"{key}: expected a table")
+        if "command" in m or "thrust" in m:
+            for k in TABLE_VECTORS:
+                if not isinstance(m.get(k), dict) or not isinstance(m[k].get("value"), list):
+                    raise _Bad(f"{key}.{k}: a table map needs command and thrust vectors {{ value = [...], unit, "
+                               f"source }} (or table = \"file.csv\")")
+            unit = m["command"].get("unit")
+            if unit not in COMMAND_UNITS:
+                raise _Bad(f"{key}.command: unit {unit!r}: a command is in one of {', '.join(COMMAND_UNITS)} "
+                           f"(PWM microseconds, normalised, rotor speed)")
+            out.append(ThrusterMap(name, "table", unit, *_table_shape(m, key)))
+        else:
+            unit = m.get("command_unit")
+            if unit not in ("1", "rad/s"):
+                raise _Bad(f"{key}.command_unit: the quadratic rotor law takes a normalised (\"1\") or rotor-speed "
+                           f"(\"rad/s\") command, got {unit!r} (a PWM map is a table)")
+            out.append(ThrusterMap(name, "quadratic", unit))
+    return tuple(out)
+
+
+def _table_shape(m: dict, key: str) -> tuple[int, tuple[int, int], bool]:
+    """(points, (first, last) index of the zero-thrust run, evenly spaced commands) of a table map; one line
+    for a table that is not a monotonic map with a dead band around zero thrust."""
+    c, t = m["command"]["value"], m["thrust"]["value"]
+    n = len(c)
+    if len(t) != n:
+        raise _Bad(f"{key}: {n} commands but {len(t)} thrusts")
+    if not 4 <= n <= MAX_TABLE_POINTS:
+        raise _Bad(f"{key}.command: {n} points, a table needs 4 to {MAX_TABLE_POINTS}")
+    for k, v in (("command", c), ("thrust", t)):
+        bad = next((i for i, x in enumerate(v) if isinstance(x, bool) or not isinstance(x, (int, float))
+                    or x != x or x in (float("inf"), float("-inf"))), None)
+        if bad is not None:
+            raise _Bad(f"{key}.{k}: point {bad}: expected a finite number, got {v[bad]!r}")
+    for i in range(1, n):
+        if not c[i] > c[i - 1]:
+            raise _Bad(f"{key}.command: not increasing at point {i} ({c[i - 1]:g} then {c[i]:g})")
+        if t[i] < t[i - 1]:
+            raise _Bad(f"{key}.thrust: a non-monotonic thrust table: thrust falls from {t[i - 1]:g} to {t[i]:g} at "
+                       f"point {i} (command {c[i]:g}); more command must give at least as much thrust")
+        if t[i] == t[i - 1] and t[i] != 0:
+            raise _Bad(f"{key}.thrust: thrust {t[i]:g} at points {i - 1} and {i}: flat only at zero thrust "
+                       f"(the dead band); the map must be invertible elsewhere")
+    zeros = [i for i, x in enumerate(t) if x == 0]
+    if not zeros or t[0] >= 0 or t[-1] <= 0:
+        raise _Bad(f"{key}.thrust: the table must run from reverse (< 0) through zero thrust (the dead band, "
+                   f"one point or more) to forward (> 0) thrust")
+    step = (c[-1] - c[0]) / (n - 1)
+    uniform = all(abs(c[i] - (c[0] + i * step)) <= 1e-9 * max(abs(c[0]), abs(c[-1])) for i in range(n))
+    return n, (zeros[0], zeros[-1]), uniform
+
+
+def _dynamics(units: list, names: list[str], maps: tuple[ThrusterMap, ...]) -> tuple[ThrusterDynamics, ...] | None:
+    """Each listed thruster's dynamics (all or none), checked against the declared maps."""
+    has = [any(k in u for k in _DYN_KEYS) for u in units]
+    if not any(has):
+        if maps:
+            raise _Bad(f"thrusters.map.{maps[0].name}: declared but no thruster uses it (give each thruster map = "
+                       f"\"{maps[0].name}\" and its time_constant)")
+        return None
+    if not all(has):
+        i = has.index(False)
+        raise _Bad(f"thrusters.unit[{i}] ({names[i]}): thruster dynamics are declared for every thruster or none "
+                   f"(map, time_constant or time_constant_up/_down, optional rate_limit)")
+    out, used = [], set()
+    for i, u in enumerate(units):
+        key = f"thrusters.unit[{i}] ({names[i]})"
+        m = u.get("map")
+        if not isinstance(m, str) or not any(x.name == m for x in maps):
+            raise _Bad(f"{key}.map: expected the name of a [thrusters.map.<name>] table"
+                       f"{config.closest(str(m), [x.name for x in maps])} (declared: "
+                       f"{', '.join(x.name for x in maps) or 'none'})")
+        used.add(m)
+        sym, up, down = "time_constant" in u, "time_constant_up" in u, "time_constant_down" in u
+        if sym == (up or down) or up != down:
+            raise _Bad(f"{key}: give time_constant, or both time_constant_up and time_constant_down")
+        out.append(ThrusterDynamics(m, up, "rate_limit" in u))
+    unused = [x.name for x in maps if x.name not in used]
+    if unused:
+        raise _Bad(f"thrusters.map.{unused[0]}: declared but no thruster uses it")
+    return tuple(out)
+
+
+def read_tables(doc: dict, path: str | Path, error: type[Exception]) -> dict:
+    """``doc`` with each ``[thrusters.map.<name>] table = "file.csv"`` read into its ``command`` and
+    ``thrust`` entries (the file: ``#`` comment lines, one ``# source: ...`` line, a header
+    ``<name> [<command unit>],<name> [<force unit>]``, then one ``command,thrust`` row per point)."""
+    thr = doc.get("thrusters")
+    maps = thr.get("map") if isinstance(thr, dict) else None
+    if not isinstance(maps, dict) or not any(isinstance(m, dict) and "table" in m for m in maps.values()):
+        return doc
+    from arvcas.io.files import read_text
+
+    new = {}
+    for name, m in maps.items():
+        if not (isinstance(m, dict) and "table" in m):
+            new[name] = m
+            continue
+        key = f"thrusters.map.{name}"
+        extra = [k for k in m if k != "table"]
+        if extra or not isinstance(m["table"], str):
+            raise error(f"{path}: {key}: a table file map takes only table = \"file.csv\""
+                        + (f" (not {extra[0]})" if extra else ""))
+        cpath = _table_path(path, m["table"])
+        if cpath is None:
+            raise error(f"{path}: {key}.table: {m['table']!r} is neither beside the system file nor a shipped "
+                        f"table (arvcas/data: {', '.join(shipped_tables()) or 'none'})")
+        text = read_text(cpath, "thrust table", lambda msg: error(f"{path}: {key}.table: {msg}"))
+        new[name] = {"table": m["table"], **_parse_csv(text, f"{path}: {key}.table: {cpath}", error)}
+    return {**doc, "thrusters": {**thr, "map": new}}
+
+
+def shipped_tables() -> list[str]:
+    """The thrust tables shipped in ``arvcas/data`` (a system file may name them from anywhere)."""
+    from importlib import resources
+
+    return sorted(p.name for p in Path(str(resources.files("arvcas") / "data")).glob("*.csv"))
+
+
+def _table_path(system: str | Path, name: str) -> Path | None:
+    """A thrust table beside the system file, else a shipped one of that name, else None."""
+    p = rel_path(system, name)
+    if p.exists():
+        return p
+    if Path(name).name == name and name in shipped_tables():
+        from importlib import resources
+
+        return Path(str(resources.files("arvcas") / "data" / name))
+    return None
+
+
+def _parse_csv(text: str, where: str, error) -> dict:
+    source, header, rows = None, None, []
+    for ln, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            body = s[1:].strip()
+            if body.lower().startswith("source:"):
+                source = body.split(":", 1)[1].strip()
+            continue
+        cells = [c.strip() for c in s.split(",")]
+        if header is None:
+            m = [re.fullmatch(r"([A-Za-z_][A-Za-z0-9_ ]*)\[([^\]]+)\]", c) for c in cells]
+            if len(cells) != 2 or not all(m):
+                raise error(f"{where}: line {ln}: expected a header 'command [unit],thrust [unit]', got {s!r}")
+            header = [x.group(2).strip() for x in m]
+            continue
+        if len(cells) != 2:
+            raise error(f"{where}: line {ln}: expected 2 numbers (command, thrust), got {len(cells)}")
+        try:
+            rows.append((float(cells[0]), float(cells[1])))
+        except ValueError:
+            raise error(f"{where}: line {ln}: not a number: {s!r}") from None
+    if not source:
+        raise error(f"{where}: no '# source: ...' line (every number carries its source)")
+    if header is None or not rows:
+        raise error(f"{where}: no header and rows")
+    return {"command": {"value": [r[0] for r in rows], "unit": header[0], "source": source},
+            "thrust": {"value": [r[1] for r in rows], "unit": header[1], "source": source}}
 
 
 # ---- the schema of one structure ------------------------------------------------------------------------
@@ -353,6 +595,37 @@ class Thruster:
     direction: tuple[float, ...] = quantity("1", n=3)
     u_min: float = quantity("force")
     u_max: float = quantity("force")
+
+
+def _thruster_cls(dyn: ThrusterDynamics | None, unit: str) -> type:
+    """A listed thruster's schema: geometry and limits, then its dynamics (docs/system-file.md)."""
+    if dyn is None:
+        return Thruster
+    def tau():  # a new field each time (a dataclass field object belongs to one field)
+        return quantity("time", gt(0, "a first-order lag's time constant"))
+
+    fields = [(f.name, f.type, quantity(f.metadata[config._META].dim, n=f.metadata[config._META].n))
+              for f in dataclasses.fields(Thruster)]
+    if dyn.asymmetric:
+        fields += [("time_constant_up", float, tau()), ("time_constant_down", float, tau())]
+    else:
+        fields.append(("time_constant", float, tau()))
+    if dyn.rate_limit:
+        fields.append(("rate_limit", float, quantity(COMMAND_UNITS[unit][1], gt(0))))
+    return dataclasses.make_dataclass(f"Thruster{'A' if dyn.asymmetric else ''}{'R' if dyn.rate_limit else ''}_"
+                                      f"{COMMAND_UNITS[unit][0]}", fields, frozen=True)
+
+
+def _map_cls(m: ThrusterMap) -> type:
+    dim = COMMAND_UNITS[m.unit][0]
+    if m.kind == "table":
+        fields = [("command", tuple[float, ...], quantity(dim, n=m.n)), ("thrust", tuple[float, ...],
+                                                                         quantity("force", n=m.n))]
+    else:
+        k = "force" if m.unit == "1" else "rotor_constant"
+        fields = [("rotor_constant", float, quantity(k, gt(0))), ("command_min", float, quantity(dim, lt(0))),
+                  ("command_max", float, quantity(dim, gt(0))), ("dead_band", float, quantity(dim, ge(0)))]
+    return dataclasses.make_dataclass(f"Map_{m.kind}_{m.n}_{dim}", fields, frozen=True)
 
 
 @dataclass(frozen=True)
@@ -452,8 +725,14 @@ def schema_for(s: Structure) -> type:
     if s.thrusters is None:
         thr: type = HaidouThrusters
     else:
-        thr = dataclasses.make_dataclass("Thrusters", [(n, Thruster, config.setting()) for n in s.thrusters],
-                                         frozen=True)
+        dyn = s.thruster_dynamics or (None,) * len(s.thrusters)
+        units = [s.thruster_map(d.map).unit if d is not None else "1" for d in dyn]
+        tf = [(n, _thruster_cls(d, u), config.setting()) for n, d, u in zip(s.thrusters, dyn, units)]
+        if s.thruster_maps:
+            maps = dataclasses.make_dataclass("Maps", [(m.name, _map_cls(m), config.setting()) for m in s.thruster_maps],
+                                              frozen=True)
+            tf.append(("map", maps, config.setting()))
+        thr = dataclasses.make_dataclass("Thrusters", tf, frozen=True)
     fields: list = [("env", Env, config.setting()), ("vehicle", _vehicle_cls(s.buoyancy), config.setting()),
                     ("hydro", hydro, config.setting()), ("thrusters", thr, config.setting())]
     if s.n_joints:
@@ -490,14 +769,18 @@ def file_doc(doc: dict) -> dict:
         out["arm"] = {k: v for k, v in out["arm"].items() if k != "trim"}
     thr = out.get("thrusters")
     if isinstance(thr, dict) and isinstance(thr.get("unit"), list):
-        out["thrusters"] = {u["name"]: {k: v for k, v in u.items() if k != "name"} for u in thr["unit"]}
+        listed = {u["name"]: {k: v for k, v in u.items() if k not in ("name", "map")} for u in thr["unit"]}
+        if isinstance(thr.get("map"), dict):  # the maps' strings (table file, command unit) are structure
+            listed["map"] = {n: {k: v for k, v in m.items() if k not in ("table", "command_unit")}
+                             if isinstance(m, dict) else m for n, m in thr["map"].items()}
+        out["thrusters"] = listed
     return out
 
 
 def expand(key: str, value: Any) -> list[tuple[str, float]]:
     """A leaf's parameters: a scalar as itself, a vector as ``key.<element label>``."""
     if isinstance(value, tuple):
-        labels = VECTOR_ELEMENTS[key.rsplit(".", 1)[-1]]
+        labels = element_labels(key, len(value))
         return [(f"{key}.{lab}", float(x)) for lab, x in zip(labels, value)]
     return [(key, float(value))]
 

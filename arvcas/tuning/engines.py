@@ -48,6 +48,7 @@ class EvalTask:
     params: Params
     ref: tuple | None = None  # per-DOF (chat, rmse) normalisation; None: the paper's Table 3 AGSTA
     plugins: tuple[str, ...] = ()  # plugin files or modules a worker loads first (the controller's)
+    chat: str = "commanded"  # CHAT on the command (eq. 42) or on the delivered wrench ([objectives] chat)
 
 
 def run_key(controller: str, cfg: ScenarioConfig, params: Params | None = None) -> str:
@@ -75,7 +76,7 @@ def evaluate_rows(task: EvalTask, gains: np.ndarray, n_threads: int | None = Non
     from arvcas.sim.simulation import simulate_batch
 
     outs = [simulate_batch(task.controller, gains, seed=seed, params=task.params, cfg=task.cfg,
-                           uncertainty=unc, phase=ph, n_threads=n_threads, return_status=True)
+                           uncertainty=unc, phase=ph, n_threads=n_threads, return_status=True, chat=task.chat)
             for seed, unc, ph in task.draws]
     chat = np.stack([o[0] for o in outs])
     rmse = np.stack([o[1] for o in outs])

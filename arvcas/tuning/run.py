@@ -176,7 +176,7 @@ def eval_task(study: Study, controller: str, params=None) -> EvalTask:
     src = provenance(controller)
     ship = (src["spec"],) if src.get("kind") in ("file", "module") else ()  # an entry point is found by itself
     return EvalTask(controller=controller, draws=draws, cfg=cfg, params=params, ref=reference(study, params, draws),
-                    plugins=ship)
+                    plugins=ship, chat=study.objectives.chat)
 
 
 def reference(study: Study, params, draws) -> tuple | None:
@@ -189,7 +189,8 @@ def reference(study: Study, params, draws) -> tuple | None:
 
     seed, unc, ph = draws[0]
     run = compiled_run("agsta", params, study.scenario)
-    chat, rmse, ok, _ = run.many(run.default_gains(), [seed], uncertainty=unc, phase=ph, n_threads=1)
+    chat, rmse, ok, _ = run.many(run.default_gains(), [seed], uncertainty=unc, phase=ph, n_threads=1,
+                                 chat=study.objectives.chat)
     if not ok[0]:
         raise StudyError(f"{study.path}: evaluation.system: the AGSTA at the default gains of "
                          f"{params.structure.name} diverges on draw 1: no normalisation for the objectives")

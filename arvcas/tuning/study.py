@@ -20,7 +20,8 @@ Layout (see ``studies/*.toml`` for commented examples)::
                    crossover_eta?, mutation_eta?, mutation_prob_var?, eliminate_duplicates?
     [termination]  max_generations | max_generations_per_variable, max_evaluations?,
                    stall_generations? with ftol?
-    [objectives]   names = ["chat", "rmse"], reference_point = [f_chat, f_rmse]
+    [objectives]   names = ["chat", "rmse"], reference_point = [f_chat, f_rmse], chat? ("commanded": eq. 42 on
+                   the command, the paper's, the default; "delivered": on the thrusters' delivered wrench)
     [evaluation]   system? (a shipped system's name or a system file; default Haidou-1), scenario? (path,
                    relative to the study file; default the system's), [[evaluation.draws]] noise_seed,
                    uncertainty? ([C, D, g, arm] factors), phase_deg? (6 disturbance phases, deg)
@@ -53,6 +54,7 @@ __all__ = [
 
 ENGINES = ("local", "dask")
 OBJECTIVES = ("chat", "rmse")
+CHAT_KINDS = ("commanded", "delivered")  # what CHAT is computed on (arvcas.sim.run.CHAT_KINDS)
 ALGORITHMS = ("nsga2",)
 
 # Sizes a study may ask for (each is a rule on its field; the tables of one generation are also held
@@ -129,6 +131,8 @@ class ObjectivesConfig:
     names: tuple[str, ...] = setting(Equals(OBJECTIVES, "mean normalised CHAT and RMSE"), default=OBJECTIVES,
                                      required=True)
     reference_point: tuple[float, float] = quantity("1", gt(0), default=(10.0, 10.0), required=True)
+    # eq. 42 on the commanded wrench (the paper's) or on the wrench the thrusters deliver (docs/model.md §6)
+    chat: str = setting(Choices(CHAT_KINDS, "CHAT signal"), default="commanded")
 
 
 @dataclass(frozen=True)
@@ -238,7 +242,9 @@ class Study:
             "variables": {"names": names, "lower": lo.tolist(), "upper": hi.tolist()},
             "algorithm": dataclasses.asdict(self.algorithm),
             "objectives": {"names": list(self.objectives.names),
-                           "reference_point": list(self.objectives.reference_point)},
+                           "reference_point": list(self.objectives.reference_point),
+                           # only when not the paper's, so that earlier checkpoints keep their identity
+                           **({"chat": self.objectives.chat} if self.objectives.chat != "commanded" else {})},
             "draws": [dataclasses.asdict(d) for d in self.draws],
             "scenario_text": self.scenario.text if self.scenario is not None else "",
             **({"system": self.params.structure.name} if self.system is not None else {}),

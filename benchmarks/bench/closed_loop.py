@@ -18,7 +18,7 @@ from benchmarks.bench.common import BenchError, CONTROLLER, Settings, _stat, _ti
 def _run_args(fn: ca.Function, g, noise, cfg, p, layout=None) -> list:
     """Arguments of a run function by input name (robust to the order of the inputs)."""
     vals = {"gains": g, "noise": noise, "unc": cfg.uncertainty, "phase": np.array(cfg.disturbance_phase),
-            "ekf": getattr(cfg, "ekf_vector", None), "p": p}
+            "ekf": getattr(cfg, "ekf_vector", None), "water": getattr(cfg, "water_vector", None), "p": p}
     args = []
     for name in fn.name_in():
         if name in ("sched_time", "sched_arm"):

@@ -284,7 +284,10 @@ def render_markdown(res: dict) -> str:
     if sy:
         L += ["", "## 5. Systems (issue 12)", "",
               f"Each shipped system's run at its own default scenario and gains, controller {CONTROLLER}, metrics "
-              f"only; the systems timed in interleaved rounds in this run (median).", "",
+              f"only; the systems timed in interleaved rounds in this run (median). A system with thruster "
+              f"dynamics (issue 22) is also timed without them (`+instantaneous`, the same scenario and step) and "
+              f"at the former plant step (`+h_plant_0.005`); instructions count the step's SX functions, not the "
+              f"table lookups in MX between them.", "",
               "| system | thrusters | joints | duration s | samples x plant steps | run s (spread) | real-time factor | "
               "instructions / sample | instructions / s |", "|---|---|---|---|---|---|---|---|---|"]
         for name, r in sy.items():

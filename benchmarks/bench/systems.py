@@ -5,6 +5,7 @@ Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says wha
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 from arvcas.build import calls
@@ -17,7 +18,7 @@ def _bench_systems(s: Settings, log) -> dict:
     """Each shipped system with a default scenario: its run at that scenario and gains, side by side in one
     measurement: metrics-only run time (the systems interleaved round by round, median over the rounds),
     real-time factor, instructions per controller sample and per second."""
-    from arvcas.system import load_system, shipped
+    from arvcas.system import System, load_system, shipped
 
     prepared = {}
     for name in shipped():
@@ -25,15 +26,21 @@ def _bench_systems(s: Settings, log) -> dict:
         if sysm.params.default("scenario") is None:  # a system for validation only (hinsdale_bluerov2_alpha5)
             log(f"systems: {name}: no default scenario, not timed")
             continue
-        log(f"systems: {name} ...")
-        run = Run(CONTROLLER, params=sysm).compile()
-        cfg = run.cfg
-        f = run.function(trace=False)
-        args = _run_args(f, run.default_gains(), scenario.noise_sequence(cfg, 0), cfg, sysm.params.vector(),
-                         layout=sysm.layout)
-        calls.call(f, *args)  # warm-up
-        spec = closedloop.RunSpec(CONTROLLER, cfg.graph_key(), run.opts, sysm.layout)
-        prepared[name] = (sysm, cfg, f, args, _step_instructions(spec, trace=False))
+        cfg0 = scenario.load_scenario(sysm.params.default("scenario"))
+        variants = [(name, sysm, cfg0)]
+        if sysm.structure.has_thruster_dynamics and s.mode != "quick":  # issue 22: without them, and at 0.005 s
+            variants += [(f"{name}+instantaneous", System(sysm.params.instantaneous()), cfg0),
+                         (f"{name}+h_plant_0.005", sysm, dataclasses.replace(cfg0, time_h_plant=0.005))]
+        for key, sv, cfg_v in variants:
+            log(f"systems: {key} ...")
+            run = Run(CONTROLLER, scenario=cfg_v, params=sv).compile()
+            cfg = run.cfg
+            f = run.function(trace=False)
+            args = _run_args(f, run.default_gains(), scenario.noise_sequence(cfg, 0), cfg, sv.params.vector(),
+                             layout=sv.layout)
+            calls.call(f, *args)  # warm-up
+            spec = closedloop.RunSpec(CONTROLLER, cfg.graph_key(), run.opts, sv.layout)
+            prepared[key] = (sv, cfg, f, args, _step_instructions(spec, trace=False))
     samples = {name: [] for name in prepared}
     for _ in range(max(s.reps, 7)):  # interleaved: the machine's drift hits every system alike
         for name, (_, _, f, args, _) in prepared.items():
@@ -47,6 +54,7 @@ def _bench_systems(s: Settings, log) -> dict:
         out[name] = {
             "controller": CONTROLLER, "duration_s": cfg.time_duration, "n_samples": n, "substeps": cfg.substeps,
             "n_thrusters": sysm.n_thrusters, "n_joints": sysm.n_joints, "run_metrics_s": t,
+            "thruster_dynamics": sysm.structure.has_thruster_dynamics, "h_plant": cfg.time_h_plant,
             "rtf_metrics": cfg.time_duration / t["median"], "instructions_per_sample": ins["total"],
             "step_calls": ins["calls"], "instr_per_s": ins["total"] * n / t["median"],
         }

@@ -1,0 +1,93 @@
+"""The plant step with thruster dynamics (issue 22): issue 14's rule on the BlueROV2 with its T200s.
+
+    python benchmarks/thruster_step.py     # writes results/step/bluerov2_heavy_alpha5/thrusters.md and .json
+
+For the default gains of the proposed controller and AGSTA (PID's diverge) and the knee of each front of
+results/bluerov2/t200 (its study's draw), at plant steps 0.005, 0.0025 and 0.00125 s: (a) the closed loop's
+state over the whole 60 s run against CVODES (1e-14) integrating the plant with the rotor states as ODE
+states (benchmarks/step_accuracy.py's reference: the textbook lag through the map, the current and the
+tether), driven by that run's own allocation; (b) CHAT (commanded and delivered) and RMSE against the
+0.00125 s run, relative. The rule (results/step): (a) <= 1e-6 m, rad and (b) <= 1e-5. One CVODES run takes
+about a minute here; the targeted set replaces step_accuracy.py's full sweep, whose CVODES runs of every
+front member would take hours with the thrust tables in the reference's right-hand side.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+STEPS = (0.005, 0.0025, 0.00125)
+OUT = ROOT / "results" / "step" / "bluerov2_heavy_alpha5"
+
+
+def main() -> dict:
+    import arvcas
+    from arvcas.io.results import read_result
+    from arvcas.sim import scenario
+
+    spec = importlib.util.spec_from_file_location("step_accuracy", ROOT / "benchmarks" / "step_accuracy.py")
+    sa = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sa)
+    blue = arvcas.load_system("bluerov2_heavy_alpha5")
+    cfg0 = scenario.load_scenario(blue.params.default("scenario"))
+    pv = blue.params.vector()
+    cases = [("proposed default", "proposed", None, None), ("agsta default", "agsta", None, None)]
+    for c in ("proposed", "agsta", "pid"):
+        k = read_result(ROOT / f"results/bluerov2/t200/knees/knee_{c}.h5")
+        cases.append((f"{c} knee", c, k.gains, (k.seed, k.uncertainty, k.phase)))
+    out = {"steps": list(STEPS), "cases": {}, "machine_load": open("/proc/loadavg").read().split()[:3]}
+    for label, c, g, draw in cases:
+        seed, unc, ph = draw if draw is not None else (0, None, None)
+        rec = {}
+        metrics = {}
+        for hp in STEPS:
+            cfg = dataclasses.replace(cfg0, time_h_plant=hp)
+            t0 = time.time()
+            r = arvcas.Run(c, scenario=cfg, params=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
+            X = np.hstack([r.eta, r.nu])
+            ref = sa.cvodes_states(cfg, pv, X[0], sa.plant_inputs(pv, r, blue.layout), r.phase, tol=1e-14,
+                                   layout=blue.layout)
+            d = np.abs(X - ref)
+            rec[repr(hp)] = {"position_m": float(d[:, 0:3].max()), "angle_rad": float(d[:, 3:6].max()),
+                             "cvodes_s": time.time() - t0}
+            metrics[hp] = np.r_[r.chat, r.chat_delivered, r.rmse]
+            print(label, hp, rec[repr(hp)], flush=True)
+        base = metrics[STEPS[-1]]
+        for hp in STEPS[:-1]:
+            rec[repr(hp)]["metrics_rel_vs_finest"] = float(np.max(np.abs(metrics[hp] - base) / np.abs(base)))
+        out["cases"][label] = rec
+    return out
+
+
+def markdown(res: dict) -> str:
+    L = ["# The plant step with the T200 dynamics (issue 22)", "",
+         "Written by `python benchmarks/thruster_step.py` (see its docstring). The BlueROV2 Heavy + Alpha 5 with its "
+         "T200 dynamics, the current and the tether (the shipped scenario), 60 s runs. State: the largest "
+         "difference from CVODES over the whole run (m for positions, rad for angles); metrics: the largest "
+         "relative difference of the 18 CHAT (commanded, delivered) and RMSE values from the 0.00125 s run. "
+         f"Machine load (1, 5, 15 min) at the end: {', '.join(res['machine_load'])}.", "",
+         "| run | " + " | ".join(f"{s:g} s: position m / angle rad / metrics" for s in res["steps"]) + " |",
+         "|---|" + "---|" * len(res["steps"])]
+    for label, rec in res["cases"].items():
+        cells = []
+        for s in res["steps"]:
+            r = rec[repr(s)]
+            m = r.get("metrics_rel_vs_finest")
+            cells.append(f"{r['position_m']:.2e} / {r['angle_rad']:.2e} / " + (f"{m:.1e}" if m is not None else "(base)"))
+        L.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(L) + "\n"
+
+
+if __name__ == "__main__":
+    res = main()
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "thrusters.json").write_text(json.dumps(res, indent=1))
+    (OUT / "thrusters.md").write_text(markdown(res))
+    print(markdown(res))
