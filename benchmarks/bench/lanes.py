@@ -184,8 +184,14 @@ def _bench_study(s: Settings, log) -> dict:
 
 
 def _bench_lanes(s: Settings, log) -> dict:
+    from benchmarks.bench.common import _CpuMeter, _machine
+
+    m, la0 = _CpuMeter(), [round(x, 2) for x in os.getloadavg()]
     res = {"batches": _bench_batches(s, log), "study": _bench_study(s, log), "targets": TARGETS,
            "cpu": os.cpu_count()}
+    mach = _machine()
+    res["measured"] = {"date": mach["date"], "git_commit": mach["git_commit"], "load_avg_start": la0,
+                       "load_avg_end": [round(x, 2) for x in os.getloadavg()], "other_cpu_share": m.share()}
     return res
 
 
@@ -196,12 +202,22 @@ def _lanes_markdown(r: dict | None) -> list[str]:
     from benchmarks.bench.report import _g, _spread, _verdict
 
     T = r["targets"]
-    L = ["", "## 8. Lockstep lanes in the runs (issue 26)", "",
+    ms = r.get("measured")
+    L = ["", "## 8. Lockstep lanes in the runs (issue 26)", ""]
+    if ms:
+        L += [f"Measured on {ms['date']} (commit {ms['git_commit']}; `arvcas bench --only lanes` puts this section "
+              f"into the file); load average (1, 5, 15 min) {' '.join(f'{x:.2f}' for x in ms['load_avg_start'])} "
+              f"before, {' '.join(f'{x:.2f}' for x in ms['load_avg_end'])} after; CPU time of other processes while "
+              f"measuring: {ms['other_cpu_share']:.1%} of the machine (2 cores shared with other work: the figures "
+              f"are of a loaded machine; the ratios come from alternated rounds in the same run).", ""]
+    L += [
          "One thread. Each batch run one at a time (`lockstep=False`, the runs of sections 2-5) and W at a time "
          "(`lockstep=True`: the controller part, the plant steps and the divergence branch on W lanes, "
          "arvcas/sim/lockstep.py), alternated round by round; every output of both compared to the bit (equal). "
          "running: the default gains times U(0.95, 1.05), every run to the end; mixed: every W-th of them 100x "
-         "(one diverging run in every lockstep group); diverging: all 100x.", "",
+         "(one diverging run in every lockstep group); diverging: all 100x. With thruster dynamics (the BlueROV2's "
+         "T200s) the thrusters' part of a sample (table lookups, MX) runs lane by lane in scalar code between the "
+         "lane controller part and the lane plant steps.", "",
          "| system | W | batch | runs | running share | one at a time, ms per run (spread) | lockstep, ms per run (spread) | "
          "real-time factor per core, one / lockstep (fastest round) | lockstep speed-up (median; fastest rounds) |",
          "|---|--:|---|--:|--:|--:|--:|--:|--:|"]
