@@ -208,8 +208,10 @@ def _lanes_markdown(r: dict | None) -> list[str]:
         L += [f"Measured on {ms['date']} (commit {ms['git_commit']}; `arvcas bench --only lanes` puts this section "
               f"into the file); load average (1, 5, 15 min) {' '.join(f'{x:.2f}' for x in ms['load_avg_start'])} "
               f"before, {' '.join(f'{x:.2f}' for x in ms['load_avg_end'])} after; CPU time of other processes while "
-              f"measuring: {ms['other_cpu_share']:.1%} of the machine (2 cores shared with other work: the figures "
-              f"are of a loaded machine; the ratios come from alternated rounds in the same run).", ""]
+              f"measuring: {ms['other_cpu_share']:.1%} of the machine"
+              + (" (the figures are of a loaded machine; the ratios come from alternated rounds in the same run)."
+                 if ms["other_cpu_share"] > 0.1 else " (a quiet machine; ratios from alternated rounds in the same run)."),
+              ""]
     L += [
          "One thread. Each batch run one at a time (`lockstep=False`, the runs of sections 2-5) and W at a time "
          "(`lockstep=True`: the controller part, the plant steps and the divergence branch on W lanes, "
