@@ -646,6 +646,9 @@ def _add_bench(p: argparse.ArgumentParser) -> None:
                    help="where bench.json and bench.md go (default: results/)")
     p.add_argument("--wait-load", type=_load_arg, default=None, metavar="L",
                    help="first wait (up to 15 min) until the 1-min load average is at most L")
+    p.add_argument("--only", default="", metavar="S1,S2",
+                   help="measure only these sections (plant, closed_loop, targets, compile, startup, systems, "
+                        "identification, controller, lanes) into the existing bench.json in --out")
 
 
 def _load_arg(text: str) -> float:
@@ -676,7 +679,7 @@ def _run_bench(a: argparse.Namespace) -> int:
 
     files.prepare_dir(a.out, f"--out {a.out}")  # before measuring
     run = bench_module().run
-    run(a.out, quick=a.quick, wait_load=a.wait_load)
+    run(a.out, quick=a.quick, wait_load=a.wait_load, only=tuple(k for k in a.only.split(",") if k))
     print(f"wrote {a.out / 'bench.json'} and {a.out / 'bench.md'}")
     return 0
 

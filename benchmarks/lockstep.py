@@ -128,14 +128,16 @@ def lane_c(src: str, name: str, W: int) -> str:
 
 
 def stage_inputs(fn: ca.Function, cfg, P) -> list[np.ndarray]:
-    """8 lanes of real inputs of the plant step: input k as (size_k, 8)."""
+    """8 lanes of real inputs of the plant step (with the scenario's water and the substep's time): input k as
+    (size_k, 8)."""
     spec = closedloop.RunSpec("proposed", cfg)
     p = P.vector()
     consts = np.array(closedloop._consts_fn(spec.opts, spec.lay)(p)).ravel()
     phase = np.array(cfg.disturbance_phase)
     pcs = np.r_[np.cos(phase), np.sin(phase)]
     _, pc_fn = closedloop._plant_substep(spec)
-    pc = np.array(pc_fn(p, consts, pcs)).ravel()
+    water = cfg.water_vector
+    pc = np.array(pc_fn(p, consts, pcs, water)).ravel()
     tab = schedule.table(cfg, p)
     rng = np.random.default_rng(1)
     x0 = np.array(list(cfg.initial_eta0) + list(cfg.initial_nu0))
@@ -144,7 +146,7 @@ def stage_inputs(fn: ca.Function, cfg, P) -> list[np.ndarray]:
     for lane in range(N_LANES_MAX):
         k = 300 + 37 * lane
         lanes.append([x0 + rng.normal(0, 0.02, 12), tab.time[:nt, k], tab.arm[:na, k], rng.normal(0, 20, 6), p,
-                      consts, pcs, pc])
+                      consts, pcs, pc, water, np.array([k * cfg.time_h])])
     return [np.stack([ln[k] for ln in lanes], axis=1) for k in range(fn.n_in())]
 
 

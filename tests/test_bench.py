@@ -51,7 +51,7 @@ def test_bench_quick_writes_complete_finite_figures(tmp_path, capsys):
         assert math.isfinite(v) and v >= 0, f"{where} = {v}"
     md = (tmp_path / "bench.md").read_text()
     for heading in ("## 1. Plant functions", "## 2. Closed loop", "## 3. Compiling", "## 7. The exported controller",
-                    "## Recommendation"):
+                    "## 8. Lockstep lanes in the runs", "## Recommendation"):
         assert heading in md
     assert "| uvms_rhs |" in md and "| uvms_rhs_jac |" in md and "QUICK MODE" in md
     assert "### Calling the dynamics from other code" in md and "written by hand in NumPy" in md

@@ -171,14 +171,15 @@ def _block_views(a: np.ndarray, n: int) -> list[memoryview]:
     return [memoryview(a[:, j * w:(j + 1) * w].reshape(-1, order="F")) for j in range(n)]
 
 
-_LOOPS: dict[int, tuple] = {}  # hash of a compiled Function -> (it, its batch_loop_c entry point or None, library)
+_LOOPS: dict[tuple, tuple] = {}  # (hash of a compiled Function, entry) -> (it, the entry point or None, library)
 _LOOPS_LOCK = threading.Lock()
 
 
-def batch_loop(f: ca.Function):
+def batch_loop(f: ca.Function, entry: str = "_arvcas_batch"):
     """``<name>_arvcas_batch`` of ``f``'s library (:func:`arvcas.build.codegen.batch_loop_c`) as a
-    ``ctypes`` function, or None when the library has none (or ``f`` is not compiled)."""
-    h = f.__hash__()
+    ``ctypes`` function, or None when the library has none (or ``f`` is not compiled). ``entry``:
+    another loop of the same signature (``_arvcas_lanes``: :mod:`arvcas.sim.lockstep`'s)."""
+    h = (f.__hash__(), entry)
     with _LOOPS_LOCK:
         hit = _LOOPS.get(h)
         if hit is not None and hit[0] is f:
@@ -190,7 +191,7 @@ def batch_loop(f: ca.Function):
     if path:
         try:
             lib = ctypes.CDLL(path)  # the file CasADi loaded: the same handle
-            fn = getattr(lib, f"{f.name()}_arvcas_batch")
+            fn = getattr(lib, f"{f.name()}{entry}")
         except (OSError, AttributeError):
             fn = None
         else:

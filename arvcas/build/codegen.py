@@ -693,6 +693,7 @@ def build_described(
     lock_timeout: float = LOCK_TIMEOUT_S,
     batch_loop: bool = False,
     label: str = "",
+    extra_c: Callable[[ca.Function], str] | None = None,
 ) -> ca.Function:
     """The compiled function ``name`` described by ``description``, built by ``make()`` only on a miss.
 
@@ -704,6 +705,8 @@ def build_described(
     called ``name``. Memoized per process. ``batch_loop``: the library also holds
     :func:`batch_loop_c`'s loops (part of the key), which :func:`arvcas.build.calls.call_many` uses.
     ``label``: what the progress line calls the build ("the run for haidou1 / proposed"; default ``name``).
+    ``extra_c``: called with ``make()``'s Function after it, returns C appended to the library (e.g. a
+    lockstep loop, :mod:`arvcas.sim.lockstep`); ``description`` must say what it holds.
     """
     from arvcas.build.provenance import model_hash
 
@@ -731,7 +734,7 @@ def build_described(
             fn = make()
             if not isinstance(fn, ca.Function) or fn.name() != name:
                 raise TypeError(f"build_described: make() must return a casadi.Function named {name!r}")
-            p = _plan(fn, cmd_flags, batch_loop_c(fn) if batch_loop else "")
+            p = _plan(fn, cmd_flags, (batch_loop_c(fn) if batch_loop else "") + (extra_c(fn) if extra_c else ""))
             return _Plan(p.name, p.n_instructions, p.c_text, p.codegen_s, p.compiler, p.cmd_flags, key)
 
         f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout, label)

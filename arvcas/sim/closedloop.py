@@ -27,6 +27,7 @@ records of its RK4 stage times: computed once per (scenario, p), shared by every
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -337,6 +338,20 @@ def build_step(spec: RunSpec, trace: bool = True, first: bool = False) -> tuple[
     return steps[0], L, pc_fn
 
 
+class StepParts(NamedTuple):
+    """The generated SX functions one controller sample calls (:func:`step_parts`), in the order it calls them."""
+
+    ctrls: list  # the controller part, one per flag of ``firsts``
+    rk4: ca.Function  # one RK4 substep of the plant, ``n_sub`` per sample
+    ok: ca.Function  # (C, x_next) -> 1 if the run goes on, 0 if it diverged
+    keep: ca.Function  # (C, S, x_next, t) -> the new state
+    freeze: ca.Function  # (C, S, x_next, t) -> the old state with ok = 0 and t_fail set
+    pc_fn: ca.Function
+    layout: Layout
+    n_sub: int
+    thr: tuple | None  # (cl_thr_lag, cl_thr_wrench) with thruster dynamics (:func:`_thruster_step`), else None
+
+
 def _thr_const_sizes(spec: RunSpec) -> tuple[int, int] | None:
     """Sizes of the thruster dynamics' per-run constants (E, tables), None without dynamics."""
     if not spec.lay.structure.has_thruster_dynamics:
@@ -346,9 +361,9 @@ def _thr_const_sizes(spec: RunSpec) -> tuple[int, int] | None:
     return E.shape[0], tabs.shape[0]
 
 
-def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.Function]:
-    """:func:`build_step` for each flag of ``firsts``, sharing one plant substep and one finalize."""
-    law, cfg, opts, lay = spec.law, spec.cfg, spec.opts, spec.lay
+def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
+    """The SX functions of one controller sample (see :func:`_build_steps`, which calls them)."""
+    law, cfg, lay = spec.law, spec.cfg, spec.lay
     cols = law.columns()
     ng = 6 * len(cols)
     rk4, pc_fn = _plant_substep(spec)
@@ -360,7 +375,6 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
     Sd, Kc = ca.SX.sym("S", i_const), ca.SX.sym("K", L.size - i_const)
     S = ca.vertcat(Sd, Kc)
     tk = ca.SX.sym("t_k")
-    n_sub = cfg.substeps
     ctrls = [_controller_part(spec, L, S, [Sd, Kc], tk, first, trace) for first in firsts]
 
     # finalize: a run that diverges (non-finite state, error bound) is frozen with ok = 0, t_fail set
@@ -372,7 +386,17 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
     keep = ca.Function("cl_keep", [Cs, Ss, xn, tks], [ca.vertcat(xn, Cs)])
     Sfail = ca.vertcat(Ss[:i_ok], 0, ca.if_else(L.get(Ss, "ok"), tks, L.get(Ss, "t_fail")))
     freeze = ca.Function("cl_freeze", [Cs, Ss, xn, tks], [Sfail])
-    switch = ca.Function.if_else("cl_finalize", keep, freeze)  # input 0: 1 -> keep, 0 -> freeze
+    thr = _thruster_functions(spec) if dyn else None
+    return StepParts(ctrls, rk4, ok_fn, keep, freeze, pc_fn, L, cfg.substeps, thr)
+
+
+def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.Function]:
+    """:func:`build_step` for each flag of ``firsts``, sharing one plant substep and one finalize."""
+    law, cfg, lay = spec.law, spec.cfg, spec.lay
+    parts = step_parts(spec, trace, firsts)
+    ctrls, rk4, ok_fn, pc_fn, L, n_sub = parts.ctrls, parts.rk4, parts.ok, parts.pc_fn, parts.layout, parts.n_sub
+    i_const = L.slices["gains"].start
+    switch = ca.Function.if_else("cl_finalize", parts.keep, parts.freeze)  # input 0: 1 -> keep, 0 -> freeze
 
     def fin(Cm, Sm, xm, tkm):
         return switch(ok_fn(Cm, xm), Cm, Sm, xm, tkm)
@@ -381,11 +405,12 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
     TS, AS, ns = Rec.time_size, Rec.arm_size, schedule.n_stages(cfg)
     Sm, Km, tkm, nm = ca.MX.sym("S", i_const), ca.MX.sym("K", L.size - i_const), ca.MX.sym("t"), ca.MX.sym("noise", 12)
     sch_t, sch_a = ca.MX.sym("sched_time", ns * TS), ca.MX.sym("sched_arm", ns * AS)
+    dyn, n_thr = parts.thr is not None, lay.structure.n_thrusters
     names = ("p", "consts", "phase_cs", "pc", "water") + (("thr_E", "thr_tab") if dyn else ())
     kslice = {name: slice(L.slices[name].start - i_const, L.slices[name].stop - i_const) for name in names}
     pm, cm, phm, pcm, wm = (Km[kslice[name]] for name in ("p", "consts", "phase_cs", "pc", "water"))
     if dyn:
-        lag, wrench = _thruster_functions(spec)
+        lag, wrench = parts.thr
         i_cmd = _trace_offset(spec, "command")
     hp = cfg.time_h_plant
     steps = []
@@ -809,8 +834,27 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     Rec = schedule.records(spec.lay)
     sched_t = ca.MX.sym("sched_time", schedule.n_stages(cfg) * Rec.time_size, n)
     sched_a = ca.MX.sym("sched_arm", schedule.n_stages(cfg) * Rec.arm_size, n)
+    S0, K = run_start(spec, L, pc_fn, G, unc, phase, ekf, water, p)
+    tgrid = ca.DM(sample_times(cfg)).T
+    out = _chain(f"run_{law.name}_loop", [step0] + _levels(step, n - 1)).call([S0, K, tgrid, noise, sched_t, sched_a])
+    outs = list(run_end(L, out[0], n - 1)) + ([out[1]] if trace else [])
+    names = list(OUTPUTS) + (["trace"] if trace else [])
+    name = f"run_{law.name}" + ("_trace" if trace else "")
+    ins = {"gains": G, "noise": noise, "unc": unc, "phase": phase, "ekf": ekf, "water": water, "p": p,
+           "sched_time": sched_t, "sched_arm": sched_a}
+    return ca.Function(name, [ins[k] for k in INPUTS], outs, list(INPUTS), names)
+
+
+def sample_times(cfg: ScenarioConfig) -> np.ndarray:
+    """t_k = k h of the run's samples k = 0..N (the values every step's ``t`` input takes)."""
+    return np.arange(scenario.n_samples(cfg)) * cfg.time_h
+
+
+def run_start(spec: RunSpec, L: Layout, pc_fn: ca.Function, G, unc, phase, ekf, water, p):
+    """The run's first loop state S0 and its constants K (the step's inputs ``S`` and ``K``) from the
+    run's inputs (MX): the one definition :func:`build_run` and the lockstep runs share."""
     consts = _consts_fn(spec.opts, spec.lay)(p)
-    x0 = ca.DM(list(cfg.initial_eta0) + list(cfg.initial_nu0))
+    x0 = ca.DM(list(spec.cfg.initial_eta0) + list(spec.cfg.initial_nu0))
     phase_cs = ca.vertcat(ca.cos(phase), ca.sin(phase))
     i_ok = L.slices["ok"].start  # every loop state before "ok" starts at zero (sample 0's step sets its values)
     S0 = ca.vertcat(x0, ca.MX.zeros(i_ok - 12), ca.MX(1), ca.MX(-1))
@@ -818,21 +862,14 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     if spec.lay.structure.has_thruster_dynamics:
         K = ca.vertcat(K, *_thr_consts_fn(spec)(p))
     assert S0.shape[0] + K.shape[0] == L.size
-    tgrid = ca.DM(np.arange(n) * cfg.time_h).T
-    N = n - 1
-    out = _chain(f"run_{law.name}_loop", [step0] + _levels(step, N)).call([S0, K, tgrid, noise, sched_t, sched_a])
-    Sf = out[0]
+    return S0, K
+
+
+def run_end(L: Layout, Sf, N: int):
+    """The run's outputs (:data:`OUTPUTS`) from the last loop state ``Sf`` after N samples (MX)."""
     chat = Sf[L.slices["chat_sum"]] / N
     rmse = ca.sqrt(Sf[L.slices["e2_sum"]] / N)
-    ok = Sf[L.slices["ok"]]
-    t_fail = Sf[L.slices["t_fail"]]
-    chat_d = Sf[L.slices["chatd_sum"]] / N
-    outs = [chat, rmse, ok, t_fail, chat_d] + ([out[1]] if trace else [])
-    names = list(OUTPUTS) + (["trace"] if trace else [])
-    name = f"run_{law.name}" + ("_trace" if trace else "")
-    ins = {"gains": G, "noise": noise, "unc": unc, "phase": phase, "ekf": ekf, "water": water, "p": p,
-           "sched_time": sched_t, "sched_arm": sched_a}
-    return ca.Function(name, [ins[k] for k in INPUTS], outs, list(INPUTS), names)
+    return chat, rmse, Sf[L.slices["ok"]], Sf[L.slices["t_fail"]], Sf[L.slices["chatd_sum"]] / N
 
 
 def _levels(f: ca.Function, n: int, base: int = 10) -> list:

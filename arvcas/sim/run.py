@@ -19,6 +19,7 @@ toolchain, so a warm start only loads a shared library.
 
 from __future__ import annotations
 
+import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,11 +37,17 @@ from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
 from arvcas.sim.result import Result
 from arvcas.sim.scenario import ScenarioConfig
 
-__all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS", "CHAT_KINDS"]
+__all__ = ["Run", "CompiledRun", "SimulationError", "MAX_RUNS", "CHAT_KINDS", "LOCKSTEP_MIN_RUNS"]
+
+log = logging.getLogger(__name__)
 
 MAX_RUNS = 10_000_000  # runs in one batch call (the outputs alone take 100 bytes a run)
 # CHAT on the command (eq. 42, the paper's) or on the thrusters' delivered wrench: the run's output of each
 CHAT_KINDS = {"commanded": "chat", "delivered": "chat_delivered"}
+# A batch of at least this many runs goes through the lockstep library (arvcas.sim.lockstep) unless asked
+# otherwise: compiling it once per machine and run description (5-15 s) costs about a thousand runs.
+LOCKSTEP_MIN_RUNS = 64
+LOCKSTEP_ENV = "ARVCAS_LOCKSTEP"
 _OUT_BYTES = 2 * 8 * (6 + 6 + 1 + 1 + 6)  # a run's outputs (chat, rmse, ok, t_fail, chat_delivered) and copies
 
 
@@ -114,6 +121,8 @@ class CompiledRun:
         self._fns: dict[bool, ca.Function] = {}
         self._pv = params.vector()
         self._source: dict | None = None
+        self._lockstep = None
+        self._lockstep_failed = False
 
     # -- compiled functions ----------------------------------------------------------------------------
     def description(self, trace: bool) -> str:
@@ -251,26 +260,28 @@ class CompiledRun:
         return meta
 
     def batch(self, gains, seed: int = 0, uncertainty=None, phase=None, n_threads: int | None = None,
-              return_status: bool = False, chat: str = "commanded"):
+              return_status: bool = False, chat: str = "commanded", lockstep: bool | None = None):
         """Many gain sets (n x n_gains) on the same noise (``seed``), uncertainty and disturbance.
 
         Returns ``(chat (n x 6), rmse (n x 6))``; with ``return_status`` also ``(ok (n,), t_fail (n,))``.
         A diverged run has ``ok = False`` and NaN metrics. ``chat``: ``"commanded"`` (eq. 42 on tau_v) or
-        ``"delivered"`` (on the thrusters' delivered wrench, docs/model.md §6).
+        ``"delivered"`` (on the thrusters' delivered wrench, docs/model.md §6). ``lockstep``: run W runs at
+        once per core (:mod:`arvcas.sim.lockstep`; the same bits); None: when :meth:`uses_lockstep` says so.
         """
         g = self._gains(gains, batch=True)
         unc, ph = self._unc_phase(uncertainty, phase)
         noise = scenario.noise_sequence(self.cfg, seed)
         chat, rmse, ok, t_fail = self._evaluate(g.shape[0], {"gains": g.T, "noise": noise, "unc": unc, "phase": ph},
-                                                {"gains"}, n_threads, chat)
+                                                {"gains"}, n_threads, chat, lockstep)
         return (chat, rmse, ok, t_fail) if return_status else (chat, rmse)
 
-    def many(self, gains, seeds, uncertainty=None, phase=None, n_threads: int | None = None, chat: str = "commanded"):
+    def many(self, gains, seeds, uncertainty=None, phase=None, n_threads: int | None = None, chat: str = "commanded",
+             lockstep: bool | None = None):
         """n draws: row i has its own gains (or shared), noise seed, uncertainty factors and phases.
 
         ``gains``: (n_gains,) or (n, n_gains); ``seeds``: (n,) non-negative integers; ``uncertainty``:
         None, (4,) or (n, 4); ``phase``: None, (6,) or (n, 6). Returns ``(chat, rmse, ok, t_fail)``;
-        ``chat`` as :meth:`batch`.
+        ``chat`` and ``lockstep`` as :meth:`batch`.
         """
         seeds = calls.integer_array(seeds, "seeds", SimulationError, max_size=MAX_RUNS)
         if seeds.ndim != 1 or seeds.size == 0:
@@ -304,9 +315,43 @@ class CompiledRun:
         for i in range(1, n):
             noise[:, i * k:(i + 1) * k] = scenario.noise_sequence(self.cfg, int(seeds[i]))
         return self._evaluate(n, {"gains": G.T, "noise": noise, "unc": U.T, "phase": PH.T},
-                              {"gains", "noise", "unc", "phase"}, n_threads, chat)
+                              {"gains", "noise", "unc", "phase"}, n_threads, chat, lockstep)
 
-    def _evaluate(self, n: int, varying: dict, per_run: set, n_threads, chat: str = "commanded"):
+    # -- lockstep ----------------------------------------------------------------------------------------
+    def lockstep(self):
+        """The lockstep run (:class:`arvcas.sim.lockstep.LockstepRun`: W runs per core, the same bits),
+        built on first use or loaded from the compile cache."""
+        if self._lockstep is None:
+            from arvcas.sim import lockstep
+
+            self._lockstep = lockstep.build(self)
+        return self._lockstep
+
+    def uses_lockstep(self, n: int, lockstep: bool | None = None) -> bool:
+        """Whether n runs go through :meth:`lockstep`: ``lockstep`` if given (True: its build errors are
+        raised); else (None) when n >= :data:`LOCKSTEP_MIN_RUNS` (its library, compiled once per machine
+        and run description, costs about as much as a thousand runs) unless ``ARVCAS_LOCKSTEP=0``, and
+        when it can be built here (a Dask worker without a compiler runs one at a time)."""
+        if lockstep is not None:
+            if not isinstance(lockstep, bool):
+                raise SimulationError(f"lockstep: expected True, False or None, got {lockstep!r}")
+            return lockstep
+        mode = os.environ.get(LOCKSTEP_ENV, "auto")
+        if mode not in ("auto", "0", "1"):
+            raise SimulationError(f"{LOCKSTEP_ENV}={mode!r}: expected 0 (never), 1 (always) or auto (n >= "
+                                  f"{LOCKSTEP_MIN_RUNS})")
+        if mode == "0" or (mode == "auto" and n < LOCKSTEP_MIN_RUNS) or self._lockstep_failed:
+            return False
+        try:
+            self.lockstep()
+        except (codegen.CompileError, codegen.CacheError) as e:
+            log.info("lockstep runs unavailable (%s): one run at a time", e)
+            self._lockstep_failed = True
+            return False
+        return True
+
+    def _evaluate(self, n: int, varying: dict, per_run: set, n_threads, chat: str = "commanded",
+                  lockstep: bool | None = None):
         """n metrics-only runs on the thread pool; the inputs in ``per_run`` have a column block per run,
         the others and the time table are shared. NaN metrics for a diverged run."""
         if n > MAX_RUNS:
@@ -314,9 +359,28 @@ class CompiledRun:
         if chat not in CHAT_KINDS:
             raise SimulationError(f"chat: expected one of {', '.join(CHAT_KINDS)}, got {chat!r}")
         calls.check_memory(f"runs: {n}", n * _OUT_BYTES, error=SimulationError)
-        fn = self.function(trace=False)
-        out = calls.call_named(fn, {**varying, **self._shared()}, n=n, per_run=per_run,
-                               n_threads=_n_threads(n_threads))
+        nt = _n_threads(n_threads)
+        if self.uses_lockstep(n, lockstep):
+            ls, names = self.lockstep(), closedloop.INPUTS
+            shapes = {"gains": (len(self.gain_names()), 1), "noise": (12, scenario.n_samples(self.cfg)), "unc": (4, 1),
+                      "phase": (6, 1), "ekf": (self.cfg.ekf_vector.size, 1), "water": (self.cfg.water_vector.size, 1),
+                      "p": (len(self._pv), 1)}
+            inputs = {**varying, **self._shared()}
+            bound = []
+            for k in names:
+                a = inputs[k]
+                if k in shapes:
+                    r, c = shapes[k]
+                    a = calls.fortran(a, (r, c * n if k in per_run else c))
+                else:
+                    a = calls.fortran(a, a.shape)
+                bound.append(a)
+            outs = [np.empty((ls.function.size1_out(k), n), order="F") for k in closedloop.OUTPUTS]
+            ls.evaluate(n, bound, set(per_run), outs, nt)
+            out = dict(zip(closedloop.OUTPUTS, outs))
+        else:
+            fn = self.function(trace=False)
+            out = calls.call_named(fn, {**varying, **self._shared()}, n=n, per_run=per_run, n_threads=nt)
         ok = out["ok"].ravel() > 0.5
         chat, rmse = out[CHAT_KINDS[chat]].T.copy(), out["rmse"].T.copy()
         chat[~ok] = np.nan

@@ -55,14 +55,15 @@ def simulate(controller: str, gains=None, seed: int = 0, params: Params | None =
 def simulate_batch(controller: str, gains, seed: int = 0, params: Params | None = None,
                    cfg: ScenarioConfig | None = None, uncertainty=None, phase=None,
                    n_threads: int | None = None, opts: ModelOptions = ModelOptions(),
-                   return_status: bool = False, chat: str = "commanded"):
+                   return_status: bool = False, chat: str = "commanded", lockstep: bool | None = None):
     """Many gain sets (n x n_gains) on common random numbers (:meth:`CompiledRun.batch`)."""
     return compiled_run(controller, params, cfg, opts).batch(gains, seed, uncertainty, phase, n_threads,
-                                                             return_status, chat)
+                                                             return_status, chat, lockstep)
 
 
 def simulate_many(controller: str, gains, seeds, uncertainty=None, phase=None, params: Params | None = None,
                   cfg: ScenarioConfig | None = None, n_threads: int | None = None,
-                  opts: ModelOptions = ModelOptions()):
+                  opts: ModelOptions = ModelOptions(), lockstep: bool | None = None):
     """n draws, each with its own seed, factors and phases: the Monte Carlo path (:meth:`CompiledRun.many`)."""
-    return compiled_run(controller, params, cfg, opts).many(gains, seeds, uncertainty, phase, n_threads)
+    return compiled_run(controller, params, cfg, opts).many(gains, seeds, uncertainty, phase, n_threads,
+                                                            lockstep=lockstep)

@@ -9,7 +9,8 @@ state), :mod:`~benchmarks.bench.plant` (1), :mod:`~benchmarks.bench.closed_loop`
 :mod:`~benchmarks.bench.targets` (2b: issue 14's targets), :mod:`~benchmarks.bench.compiling` (3),
 :mod:`~benchmarks.bench.startup` (4), :mod:`~benchmarks.bench.systems` (5),
 :mod:`~benchmarks.bench.identification` (6), :mod:`~benchmarks.bench.controller` (7: the exported
-controller's time per step),
+controller's time per step), :mod:`~benchmarks.bench.lanes` (8: lockstep lanes against one run at a time,
+the 40,000-run study),
 :mod:`~benchmarks.bench.runner` (:func:`run`: every section in one process, and :func:`write`) and
 :mod:`~benchmarks.bench.report` (``bench.md``).
 
@@ -39,6 +40,9 @@ What is measured:
    default optimisation level.
 7. The exported controller (``arvcas export-controller``): ns per ``step`` from a C driver linking
    the export's own library, for the proposed law, AGSTA and PID on each system with a scenario.
+8. Lockstep lanes (:mod:`arvcas.sim.lockstep`): batches on one thread W runs at a time against one at
+   a time, alternated, outputs compared to the bit, with running, mixed and diverging members; a
+   40,000-run study on 2 threads: its runs alone, and ``run_study`` end to end.
 
 Interference: the load average before and after, and the share of the machine's CPU time used by
 other processes while measuring (from ``/proc/stat`` minus this process and its children), are

@@ -90,8 +90,9 @@ def _bench_closed_loop(s: Settings, cfg, P, log) -> dict:
     G[0] = g
     batch = {}
     for nt in (1, 2):
-        simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, params=P, n_threads=nt)  # warm-up (thread buffers allocated)
-        st = _time(lambda: simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, params=P, n_threads=nt),
+        simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, params=P, n_threads=nt, lockstep=False)  # warm-up (thread buffers allocated)
+        st = _time(lambda: simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, params=P, n_threads=nt,
+                                                       lockstep=False),
                    s.reps_slow, warmup=0)
         batch[f"wall_s_{nt}"] = st
         batch[f"runs_per_s_{nt}"] = s.batch_n / st["median"]

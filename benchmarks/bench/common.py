@@ -70,6 +70,8 @@ REQUIRED_KEYS = (
     "systems.haidou1.rtf_metrics", "systems.bluerov2_heavy_alpha5.rtf_metrics",
     "systems.bluerov2_heavy_alpha5.instructions_per_sample",
     "controller.haidou1.proposed.ns_per_step", "controller.haidou1.proposed.instructions_per_step",
+    "lanes.batches.haidou1.W", "lanes.batches.haidou1.running.rtf_lanes", "lanes.batches.haidou1.running.speedup",
+    "lanes.study.lanes_s", "lanes.study.scalar_part_s", "lanes.study.runs_only.study_runs_s_lanes",
 )
 
 

@@ -9,6 +9,7 @@ import math
 
 from benchmarks.bench.common import CONTROLLER, N_INPUT_SETS
 from benchmarks.bench.controller import _controller_markdown
+from benchmarks.bench.lanes import _lanes_markdown
 from benchmarks.bench.targets import STUDY_RUNS
 
 def _m(st) -> float:
@@ -295,6 +296,7 @@ def render_markdown(res: dict) -> str:
                      f"{r['rtf_metrics']:,.0f}x | {r['instructions_per_sample']:,} | {_g(r['instr_per_s'])} |")
     L += _identification_markdown(res.get("identification"))
     L += _controller_markdown(res.get("controller"))
+    L += _lanes_markdown(res.get("lanes"))
     L += ["", "## Recommendation", "", rec["text"], ""]
     return "\n".join(L)
 

@@ -22,20 +22,28 @@ from benchmarks.bench.common import Settings, _CpuMeter, _default_opt_level, _ma
 from benchmarks.bench.compiling import _bench_compile, _recommend
 from benchmarks.bench.controller import _bench_controller
 from benchmarks.bench.identification import _bench_identification
+from benchmarks.bench.lanes import _bench_lanes
 from benchmarks.bench.plant import _Driver, _bench_plant
 from benchmarks.bench.report import render_markdown
 from benchmarks.bench.startup import _bench_startup
 from benchmarks.bench.systems import _bench_systems
 from benchmarks.bench.targets import _bench_targets
 
+SECTIONS = ("plant", "closed_loop", "targets", "compile", "startup", "systems", "identification", "controller", "lanes")
+
+
 def run(out: str | Path | None = "results", quick: bool = False, wait_load: float | None = None,
-        wait_max_s: float = 900.0, log: Callable[[str], None] | None = None) -> dict:
+        wait_max_s: float = 900.0, log: Callable[[str], None] | None = None, only: tuple[str, ...] = ()) -> dict:
     """Measure everything once; write ``bench.json`` and ``bench.md`` to ``out`` (unless None).
 
     ``quick``: tiny repetition counts, the opt sweep only at -O0 (checks that everything works; its
     figures are not for the record). ``wait_load``: first wait (at most ``wait_max_s``) until the
-    1-min load average is at most this. Returns the result dictionary.
+    1-min load average is at most this. ``only``: measure just these sections (:data:`SECTIONS`) and put
+    them into ``out``'s existing ``bench.json`` (the others keep their figures; ``partial`` records the
+    date, commit and load of each section measured so). Returns the result dictionary.
     """
+    if only:
+        return _run_only(out, quick, only, log)
     s = Settings.quick() if quick else Settings.full()
     log = log or (lambda m: print(f"bench: {m}", file=sys.stderr, flush=True))
     waited = _wait_for_load(wait_load, wait_max_s, log) if wait_load is not None else 0.0
@@ -53,16 +61,7 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
         machine["driver_flags"] = " ".join(driver.flags)
         machine["codegen_flags"] = " ".join([*codegen.BASE_FLAGS, _default_opt_level(), *codegen.FIXED_FLAGS, *codegen.isa_flags()])
         res: dict = {"schema": 1, "mode": s.mode, "machine": machine, "settings": s.__dict__ | {"opt_levels": list(s.opt_levels)}}
-        for key, fn in (
-            ("plant", lambda: _bench_plant(s, driver, work, P, log)),
-            ("closed_loop", lambda: _bench_closed_loop(s, cfg, P, log)),
-            ("targets", lambda: _bench_targets(s, cfg, P, log)),
-            ("compile", lambda: _bench_compile(s, cfg, P, driver, work, log)),
-            ("startup", lambda: _bench_startup(s, log)),
-            ("systems", lambda: _bench_systems(s, log)),
-            ("identification", lambda: _bench_identification(s, log)),
-            ("controller", lambda: _bench_controller(s, log)),
-        ):
+        for key, fn in _section_functions(s, cfg, P, driver, work, log):
             m = _CpuMeter()
             t0 = time.perf_counter()
             res[key] = fn()
@@ -77,6 +76,48 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
     machine["total_wall_s"] = time.perf_counter() - t_start
     if out is not None:
         write(res, out)
+    return res
+
+
+def _section_functions(s, cfg, P, driver, work, log):
+    return (
+            ("plant", lambda: _bench_plant(s, driver, work, P, log)),
+            ("closed_loop", lambda: _bench_closed_loop(s, cfg, P, log)),
+            ("targets", lambda: _bench_targets(s, cfg, P, log)),
+            ("compile", lambda: _bench_compile(s, cfg, P, driver, work, log)),
+            ("startup", lambda: _bench_startup(s, log)),
+            ("systems", lambda: _bench_systems(s, log)),
+            ("identification", lambda: _bench_identification(s, log)),
+            ("controller", lambda: _bench_controller(s, log)),
+            ("lanes", lambda: _bench_lanes(s, log)),
+    )
+
+
+def _run_only(out, quick: bool, only: tuple[str, ...], log) -> dict:
+    """:func:`run` with ``only``: the named sections measured into ``out``'s bench.json."""
+    bad = [k for k in only if k not in SECTIONS]
+    if bad:
+        raise ValueError(f"bench: --only {','.join(bad)}: unknown section; allowed: {', '.join(SECTIONS)}")
+    if out is None or not (Path(out) / "bench.json").is_file():
+        raise ValueError(f"bench: --only needs an existing {Path(out or '.') / 'bench.json'} to put the sections into")
+    res = json.loads((Path(out) / "bench.json").read_text(encoding="utf-8"))
+    s = Settings.quick() if quick else Settings.full()
+    log = log or (lambda m: print(f"bench: {m}", file=sys.stderr, flush=True))
+    cfg, P = scenario.load_scenario(), load_params()
+    work = Path(tempfile.mkdtemp(prefix="arvcas-bench-"))
+    try:
+        fns = dict(_section_functions(s, cfg, P, _Driver(work, _default_opt_level()), work, log))
+        for key in only:
+            m, la0, t0 = _CpuMeter(), [round(x, 2) for x in os.getloadavg()], time.perf_counter()
+            res[key] = fns[key]()
+            mach = _machine()
+            res.setdefault("partial", {})[key] = {
+                "date": mach["date"], "git_commit": mach["git_commit"], "mode": s.mode, "wall_s": time.perf_counter() - t0,
+                "load_avg_start": la0, "load_avg_end": [round(x, 2) for x in os.getloadavg()],
+                "other_cpu_share": m.share()}
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    write(res, out)
     return res
 
 

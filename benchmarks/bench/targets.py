@@ -1,5 +1,8 @@
 """Section 2b: issue 14's targets (the default plant step against the previous one and the VM).
 
+Every batch here is one run at a time per core (``lockstep=False``): issue 14's figures; the lockstep
+runs are section 8 (:mod:`benchmarks.bench.lanes`).
+
 Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
 """
 
@@ -41,7 +44,7 @@ simulation.compiled_run({controller!r}, None, cfg).function(False)
 schedule.table(cfg, load().vector())
 scenario.noise_sequence(cfg, 0)
 base = {hwm}
-simulation.simulate_batch({controller!r}, G, seed=0, cfg=cfg, n_threads={nt})
+simulation.simulate_batch({controller!r}, G, seed=0, cfg=cfg, n_threads={nt}, lockstep=False)
 print(json.dumps({{"base_mb": base, "peak_mb": {hwm}}}))
 """
 
@@ -54,7 +57,7 @@ from arvcas.sim import scenario, simulation
 cfg = dataclasses.replace(scenario.load_scenario(), time_h_plant={hp!r})
 g = gains_mod.default_gains({controller!r})
 G = g[None, :] * np.random.default_rng(2024).uniform(0.95, 1.05, ({n}, g.size))
-simulation.simulate_batch({controller!r}, G, seed=0, cfg=cfg, n_threads=1)  # load, table, warm
+simulation.simulate_batch({controller!r}, G, seed=0, cfg=cfg, n_threads=1, lockstep=False)  # load, table, warm
 print("ready", flush=True)
 start = float(sys.stdin.readline())
 while time.time() < start:
@@ -62,7 +65,7 @@ while time.time() < start:
 ts = []
 for _ in range({reps}):
     t0 = time.perf_counter()
-    simulation.simulate_batch({controller!r}, G, seed=0, cfg=cfg, n_threads=1)
+    simulation.simulate_batch({controller!r}, G, seed=0, cfg=cfg, n_threads=1, lockstep=False)
     ts.append(time.perf_counter() - t0)
 print(json.dumps(ts))
 """
@@ -164,11 +167,11 @@ def _bench_targets(s: Settings, cfg, P, log) -> dict:
         log(f"targets: batch of {s.study_pop} at h_plant = {c.time_h_plant:g} s, 1 and 2 threads ...")
         bt = {1: [], 2: []}
         for nt in (1, 2):
-            simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, params=P, n_threads=nt)  # warm-up
+            simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, params=P, n_threads=nt, lockstep=False)  # warm-up
         for _ in range(2 * s.reps_slow):
             for nt in (1, 2):
                 t0 = time.perf_counter()
-                simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, params=P, n_threads=nt)
+                simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, params=P, n_threads=nt, lockstep=False)
                 bt[nt].append(time.perf_counter() - t0)
         paired = [a / b for a, b in zip(bt[1], bt[2])]  # each round: 1 then 2 threads, back to back
         run_s = _stat(t[k])
