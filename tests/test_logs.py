@@ -163,7 +163,7 @@ def test_bad_logs_one_line(tmp_path):
     (('unit = "m" }', 'unit = "furlong" }'), r"stream\[1\]\.position\.unit: unknown unit 'furlong' \(allowed for a length"),
     (('unit = "m" }', 'unit = "rad" }'), r"'rad' is not a unit of length"),
     (('"px"', '"pxx"'), r"pose\.csv: no column 'pxx' \(named in .*trial\.log\.toml\) \(did you mean 'px'\?\)"),
-    (("passive = true", ""), r"no thrust or wrench stream: map one, or say \[log\] passive = true"),
+    (("passive = true", ""), r"no thrust, command or wrench stream: map one, or say \[log\] passive = true"),
     (('world = "nwu"', 'world = "up"'), r"stream\[1\]\.world: unknown world frame .up. \(allowed: ned, enu, nwu\)"),
     (('q2 = {', 'q3 = {'), r"joints\.q3: the system has joints q1\.\.q2"),
 ])

@@ -53,8 +53,12 @@ def _system(a):
 
 def _logs(a, system):
     from arvcas.ident.logs import load_logs
+    from arvcas.ident.plant import check_commands
 
-    return load_logs(a.logs, system.n_joints, tuple(system.structure.thrusters or ()))
+    logs = load_logs(a.logs, system.n_joints, tuple(system.structure.thrusters or ()))
+    for lg in logs:  # thruster commands against the system's maps, before any work
+        check_commands(lg, system)
+    return logs
 
 
 def _h_arg(text: str) -> float:

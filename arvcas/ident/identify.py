@@ -182,6 +182,9 @@ class _Problem:
         self.scale = np.where(np.abs(self.theta0) > 0, np.abs(self.theta0), 0.1)
         self.nt = len(self.free)
         self.data = [plant_mod.sample_inputs(lg, system, m) for lg in logs]
+        self.m = m
+        # free parameters that move a commanded log's thrust: its inputs and d u / d theta follow theta
+        self.thrust_idx = [k for k, n in enumerate(self.free) if n in self.plant.thrust_free]
         self.signals = tuple(signals)
         self.stated = dict(stated)
         self.sel = []  # per log: (state indices, measured (N x k))
@@ -211,6 +214,15 @@ class _Problem:
         th = self.theta(z)
         pv = self.p.copy()
         pv[self.idx] = th
+        if self.thrust_idx and lg.command:
+            d = dict(plant_mod.sample_inputs(lg, self.system, self.m, p=pv))
+            if sens:
+                tf = tuple(self.free[k] for k in self.thrust_idx)
+                part = plant_mod.rotor_thrust_sens(lg, self.system, self.m, pv, tf)  # (3 nt) x (len(tf) steps)
+                n_st = part.shape[1] // len(tf)
+                full = np.zeros((part.shape[0], len(self.free), n_st))
+                full[:, self.thrust_idx, :] = part.reshape(part.shape[0], len(tf), n_st, order="F")
+                d["dU"] = full.reshape(part.shape[0], len(self.free) * n_st, order="F")
         if sens:
             X, dX = plant_mod.simulate_sens(self.plant, lg, self.x0(z, j), pv, th, self.K, d)
         else:

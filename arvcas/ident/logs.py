@@ -1,7 +1,7 @@
 """Logs of a real vehicle: a mapping file (``*.log.toml``) -> streams aligned on one time base in the model's frames.
 
 A log is a set of time-stamped streams (motion-capture or navigation pose, IMU attitude and rates, DVL
-velocities, depth, joint positions, thrust, payload). The mapping file (docs/logs.md) says which CSV file
+velocities, depth, joint positions, thrust or thruster commands, payload). The mapping file (docs/logs.md) says which CSV file
 (or which ROS 2 bag topic) and which columns (or message fields) give which signal, in which unit and
 frame. :func:`load_log` reads it, checks every stream before any work (one line naming the file, the column
 and the reason: time not increasing, a gap longer than allowed, NaN, an unknown unit, a frame that does
@@ -42,6 +42,7 @@ import numpy as np
 
 from arvcas.system import config
 from arvcas.system.config import Choices, Count, Invalid, Unique, ge, gt, le, quantity, setting
+from arvcas.system.systemfile import COMMAND_UNITS
 
 __all__ = ["LogError", "Log", "JointTrajectory", "load_log", "load_logs", "MAPPING_SUFFIX", "SIGNALS",
            "euler_from_R", "R_from_euler", "WORLD_FRAMES", "BODY_FRAMES"]
@@ -120,6 +121,7 @@ class StreamMap:
     wrench: SignalMap | None = setting(default=None)
     payload: SignalMap | None = setting(default=None)
     thrust: dict[str, SignalMap] | None = setting(default=None)  # thruster name -> its thrust column
+    command: dict[str, SignalMap] | None = setting(default=None)  # thruster name -> the command sent to it
     joints: dict[str, JointMap] | None = setting(default=None)  # "q1".."qn" -> its column
 
     def _config_check(self, given):
@@ -127,9 +129,9 @@ class StreamMap:
             raise Invalid(None, "a stream gives exactly one of `file` (a CSV file) or `topic` (a bag topic)")
         if self.file is not None and self.time is None:
             raise Invalid("time", "a CSV stream names its time column")
-        if not any(getattr(self, k) is not None for k in (*_KINDS, "thrust", "joints")):
+        if not any(getattr(self, k) is not None for k in (*_KINDS, "thrust", "command", "joints")):
             raise Invalid(None, "the stream maps no signal (position, quaternion, euler, depth, velocity, "
-                                "angular_velocity, acceleration, wrench, payload, thrust, joints)")
+                                "angular_velocity, acceleration, wrench, payload, thrust, command, joints)")
         if self.quaternion is not None and self.euler is not None:
             raise Invalid("euler", "a stream gives its attitude once: `quaternion` or `euler`")
 
@@ -199,6 +201,8 @@ class Log:
     std: dict[str, float]  # stated measurement noise (SI) of the signals that give one
     joints: JointTrajectory | None
     thrust: dict[str, np.ndarray]  # thruster name -> (N,) N
+    command: dict[str, np.ndarray]  # thruster name -> (N,) the command sent (its map's unit), held between messages
+    command_unit: dict[str, str]  # thruster name -> the unit of its command (us, 1, rad/s)
     wrench: np.ndarray | None  # (N, 6) body wrench at the body origin: N, N m
     payload: np.ndarray | None  # (N,) fraction of the system's payload
     passive: bool
@@ -230,7 +234,8 @@ class Log:
         return dataclasses.replace(
             self, t=self.t[k] - self.t[i0], t0=self.t0 + float(self.t[i0]),
             signals={n: v[k] for n, v in self.signals.items()}, joints=jt,
-            thrust={n: v[k] for n, v in self.thrust.items()}, wrench=sl(self.wrench), payload=sl(self.payload))
+            thrust={n: v[k] for n, v in self.thrust.items()}, command={n: v[k] for n, v in self.command.items()},
+            wrench=sl(self.wrench), payload=sl(self.payload))
 
 
 def _shifted(jt: JointTrajectory, shift: float) -> JointTrajectory:
@@ -440,7 +445,10 @@ def _columns_of(sm: StreamMap) -> list[str]:
             if len(s.columns) != _KINDS[k][0]:
                 raise Invalid(f"{k}.columns", f"{_KINDS[k][0]} columns expected, got {len(s.columns)}")
             names += list(s.columns)
-    for s in (sm.thrust or {}).values():
+    for s in (*(sm.thrust or {}).values(), *(sm.command or {}).values()):
+        if len(s.columns) != 1:
+            raise Invalid("thrust" if s in (sm.thrust or {}).values() else "command",
+                          f"one column per thruster, got {len(s.columns)}")
         names += list(s.columns)
     for j in (sm.joints or {}).values():
         names.append(j.column)
@@ -491,10 +499,15 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
                 raise LogError(f"{where}: {key}.joints.{jn}: the system has joints q1..q{n_joints}")
             if jm.unit not in ("rad", "deg", config.SI):
                 raise LogError(f"{where}: {key}.joints.{jn}.unit: unknown unit {jm.unit!r} (allowed: rad, deg, SI)")
-        for tn in (sm.thrust or {}):
-            if thruster_names is not None and tn not in thruster_names:
-                raise LogError(f"{where}: {key}.thrust.{tn}: the system has no thruster {tn!r} "
-                               f"(it has {', '.join(thruster_names)})")
+        for kind in ("thrust", "command"):
+            for tn in (getattr(sm, kind) or {}):
+                if thruster_names is not None and tn not in thruster_names:
+                    raise LogError(f"{where}: {key}.{kind}.{tn}: the system has no thruster {tn!r} "
+                                   f"(it has {', '.join(thruster_names)})")
+        for tn, s in (sm.command or {}).items():
+            if s.unit not in (*COMMAND_UNITS, config.SI):
+                raise LogError(f"{where}: {key}.command.{tn}.unit: unknown command unit {s.unit!r} "
+                               f"(allowed: {', '.join(COMMAND_UNITS)}; SI means rad/s)")
         for sig in _signal_names(sm):
             if sig in seen:
                 raise LogError(f"{where}: {key}: {sig} is also given by {seen[sig]}; map each signal once")
@@ -503,8 +516,11 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
         missing = [f"q{k}" for k in range(1, n_joints + 1) if f"q{k}" not in seen]
         if missing and len(missing) < n_joints:
             raise LogError(f"{where}: joints {', '.join(missing)} are not mapped (map every joint or none)")
-    if not any(k in seen for k in ("thrust", "wrench")) and not info.passive:
-        raise LogError(f"{where}: no thrust or wrench stream: map one, or say [log] passive = true "
+    if "thrust" in seen and "command" in seen:
+        raise LogError(f"{where}: {seen['command']}: commands and thrust in one log: map the thrusters' commands "
+                       f"(the plant runs them through the system's thruster dynamics) or their thrust, not both")
+    if not any(k in seen for k in ("thrust", "command", "wrench")) and not info.passive:
+        raise LogError(f"{where}: no thrust, command or wrench stream: map one, or say [log] passive = true "
                        f"(the thrusters were off)")
     # read every stream, check its time, find the common window
     tabs = []
@@ -537,6 +553,8 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     signals: dict[str, np.ndarray] = {}
     std: dict[str, float] = {}
     thrust: dict[str, np.ndarray] = {}
+    command: dict[str, np.ndarray] = {}
+    command_unit: dict[str, str] = {}
     wrench = payload = None
     jt_names, jt_t, jt_q, jt_std = [], [], [], {}
     for i, (sm, tb) in enumerate(zip(m.stream, tabs)):
@@ -624,6 +642,10 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
         for tn, s in (sm.thrust or {}).items():
             f = _unit_factors(s, 1, "force", f"{key}.thrust.{tn}", where)
             thrust[tn] = _interp(grid, tb.time, tb.cols[s.columns[0]] * f[0])
+        for tn, s in (sm.command or {}).items():  # an autopilot's command holds until the next one
+            k = np.clip(np.searchsorted(tb.time, grid, side="right") - 1, 0, tb.time.size - 1)
+            command[tn] = tb.cols[s.columns[0]][k]
+            command_unit[tn] = "rad/s" if s.unit == config.SI else s.unit
         for jn, jm in sorted((sm.joints or {}).items(), key=lambda kv: int(kv[0][1:]) if kv[0][1:].isdigit() else 0):
             fac = math.pi / 180.0 if jm.unit == "deg" else 1.0
             qv = jm.sign * tb.cols[jm.column] * fac + jm.offset
@@ -656,8 +678,8 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             signals[nm] = qg[:, k]
         std.update(jt_std)
     return Log(name=name, path=where, system=info.system, source=info.source, t=grid - t_lo, t0=t_lo,
-               signals=signals, std=std, joints=joints, thrust=thrust, wrench=wrench, payload=payload,
-               passive=info.passive and not thrust and wrench is None,
+               signals=signals, std=std, joints=joints, thrust=thrust, command=command, command_unit=command_unit,
+               wrench=wrench, payload=payload, passive=info.passive and not thrust and not command and wrench is None,
                files=tuple(tb.where for tb in tabs))
 
 
@@ -677,6 +699,8 @@ def _signal_names(sm: StreamMap) -> list[str]:
         out += ["wrench"]
     if sm.thrust:
         out += ["thrust"] + [f"thrust.{n}" for n in sm.thrust]
+    if sm.command:
+        out += ["command"] + [f"command.{n}" for n in sm.command]
     if sm.payload is not None:
         out += ["payload"]
     out += list(sm.joints or {})

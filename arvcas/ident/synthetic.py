@@ -90,7 +90,7 @@ def truth(system, duration: float, seed: int, p: np.ndarray | None = None, x0: n
     jm = moves(system, duration, seed)
     t = np.arange(int(round(duration * rate)) + 1) / rate
     lg = Log(name="truth", path="<synthetic>", system=None, source="", t=t, t0=0.0, signals={}, std={},
-             joints=jm, thrust={}, wrench=None, payload=None, passive=True, files=())
+             joints=jm, thrust={}, command={}, command_unit={}, wrench=None, payload=None, passive=True, files=())
     m = max(1, int(math.ceil((1.0 / rate) / TRUTH_STEP_S - 1e-9)))
     pl = plant_mod.LogPlant(system, m=m)
     x0 = np.zeros(12) if x0 is None else x0

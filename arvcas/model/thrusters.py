@@ -115,7 +115,7 @@ def envelope(P):
 # sample the command is held, so the solution is written in closed form (:func:`lag_states`).
 
 __all__ += ["has_dynamics", "thruster_maps", "map_grid", "map_table", "pchip_slopes", "hermite", "map_thrust",
-            "map_inverse", "map_range", "command_of", "time_constants", "lag_constants", "lag_states", "LAG_EXP_LIMIT"]
+            "map_inverse", "map_range", "command_of", "state_of", "time_constants", "lag_constants", "lag_states", "LAG_EXP_LIMIT"]
 
 LAG_EXP_LIMIT = 700.0  # h / tau above this would overflow the closed form's exp(h / tau) (refused before a run)
 
@@ -252,6 +252,18 @@ def command_of(P, m, s):
         hi = P[_mp(m, "dead_band")]
         lo = -hi
     return ca.if_else(s > 0, hi + s, ca.if_else(s < 0, lo + s, 0.5 * (lo + hi)))
+
+
+def state_of(P, m, c):
+    """The rotor state that command ``c`` (map units) asks for: the inverse of :func:`command_of` (a command
+    inside the dead band stops the rotor). The command must lie in the map's range (callers check)."""
+    if m.kind == "table":
+        i0, i1 = m.zero
+        lo, hi = P[_mp(m, f"command.{i0}")], P[_mp(m, f"command.{i1}")]
+    else:
+        hi = P[_mp(m, "dead_band")]
+        lo = -hi
+    return ca.if_else(c > hi, c - hi, ca.if_else(c < lo, c - lo, 0))
 
 
 def time_constants(P, i: int):

@@ -59,7 +59,7 @@ def _bench_identification(s, log) -> dict:
     x0 = validate.initial_state(lg)
     p = system.params.vector()
     vm = pl._accumulated("ident_block_vm", plant.DEFAULT_BLOCK, None)  # the same graph in CasADi's VM
-    n = d["U"].shape[1]
+    n = d["W"].shape[1]  # steps
     t_vm = []
     for _ in range(max(1, reps // 2)):
         t0 = time.perf_counter()
