@@ -42,7 +42,8 @@ MEASURED: dict = {}
 
 def _cfg(s):
     """The system's scenario; the BlueROV2's without its current and tether (the exported plant the controller
-    is closed around has neither, nor thruster dynamics: the run uses Params.instantaneous())."""
+    is closed around, export-c's uvms_rhs, takes a body wrench: the relative-velocity current acts inside its
+    hydrodynamics, docs/exporting-a-controller.md), with its T200 dynamics (the rotors in close_loop)."""
     cfg = scenario.load_scenario(s.params.default("scenario"))
     if s.name == "haidou1":
         return cfg
@@ -73,7 +74,7 @@ def case(request, tmp_path_factory):
     out = d / "out"
     _run(["make", "-C", str(out)])
     mod, ctl = load_binding(out)
-    run = arvcas.Run(law, scenario=cfg, params=s.params.instantaneous()).compile()
+    run = arvcas.Run(law, scenario=cfg, params=s.params).compile()
     return name, law, out, mod, ctl, run, run.simulate(seed=SEED)
 
 
@@ -90,7 +91,7 @@ def test_closed_loop_reproduces_the_run(case):
         scale = max(1.0, np.abs(b).max())
         worst[k] = diff
         assert diff <= TOL * scale, f"{name}/{law} {k}: max |difference| {diff:.3g} (scale {scale:.3g})"
-    for k in ("chat", "rmse"):
+    for k in ("chat", "rmse", "chat_delivered"):
         np.testing.assert_allclose(e[k], getattr(r, k), rtol=TOL, atol=0)
         worst[k + "_rel"] = float(np.max(np.abs(e[k] - getattr(r, k)) / np.abs(getattr(r, k))))
     assert r.ok and np.abs(r.q - r.q[0]).max() > 0.1  # the arm moved: the coupling is exercised
@@ -101,9 +102,12 @@ def test_replay_is_bit_for_bit(case):
     """Fed the run's own measurements (true states + the same noise), the controller returns the run's
     estimate, reference, commands and law signals bit for bit."""
     name, law, _, mod, ctl, run, r = case
-    e = close_loop(ctl, run, seed=SEED, states=np.hstack([r.eta, r.nu]))
-    names = [n for n, *_ in mod.DIAGNOSTICS if n in r.series] + ["thrust"]
-    assert {"eta_hat", "eta_ref", "tau_cmd"} <= set(names) and set(ctl.diagnostics()) >= set(names) - {"thrust"}
+    dyn = run.params.structure.has_thruster_dynamics
+    e = close_loop(ctl, run, seed=SEED, states=np.hstack([r.eta, r.nu]), delivered=r.thrust if dyn else None)
+    sent = ["thrust_cmd", "command"] if dyn else ["thrust"]  # the controller's thrust (and command)
+    names = [n for n, *_ in mod.DIAGNOSTICS if n in r.series] + sent
+    assert {"eta_hat", "eta_ref", "tau_cmd"} <= set(names) and set(ctl.diagnostics()) >= set(names) - set(sent)
+    assert dyn == (name == "bluerov2_heavy_alpha5") == mod.HAS_COMMAND_MAP
     for k in names:
         np.testing.assert_array_equal(e[k].reshape(r.series[k].shape), r.series[k], err_msg=f"{name}/{law} {k}")
 
