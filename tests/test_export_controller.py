@@ -41,14 +41,15 @@ MEASURED: dict = {}
 
 
 def _cfg(s):
-    """The system's scenario; the BlueROV2's without its current and tether (the exported plant the controller
-    is closed around, export-c's uvms_rhs, takes a body wrench: the relative-velocity current acts inside its
-    hydrodynamics, docs/exporting-a-controller.md), with its T200 dynamics (the rotors in close_loop)."""
+    """The system's scenario; the BlueROV2's with its T200 dynamics (the rotors in close_loop) and its tether's
+    pull, without its current (the exported plant the controller is closed around, export-c's uvms_rhs, takes a
+    body wrench: the relative-velocity current acts inside its hydrodynamics, and without it the tether has no
+    drag; docs/exporting-a-controller.md)."""
     cfg = scenario.load_scenario(s.params.default("scenario"))
     if s.name == "haidou1":
         return cfg
-    return replace(cfg, time_duration=20.0, current_velocity=None, tether_attachment=None, tether_length=None,
-                   tether_diameter=None, tether_Cn=None, tether_pull=None)
+    assert cfg.has_tether and cfg.current == "constant"
+    return replace(cfg, time_duration=20.0, current_velocity=None)
 
 
 def _run(cmd, **kw):

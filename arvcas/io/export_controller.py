@@ -977,6 +977,23 @@ class _Rotors:
         return np.array([F(s[i]) for i, F in enumerate(self.F)], dtype=float)
 
 
+def _tether_pull(cfg):
+    """The wrench (6, {b}, about the body origin) of a tether without a current at the state ``x``: its pull
+    ``f`` ({n}) turned into the body frame, ``R(eta)' f``, and its moment ``r_a x R(eta)' f`` (docs/model.md §10;
+    R = Rz(psi) Ry(theta) Rx(phi), NumPy)."""
+    r_a, f_n = np.array(cfg.tether_attachment, dtype=float), np.array(cfg.tether_pull, dtype=float)
+
+    def wrench(x):
+        cf, sf, ct, st, cp, sp = (np.cos(x[3]), np.sin(x[3]), np.cos(x[4]), np.sin(x[4]), np.cos(x[5]), np.sin(x[5]))
+        R = np.array([[cp * ct, -sp * cf + cp * st * sf, sp * sf + cp * cf * st],
+                      [sp * ct, cp * cf + sf * st * sp, -cp * sf + st * sp * cf],
+                      [-st, ct * sf, ct * cf]])
+        f = R.T @ f_n
+        return np.concatenate([f, np.cross(r_a, f)])
+
+    return wrench
+
+
 def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=None, delivered=None) -> dict:
     """The exported controller closed around the plant over a compiled run's scenario.
 
@@ -999,8 +1016,13 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     the rotors' thrust at each stage drives the plant's RK4 stages; the series add ``thrust_cmd`` (the
     controller's thrust), ``command`` and ``tau_delivered``, and ``thrust`` is the delivered thrust at t_k,
     as in the run. ``delivered``: (N + 1, n_thrusters) delivered thrust at t_k to give ``arm_truth`` instead
-    of the rotors' (a run's own ``thrust``, for a replay with ``states``). The exported plant has no current
-    or tether: a scenario with either is refused.
+    of the rotors' (a run's own ``thrust``, for a replay with ``states``).
+
+    A tether (docs/model.md §10) is a wrench on the plant: without a current its drag is zero and it pulls
+    with ``pull`` ({n}) at its attachment, ``f_b = R(eta)' pull`` and ``r_a x f_b`` (NumPy, at every RK4
+    stage's state), added to the plant's ``tau``. A current is refused: it acts inside the hydrodynamics
+    (``D(nu_r) nu_r``, ``C_A(nu_r) nu_r``, ``M_A nu_c_dot``, the links' drag in the relative flow), which the
+    exported plant's body-wrench input cannot carry.
 
     Returns the series of the run's signals that the controller and the plant give (``t``, ``eta``,
     ``nu``, ``eta_hat``, ``eta_ref``, ``tau_cmd``, ``thrust``, ``q``, ``payload`` and the law's own),
@@ -1010,10 +1032,11 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     from arvcas.sim import scenario, schedule
 
     cfg, P = run.cfg, run.params
-    if cfg.has_water:
+    if cfg.current != "none":
         raise ExportError(f"{WHAT}: close_loop integrates the exported plant (arvcas export-c's uvms_rhs and thrust), "
-                          f"which takes a body wrench and has no current or tether (docs/model.md §10): give a "
-                          f"scenario without [current] and [tether]")
+                          f"which takes a body wrench: a current acts inside its hydrodynamic terms (the relative "
+                          f"velocity, docs/model.md §10) and cannot be added to it; give a scenario without [current]")
+    tether = _tether_pull(cfg) if cfg.has_tether else None
     dyn = P.structure.has_thruster_dynamics
     if dyn and not getattr(controller, "HAS_COMMAND_MAP", False):
         raise ExportError(f"{WHAT}: close_loop: the run's system has thruster dynamics but the controller has no "
@@ -1038,6 +1061,7 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     cos_ph = np.array([math.cos(v) for v in ph])
     sin_ph = np.array([math.sin(v) for v in ph])
     off, amp = np.array(cfg.disturbance_offset, dtype=float), np.array(cfg.disturbance_amplitude, dtype=float)
+    water = cfg.water_vector
 
     def stage(k, j):
         r = tab.time[j * TS:(j + 1) * TS, k]
@@ -1060,7 +1084,7 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
         tau_arm = None
         if truth is not None:
             held = u_hold if delivered is None else np.asarray(delivered[k], dtype=float)
-            tau_arm = np.array(truth(x, held, tab.time[0:TS, k], tab.arm[0:AS, k], p, ph)).ravel()
+            tau_arm = np.array(truth(x, held, tab.time[0:TS, k], tab.arm[0:AS, k], p, ph, water, tk)).ravel()
         u = np.array(controller.step(list(x + noise[:, k]), tk, tau_arm))
         dg = controller.diagnostics()
         tau_v, y1 = np.array(dg["tau_cmd"]), np.array(dg["eta_ref"])
@@ -1096,6 +1120,8 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
             def f(xx, j):
                 qj, qdj, qddj, plj, dj = stage(k, 2 * i + j)
                 tr = W[2 * i + j] if dyn else tau_real  # stage 2i + j of the sample
+                if tether is not None:
+                    tr = tr + tether(xx)
                 return np.asarray(rhs(xx, tr + dj, qj, qdj, qddj, plj)).ravel()
 
             k1 = f(x, 0)

@@ -753,23 +753,24 @@ def _true_terms(cfg, opts, P, x, u_hold, R0, static, phase_cs, water=None, tk=No
 
 
 def arm_truth(spec: RunSpec) -> ca.Function:
-    """``(x, u_hold, rec_time, rec_arm, p, phase) -> tau_m + trim``: the run's true arm wrench on the
+    """``(x, u_hold, rec_time, rec_arm, p, phase, water, t) -> tau_m + trim``: the run's true arm wrench on the
     vehicle plus the trim at sample k (the ``tau_arm`` a controller's step sees: :class:`StepContext`),
     from the true state, the thrust acting at t_k (``u_hold``: the held thrust, or with thruster dynamics the
-    rotors' delivered thrust) and the time table's record at t_k; the run's operations."""
-    lay = spec.lay
-    if spec.cfg.has_water:
-        raise ValueError("arm_truth: the run's current and tether (docs/model.md §10) are not inputs of it")
+    rotors' delivered thrust), the time table's record at t_k, and the run's ``water`` input and t_k (its
+    current and tether, docs/model.md §10; empty without them); the run's operations."""
+    lay, cfg = spec.lay, spec.cfg
     Rec = schedule.records(lay)
     x, u_hold = ca.SX.sym("x", 12), ca.SX.sym("u_hold", lay.structure.n_thrusters)
     rt, ra = ca.SX.sym("rec_time", Rec.time_size), ca.SX.sym("rec_arm", Rec.arm_size)
     p, phase = ca.SX.sym("p", len(lay)), ca.SX.sym("phase", 6)
+    water, t = ca.SX.sym("water", cfg.water_vector.size), ca.SX.sym("t")
     P = view(p, lay)
     consts = derived_constants(P, spec.opts)
-    _, trim, _, tau_m = _true_terms(spec.cfg, spec.opts, P, x, u_hold, schedule.unpack(ca.vertcat(rt, ra), lay),
-                                    (consts[0], consts[1], consts[2]), ca.vertcat(ca.cos(phase), ca.sin(phase)))
-    return ca.Function("arm_truth", [x, u_hold, rt, ra, p, phase], [tau_m + trim],
-                       ["x", "u_hold", "rec_time", "rec_arm", "p", "phase"], ["tau_arm"])
+    _, trim, _, tau_m = _true_terms(cfg, spec.opts, P, x, u_hold, schedule.unpack(ca.vertcat(rt, ra), lay),
+                                    (consts[0], consts[1], consts[2]), ca.vertcat(ca.cos(phase), ca.sin(phase)),
+                                    water, t)
+    return ca.Function("arm_truth", [x, u_hold, rt, ra, p, phase, water, t], [tau_m + trim],
+                       ["x", "u_hold", "rec_time", "rec_arm", "p", "phase", "water", "t"], ["tau_arm"])
 
 
 def _sym_get(Pu, i, j):
