@@ -238,8 +238,17 @@ def _pchip_inverse(g, v, d, u, iterations: int = 8):
     """The ``x`` at which the monotone cubic equals ``u`` (a column, MX): its interval by ``casadi.low`` on
     the values, then Newton's method on that interval's cubic from the secant's guess, kept in the
     interval (quadratic convergence from a guess within a few percent: 8 steps reach round-off)."""
+    return _pchip_newton(*_pchip_interval(g, v, d, u), u, iterations)
+
+
+def _pchip_interval(g, v, d, u):
+    """``(g0, g1, v0, v1, d0, d1)``: the interval of the monotone cubic's values that holds ``u`` (MX lookup)."""
     i = ca.low(v, u, {"lookup_mode": "binary"})
-    g0, g1, v0, v1, d0, d1 = g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
+    return g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
+
+
+def _pchip_newton(g0, g1, v0, v1, d0, d1, u, iterations: int = 8):
+    """Newton's method for the ``x`` at which one interval's cubic equals ``u`` (:func:`_pchip_inverse`); MX or SX."""
     h = g1 - g0
     t = ca.fmin(ca.fmax((u - v0) / (v1 - v0), 0), 1)
     for _ in range(iterations):
@@ -636,10 +645,22 @@ def command_functions(cfg: ScenarioConfig, layout, prefix: str = "") -> dict[str
     y = [y_tab[i] if m.kind == "table" else thrusters.map_inverse(P, m, u_s[i]) for i, m in enumerate(maps)]
     cmd_sx = ca.Function(prefix + "command_of", [u_s, y_tab, p],
                          [ca.vertcat(*[thrusters.command_of(P, m, y[i]) for i, m in enumerate(maps)])])
+    # a table's inverse: the interval looked up in MX, Newton's method in SX (scalar code: the same operations
+    # as the run's MX ones, element by element; tests/test_export_controller.py checks the bits)
     um, tm, pm = ca.MX.sym("u", n), ca.MX.sym("tab", tab.shape[0]), ca.MX.sym("p", len(layout))
+    maps_s = [st.thruster_map(d.map) for d in st.thruster_dynamics]
     _, grids = _table_grids(st, tm)
+    y_tab = [ca.MX(1, 1)] * n
+    for name, (g, v, d, _) in grids.items():
+        idx = [i for i, m in enumerate(maps_s) if m.name == name]
+        iv = [ca.SX.sym(k, len(idx)) for k in ("g0", "g1", "v0", "v1", "d0", "d1", "u")]
+        newton = ca.Function(f"{prefix}newton_{name}", iv, [_pchip_newton(*iv)])
+        uu = ca.vertcat(*[um[i] for i in idx])
+        ys = newton(*_pchip_interval(g, v, d, uu), uu)
+        for r, i in enumerate(idx):
+            y_tab[i] = ys[r]
     return {"thr_tab": ca.Function(prefix + "thr_tab", [p], [tab], ["p"], ["tab"]),
-            "command": ca.Function(prefix + "command", [um, tm, pm], [cmd_sx(um, _table_targets(st, grids, um), pm)],
+            "command": ca.Function(prefix + "command", [um, tm, pm], [cmd_sx(um, ca.vertcat(*y_tab), pm)],
                                    ["u", "tab", "p"], ["command"])}
 
 
