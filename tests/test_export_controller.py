@@ -168,6 +168,8 @@ def test_gains_as_inputs_reset_and_errors(case):
             ctl.init(gains=bad)
     with pytest.raises(mod.ControllerError, match=r"ekf has q < 0 or a variance <= 0: ekf\[2\]$"):
         ctl.init(gains=g, ekf=[1e-6, 1e-6, 0.0, 1e-4, 1e-4])
+    with pytest.raises(mod.ControllerError, match="no command map"):
+        ctl.command()  # Haidou-1's thrusters have no command map
     with pytest.raises(mod.ControllerError, match="init: eta_d: expected 6 values"):
         ctl.init(eta_d=[0.0])
     ctl.step(y, 0.0)  # the refused inits changed nothing: still initialised with g
@@ -245,6 +247,18 @@ def test_front_of_another_system_gives_its_controller(tmp_path, capsys):
     h = (out / "arvcas_bluerov2_heavy_alpha5_agsta.h").read_text()
     assert "#define ARVCAS_BLUEROV2_HEAVY_ALPHA5_AGSTA_N_U 8" in h and "u[7]  T8" in h
     assert "#define ARVCAS_BLUEROV2_HEAVY_ALPHA5_AGSTA_USES_TAU_ARM 1" in h
+
+
+def test_close_loop_refuses_a_current():
+    """The exported plant cannot carry a current: one line, before any work."""
+    from types import SimpleNamespace
+
+    from arvcas.io.export_controller import ExportError
+
+    blue = load_system("bluerov2_heavy_alpha5")
+    cfg = scenario.load_scenario(blue.params.default("scenario"))
+    with pytest.raises(ExportError, match=r"^export-controller: close_loop .* a current acts inside .*\[current\]$"):
+        close_loop(None, SimpleNamespace(cfg=cfg, params=blue.params))
 
 
 def teardown_module(module):

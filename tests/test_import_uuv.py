@@ -350,6 +350,23 @@ def test_cli_refuses_thruster_models_arvcas_cannot_represent(tmp_path, capsys, o
     assert "rexrov2_default.xacro" in err and "rexrov2_0_thruster_model" in err and all(w in err for w in words), err
 
 
+def test_gain_clamps_and_efficiencies_fold_into_the_map(tmp_path):
+    """ThrusterPlugin.cc: x = gain * clamp(input), thrust = thrust_efficiency * convert(propeller_efficiency * lag(x)):
+    the rotor law's constant is thrust_efficiency * propeller_efficiency^2 * rotorConstant, the command range
+    gain * [clampMin, clampMax]."""
+    tag = "<thrusterID>${thruster_id}</thrusterID>"
+    root = _variant(tmp_path, tag, tag + "<gain>2</gain><clampMin>-1000</clampMin><clampMax>1000</clampMax>"
+                                      "<thrust_efficiency>0.5</thrust_efficiency><propeller_efficiency>0.8"
+                                      "</propeller_efficiency>")
+    imp = uuv.import_uuv(root / "rexrov2_description" / "robots" / "rexrov2_default.xacro", ros_paths=[root],
+                         thruster_manager=TM)
+    path = tmp_path / "r.toml"
+    path.write_text(imp.text)
+    v = _values(arvcas.load_system(str(path)))
+    assert v["thrusters.map.basic.rotor_constant"] == pytest.approx(0.5 * 0.8 ** 2 * 0.026546960744430276, rel=1e-15)
+    assert (v["thrusters.map.basic.command_min"], v["thrusters.map.basic.command_max"]) == (-2000.0, 2000.0)
+
+
 def test_zero_order_thrusters_are_instantaneous(tmp_path):
     root = _variant(tmp_path, "<type>FirstOrder</type>", "<type>ZeroOrder</type>")
     imp = uuv.import_uuv(root / "rexrov2_description" / "robots" / "rexrov2_default.xacro", ros_paths=[root],
