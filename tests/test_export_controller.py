@@ -41,13 +41,15 @@ MEASURED: dict = {}
 
 
 def _cfg(s):
-    """The system's scenario; the BlueROV2's without its current and tether (the exported plant the controller
-    is closed around has neither, nor thruster dynamics: the run uses Params.instantaneous())."""
+    """The system's scenario; the BlueROV2's with its T200 dynamics (the rotors in close_loop) and its tether's
+    pull, without its current (the exported plant the controller is closed around, export-c's uvms_rhs, takes a
+    body wrench: the relative-velocity current acts inside its hydrodynamics, and without it the tether has no
+    drag; docs/exporting-a-controller.md)."""
     cfg = scenario.load_scenario(s.params.default("scenario"))
     if s.name == "haidou1":
         return cfg
-    return replace(cfg, time_duration=20.0, current_velocity=None, tether_attachment=None, tether_length=None,
-                   tether_diameter=None, tether_Cn=None, tether_pull=None)
+    assert cfg.has_tether and cfg.current == "constant"
+    return replace(cfg, time_duration=20.0, current_velocity=None)
 
 
 def _run(cmd, **kw):
@@ -73,7 +75,7 @@ def case(request, tmp_path_factory):
     out = d / "out"
     _run(["make", "-C", str(out)])
     mod, ctl = load_binding(out)
-    run = arvcas.Run(law, scenario=cfg, params=s.params.instantaneous()).compile()
+    run = arvcas.Run(law, scenario=cfg, params=s.params).compile()
     return name, law, out, mod, ctl, run, run.simulate(seed=SEED)
 
 
@@ -90,7 +92,7 @@ def test_closed_loop_reproduces_the_run(case):
         scale = max(1.0, np.abs(b).max())
         worst[k] = diff
         assert diff <= TOL * scale, f"{name}/{law} {k}: max |difference| {diff:.3g} (scale {scale:.3g})"
-    for k in ("chat", "rmse"):
+    for k in ("chat", "rmse", "chat_delivered"):
         np.testing.assert_allclose(e[k], getattr(r, k), rtol=TOL, atol=0)
         worst[k + "_rel"] = float(np.max(np.abs(e[k] - getattr(r, k)) / np.abs(getattr(r, k))))
     assert r.ok and np.abs(r.q - r.q[0]).max() > 0.1  # the arm moved: the coupling is exercised
@@ -101,9 +103,12 @@ def test_replay_is_bit_for_bit(case):
     """Fed the run's own measurements (true states + the same noise), the controller returns the run's
     estimate, reference, commands and law signals bit for bit."""
     name, law, _, mod, ctl, run, r = case
-    e = close_loop(ctl, run, seed=SEED, states=np.hstack([r.eta, r.nu]))
-    names = [n for n, *_ in mod.DIAGNOSTICS if n in r.series] + ["thrust"]
-    assert {"eta_hat", "eta_ref", "tau_cmd"} <= set(names) and set(ctl.diagnostics()) >= set(names) - {"thrust"}
+    dyn = run.params.structure.has_thruster_dynamics
+    e = close_loop(ctl, run, seed=SEED, states=np.hstack([r.eta, r.nu]), delivered=r.thrust if dyn else None)
+    sent = ["thrust_cmd", "command"] if dyn else ["thrust"]  # the controller's thrust (and command)
+    names = [n for n, *_ in mod.DIAGNOSTICS if n in r.series] + sent
+    assert {"eta_hat", "eta_ref", "tau_cmd"} <= set(names) and set(ctl.diagnostics()) >= set(names) - set(sent)
+    assert dyn == (name == "bluerov2_heavy_alpha5") == mod.HAS_COMMAND_MAP
     for k in names:
         np.testing.assert_array_equal(e[k].reshape(r.series[k].shape), r.series[k], err_msg=f"{name}/{law} {k}")
 
@@ -163,6 +168,8 @@ def test_gains_as_inputs_reset_and_errors(case):
             ctl.init(gains=bad)
     with pytest.raises(mod.ControllerError, match=r"ekf has q < 0 or a variance <= 0: ekf\[2\]$"):
         ctl.init(gains=g, ekf=[1e-6, 1e-6, 0.0, 1e-4, 1e-4])
+    with pytest.raises(mod.ControllerError, match="no command map"):
+        ctl.command()  # Haidou-1's thrusters have no command map
     with pytest.raises(mod.ControllerError, match="init: eta_d: expected 6 values"):
         ctl.init(eta_d=[0.0])
     ctl.step(y, 0.0)  # the refused inits changed nothing: still initialised with g
@@ -240,6 +247,18 @@ def test_front_of_another_system_gives_its_controller(tmp_path, capsys):
     h = (out / "arvcas_bluerov2_heavy_alpha5_agsta.h").read_text()
     assert "#define ARVCAS_BLUEROV2_HEAVY_ALPHA5_AGSTA_N_U 8" in h and "u[7]  T8" in h
     assert "#define ARVCAS_BLUEROV2_HEAVY_ALPHA5_AGSTA_USES_TAU_ARM 1" in h
+
+
+def test_close_loop_refuses_a_current():
+    """The exported plant cannot carry a current: one line, before any work."""
+    from types import SimpleNamespace
+
+    from arvcas.io.export_controller import ExportError
+
+    blue = load_system("bluerov2_heavy_alpha5")
+    cfg = scenario.load_scenario(blue.params.default("scenario"))
+    with pytest.raises(ExportError, match=r"^export-controller: close_loop .* a current acts inside .*\[current\]$"):
+        close_loop(None, SimpleNamespace(cfg=cfg, params=blue.params))
 
 
 def teardown_module(module):

@@ -260,7 +260,7 @@ def test_oberon7_arm(oberon7):
     # the mount: 1.3 m forward, 0.5 m to starboard, 0.665 m down; the arm's frame turned a half turn about x
     assert [v[f"arm.mount.{k}"] for k in ("x", "y", "z", "roll", "pitch", "yaw")] == pytest.approx(
         [1.3, 0.5, 0.665, np.pi, 0.0, 0.0], abs=1e-15)
-    assert any("cylinder" in n for n in imp.notes) and any("timeConstant=0.05" in n for n in imp.notes)
+    assert any("cylinder" in n for n in imp.notes) and not any("timeConstant" in n for n in imp.notes)
 
 
 def test_cli_import(tmp_path, capsys):
@@ -273,7 +273,7 @@ def test_cli_import(tmp_path, capsys):
     assert err < 1e-6, text
     doc = out.read_text()
     assert doc.count('source = "uuvsimulator/rexrov2 @1546681, rexrov2_description/robots/rexrov2_default.xacro') > 50
-    assert "thrusters' dynamics (type=FirstOrder timeConstant=0.05)" in doc
+    assert 'map = "basic"' in doc and "<dynamics> FirstOrder <timeConstant>" in doc and "dynamics (" not in doc
     assert arvcas.load_system(str(out)).n_thrusters == 6
     assert main(args) == 0  # arvcas wrote it: replaced
     mine = tmp_path / "mine.toml"
@@ -281,6 +281,98 @@ def test_cli_import(tmp_path, capsys):
     capsys.readouterr()
     assert main(args[:4] + [str(mine)] + args[5:]) == 2
     assert "not written by arvcas" in capsys.readouterr().err and mine.read_text() == "# the user's\n"
+
+
+def _plugins(urdf: str) -> list:
+    """The thruster plugins of an expanded URDF: (name, timeConstant, rotorConstant) as uuv_simulator reads them."""
+    out = []
+    for pl in ET.fromstring(urdf).iter("plugin"):
+        if pl.get("filename") == "libuuv_thruster_ros_plugin.so":
+            out.append((pl.get("name"), pl.findtext("dynamics/type"), float(pl.findtext("dynamics/timeConstant")),
+                        pl.findtext("conversion/type"), float(pl.findtext("conversion/rotorConstant"))))
+    return out
+
+
+def test_thruster_dynamics_are_uuv_simulators(rexrov2):
+    """Each imported thruster's lag and rotor law are its plugin's (ThrusterPlugin.cc with FirstOrder and Basic,
+    written out here): for rotor speeds w the thrust is rotorConstant * |w| * w, and over a step dt the rotor
+    follows ``state = state * exp(-dt / timeConstant) + (1 - exp(-dt / timeConstant)) * cmd``."""
+    import casadi as ca
+
+    imp, system, urdf = rexrov2
+    P = view(system.params)
+    st = system.params.structure
+    plugins = _plugins(urdf)
+    assert [(d, c) for _, d, _, c, _ in plugins] == [("FirstOrder", "Basic")] * 6 and st.has_thruster_dynamics
+    w = np.array([-240.0, -97.3, -1.5, 0.0, 0.25, 12.0, 180.0, 240.0])  # rad/s, within the command range
+    for name, (_, _, tc, _, rc) in zip(st.thrusters, plugins):
+        assert P[f"thrusters.{name}.time_constant"] == tc == 0.05  # the xacro's dyn_time_constant
+        m = st.thruster_map(st.thruster_dynamics[st.thrusters.index(name)].map)
+        assert m.kind == "quadratic" and m.unit == "rad/s"
+        T = np.array(ca.DM(thrusters.map_thrust(P, m, ca.DM(w)))).ravel()
+        np.testing.assert_allclose(T, rc * np.abs(w) * w, rtol=1e-15, atol=0)
+        lo, hi = float(P[f"thrusters.map.{m.name}.command_min"]), float(P[f"thrusters.map.{m.name}.command_max"])
+        assert rc * hi * hi >= float(P[f"thrusters.{name}.u_max"]) == 1540.0 and lo == -hi  # covers the limits
+    # the lag over dt = 0.01 s from a spinning rotor to a new command, against the plugin's update
+    dt, s0, cmd = 0.01, ca.DM([50.0, -20.0, 0.0, 200.0, -240.0, 1.0]), ca.DM([-100.0, 30.0, 80.0, 200.0, 0.0, 1.0])
+    E = thrusters.lag_constants(P, [dt])
+    s1 = np.array(ca.DM(ca.vertcat(*[row[0] for row in thrusters.lag_states(P, s0, cmd, E, [dt], dt)]))).ravel()
+    a = np.exp(-dt / 0.05)
+    np.testing.assert_allclose(s1, np.array(s0).ravel() * a + (1 - a) * np.array(cmd).ravel(), rtol=1e-14, atol=1e-12)
+
+
+def _variant(tmp_path, old: str, new: str) -> Path:
+    """A copy of the excerpt with one text replaced in uuv_simulator's thruster snippets."""
+    import shutil
+
+    root = tmp_path / "data"
+    shutil.copytree(DATA, root)
+    f = root / "uuv_gazebo_ros_plugins" / "urdf" / "thruster_snippets.xacro"
+    text = f.read_text()
+    assert old in text
+    f.write_text(text.replace(old, new, 1))
+    return root
+
+
+@pytest.mark.parametrize("old,new,words", [
+    ("<type>FirstOrder</type>", "<type>Yoerger</type>", ["<dynamics> <type> 'Yoerger'", "ZeroOrder or FirstOrder"]),
+    ("<type>Basic</type>", "<type>Bessa</type>", ["<conversion> <type> 'Bessa'", "Basic"]),
+    ("<timeConstant>${time_constant}</timeConstant>", "<timeConstant>0</timeConstant>",
+     ["<timeConstant> must be > 0"]),
+])
+def test_cli_refuses_thruster_models_arvcas_cannot_represent(tmp_path, capsys, old, new, words):
+    root = _variant(tmp_path, old, new)
+    out = tmp_path / "x.toml"
+    code = main(["import-system", "uuv", str(root / "rexrov2_description"), "--out", str(out), "--ros-path", str(root),
+                 "--thruster-manager", str(TM)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and not out.exists() and "\n" not in err, err
+    assert "rexrov2_default.xacro" in err and "rexrov2_0_thruster_model" in err and all(w in err for w in words), err
+
+
+def test_gain_clamps_and_efficiencies_fold_into_the_map(tmp_path):
+    """ThrusterPlugin.cc: x = gain * clamp(input), thrust = thrust_efficiency * convert(propeller_efficiency * lag(x)):
+    the rotor law's constant is thrust_efficiency * propeller_efficiency^2 * rotorConstant, the command range
+    gain * [clampMin, clampMax]."""
+    tag = "<thrusterID>${thruster_id}</thrusterID>"
+    root = _variant(tmp_path, tag, tag + "<gain>2</gain><clampMin>-1000</clampMin><clampMax>1000</clampMax>"
+                                      "<thrust_efficiency>0.5</thrust_efficiency><propeller_efficiency>0.8"
+                                      "</propeller_efficiency>")
+    imp = uuv.import_uuv(root / "rexrov2_description" / "robots" / "rexrov2_default.xacro", ros_paths=[root],
+                         thruster_manager=TM)
+    path = tmp_path / "r.toml"
+    path.write_text(imp.text)
+    v = _values(arvcas.load_system(str(path)))
+    assert v["thrusters.map.basic.rotor_constant"] == pytest.approx(0.5 * 0.8 ** 2 * 0.026546960744430276, rel=1e-15)
+    assert (v["thrusters.map.basic.command_min"], v["thrusters.map.basic.command_max"]) == (-2000.0, 2000.0)
+
+
+def test_zero_order_thrusters_are_instantaneous(tmp_path):
+    root = _variant(tmp_path, "<type>FirstOrder</type>", "<type>ZeroOrder</type>")
+    imp = uuv.import_uuv(root / "rexrov2_description" / "robots" / "rexrov2_default.xacro", ros_paths=[root],
+                         thruster_manager=TM)
+    assert "time_constant" not in imp.text and "[thrusters.map" not in imp.text
+    assert any("ZeroOrder" in n and "Basic" in n for n in imp.notes)
 
 
 @pytest.mark.parametrize("extra,words", [

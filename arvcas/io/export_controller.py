@@ -45,8 +45,8 @@ from arvcas.build import export as ex
 from arvcas.build.text import c_comment, markdown
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import DOFS, Controller, get as get_controller
-from arvcas.sim.closedloop import (RunSpec, arm_truth, controller_diagnostics, controller_functions, controller_reads,
-                                   controller_sizes)
+from arvcas.sim.closedloop import (RunSpec, arm_truth, command_functions, controller_diagnostics, controller_functions,
+                                   controller_reads, controller_sizes)
 from arvcas.sim.scenario import ScenarioConfig
 
 __all__ = ["ExportError", "export_controller", "default_prefix", "files", "load_binding", "close_loop"]
@@ -131,6 +131,7 @@ def export_controller(out_dir, controller="proposed", gains=None, params=None, s
     d = _Design(law, np.asarray(g, dtype=float).copy(), gains_source, cfg, P, prefix)
     try:
         fns = controller_functions(law, cfg, P.layout, prefix + "cas_")
+        fns.update(command_functions(cfg, P.layout, prefix + "cas_"))
     except ValueError as e:
         raise ExportError(f"{WHAT}: {e}") from None
     cg = ca.CodeGenerator(d.lib, {"with_header": False, "casadi_real": "double", "casadi_int": "long long int"})
@@ -175,6 +176,9 @@ class _Info:
         st = P.structure
         self.thrusters = list(st.thrusters) if st.thrusters is not None else [f"T{j + 1}" for j in range(st.n_thrusters)]
         self.thrust_text = ex._glossary(P)["u"]  # export-c's words: "thrust per thruster (N): <names>"
+        self.has_map = "command" in fns  # a thruster command map: step also gives the command in its unit
+        self.n_tab = fns["thr_tab"].numel_out(0) if self.has_map else 0
+        self.commands = _command_texts(P) if self.has_map else []
         self.upper = gains_mod.upper_limits(law, d.cfg.time_h)
         self.gain_names = gains_mod.gain_names(law)
         self.gain_units = gains_mod.gain_units(law)
@@ -215,6 +219,32 @@ _PARAM_DOC = {
     "eta_d": "set point eta_d in {n} (m, rad): where the vehicle is held",
     "p": "the model parameters, SI (names, units and indices in the _params.h header)",
 }
+
+
+_UNIT_WORDS = {"us": "us (PWM pulse width)", "1": "1 (normalised command)", "rad/s": "rad/s (rotor speed)"}
+
+
+def _command_texts(P) -> list[tuple[str, str, str]]:
+    """Per listed thruster: (name, unit, what its command is) for a system with thruster dynamics."""
+    out = []
+    for name, dyn in zip(P.structure.thrusters, P.structure.thruster_dynamics):
+        m = P.structure.thruster_map(dyn.map)
+        u = m.unit
+
+        def v(key):
+            return float(P[f"thrusters.map.{m.name}.{key}"])
+
+        if m.kind == "table":
+            i0, i1 = m.zero
+            lo, hi = v(f"command.{i0}"), v(f"command.{i1}")
+            what = (f"map {m.name}: table {v('command.0'):g}-{v(f'command.{m.n - 1}'):g} {u}, dead band "
+                    f"{lo:g}-{hi:g} {u} ({0.5 * (lo + hi):g} {u}: at rest)")
+        else:
+            db = v("dead_band")
+            what = (f"map {m.name}: thrust = {v('rotor_constant'):g} s |s|, s the command beyond the dead band "
+                    f"+-{db:g} {u}, command within [{v('command_min'):g}, {v('command_max'):g}] {u}")
+        out.append((name, _UNIT_WORDS.get(u, u), what))
+    return out
 
 
 def _doubles(v) -> str:
@@ -279,10 +309,16 @@ def _header(I: _Info) -> str:
         f"#define {up}N_DIAG {sz.n_diag}",
         f"#define {up}SAMPLE_TIME {ex._c_double(cfg.time_h)}  /* sampling period (s) */",
         f"#define {up}USES_TAU_ARM {int(I.uses_tau_arm)}  /* 1: step reads tau_arm */",
+        f"#define {up}HAS_COMMAND_MAP {int(I.has_map)}  /* 1: {pre}command gives each thruster's command in its unit */",
         "",
         f"/* u: {I.thrust_text}, after saturation to each thruster's limits:",
         *[f" *   u[{j}]  {n}" for j, n in enumerate(I.thrusters)],
-        " * (a thruster command map, thrust -> the unit the thrusters take, comes with issue 22) */",
+        *([" * command (after each step, " + pre + "command): what each thruster's ESC or driver is sent for its",
+           " * thrust u, in its command map's unit (the map inverted: arvcas's docs/model.md section 9):",
+           *[f" *   command[{j}]  {n}: {c_comment(unit)}; {c_comment(what)}" for j, (n, unit, what) in
+             enumerate(I.commands)]] if I.has_map else
+          [" * (this system's thrusters have no command map: send the thrust u; docs/system-file.md) */"]),
+        *([" */"] if I.has_map else []),
         "",
         "/* errors returned by init and step (0: success) */",
         f"#define {up}E_GAIN (-1)     /* init: a gain is not finite, not > 0, or not below its stability limit */",
@@ -306,7 +342,9 @@ def _header(I: _Info) -> str:
           f"  double k[{sz.n_k}];  /* the params, then the nominal inertia Mhat */",
           f"  double kp0[{max(I.n_kp0, 1)}], kp[{max(I.n_kp, 1)}];  /* terms of the params alone */",
           f"  double mem[2][{sz.n_mem}];  /* EKF, reference, law state: current and next */",
-          f"  double u[{sz.n_u}], diag[{sz.n_diag}];  /* the last step's command and diagnostics */",
+          f"  double u[{sz.n_u}], diag[{sz.n_diag}];  /* the last step's thrust and diagnostics */",
+          *([f"  double tab[{I.n_tab}], command[{sz.n_u}];  /* the command maps' tables; the last step's command */"]
+            if I.has_map else []),
           f"  long long iw[{I.sz_iw + 1}];",
           f"  double w[{I.sz_w + 1}];",
           "  long long n_steps;  /* steps since init or reset */",
@@ -334,6 +372,10 @@ def _header(I: _Info) -> str:
     for s, off, w in I.diag:
         L.append(f"#define {up}DIAG_{ex._ident(s.name)} {off}  /* {w}: "
                  + c_comment(f"{s.name} ({s.units}{', ' + s.frame if s.frame else ''}): {s.description}") + " */")
+    if I.has_map:
+        L += [f"/* the last step's command per thruster ({up}N_U values, each in its map's unit, listed above;",
+              " * zeros before the first step: send nothing then) */",
+              f"const double* {pre}command(const {pre}state* s);"]
     L += [f"const double* {pre}diagnostics(const {pre}state* s);",
           "/* after init returned E_GAIN or E_PARAM: the index of the first bad entry in the fields of params",
           " * taken in order as one array (gains, unc, ekf, eta_d, p) */",
@@ -354,6 +396,14 @@ def _api_c(I: _Info) -> str:
     cas = pre + "cas_"
     off = _offsets(sz.params)
     copy_params = "\n".join(f"  memcpy(s->k + {i}, prm->{name}, sizeof prm->{name});" for name, i in off.items())
+    tab_check = reset_cmd = step_cmd = copy_cmd = cmd_fn = ""
+    if I.has_map:  # the command map: its tables once per init, the command after each step's thrust
+        tab_check = f" ||\n      {cas}finite(s->tab, {I.n_tab}) >= 0"
+        reset_cmd = "\n  memset(s->command, 0, sizeof s->command);"
+        step_cmd = (f"\n  arg[0] = u_new;\n  arg[1] = s->tab;\n  arg[2] = s->k + {off['p']};\n  res[0] = cmd_new;\n"
+                    f"  if ({cas}call({cas}command, arg, res, s) || {cas}finite(cmd_new, {sz.n_u}) >= 0) return {up}E_OUTPUT;")
+        copy_cmd = "\n  memcpy(s->command, cmd_new, sizeof cmd_new);"
+        cmd_fn = f"\nconst double* {pre}command(const {pre}state* s) {{\n  return s->command;\n}}\n"
     return f"""
 
 /* ---------------------------------------------------------------------------------------------
@@ -414,10 +464,10 @@ int {pre}init({pre}state* s, const {pre}params* prm) {{
   res[0] = s->kp0;
   rc |= {cas}call({cas}prep0, arg, res, s);
   res[0] = s->kp;
-  rc |= {cas}call({cas}prep, arg, res, s);
+  rc |= {cas}call({cas}prep, arg, res, s);{_init_tab(I)}
   /* terms of p alone that are not finite (e.g. a singular thruster matrix): not initialised */
   if (rc || {cas}finite(s->k, {sz.n_k}) >= 0 || {cas}finite(s->kp0, {I.n_kp0}) >= 0 ||
-      {cas}finite(s->kp, {I.n_kp}) >= 0)
+      {cas}finite(s->kp, {I.n_kp}) >= 0{tab_check})
     return {up}E_PARAM;
   s->initialized = 1;
   {pre}reset(s);
@@ -427,7 +477,7 @@ int {pre}init({pre}state* s, const {pre}params* prm) {{
 void {pre}reset({pre}state* s) {{
   memset(s->mem, 0, sizeof s->mem);
   memset(s->u, 0, sizeof s->u);
-  memset(s->diag, 0, sizeof s->diag);
+  memset(s->diag, 0, sizeof s->diag);{reset_cmd}
   s->cur = 0;
   s->n_steps = 0;
 }}
@@ -435,7 +485,7 @@ void {pre}reset({pre}state* s) {{
 int {pre}step({pre}state* s, const double* y, double t, const double* tau_arm, double* u) {{
   const double* arg[{I.sz_arg}];
   double* res[{I.sz_res}];
-  double u_new[{sz.n_u}], diag_new[{sz.n_diag}];
+  double u_new[{sz.n_u}], diag_new[{sz.n_diag}]{", cmd_new[" + str(sz.n_u) + "]" if I.has_map else ""};
   double* next;
   if (!s->initialized) return {up}E_NOT_INIT;
   if ({cas}finite(y, 12) >= 0 || {cas}finite(&t, 1) >= 0 || (tau_arm && {cas}finite(tau_arm, 6) >= 0))
@@ -451,10 +501,10 @@ int {pre}step({pre}state* s, const double* y, double t, const double* tau_arm, d
   res[1] = u_new;
   res[2] = diag_new;
   if ({cas}call(s->n_steps == 0 ? {cas}step0 : {cas}step, arg, res, s)) return {up}E_OUTPUT;
-  if ({cas}finite(next, {sz.n_mem}) >= 0 || {cas}finite(u_new, {sz.n_u}) >= 0) return {up}E_OUTPUT;
+  if ({cas}finite(next, {sz.n_mem}) >= 0 || {cas}finite(u_new, {sz.n_u}) >= 0) return {up}E_OUTPUT;{step_cmd}
   s->cur = 1 - s->cur;
   s->n_steps += 1;
-  memcpy(s->u, u_new, sizeof u_new);
+  memcpy(s->u, u_new, sizeof u_new);{copy_cmd}
   memcpy(s->diag, diag_new, sizeof diag_new);
   if (u) memcpy(u, u_new, sizeof u_new);
   return 0;
@@ -463,7 +513,7 @@ int {pre}step({pre}state* s, const double* y, double t, const double* tau_arm, d
 const double* {pre}diagnostics(const {pre}state* s) {{
   return s->diag;
 }}
-
+{cmd_fn}
 int {pre}bad_index(const {pre}state* s) {{
   return s->bad_index;
 }}
@@ -488,6 +538,14 @@ unsigned long {pre}params_size(void) {{
   return (unsigned long) sizeof({pre}params);
 }}
 """
+
+
+def _init_tab(I: _Info) -> str:
+    """init's call of the command maps' tables (the run's per-run constants), after the derived terms."""
+    if not I.has_map:
+        return ""
+    cas = I.d.prefix + "cas_"
+    return f"\n  arg[0] = prm->p;\n  res[0] = s->tab;\n  rc |= {cas}call({cas}thr_tab, arg, res, s);"
 
 
 def _offsets(fields: dict[str, int]) -> dict[str, int]:
@@ -522,6 +580,20 @@ def _example_y(I: _Info) -> list[float]:
     return [float(v) for v in eta_d + np.array([0.1, -0.1, 0.1, 0.05, -0.05, 0.05])] + [0.0] * 6
 
 
+def _cmd_line(I: _Info, lang: str) -> str:
+    """The examples' 'command k :' line (each thruster's command in its map's unit), with a command map."""
+    if not I.has_map:
+        return ""
+    pre, up = I.d.prefix, I.up
+    if lang == "c":
+        return (f'\n    printf("\\ncommand %d :", k);\n'
+                f'    for (i = 0; i < {up}N_U; ++i) printf(" %.17g", {pre}command(&s)[i]);')
+    if lang == "cpp":
+        return (f'\n    std::printf("\\ncommand %d :", k);\n'
+                f'    for (int i = 0; i < {up}N_U; ++i) std::printf(" %.17g", {pre}command(&s)[i]);')
+    return '        print("command %d :" % k + "".join(" %.17g" % v for v in c.command()))\n'
+
+
 def _example_c(I: _Info) -> str:
     lib, pre, up = I.d.lib, I.d.prefix, I.up
     return f"""/* example.c: the exported controller for {_EXAMPLE_STEPS} samples at a fixed measurement; prints
@@ -549,7 +621,7 @@ int main(void)
       return 1;
     }}
     printf("step %d %.17g :", k, t);
-    for (i = 0; i < {up}N_U; ++i) printf(" %.17g", u[i]);
+    for (i = 0; i < {up}N_U; ++i) printf(" %.17g", u[i]);{_cmd_line(I, "c")}
     printf("\\ndiag %d :", k);
     for (i = 0; i < {up}N_DIAG; ++i) printf(" %.17g", {pre}diagnostics(&s)[i]);
     printf("\\n");
@@ -584,7 +656,7 @@ int main() {{
       return 1;
     }}
     std::printf("step %d %.17g :", k, t);
-    for (double v : u) std::printf(" %.17g", v);
+    for (double v : u) std::printf(" %.17g", v);{_cmd_line(I, "cpp")}
     std::printf("\\ndiag %d :", k);
     const double* dg = {pre}diagnostics(&s);
     for (int i = 0; i < {up}N_DIAG; ++i) std::printf(" %.17g", dg[i]);
@@ -614,7 +686,7 @@ def main(argv):
         t = k * binding.H
         u = c.step(Y, t)
         print("step %d %.17g :" % (k, t) + "".join(" %.17g" % v for v in u))
-        print("diag %d :" % k + "".join(" %.17g" % v for v in c.diagnostics_flat()))
+{_cmd_line(I, "py")}        print("diag %d :" % k + "".join(" %.17g" % v for v in c.diagnostics_flat()))
     return 0
 
 
@@ -635,6 +707,7 @@ No arvcas, CasADi or NumPy needed. Build the library first (make). Units and fra
     c = Controller()                 # lib{lib}.so beside this file; the exported defaults
     c.init(gains=[...])              # optional: other gains, unc, ekf, eta_d or p (lists)
     u = c.step(y, t)                 # y = measured [eta; nu] (12), t in s; u: thrust per thruster (N)
+    c.command()                      # with a command map: what each thruster is sent (COMMAND_UNITS)
     c.diagnostics()                  # {{name: values}} of the last step
     c.reset()                        # the next step starts the EKF, reference and law again
 """
@@ -647,6 +720,8 @@ H = {d.cfg.time_h!r}  # sampling period (s): call step once every H seconds
 N_Y, N_U, N_GAINS, N_P = 12, {sz.n_u}, {sz.n_gains}, {sz.n_p}
 USES_TAU_ARM = {I.uses_tau_arm!r}
 THRUSTERS = {I.thrusters!r}
+HAS_COMMAND_MAP = {I.has_map!r}  # True: command() gives each thruster's command in its map's unit
+COMMAND_UNITS = {[unit for _, unit, _ in I.commands]!r}
 GAIN_NAMES = {I.gain_names!r}
 # diagnostics: (name, offset, width, units, frame)
 DIAGNOSTICS = {diag!r}
@@ -670,6 +745,7 @@ class Controller:
     """One controller state (its own memory) over the library."""
 
     H, N_U, USES_TAU_ARM, THRUSTERS, GAIN_NAMES, DIAGNOSTICS = H, N_U, USES_TAU_ARM, THRUSTERS, GAIN_NAMES, DIAGNOSTICS
+    HAS_COMMAND_MAP, COMMAND_UNITS = HAS_COMMAND_MAP, COMMAND_UNITS
 
     def __init__(self, path=None):
         if path is None:
@@ -686,7 +762,8 @@ class Controller:
                 ("bad_index", ctypes.c_int, [ctypes.c_void_p]),
                 ("error", ctypes.c_char_p, [ctypes.c_int]),
                 ("state_size", ctypes.c_ulong, []),
-                ("params_size", ctypes.c_ulong, [])):
+                ("params_size", ctypes.c_ulong, []),
+                *([("command", ctypes.POINTER(_d), [ctypes.c_void_p])] if HAS_COMMAND_MAP else [])):
             f = getattr(lib, PREFIX + name)
             f.restype, f.argtypes = res, args
             self._fn[name] = f
@@ -744,6 +821,12 @@ class Controller:
             raise ControllerError(f"step: {{self._fn['error'](rc).decode()}}")
         return list(self._u)
 
+    def command(self):
+        """The last step's command per thruster, each in its map's unit (COMMAND_UNITS: PWM us, 1, rad/s)."""
+        if not HAS_COMMAND_MAP:
+            raise ControllerError("command: this system's thrusters have no command map (send the thrust of step)")
+        return self._fn["command"](self.state)[:N_U]
+
     def diagnostics_flat(self):
         return self._fn["diagnostics"](self.state)[:self._n_diag]
 
@@ -795,6 +878,8 @@ def _readme(I: _Info) -> str:
             "the arm's wrench on the vehicle plus the trim; this law's nominal model uses the fraction `unc[3]`"
             if I.uses_tau_arm else "not read by this law (NULL)") + " |",
         f"| `u` | {sz.n_u} | N | {I.thrust_text}, after saturation |",
+        *([f"| `{pre}command(&s)` | {sz.n_u} | per thruster, below | the command each thruster is sent for its thrust"
+           f" `u` (its command map inverted, docs/model.md §9 of arvcas) |"] if I.has_map else []),
         "",
         "Parameters (`" + pre + "params`):",
         "",
@@ -810,8 +895,14 @@ def _readme(I: _Info) -> str:
     L += ["", "Diagnostics after each step (`" + pre + "diagnostics`):", ""]
     for s, off, w in I.diag:
         L.append(f"- `[{off}:{off + w}]` `{s.name}` ({s.units}{', ' + s.frame if s.frame else ''}): {s.description}")
-    L += ["", f"Thruster command maps (thrust to PWM or rotor speed) are not part of this export yet (arvcas issue"
-          " 22): `u` is thrust in N.", ""]
+    if I.has_map:
+        L += ["", "Thruster commands (`" + pre + "command` after each step; the thrust `u` as well):", ""]
+        L += [f"- `command[{j}]` {markdown(n)}: {markdown(unit)}; {markdown(what)}" for j, (n, unit, what) in
+              enumerate(I.commands)]
+    else:
+        L += ["", "This system's thrusters have no command map (docs/system-file.md of arvcas): `u`, thrust in N,"
+              " is what the thrusters are sent."]
+    L += [""]
     return "\n".join(L)
 
 
@@ -832,7 +923,78 @@ def load_binding(out_dir, lib_path=None):
     return mod, mod.Controller(None if lib_path is None else str(lib_path))
 
 
-def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=None) -> dict:
+class _Rotors:
+    """The thrusters' side of the plant with thruster dynamics (docs/model.md §9), in NumPy: what a thruster
+    does with the command it is sent. ``target(command)``: the rotor state it steers to (the command beyond
+    the dead band's edge, 0 inside the band); ``stages(s0, y)``: the rotor states at a sample's RK4 stage
+    times (the lag's closed form, :func:`arvcas.model.thrusters.lag_states`, with the command held), one
+    column per stage; ``thrust(s)``: the steady thrust of rotor states (a table's monotone cubic by
+    SciPy's ``PchipInterpolator``, the quadratic law ``k s |s|``)."""
+
+    def __init__(self, P, cfg):
+        from scipy.interpolate import PchipInterpolator
+
+        from arvcas.model import thrusters as thr
+        from arvcas.sim.closedloop import stage_offsets
+        from arvcas.system.params import view
+
+        lay = P.layout
+        st = lay.structure
+        pv = P.vector()
+        Pn = view(ca.DM(pv), lay)
+        self.lo, self.hi, self.F = [], [], []
+        for d in st.thruster_dynamics:
+            m = st.thruster_map(d.map)
+            if m.kind == "table":
+                i0, i1 = m.zero
+                lo, hi = float(Pn[f"thrusters.map.{m.name}.command.{i0}"]), float(Pn[f"thrusters.map.{m.name}.command.{i1}"])
+                g, v = (np.array(ca.DM(x), dtype=float).ravel() for x in thr.map_grid(Pn, m))
+                self.F.append(PchipInterpolator(g, v, extrapolate=True))
+            else:
+                hi = float(Pn[f"thrusters.map.{m.name}.dead_band"])
+                lo = -hi
+                k = float(Pn[f"thrusters.map.{m.name}.rotor_constant"])
+                self.F.append(lambda x, k=k: k * x * np.abs(x))
+            self.lo.append(lo)
+            self.hi.append(hi)
+        self.lo, self.hi = np.array(self.lo), np.array(self.hi)
+        offs = stage_offsets(cfg)
+        p_s, s0, y = ca.SX.sym("p", len(lay)), ca.SX.sym("s0", st.n_thrusters), ca.SX.sym("y", st.n_thrusters)
+        Ps = view(p_s, lay)
+        S = thr.lag_states(Ps, s0, y, thr.lag_constants(Ps, offs), offs, cfg.time_h)
+        self._lag = ca.Function("rotor_stages", [s0, y, p_s], [ca.horzcat(*[ca.vertcat(*row) for row in zip(*S)])])
+        self._p = pv
+
+    def target(self, command):
+        c = np.asarray(command, dtype=float)
+        return np.where(c > self.hi, c - self.hi, np.where(c < self.lo, c - self.lo, 0.0))
+
+    def stages(self, s0, y):
+        return np.array(self._lag(s0, y, self._p), dtype=float)
+
+    def thrust(self, s):
+        s = np.asarray(s, dtype=float)
+        return np.array([F(s[i]) for i, F in enumerate(self.F)], dtype=float)
+
+
+def _tether_pull(cfg):
+    """The wrench (6, {b}, about the body origin) of a tether without a current at the state ``x``: its pull
+    ``f`` ({n}) turned into the body frame, ``R(eta)' f``, and its moment ``r_a x R(eta)' f`` (docs/model.md §10;
+    R = Rz(psi) Ry(theta) Rx(phi), NumPy)."""
+    r_a, f_n = np.array(cfg.tether_attachment, dtype=float), np.array(cfg.tether_pull, dtype=float)
+
+    def wrench(x):
+        cf, sf, ct, st, cp, sp = (np.cos(x[3]), np.sin(x[3]), np.cos(x[4]), np.sin(x[4]), np.cos(x[5]), np.sin(x[5]))
+        R = np.array([[cp * ct, -sp * cf + cp * st * sf, sp * sf + cp * cf * st],
+                      [sp * ct, cp * cf + sf * st * sp, -cp * sf + st * sp * cf],
+                      [-st, ct * sf, ct * cf]])
+        f = R.T @ f_n
+        return np.concatenate([f, np.cross(r_a, f)])
+
+    return wrench
+
+
+def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=None, delivered=None) -> dict:
     """The exported controller closed around the plant over a compiled run's scenario.
 
     ``controller``: a binding's ``Controller`` (:func:`load_binding`), initialised with the gains to
@@ -848,6 +1010,20 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     ``[eta; nu]`` to measure instead of integrating the plant (a run's own ``eta``, ``nu``: the
     controller then sees exactly the run's measurements).
 
+    With thruster dynamics (docs/model.md §9) the controller's commands (its ``command()``, in the map's
+    unit: PWM µs for the T200) drive the rotors (:class:`_Rotors`: the rotor state each command steers to,
+    the lag's closed form at the RK4 stage times, the map's thrust by SciPy's PCHIP), and ``thrust(T)`` of
+    the rotors' thrust at each stage drives the plant's RK4 stages; the series add ``thrust_cmd`` (the
+    controller's thrust), ``command`` and ``tau_delivered``, and ``thrust`` is the delivered thrust at t_k,
+    as in the run. ``delivered``: (N + 1, n_thrusters) delivered thrust at t_k to give ``arm_truth`` instead
+    of the rotors' (a run's own ``thrust``, for a replay with ``states``).
+
+    A tether (docs/model.md §10) is a wrench on the plant: without a current its drag is zero and it pulls
+    with ``pull`` ({n}) at its attachment, ``f_b = R(eta)' pull`` and ``r_a x f_b`` (NumPy, at every RK4
+    stage's state), added to the plant's ``tau``. A current is refused: it acts inside the hydrodynamics
+    (``D(nu_r) nu_r``, ``C_A(nu_r) nu_r``, ``M_A nu_c_dot``, the links' drag in the relative flow), which the
+    exported plant's body-wrench input cannot carry.
+
     Returns the series of the run's signals that the controller and the plant give (``t``, ``eta``,
     ``nu``, ``eta_hat``, ``eta_ref``, ``tau_cmd``, ``thrust``, ``q``, ``payload`` and the law's own),
     each (N + 1, width), and ``chat``, ``rmse`` (6) as the run computes them (eq. 42-43).
@@ -856,10 +1032,16 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     from arvcas.sim import scenario, schedule
 
     cfg, P = run.cfg, run.params
-    if P.structure.has_thruster_dynamics or cfg.has_water:
-        raise ExportError(f"{WHAT}: close_loop integrates the exported plant (arvcas export-c), which has no thruster "
-                          f"dynamics, current or tether (docs/model.md §9-§10): give a run with "
-                          f"Params.instantaneous() and a scenario without [current] and [tether]")
+    if cfg.current != "none":
+        raise ExportError(f"{WHAT}: close_loop integrates the exported plant (arvcas export-c's uvms_rhs and thrust), "
+                          f"which takes a body wrench: a current acts inside its hydrodynamic terms (the relative "
+                          f"velocity, docs/model.md §10) and cannot be added to it; give a scenario without [current]")
+    tether = _tether_pull(cfg) if cfg.has_tether else None
+    dyn = P.structure.has_thruster_dynamics
+    if dyn and not getattr(controller, "HAS_COMMAND_MAP", False):
+        raise ExportError(f"{WHAT}: close_loop: the run's system has thruster dynamics but the controller has no "
+                          f"command map (export it for that system)")
+    rotors = _Rotors(P, cfg) if dyn else None
     lay = P.layout
     p = P.vector()
     rhs = rhs or (lambda f: lambda x, tau, q, qd, qdd, pl: f(x, tau, q, qd, qdd, pl))(dynamics("uvms_rhs", P))
@@ -879,6 +1061,7 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     cos_ph = np.array([math.cos(v) for v in ph])
     sin_ph = np.array([math.sin(v) for v in ph])
     off, amp = np.array(cfg.disturbance_offset, dtype=float), np.array(cfg.disturbance_amplitude, dtype=float)
+    water = cfg.water_vector
 
     def stage(k, j):
         r = tab.time[j * TS:(j + 1) * TS, k]
@@ -886,17 +1069,22 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
         return r[sl["q"]], r[sl["qd"]], r[sl["qdd"]], r[sl["payload"]], dist
 
     x = np.array(list(cfg.initial_eta0) + list(cfg.initial_nu0) if states is None else states[0], dtype=float)
-    u_hold = np.zeros(P.structure.n_thrusters)
+    n_thr = P.structure.n_thrusters
+    u_hold = np.zeros(n_thr)  # the thrust acting at t_k: held, or the rotors' delivered thrust
+    s_rot = np.zeros(n_thr)  # the rotor states (at rest)
     names = [name for name, *_ in controller.DIAGNOSTICS]
     series = {k: [] for k in ("t", "eta", "nu", *names, "thrust", "q", "payload")}
-    chat_sum, e2_sum, tau_prev = np.zeros(6), np.zeros(6), None
+    if dyn:
+        series.update(thrust_cmd=[], command=[], tau_delivered=[])
+    chat_sum, e2_sum, chatd_sum, tau_prev, tdel_prev = np.zeros(6), np.zeros(6), np.zeros(6), None, None
     controller.reset()
     for k in range(n):
         tk = k * h  # the run's t_k
         q, qd, qdd, pl, dist = stage(k, 0)
         tau_arm = None
         if truth is not None:
-            tau_arm = np.array(truth(x, u_hold, tab.time[0:TS, k], tab.arm[0:AS, k], p, ph)).ravel()
+            held = u_hold if delivered is None else np.asarray(delivered[k], dtype=float)
+            tau_arm = np.array(truth(x, held, tab.time[0:TS, k], tab.arm[0:AS, k], p, ph, water, tk)).ravel()
         u = np.array(controller.step(list(x + noise[:, k]), tk, tau_arm))
         dg = controller.diagnostics()
         tau_v, y1 = np.array(dg["tau_cmd"]), np.array(dg["eta_ref"])
@@ -905,27 +1093,47 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
         series["t"].append([tk])
         series["eta"].append(x[0:6].copy())
         series["nu"].append(x[6:12].copy())
-        series["thrust"].append(u)
+        if dyn:  # the command drives the rotors; the wrench at every RK4 stage is that of their thrust
+            cmd = np.array(controller.command())
+            S = rotors.stages(s_rot, rotors.target(cmd))
+            T = rotors.thrust(S)  # (n_thr, stages); column 0 is the thrust at t_k
+            W = [np.asarray(thrust(T[:, j])).ravel() for j in range(T.shape[1])]
+            series["thrust"].append(T[:, 0])
+            series["thrust_cmd"].append(u)
+            series["command"].append(cmd)
+            series["tau_delivered"].append(W[0])
+            tau_del = W[0]
+        else:
+            series["thrust"].append(u)
+            tau_del = np.asarray(thrust(u)).ravel()
         series["q"].append(q)
         series["payload"].append(pl)
         e = x[0:6] - y1
         if k > 0:
             chat_sum = chat_sum + np.abs(tau_v - tau_prev)
+            chatd_sum = chatd_sum + np.abs(tau_del - tdel_prev)  # CHAT on the delivered wrench (docs/model.md §6)
         if k < N:
             e2_sum = e2_sum + e**2
-        tau_prev = tau_v
-        tau_real = np.asarray(thrust(u)).ravel()
+        tau_prev, tdel_prev = tau_v, tau_del
+        tau_real = tau_del
         for i in range(0 if states is not None else cfg.substeps):
             def f(xx, j):
                 qj, qdj, qddj, plj, dj = stage(k, 2 * i + j)
-                return np.asarray(rhs(xx, tau_real + dj, qj, qdj, qddj, plj)).ravel()
+                tr = W[2 * i + j] if dyn else tau_real  # stage 2i + j of the sample
+                if tether is not None:
+                    tr = tr + tether(xx)
+                return np.asarray(rhs(xx, tr + dj, qj, qdj, qddj, plj)).ravel()
 
             k1 = f(x, 0)
             k2 = f(x + 0.5 * hp * k1, 1)
             k3 = f(x + 0.5 * hp * k2, 1)
             k4 = f(x + hp * k3, 2)
             x = x + hp / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        u_hold = u
+        if dyn:
+            s_rot = S[:, -1]
+            u_hold = T[:, -1]
+        else:
+            u_hold = u
         if states is not None and k + 1 < n:
             x = np.array(states[k + 1], dtype=float)
     out = {k: np.array(v, dtype=float) for k, v in series.items()}
@@ -933,4 +1141,5 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
         out[k] = out[k].reshape(-1)
     out["chat"] = chat_sum / N
     out["rmse"] = np.sqrt(e2_sum / N)
+    out["chat_delivered"] = chatd_sum / N
     return out

@@ -239,8 +239,17 @@ def _pchip_inverse(g, v, d, u, iterations: int = 8):
     """The ``x`` at which the monotone cubic equals ``u`` (a column, MX): its interval by ``casadi.low`` on
     the values, then Newton's method on that interval's cubic from the secant's guess, kept in the
     interval (quadratic convergence from a guess within a few percent: 8 steps reach round-off)."""
+    return _pchip_newton(*_pchip_interval(g, v, d, u), u, iterations)
+
+
+def _pchip_interval(g, v, d, u):
+    """``(g0, g1, v0, v1, d0, d1)``: the interval of the monotone cubic's values that holds ``u`` (MX lookup)."""
     i = ca.low(v, u, {"lookup_mode": "binary"})
-    g0, g1, v0, v1, d0, d1 = g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
+    return g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
+
+
+def _pchip_newton(g0, g1, v0, v1, d0, d1, u, iterations: int = 8):
+    """Newton's method for the ``x`` at which one interval's cubic equals ``u`` (:func:`_pchip_inverse`); MX or SX."""
     h = g1 - g0
     t = ca.fmin(ca.fmax((u - v0) / (v1 - v0), 0), 1)
     for _ in range(iterations):
@@ -285,11 +294,9 @@ def _thruster_functions(spec: RunSpec):
     return lag, wrench
 
 
-def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, E, tabs, p):
-    """One sample of the thruster dynamics in MX: the inverse maps (table lookups and Newton), the lag, the
-    maps at every stage (table lookups), the wrenches. Returns ``(W (6 n_stages), s_end, T_end, command)``."""
-    st = spec.lay.structure
-    n, m_off = st.n_thrusters, schedule.n_stages(spec.cfg)
+def _table_grids(st, tabs):
+    """The thrusters' maps (in thruster order) and each table map's ``(s grid, thrust, slopes, lookup mode)``
+    from the stacked per-run tables ``tabs`` (:func:`thruster_constants`), by map name."""
     maps = [st.thruster_map(d.map) for d in st.thruster_dynamics]
     grids, k = {}, 0
     for m in st.thruster_maps:
@@ -298,13 +305,29 @@ def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, 
             grids[m.name] = (tabs[k:k + n_g], tabs[k + n_g:k + 2 * n_g], tabs[k + 2 * n_g:k + 3 * n_g],
                              "exact" if m.uniform else "binary")
             k += 3 * n_g
-    y_tab = [ca.MX(1, 1)] * n
+    return maps, grids
+
+
+def _table_targets(st, grids, u):
+    """Each table-mapped thruster's rotor-state target ``F^-1(u_i)`` (MX; 0 for the others): the inverse of its
+    map's monotone cubic at the allocated thrust ``u`` (:func:`_pchip_inverse`), thrusters of one map together."""
+    maps = [st.thruster_map(d.map) for d in st.thruster_dynamics]
+    y_tab = [ca.MX(1, 1)] * st.n_thrusters
     for name, (g, v, d, _) in grids.items():
         idx = [i for i, m in enumerate(maps) if m.name == name]
         ys = _pchip_inverse(g, v, d, ca.vertcat(*[u[i] for i in idx]))  # thrust -> rotor state
         for r, i in enumerate(idx):
             y_tab[i] = ys[r]
-    s_all, cmd = lag(s0, u, ca.vertcat(*y_tab), E, p)
+    return ca.vertcat(*y_tab)
+
+
+def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, E, tabs, p):
+    """One sample of the thruster dynamics in MX: the inverse maps (table lookups and Newton), the lag, the
+    maps at every stage (table lookups), the wrenches. Returns ``(W (6 n_stages), s_end, T_end, command)``."""
+    st = spec.lay.structure
+    n, m_off = st.n_thrusters, schedule.n_stages(spec.cfg)
+    maps, grids = _table_grids(st, tabs)
+    s_all, cmd = lag(s0, u, _table_targets(st, grids, u), E, p)
     T_tab = [ca.MX.zeros(m_off, 1)] * n
     for name, (g, v, d, mode) in grids.items():
         idx = [i for i, m in enumerate(maps) if m.name == name]
@@ -624,6 +647,48 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
     return fns
 
 
+def command_functions(cfg: ScenarioConfig, layout, prefix: str = "") -> dict[str, ca.Function]:
+    """The thruster command map of the controller (docs/model.md §9), for ``arvcas export-controller``: the
+    command each thruster is sent for its saturated thrust, in the map's unit (PWM µs, normalised, rad/s),
+    computed as the run computes its ``command`` (:func:`_thruster_step`: the same helpers, the same order).
+
+    * ``thr_tab(p) -> tab``: each table map's rotor-state grid, thrust and slopes (the run's per-run
+      constants, :func:`thruster_constants`), once per init;
+    * ``command(u, tab, p) -> command``: the rotor-state target ``y = F^-1(u)`` (a table's cubic inverted in
+      MX, :func:`_pchip_inverse`; the quadratic law's in closed form) and ``command_of(y)``.
+
+    Empty for a system without thruster dynamics (its commands are the thrust itself)."""
+    st = layout.structure
+    if not st.has_thruster_dynamics:
+        return {}
+    n = st.n_thrusters
+    p = ca.SX.sym("p", len(layout))
+    P = view(p, layout)
+    tab = thruster_constants(P, cfg)[1]
+    maps = thrusters.thruster_maps(P)
+    u_s, y_tab = ca.SX.sym("u", n), ca.SX.sym("y_tab", n)
+    y = [y_tab[i] if m.kind == "table" else thrusters.map_inverse(P, m, u_s[i]) for i, m in enumerate(maps)]
+    cmd_sx = ca.Function(prefix + "command_of", [u_s, y_tab, p],
+                         [ca.vertcat(*[thrusters.command_of(P, m, y[i]) for i, m in enumerate(maps)])])
+    # a table's inverse: the interval looked up in MX, Newton's method in SX (scalar code: the same operations
+    # as the run's MX ones, element by element; tests/test_export_controller.py checks the bits)
+    um, tm, pm = ca.MX.sym("u", n), ca.MX.sym("tab", tab.shape[0]), ca.MX.sym("p", len(layout))
+    maps_s = [st.thruster_map(d.map) for d in st.thruster_dynamics]
+    _, grids = _table_grids(st, tm)
+    y_tab = [ca.MX(1, 1)] * n
+    for name, (g, v, d, _) in grids.items():
+        idx = [i for i, m in enumerate(maps_s) if m.name == name]
+        iv = [ca.SX.sym(k, len(idx)) for k in ("g0", "g1", "v0", "v1", "d0", "d1", "u")]
+        newton = ca.Function(f"{prefix}newton_{name}", iv, [_pchip_newton(*iv)])
+        uu = ca.vertcat(*[um[i] for i in idx])
+        ys = newton(*_pchip_interval(g, v, d, uu), uu)
+        for r, i in enumerate(idx):
+            y_tab[i] = ys[r]
+    return {"thr_tab": ca.Function(prefix + "thr_tab", [p], [tab], ["p"], ["tab"]),
+            "command": ca.Function(prefix + "command", [um, tm, pm], [cmd_sx(um, ca.vertcat(*y_tab), pm)],
+                                   ["u", "tab", "p"], ["command"])}
+
+
 def controller_reads(fns: dict[str, ca.Function], name: str) -> bool:
     """Whether the controller's command or memory depends on the step input ``name`` (``tau_arm``, ``t``)
     of :func:`controller_functions`."""
@@ -734,23 +799,24 @@ def _true_terms(cfg, opts, P, x, u_hold, R0, static, phase_cs, water=None, tk=No
 
 
 def arm_truth(spec: RunSpec) -> ca.Function:
-    """``(x, u_hold, rec_time, rec_arm, p, phase) -> tau_m + trim``: the run's true arm wrench on the
+    """``(x, u_hold, rec_time, rec_arm, p, phase, water, t) -> tau_m + trim``: the run's true arm wrench on the
     vehicle plus the trim at sample k (the ``tau_arm`` a controller's step sees: :class:`StepContext`),
-    from the true state, the held thrust and the time table's record at t_k; the run's operations."""
-    lay = spec.lay
-    if spec.cfg.has_water or lay.structure.has_thruster_dynamics:
-        raise ValueError("arm_truth: the run's current, tether or thruster dynamics (docs/model.md §9-§10) are not "
-                         "inputs of it")
+    from the true state, the thrust acting at t_k (``u_hold``: the held thrust, or with thruster dynamics the
+    rotors' delivered thrust), the time table's record at t_k, and the run's ``water`` input and t_k (its
+    current and tether, docs/model.md §10; empty without them); the run's operations."""
+    lay, cfg = spec.lay, spec.cfg
     Rec = schedule.records(lay)
     x, u_hold = ca.SX.sym("x", 12), ca.SX.sym("u_hold", lay.structure.n_thrusters)
     rt, ra = ca.SX.sym("rec_time", Rec.time_size), ca.SX.sym("rec_arm", Rec.arm_size)
     p, phase = ca.SX.sym("p", len(lay)), ca.SX.sym("phase", 6)
+    water, t = ca.SX.sym("water", cfg.water_vector.size), ca.SX.sym("t")
     P = view(p, lay)
     consts = derived_constants(P, spec.opts)
-    _, trim, _, tau_m = _true_terms(spec.cfg, spec.opts, P, x, u_hold, schedule.unpack(ca.vertcat(rt, ra), lay),
-                                    (consts[0], consts[1], consts[2]), ca.vertcat(ca.cos(phase), ca.sin(phase)))
-    return ca.Function("arm_truth", [x, u_hold, rt, ra, p, phase], [tau_m + trim],
-                       ["x", "u_hold", "rec_time", "rec_arm", "p", "phase"], ["tau_arm"])
+    _, trim, _, tau_m = _true_terms(cfg, spec.opts, P, x, u_hold, schedule.unpack(ca.vertcat(rt, ra), lay),
+                                    (consts[0], consts[1], consts[2]), ca.vertcat(ca.cos(phase), ca.sin(phase)),
+                                    water, t)
+    return ca.Function("arm_truth", [x, u_hold, rt, ra, p, phase, water, t], [tau_m + trim],
+                       ["x", "u_hold", "rec_time", "rec_arm", "p", "phase", "water", "t"], ["tau_arm"])
 
 
 def _sym_get(Pu, i, j):

@@ -627,6 +627,8 @@ def import_uuv(description: str | Path, *, name: str | None = None, base_link: s
     lines += _hydro(uw, f"{src}: <plugin uuv_plugin> <link {base}> <hydrodynamic_model>", str(path), notes, error)
     B = np.zeros((6, n_thr))
     names = []
+    dyn_lines, unit_dyn = _thruster_dynamics(r, limits, notes, error)
+    lines += dyn_lines
     for k, (tid, jn, ln, pl) in enumerate(r.thrusters):
         j = r.joints[jn]
         parent = j.find("parent").get("link")
@@ -650,7 +652,7 @@ def import_uuv(description: str | Path, *, name: str | None = None, base_link: s
         if limits[k][2] is not None:
             lines[-3] = f"u_min = {_e(limits[k][2][0], 'N', limits[k][1])}"
             lines[-2] = f"u_max = {_e(limits[k][2][1], 'N', limits[k][1])}"
-    notes += _thruster_notes(r)
+        lines[-1:-1] = unit_dyn[k]
     arm_joints: tuple[str, ...] = ()
     if arm_base is not None:
         arm_lines, arm_joints = _arm(r, body, arm_base, tool_link, tool_offset, locks, stow, src, notes, error)
@@ -773,22 +775,115 @@ def _hydro(uw: ET.Element, src: str, where: str, notes: list, error) -> list[str
     return out
 
 
-def _thruster_notes(r: _Robot) -> list[str]:
-    dyn, conv = set(), set()
+DYNAMICS = ("ZeroOrder", "FirstOrder")  # uuv_simulator's thruster dynamics arvcas represents (docs/model.md §9)
+CONVERSIONS = ("Basic",)  # and its conversions from the dynamics' state to thrust
+
+
+def _plugin_float(pl: ET.Element, tag: str, where: str, error, default=None, parent: ET.Element | None = None):
+    el = (parent if parent is not None else pl).find(tag)
+    if el is None:
+        if default is None:
+            raise error(f"{where}: thruster plugin '{pl.get('name')}': <{tag}> is missing")
+        return default
+    try:
+        v = float((el.text or "").strip())
+    except ValueError:
+        raise error(f"{where}: thruster plugin '{pl.get('name')}': <{tag}> must be a number, got "
+                    f"{(el.text or '').strip()!r}") from None
+    if not math.isfinite(v):
+        raise error(f"{where}: thruster plugin '{pl.get('name')}': <{tag}> must be finite, got {v}")
+    return v
+
+
+def _thruster_dynamics(r: _Robot, limits, notes: list, error) -> tuple[list[str], list[list[str]]]:
+    """uuv_simulator's thruster models (ThrusterPlugin.cc) as arvcas's thruster dynamics (docs/model.md §9).
+
+    The plugin sends ``x = gain * clamp(input, clampMin, clampMax)`` through its dynamics, multiplies the
+    state by ``propeller_efficiency`` and converts it to thrust, times ``thrust_efficiency``. ``FirstOrder``
+    (``state += (1 - exp(-dt / timeConstant)) (x - state)``: the exact step of arvcas's lag) with the
+    ``Basic`` conversion (``rotorConstant * |s| * s``) is arvcas's quadratic map with the command ``x`` in
+    rad/s: ``k = thrust_efficiency * propeller_efficiency^2 * rotorConstant``, the command range
+    ``gain * [clampMin, clampMax]`` (without clamps, the rotor speed of the thrust limits, rounded up), no
+    dead band, and the lag's time constant. ``ZeroOrder`` thrusters are instantaneous (arvcas allocates
+    thrust; the conversion then plays no part). Any other dynamics or conversion is refused, as are
+    thrusters of which some have dynamics and others not. Returns the map sections and each thruster's
+    ``map`` and ``time_constant`` lines."""
+    where = r.where
+    kinds = []
     for tid, jn, ln, pl in r.thrusters:
         d = pl.find("dynamics")
-        if d is not None:
-            dyn.add(" ".join(f"{c.tag}={(c.text or '').strip()}" for c in d))
-        c = pl.find("conversion")
-        if c is not None:
-            conv.add(" ".join(f"{e.tag}={(e.text or '').strip()}" for e in c))
-    out = []
-    if dyn:
-        out.append("the thrusters' dynamics (" + "; ".join(sorted(dyn)) + "): arvcas's thrusters follow their "
-                   "commands at once")
-    if conv:
-        out.append("the thrusters' conversion from rotor speed to thrust (" + "; ".join(sorted(conv)) + "): arvcas "
-                   "commands thrust")
+        t = (d.findtext("type") or "").strip() if d is not None else "ZeroOrder"
+        if t not in DYNAMICS:
+            raise error(f"{where}: thruster plugin '{pl.get('name')}': <dynamics> <type> {t!r}: arvcas represents "
+                        f"{' or '.join(DYNAMICS)} (a first-order lag with <timeConstant>; docs/importing.md)")
+        kinds.append(t)
+    empty = ([], [[] for _ in r.thrusters])
+    if set(kinds) == {"ZeroOrder"}:
+        convs = sorted({(pl.findtext("conversion/type") or "").strip() for *_, pl in r.thrusters} - {""})
+        if convs:
+            notes.append("the thrusters' conversion to thrust (" + ", ".join(convs) + "): with ZeroOrder dynamics "
+                         "the thrust follows the command at once and arvcas allocates thrust")
+        return empty
+    if len(set(kinds)) > 1:
+        first = [pl.get("name") for (*_, pl), k in zip(r.thrusters, kinds) if k == "FirstOrder"][0]
+        other = [pl.get("name") for (*_, pl), k in zip(r.thrusters, kinds) if k != "FirstOrder"][0]
+        raise error(f"{where}: thruster plugin '{other}' has ZeroOrder dynamics and '{first}' FirstOrder: arvcas "
+                    f"gives every thruster dynamics or none (docs/system-file.md)")
+    maps: dict[tuple, str] = {}
+    sections, per_unit = [], []
+    for k, (tid, jn, ln, pl) in enumerate(r.thrusters):
+        name = pl.get("name")
+        psrc = f"{r.src}: thruster plugin '{name}'"
+        dyn = pl.find("dynamics")
+        tc = _plugin_float(pl, "timeConstant", where, error, parent=dyn)
+        if not tc > 0:
+            raise error(f"{where}: thruster plugin '{name}': <dynamics> <timeConstant> must be > 0 s, got {tc:g}")
+        conv = pl.find("conversion")
+        ct = (conv.findtext("type") or "").strip() if conv is not None else ""
+        if ct not in CONVERSIONS:
+            raise error(f"{where}: thruster plugin '{name}': <conversion> <type> {ct!r}: arvcas represents "
+                        f"{' or '.join(CONVERSIONS)} (thrust = rotorConstant * |x| * x; docs/importing.md)")
+        rc = _plugin_float(pl, "rotorConstant", where, error, parent=conv)
+        gain = _plugin_float(pl, "gain", where, error, default=1.0)
+        eff_t = _plugin_float(pl, "thrust_efficiency", where, error, default=1.0)
+        eff_p = _plugin_float(pl, "propeller_efficiency", where, error, default=1.0)
+        # the plugin resets an efficiency outside [0, 1] to 1 (ThrusterPlugin::Load)
+        eff_t, eff_p = (e if 0.0 <= e <= 1.0 else 1.0 for e in (eff_t, eff_p))
+        kk = eff_t * eff_p ** 2 * rc
+        if not (kk > 0 and gain > 0):
+            raise error(f"{where}: thruster plugin '{name}': rotorConstant, gain and the efficiencies must be > 0")
+        ksrc = psrc + " <conversion> Basic <rotorConstant>"
+        if (eff_t, eff_p) != (1.0, 1.0):
+            ksrc += f" times thrust_efficiency {eff_t:g} and propeller_efficiency^2 ({eff_p:g}^2)"
+        cmin, cmax = (_plugin_float(pl, t, where, error, default=math.nan) for t in ("clampMin", "clampMax"))
+        if math.isfinite(cmin) and math.isfinite(cmax) and cmin < cmax:
+            lo, hi = gain * cmin, gain * cmax
+            csrc = psrc + " <clampMin> <clampMax>" + (f" times <gain> {gain:g}" if gain != 1.0 else "")
+        else:  # no clamp: the rotor speeds of the thrust limits (the plugin clips the thrust to them)
+            u_lo, u_hi = limits[k][2] if limits[k][2] is not None else (-limits[k][0], limits[k][0])
+            hi = _speed_of(u_hi, kk) if u_hi > 0 else _speed_of(-u_lo, kk)
+            lo = -_speed_of(-u_lo, kk) if u_lo < 0 else -hi
+            csrc = (f"the rotor speed of the thrust limits sqrt(|u| / k) ({limits[k][1]}), rounded up: the plugin "
+                    f"sets no <clampMin>/<clampMax>")
+        key = (kk, lo, hi)
+        if key not in maps:
+            maps[key] = "basic" if not maps else f"basic_{len(maps) + 1}"
+            sections += [f"[thrusters.map.{maps[key]}]", 'command_unit = "rad/s"',
+                         f"rotor_constant = {_e(kk, 'N*s^2/rad^2', ksrc)}",
+                         f"command_min = {_e(lo, 'rad/s', csrc)}", f"command_max = {_e(hi, 'rad/s', csrc)}",
+                         f"dead_band = {_e(0.0, 'rad/s', 'uuv_simulator Basic conversion: no dead band')}", ""]
+        per_unit.append([f"map = {_q(maps[key])}",
+                         f"time_constant = {_e(tc, 's', psrc + ' <dynamics> FirstOrder <timeConstant>')}"])
+    return sections, per_unit
+
+
+def _speed_of(thrust: float, k: float) -> float:
+    """The rotor speed whose thrust ``k c^2`` reaches ``thrust`` (> 0), rounded up to 6 significant digits."""
+    c = math.sqrt(thrust / k)
+    e = math.floor(math.log10(c)) - 5
+    out = float(f"{math.ceil(c / 10.0 ** e) * 10.0 ** e:.6g}")
+    while k * out * out < thrust:  # rounding: one more in the last digit
+        out = float(f"{out + 10.0 ** e:.6g}")
     return out
 
 

@@ -9,9 +9,11 @@ Makefile (the flags of arvcas's build cache, no ``-mavx``: a vehicle's computer 
 C driver generated here links it and calls ``<prefix>step`` over one run's measurements (the scenario's
 initial state plus its sensor noise, seed 0: the step's work does not depend on the values, CasADi
 evaluates both sides of every branch), resetting the controller after each pass, so the first-sample
-branch is in the mix once per run as on a vehicle. Reported: ns per step (median, min, max over the
-repetitions), the CasADi instructions of a step k >= 1 (the machine-independent size of the work), the
-state's size in bytes and ``init``'s time.
+branch is in the mix once per run as on a vehicle. For a system with thruster command maps (the
+BlueROV2's T200s) a step also computes each thruster's command (the map's inverse: an interval lookup and
+Newton's method per thruster). Reported: ns per step (median, min, max over the repetitions), the CasADi
+instructions of a step k >= 1 without the command map (the machine-independent size of the work), whether
+the step has a command map, the state's size in bytes and ``init``'s time.
 """
 
 from __future__ import annotations
@@ -124,7 +126,8 @@ def _bench_controller(s: Settings, log) -> dict:
                 fn = closedloop.controller_functions(law, cfg, sysm.layout)["step"]
                 out[system][law] = {"ns_per_step": _stat(ns), "init_ns": val["init_ns"],
                                     "instructions_per_step": int(fn.n_instructions()),
-                                    "state_bytes": int(val["state_bytes"]), "n_steps": steps, "run_samples": y.shape[0]}
+                                    "state_bytes": int(val["state_bytes"]), "n_steps": steps, "run_samples": y.shape[0],
+                                    "command_map": bool(closedloop.command_functions(cfg, sysm.layout))}
                 log(f"controller: {system} / {law}: {statistics.median(ns):.0f} ns per step "
                     f"(min {min(ns):.0f}), state {int(val['state_bytes'])} bytes")
     return out
@@ -138,12 +141,15 @@ def _controller_markdown(res: dict | None) -> list[str]:
          "`arvcas export-controller` with each system's defaults, built by the export's Makefile (arvcas's flags, "
          "without `-mavx`), timed by a C driver over one run's measurements (the initial state plus the scenario's "
          "sensor noise; reset after each run: the first-sample branch included). One step = EKF, reference, law, "
-         "allocation and saturation: the budget on a vehicle's computer.", "",
-         "| system | law | ns per step (median) | min | max | CasADi instructions per step | state bytes | init ns |",
-         "|---|---|---|---|---|---|---|---|"]
+         "allocation and saturation, and with thruster command maps each thruster's command (the map's inverse): "
+         "the budget on a vehicle's computer.", "",
+         "| system | law | ns per step (median) | min | max | CasADi instructions per step (without the command map) "
+         "| command map | state bytes | init ns |",
+         "|---|---|---|---|---|---|---|---|---|"]
     for system, laws in res.items():
         for law, r in laws.items():
             st = r["ns_per_step"]
             L.append(f"| {system} | {law} | {st['median']:.0f} | {st['min']:.0f} | {st['max']:.0f} | "
-                     f"{r['instructions_per_step']:,} | {r['state_bytes']} | {r['init_ns']:.0f} |")
+                     f"{r['instructions_per_step']:,} | {'yes' if r.get('command_map') else 'no'} | {r['state_bytes']} | "
+                     f"{r['init_ns']:.0f} |")
     return L
