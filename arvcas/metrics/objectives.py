@@ -370,29 +370,30 @@ class Constraint:
 
 def parse_constraint(text: str, where: str = "constraint", settling_band=None) -> Constraint:
     """A constraint from its text (:data:`FORMS`), checked against the registry: one-line
-    :class:`ObjectiveError` naming ``where`` and what is allowed."""
+    :class:`ObjectiveError` naming ``where`` (may be empty) and what is allowed."""
+    pre = f"{where}: " if where else ""
     if not isinstance(text, str):
-        raise ObjectiveError(f"{where}: expected a string of the form {FORMS}, got {type(text).__name__}")
+        raise ObjectiveError(f"{pre}expected a string of the form {FORMS}, got {type(text).__name__}")
     m = _CONSTRAINT.match(text)
     if m is None:
-        raise ObjectiveError(f"{where}: {text!r} is not a constraint (allowed forms: {FORMS}, e.g. "
+        raise ObjectiveError(f"{pre}{text!r} is not a constraint (allowed forms: {FORMS}, e.g. "
                              f"'peak_thrust <= 0.8 * limit')")
     name, op, num, f1, f2 = m.groups()
     if f1 is not None and f2 is not None:
-        raise ObjectiveError(f"{where}: {text!r}: one factor of limit (allowed forms: {FORMS})")
+        raise ObjectiveError(f"{pre}{text!r}: one factor of limit (allowed forms: {FORMS})")
     try:
         o = get(name, settling_band)
     except ObjectiveError:
-        raise ObjectiveError(f"{where}: {text!r}: unknown objective {name!r} (allowed: {', '.join(available())})") from None
+        raise ObjectiveError(f"{pre}{text!r}: unknown objective {name!r} (allowed: {', '.join(available())})") from None
     if num is None:
         factor = float(f1 if f1 is not None else f2 if f2 is not None else 1.0)
         if type(o).limit is Objective.limit:
             with_limit = [n for n in available() if type(get(n)).limit is not Objective.limit]
-            raise ObjectiveError(f"{where}: {text!r}: objective {name} has no limit (objectives with one: "
+            raise ObjectiveError(f"{pre}{text!r}: objective {name} has no limit (objectives with one: "
                                  f"{', '.join(with_limit)}); give a number")
         if not np.isfinite(factor):
-            raise ObjectiveError(f"{where}: {text!r}: the factor must be finite")
+            raise ObjectiveError(f"{pre}{text!r}: the factor must be finite")
         return Constraint(text=text, objective=name, op=op, factor=factor)
     if not np.isfinite(float(num)):
-        raise ObjectiveError(f"{where}: {text!r}: the bound must be finite")
+        raise ObjectiveError(f"{pre}{text!r}: the bound must be finite")
     return Constraint(text=text, objective=name, op=op, number=float(num))
