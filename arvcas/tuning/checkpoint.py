@@ -387,6 +387,30 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
         for k in _T2:
             t.create_dataset(k, data=np.asarray(getattr(c, f"table2_{k}")))
     f.visititems(lambda name, obj: _doc(obj, c.system) if isinstance(obj, h5py.Dataset) else None)
+    _doc_objectives(f, c)
+
+
+def _doc_objectives(f: h5py.File, c: Checkpoint) -> None:
+    """Other objectives than the paper's (docs/objectives.md): F's units and description name them."""
+    try:
+        names = json.loads(c.identity)["objectives"]["names"]
+    except (ValueError, KeyError, TypeError):
+        return
+    if list(names) == ["chat", "rmse"]:
+        return
+    from arvcas.metrics import objectives as objectives_mod
+
+    units = []
+    for n in names:
+        try:
+            units.append(objectives_mod.get(n).unit)
+        except (objectives_mod.ObjectiveError, ValueError):
+            units.append("?")
+    for g in ("population", "front", "table2"):
+        if g in f and "F" in f[g]:
+            f[g]["F"].attrs["units"] = ", ".join(units)
+            f[g]["F"].attrs["description"] = ("objectives " + ", ".join(f"f_{n}" for n in names)
+                                             + " (docs/objectives.md), the mean over the draws; NaN when infeasible")
 
 
 def write_checkpoint(c: Checkpoint, path: Path) -> Path:
