@@ -330,8 +330,8 @@ def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bo
 
 def _plot_pairs(fronts, labels=None, population: bool = True):
     """Fronts of m objectives other than the paper's two: one panel per pair of objectives (m = 3: three
-    panels), each front's members, its knee (diamond) and the default gains (star); log axes where every
-    value is positive."""
+    panels), each front's members, its knee (diamond) and the default gains (star); log axes where the
+    values are positive and span more than a decade."""
     from itertools import combinations
 
     from arvcas.io import style
@@ -362,10 +362,14 @@ def _plot_pairs(fronts, labels=None, population: bool = True):
                             label=f"{lab}: default gains")
             ax.set_xlabel(labs[a])
             ax.set_ylabel(labs[b])
+            logs = 0
             for axis, i in ((ax.set_xscale, a), (ax.set_yscale, b)):
                 vals = np.concatenate([fr.F[:, i] for fr in fronts])
-                if vals.size and (vals > 0).all():
+                if vals.size and (vals > 0).all() and vals.max() > 10 * vals.min():  # log where a decade is spanned
                     axis("log")
+                    logs += 1
+            if logs:
+                style.log_labels(ax)
             ax.grid(True, which="both", alpha=0.3)
         for ax in axes[len(pairs):]:
             ax.set_visible(False)

@@ -594,8 +594,13 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
         of = f"/{max_gen}" if max_gen is not None else ""
         bc = f"{best[0]:.4g}" if np.isfinite(best[0]) else "-"
         br = f"{best[1]:.4g}" if np.isfinite(best[1]) else "-"
+        if study.objectives.names == ("chat", "rmse"):
+            bests = f"best CHAT {bc}  best RMSE {br}"
+        else:  # the smallest value of each objective in the population
+            bests = "  ".join(f"best {n} {b:.4g}" if np.isfinite(b) else f"best {n} -"
+                              for n, b in zip(study.objectives.names, best))
         say(f"{controller} gen {n_gen}{of}  evals {n_eval}  feasible {int(feas.sum())}/{len(feas)}  "
-            f"HV {hv:.5g}  best CHAT {bc}  best RMSE {br}  {dt:.1f} s/gen{eta}")
+            f"HV {hv:.5g}  {bests}  {dt:.1f} s/gen{eta}")
         if done:
             say(f"{controller}: finished: {term.reason}; {c.front.size} on the front; {path}")
             return _outcome(c, path, time.time() - t_session)
