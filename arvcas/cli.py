@@ -174,7 +174,7 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
             raise ValueError(f"--controller {a.controller} differs from the front's controller {fr.controller}")
         what = "its knee" if a.member == "knee" else "members sorted by f_chat"
         design.update(controller=fr.controller, gains=fr.gains[i].copy(), gains_source=(
-            f"member {i} of the {fr.size} of the front {path} ({what}; f_chat {fr.F[i, 0]:.6g}, f_rmse {fr.F[i, 1]:.6g})"
+            f"member {i} of the {fr.size} of the front {path} ({what}; {fr.describe(i, '.6g')})"
             + (f"; exported under another model than the study's ({changed}), as allowed by --allow-model-change"
                if changed else "")))
         cfg_text = (fr.scenario_text, f"{path} (study scenario)")

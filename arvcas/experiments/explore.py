@@ -106,6 +106,9 @@ def _checked(path: Path, allow_model_change: bool):
     from arvcas.tuning.front import check_provenance, read_front, system_params
 
     fr = read_front(path)
+    if fr.objectives != ("chat", "rmse"):  # the page draws the f_chat-f_rmse plane (docs/objectives.md)
+        raise ValueError(f"front explore {fr.path}: the page shows fronts of f_chat and f_rmse; this study's objectives "
+                         f"are {', '.join(fr.objectives)} (plot it with arvcas front plot)")
     c = ck.read_checkpoint(fr.path)
     params = system_params(c)
     changed = check_provenance(fr.path, params, allow_model_change, "front explore")

@@ -63,7 +63,7 @@ def replay_knees(study_dir: str | Path, out: str | Path, say=print, fmt: str = "
                                f"(max difference {np.abs(r.chat - fr.chat[0, k]).max():.3g}); the model changed?")
         r.meta["front"], r.meta["front_index"] = str(path), int(k)
         dest = results.write_result(r, out / f"knee_{controller}.h5")
-        say(f"{controller}: knee {k} of {fr.size}, F = ({fr.F[k, 0]:.4g}, {fr.F[k, 1]:.4g}); wrote {dest}")
+        say(f"{controller}: knee {k} of {fr.size}, F = ({', '.join(f'{x:.4g}' for x in fr.F[k])}); wrote {dest}")
         rows.append((controller, k, fr.size, fr.F[k], r))
         runs.append(r)
     lo, hi = thrusters.envelope(view(system))

@@ -99,7 +99,7 @@ def front_variables(front) -> tuple[dict, dict, dict, dict]:
     """(variables, units, descriptions, columns) of a :class:`~arvcas.tuning.front.Front`."""
     chat = np.transpose(np.asarray(front.chat, dtype=float), (1, 2, 0))  # (K, f, 6) -> member, DOF, draw
     rmse = np.transpose(np.asarray(front.rmse, dtype=float), (1, 2, 0))
-    var = {"F": np.asarray(front.F, dtype=float), "G": np.asarray(front.G, dtype=float).reshape(-1, 1),
+    var = {"F": np.asarray(front.F, dtype=float), "G": np.asarray(front.G, dtype=float).reshape(front.F.shape[0], -1),
            "gains": np.asarray(front.gains, dtype=float), "X": np.asarray(front.X, dtype=float),
            "gain_names": _cell(front.names), "chat": chat, "rmse": rmse, "knee": float(front.knee() + 1),
            "table2_F": _row(front.table2_F), "reference_point": _row(front.reference_point),
@@ -118,6 +118,14 @@ def front_variables(front) -> tuple[dict, dict, dict, dict]:
             "table2_F": f"objectives of the {defaults_name(front.system)} on the same draws",
             "reference_point": "the study's hypervolume reference point", "hypervolume": "of F against reference_point"}
     cols = {"F": _cell(["f_chat", "f_rmse"]), "gains": _cell(front.names), "X": _cell(front.names)}
+    if tuple(getattr(front, "objectives", ("chat", "rmse"))) != ("chat", "rmse"):  # docs/objectives.md
+        from arvcas.metrics import objectives as objectives_mod
+
+        cols["F"] = _cell(front.labels)
+        units["F"] = units["table2_F"] = units["reference_point"] = ", ".join(
+            objectives_mod.get(n).unit for n in front.objectives)
+        desc["F"] = f"objectives ({', '.join(front.labels)}) of each front member, docs/objectives.md"
+        desc["G"] = "constraints: > 0 means infeasible (the run diverged, or a study constraint is violated)"
     return var, units, desc, cols
 
 

@@ -1,11 +1,10 @@
 """Code from outside the package: plugins found by entry points or named by the user, and where each
 registered thing came from.
 
-A plugin is a Python module that defines controllers (and, once objectives are registered objects,
-objectives). It is found three ways:
+A plugin is a Python module that defines controllers or objectives (:mod:`arvcas.metrics.objectives`). It is found three ways:
 
 * **entry points** of an installed distribution, in the groups of :data:`GROUPS`
-  (``arvcas.controllers``; ``arvcas.objectives`` is reserved for objectives), read with
+  (``arvcas.controllers``, ``arvcas.objectives``), read with
   :func:`importlib.metadata.entry_points` as pytest and Optuna read theirs. They are loaded lazily: a
   registry asks for the entry points named like a name it does not hold (:func:`find`), and for all of
   them only when that name is still missing or when it lists what it offers (:func:`load_group`); a
@@ -52,7 +51,7 @@ from typing import Callable
 __all__ = ["GROUPS", "PluginError", "Plugin", "add_registry", "load", "find", "load_group", "failures",
            "current", "loaded", "source_files", "digest", "is_file_spec"]
 
-GROUPS = ("arvcas.controllers", "arvcas.objectives")  # entry-point groups; objectives: reserved
+GROUPS = ("arvcas.controllers", "arvcas.objectives")  # entry-point groups (arvcas.metrics.objectives: the second)
 
 
 class PluginError(ValueError):

@@ -35,7 +35,7 @@ import numpy as np
 from arvcas.controllers import atd, gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller
 from arvcas.model import manipulator, thrusters, vehicle, water as water_mod
-from arvcas.sim import scenario, schedule, signals as signals_mod
+from arvcas.sim import accumulate, scenario, schedule, signals as signals_mod
 from arvcas.system.params import Layout as ParamLayout, default_layout, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.spatial import J, J_dot, J_inv
@@ -73,11 +73,12 @@ class Layout:
 
 
 def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int, n_ekf: int = 5,
-                 n_water: int = 0, thr_consts: tuple[int, int] | None = None) -> Layout:
+                 n_water: int = 0, thr_consts: tuple[int, int] | None = None, n_acc: int = 0) -> Layout:
     """The loop state: the plant (with the thrusters' rotor states and delivered thrust when they have
     dynamics), EKF and reference; the controller's own state; the metrics and status; then the run's
     constants (carried through the loop, never changed). ``thr_consts``: the sizes of the thruster
-    dynamics' per-run constants (:func:`thruster_constants`), None for instantaneous thrusters."""
+    dynamics' per-run constants (:func:`thruster_constants`), None for instantaneous thrusters; ``n_acc``:
+    the rows of the run's accumulators (:mod:`arvcas.sim.accumulate`; none: no slot)."""
     dyn = thr_consts is not None
     return Layout([
         ("x", 12),  # true plant state [eta; nu]
@@ -87,7 +88,7 @@ def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int
         *controller_memory(ctrl),
         # previous command (CHAT); held realised thrust, or with dynamics the previous delivered wrench
         ("tau_prev", 6), ("tdel_prev", 6) if dyn else ("u_hold", n_thr),
-        ("chat_sum", 6), ("chatd_sum", 6), ("e2_sum", 6), ("ok", 1), ("t_fail", 1),
+        ("chat_sum", 6), ("chatd_sum", 6), ("e2_sum", 6), *([("acc", n_acc)] if n_acc else []), ("ok", 1), ("t_fail", 1),
         # constants of the run carried through the loop
         ("gains", n_gains), ("unc", 4), ("phase_cs", 12), ("ekf", n_ekf), ("water", n_water), ("p", n_p),
         ("consts", 9), ("pc", n_pc),
@@ -117,6 +118,7 @@ class RunSpec:
     cfg: ScenarioConfig
     opts: ModelOptions = ModelOptions()
     layout: ParamLayout | None = None  # the system's parameter layout (default Haidou-1's)
+    accumulators: tuple = ()  # arvcas.sim.accumulate.Accumulator: extra sums and maxima, the output "acc"
 
     @property
     def law(self) -> Controller:
@@ -393,7 +395,7 @@ def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     n_thr = lay.structure.n_thrusters
     dyn = lay.structure.has_thruster_dynamics
     L = state_layout(law, ng, n_thr, pc_fn.size1_out(0), len(lay), cfg.ekf_vector.size, cfg.water_vector.size,
-                     _thr_const_sizes(spec))
+                     _thr_const_sizes(spec), n_accumulated(spec))
     i_x1, i_ok, i_const = L.slices["x"].stop, L.slices["ok"].start, L.slices["gains"].start  # constants follow t_fail
     Sd, Kc = ca.SX.sym("S", i_const), ca.SX.sym("K", L.size - i_const)
     S = ca.vertcat(Sd, Kc)
@@ -765,7 +767,13 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
     # (never changed: the step passes them on itself)
     new = {
         **cs.memory, "tau_prev": tau_v, **({"tdel_prev": tau_real_held} if dyn else {"u_hold": u_sat}),
-        "chat_sum": chat_sum, "chatd_sum": chatd_sum, "e2_sum": e2_sum, "ok": ok_c, "t_fail": L.get(S, "t_fail"),
+        "chat_sum": chat_sum, "chatd_sum": chatd_sum, "e2_sum": e2_sum,
+        **({"acc": _accumulate(spec, L.get(S, "acc"), last, accumulate.SampleView(
+            t=tk, h=h, e=e_true, eta=eta, nu=nu, eta_ref=y1, tau_cmd=tau_v, tau_del=tau_real_held,
+            thrust=u_hold if dyn else u_sat, u_alloc=cs.u_cmd, u_min=thrusters.limits(P)[0],
+            u_max=thrusters.limits(P)[1], events=accumulate.event_times(cfg), duration=cfg.time_duration, P=P))}
+           if spec.accumulators else {}),
+        "ok": ok_c, "t_fail": L.get(S, "t_fail"),
     }
     names = [n for n in L.slices if n not in ("thr", "thr_T")]  # the thrusters' state comes from the step
     assert names.index("x") == 0 and list(new) == names[1:names.index("gains")]
@@ -778,6 +786,28 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
         outs.append(ca.vertcat(*[sig.value(ctx) for sig in signals_mod.trace_signals(law, lay.structure)]))
     name = f"cl_ctrl_{law.name}" + ("_first" if first.is_one() else "") + ("_tr" if trace else "")
     return ca.Function(name, [*ins, tk, noise, rec0_t, rec0_a], ca.cse(outs))
+
+
+def _accumulate(spec: RunSpec, acc, last, view):
+    """The accumulators' new values (:mod:`arvcas.sim.accumulate`): each sum adds, each max keeps the
+    larger, the sample's value over k = 0 .. N-1 (the last sample k = N adds nothing, as for RMSE)."""
+    n_thr, n_ev = spec.lay.structure.n_thrusters, len(accumulate.event_times(spec.cfg))
+    out, i = [], 0
+    for a in spec.accumulators:
+        w = accumulate.width(a, n_thr, n_ev)
+        v = ca.vertcat(a.value(view))
+        if v.shape != (w, 1):
+            raise ValueError(f"accumulator {a.name}: value has shape {v.shape}, expected ({w}, 1)")
+        old = acc[i:i + w]
+        out.append(old + ca.if_else(last, 0, v) if a.kind == "sum" else ca.fmax(old, ca.if_else(last, 0, v)))
+        i += w
+    return ca.vertcat(*out)
+
+
+def n_accumulated(spec: RunSpec) -> int:
+    """The rows of the run's output ``acc`` (0 without accumulators)."""
+    n_ev = len(accumulate.event_times(spec.cfg))
+    return sum(accumulate.width(a, spec.lay.structure.n_thrusters, n_ev) for a in spec.accumulators)
 
 
 def _true_terms(cfg, opts, P, x, u_hold, R0, static, phase_cs, water=None, tk=None):
@@ -903,8 +933,9 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     S0, K = run_start(spec, L, pc_fn, G, unc, phase, ekf, water, p)
     tgrid = ca.DM(sample_times(cfg)).T
     out = _chain(f"run_{law.name}_loop", [step0] + _levels(step, n - 1)).call([S0, K, tgrid, noise, sched_t, sched_a])
-    outs = list(run_end(L, out[0], n - 1)) + ([out[1]] if trace else [])
-    names = list(OUTPUTS) + (["trace"] if trace else [])
+    acc = [out[0][L.slices["acc"]]] if spec.accumulators else []  # the accumulators, raw (arvcas.sim.accumulate)
+    outs = list(run_end(L, out[0], n - 1)) + acc + ([out[1]] if trace else [])
+    names = list(OUTPUTS) + (["acc"] if acc else []) + (["trace"] if trace else [])
     name = f"run_{law.name}" + ("_trace" if trace else "")
     ins = {"gains": G, "noise": noise, "unc": unc, "phase": phase, "ekf": ekf, "water": water, "p": p,
            "sched_time": sched_t, "sched_arm": sched_a}

@@ -70,6 +70,7 @@ class Run:
     scenario: ScenarioConfig | str | Path | None = None
     params: Params | str | Path | None = None
     options: ModelOptions = ModelOptions()
+    accumulators: tuple = ()  # arvcas.sim.accumulate.Accumulator: the output "acc" (docs/objectives.md)
 
     def compile(self) -> "CompiledRun":
         """The compiled run. Cheap when repeated: its compiled functions are memoised per process by
@@ -84,7 +85,7 @@ class Run:
             raise SimulationError(f"options: expected arvcas.model.uvms.ModelOptions, got {type(self.options).__name__}")
         scenario.check_joint_limits(cfg, params)
         _check_lag(cfg, params)
-        return CompiledRun(with_law, cfg, params, self.options)
+        return CompiledRun(with_law, cfg, params, self.options, tuple(self.accumulators))
 
 
 def _check_lag(cfg: ScenarioConfig, params: Params) -> None:
@@ -111,8 +112,10 @@ class CompiledRun:
     (:mod:`arvcas.sim.signals`); ``artifact(trace)``: the compiled library's manifest (key, path...).
     """
 
-    def __init__(self, controller: Controller, cfg: ScenarioConfig, params: Params, opts: ModelOptions):
+    def __init__(self, controller: Controller, cfg: ScenarioConfig, params: Params, opts: ModelOptions,
+                 accumulators: tuple = ()):
         self.controller = controller
+        self.accumulators = tuple(accumulators)
         self.cfg = cfg
         self.params = params
         self.opts = opts
@@ -129,14 +132,16 @@ class CompiledRun:
         """What keys the compiled run in the cache (beside the package's model hash and the toolchain)."""
         law = self.controller
         system = system_tag(self.params.structure)
+        acc = (" accumulators=" + ";".join(a.identity() for a in self.accumulators)) if self.accumulators else ""
         return (f"run controller={law.identity()} own_source={law.source_digest()} trace={trace} "
-                f"scenario={self.cfg.graph_key()!r} options={self.opts!r}{system}")
+                f"scenario={self.cfg.graph_key()!r} options={self.opts!r}{system}{acc}")
 
     def function(self, trace: bool) -> ca.Function:
         """The compiled run function (metrics only, or with the trace), loaded from the cache when it is there."""
         fn = self._fns.get(trace)
         if fn is None:
-            spec = closedloop.RunSpec(self.controller, self.cfg.graph_key(), self.opts, self.params.layout)
+            spec = closedloop.RunSpec(self.controller, self.cfg.graph_key(), self.opts, self.params.layout,
+                                      self.accumulators)
             name = f"run_{self.controller.name}" + ("_trace" if trace else "")
             fn = _FUNCTIONS.get((name, self.description(trace)))
             if fn is None:
@@ -317,6 +322,20 @@ class CompiledRun:
         return self._evaluate(n, {"gains": G.T, "noise": noise, "unc": U.T, "phase": PH.T},
                               {"gains", "noise", "unc", "phase"}, n_threads, chat, lockstep)
 
+    def outputs(self, gains, seed: int = 0, uncertainty=None, phase=None, n_threads: int | None = None) -> dict:
+        """Many gain sets (n x n_gains) on one draw, as :meth:`batch`: every output of the metrics-only run by
+        name, one row per run (``chat``, ``chat_delivered``, ``rmse`` (n, 6), ``ok``, ``t_fail`` (n,), and with
+        accumulators ``acc`` (n, rows)), as the run returned them (not NaN-masked)."""
+        g = self._gains(gains, batch=True)
+        unc, ph = self._unc_phase(uncertainty, phase)
+        n = g.shape[0]
+        if n > MAX_RUNS:
+            raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
+        out = calls.call_named(self.function(trace=False), {"gains": g.T, "noise": scenario.noise_sequence(self.cfg, seed),
+                                                            "unc": unc, "phase": ph, **self._shared()},
+                               n=n, per_run={"gains"}, n_threads=_n_threads(n_threads))
+        return {k: (v.ravel().copy() if v.shape[0] == 1 else v.T.copy()) for k, v in out.items()}
+
     # -- lockstep ----------------------------------------------------------------------------------------
     def lockstep(self):
         """The lockstep run (:class:`arvcas.sim.lockstep.LockstepRun`: W runs per core, the same bits),
@@ -335,12 +354,17 @@ class CompiledRun:
         if lockstep is not None:
             if not isinstance(lockstep, bool):
                 raise SimulationError(f"lockstep: expected True, False or None, got {lockstep!r}")
+            if lockstep and self.accumulators:
+                raise SimulationError("lockstep: a run with accumulators (objectives beyond CHAT and RMSE) runs "
+                                      "one at a time")
             return lockstep
         mode = os.environ.get(LOCKSTEP_ENV, "auto")
         if mode not in ("auto", "0", "1"):
             raise SimulationError(f"{LOCKSTEP_ENV}={mode!r}: expected 0 (never), 1 (always) or auto (n >= "
                                   f"{LOCKSTEP_MIN_RUNS})")
-        if mode == "0" or (mode == "auto" and n < LOCKSTEP_MIN_RUNS) or self._lockstep_failed:
+        # a run with accumulators (a study's own objectives) runs one at a time: the lockstep library
+        # carries the paper's outputs only
+        if mode == "0" or (mode == "auto" and n < LOCKSTEP_MIN_RUNS) or self._lockstep_failed or self.accumulators:
             return False
         try:
             self.lockstep()

@@ -23,14 +23,15 @@ default_gains = gains_mod.default_gains
 
 
 def compiled_run(controller, params: Params | None = None, cfg: ScenarioConfig | None = None,
-                 opts: ModelOptions = ModelOptions()) -> CompiledRun:
-    """``Run(controller, cfg, params, opts).compile()``, memoised per process (the wrappers' path)."""
+                 opts: ModelOptions = ModelOptions(), accumulators: tuple = ()) -> CompiledRun:
+    """``Run(controller, cfg, params, opts, accumulators).compile()``, memoised per process (the wrappers' path)."""
     if params is not None and not isinstance(params, Params):
         raise SimulationError(f"params: expected arvcas.system.params.Params, got {type(params).__name__}")
-    key = (gains_mod.get(controller), cfg, params, opts)
+    key = (gains_mod.get(controller), cfg, params, opts) + ((tuple(accumulators),) if accumulators else ())
     run = _COMPILED.get(key)
     if run is None:
-        run = _COMPILED[key] = Run(controller=key[0], scenario=cfg, params=params, options=opts).compile()
+        run = _COMPILED[key] = Run(controller=key[0], scenario=cfg, params=params, options=opts,
+                                   accumulators=tuple(accumulators)).compile()
         while len(_COMPILED) > 32:
             _COMPILED.pop(next(iter(_COMPILED)))
     return run

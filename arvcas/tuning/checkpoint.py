@@ -17,7 +17,8 @@ study file), ``study_path``, ``identity`` (JSON of what shapes the search, see
 ``artifact_key`` (content hash of the compiled run), ``engine`` (last session), ``created``,
 ``updated`` (ISO 8601 UTC); for a controller defined outside the package, ``plugin`` (JSON of
 :func:`arvcas.controllers.base.provenance`: the controller's class, the sha256 of its source files,
-and the plugin file, module or entry point and distribution it came from).
+and the plugin file, module or entry point and distribution it came from); for NSGA-III, ``survival``
+(JSON: the ideal, worst and extreme points of its hyperplane normalisation, which a resume restores).
 
 =====================  ===========  =============================================================
 dataset                shape        content
@@ -31,8 +32,9 @@ draws/phase            (K, 6)       disturbance phases of each draw, rad
 params                 (p,)         parameter vector the runs used
 population/X           (n, m)       decision vectors, log10(gains)
 population/gains       (n, m)       10 ** X (the values the runs used)
-population/F           (n, 2)       objectives (f_chat, f_rmse); NaN when infeasible
-population/G           (n, 1)       constraint (<= 0 feasible, see problem.py)
+population/F           (n, m)       objectives (f_chat, f_rmse; or the study's m: docs/objectives.md); NaN when
+                                    infeasible
+population/G           (n, c)       constraints (<= 0 feasible, see problem.py): divergence, then the study's
 population/rank        (n,)         NSGA-II non-domination rank
 population/crowding    (n,)         NSGA-II crowding distance (inf at the ends)
 population/chat,rmse   (K, n, 6)    per-DOF CHAT and RMSE of each draw (NaN where it diverged)
@@ -41,7 +43,7 @@ front/index            (f,)         population rows on the feasible non-dominate
 front/X,gains,F,G      (f, ...)     those rows (for readers that want the front alone)
 history/<name>         (g,)         per generation: gen, n_eval, n_feasible, hv, best_chat,
                                     best_rmse, gen_time_s, elapsed_s
-table2/F,G             (2,), (1,)   Table 2 gains on the same draws
+table2/F,G             (m,), (c,)   Table 2 gains on the same draws
 table2/chat,rmse       (K, 6)
 table2/ok,t_fail       (K,)
 =====================  ===========  =============================================================
@@ -143,6 +145,7 @@ class Checkpoint:
     ref_chat: np.ndarray | None = None  # the objectives' per-DOF normalisation (None: Table 3's AGSTA)
     ref_rmse: np.ndarray | None = None
     plugin: dict = field(default_factory=dict)  # where a controller from outside the package came from
+    survival: str = ""  # NSGA-III's normalisation state (JSON); "" for NSGA-II
     engine: str = ""
     created: str = ""
     updated: str = ""
@@ -157,7 +160,7 @@ def front_indices(F: np.ndarray, G: np.ndarray) -> np.ndarray:
     """Feasible, non-dominated rows of F (duplicates kept once), sorted by the first objective."""
     if F is None or len(F) == 0:
         return np.zeros(0, dtype=int)
-    feas = np.where((G[:, 0] <= 0) & np.isfinite(F).all(axis=1))[0]
+    feas = np.where((G <= 0).all(axis=1) & np.isfinite(F).all(axis=1))[0]
     Ff = F[feas]
     # [i, j]: row j weakly below row i in every objective, and strictly in one or an earlier duplicate
     le = (Ff[None, :, :] <= Ff[:, None, :]).all(axis=2)
@@ -353,6 +356,8 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
         f.attrs["system"] = c.system
     if c.plugin:
         f.attrs["plugin"] = json.dumps(c.plugin, sort_keys=True)
+    if c.survival:
+        f.attrs["survival"] = c.survival
     if c.ref_chat is not None:
         f.attrs["ref_chat"] = np.asarray(c.ref_chat, dtype=float)
         f.attrs["ref_rmse"] = np.asarray(c.ref_rmse, dtype=float)
@@ -382,6 +387,30 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
         for k in _T2:
             t.create_dataset(k, data=np.asarray(getattr(c, f"table2_{k}")))
     f.visititems(lambda name, obj: _doc(obj, c.system) if isinstance(obj, h5py.Dataset) else None)
+    _doc_objectives(f, c)
+
+
+def _doc_objectives(f: h5py.File, c: Checkpoint) -> None:
+    """Other objectives than the paper's (docs/objectives.md): F's units and description name them."""
+    try:
+        names = json.loads(c.identity)["objectives"]["names"]
+    except (ValueError, KeyError, TypeError):
+        return
+    if list(names) == ["chat", "rmse"]:
+        return
+    from arvcas.metrics import objectives as objectives_mod
+
+    units = []
+    for n in names:
+        try:
+            units.append(objectives_mod.get(n).unit)
+        except (objectives_mod.ObjectiveError, ValueError):
+            units.append("?")
+    for g in ("population", "front", "table2"):
+        if g in f and "F" in f[g]:
+            f[g]["F"].attrs["units"] = ", ".join(units)
+            f[g]["F"].attrs["description"] = ("objectives " + ", ".join(f"f_{n}" for n in names)
+                                             + " (docs/objectives.md), the mean over the draws; NaN when infeasible")
 
 
 def write_checkpoint(c: Checkpoint, path: Path) -> Path:
@@ -462,6 +491,7 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     kw["model_changes"] = _json_attr(f, "model_changes", path, list) if "model_changes" in f.attrs else []
     kw["system"] = _s(f.attrs["system"]) if "system" in f.attrs else ""
     kw["plugin"] = _json_attr(f, "plugin", path, dict) if "plugin" in f.attrs else {}
+    kw["survival"] = _s(f.attrs["survival"]) if "survival" in f.attrs else ""
     if "ref_chat" in f.attrs:
         kw["ref_chat"], kw["ref_rmse"] = np.asarray(f.attrs["ref_chat"], float), np.asarray(f.attrs["ref_rmse"], float)
     if "population" in f:
@@ -484,7 +514,7 @@ def _int(v) -> int:
 
 def _point(v) -> np.ndarray:
     a = np.asarray(v, dtype=float)
-    if a.shape != (2,):
+    if a.ndim != 1 or not 2 <= a.size <= 4:
         raise ValueError(v)
     return a
 
@@ -528,7 +558,7 @@ def _validate_population(c: Checkpoint, path: Path) -> None:
         raise bad("gains", "not 10**X")
     if not np.isfinite(c.G).all():
         raise bad("G", "not finite")
-    feasible = c.G[:, 0] <= 0
+    feasible = (c.G <= 0).all(axis=1)
     if not np.isfinite(c.F[feasible]).all():
         raise bad("F", "not finite for a feasible member")
 
@@ -540,7 +570,9 @@ def _validate(c: Checkpoint, path: Path) -> None:
     if c.X is not None:
         n = c.X.shape[0]
         K = c.draw_seeds.shape[0]
-        want = {"X": (n, m), "gains": (n, m), "F": (n, 2), "G": (n, 1), "rank": (n,), "crowding": (n,),
+        n_g = c.G.shape[1] if c.G.ndim == 2 and c.G.shape[1] >= 1 else 1
+        want = {"X": (n, m), "gains": (n, m), "F": (n, c.reference_point.size), "G": (n, n_g), "rank": (n,),
+                "crowding": (n,),
                 "chat": (K, n, 6), "rmse": (K, n, 6), "ok": (K, n), "t_fail": (K, n)}
         for k, shp in want.items():
             if getattr(c, k).shape != shp:

@@ -166,7 +166,7 @@ def run_front_plot(a: argparse.Namespace) -> int:
     style.write_figure(out, fig, figure_file(out, a.format, f"--out {out}"))
     k = fr.knee()
     print(f"{fr.controller}: {fr.size} on the front, HV {fr.hv:.6g}; knee: member {k} "
-          f"(f_chat {fr.F[k, 0]:.4g}, f_rmse {fr.F[k, 1]:.4g}); wrote {out}")
+          f"({fr.describe(k)}); wrote {out}")
     return 0
 
 

@@ -7,8 +7,11 @@ Any number of fronts (two or more; A, B, C, ... in the order given):
   ``ref`` overrides it. Members that do not dominate the reference point add nothing.
 * Coverage (Zitzler's C metric): for each pair, the fraction of one front's members weakly dominated
   by some member of the other.
-* Where: along f_chat, the attainment curve of each front (the best f_rmse reachable at or below that
-  f_chat); the f_chat intervals where one front's curve lies strictly below all the others'.
+* Where (two objectives): along the first, the attainment curve of each front (the best second objective
+  reachable at or below that value); the intervals where one front's curve lies strictly below all the
+  others'. Fronts of three or more objectives get hypervolume and coverage only.
+
+Fronts of different objectives (docs/objectives.md) are not compared.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ class Comparison:
     regions: tuple  # ((f_chat_lo, f_chat_hi, "A" | "B" | ... | "tie" | "A only" | ... | "none"), ...)
     defaults: tuple  # each front's point at its system's default gains (Table 2 for Haidou-1) on its own draws
     systems: tuple = ()  # each front's system ("": Haidou-1)
+    objectives: tuple = ("chat", "rmse")
 
     @property
     def coverage(self) -> tuple[float, float]:
@@ -99,11 +103,16 @@ def compare_fronts(*fronts, ref=None) -> Comparison:
         raise ValueError(f"compare: needs at least two fronts, got {len(fronts)}")
     frs = [f if isinstance(f, Front) else read_front(f) for f in fronts]
     _letters(len(frs))
+    objs = frs[0].objectives
+    for f in frs[1:]:
+        if f.objectives != objs:
+            raise ValueError(f"compare: {frs[0].path} has objectives {', '.join(objs)}, {f.path} has "
+                             f"{', '.join(f.objectives)}: fronts of different objectives are not comparable")
     if ref is None:
         ref = np.max([f.reference_point for f in frs], axis=0)
     ref = np.asarray(ref, dtype=float)
-    if ref.shape != (2,) or not np.isfinite(ref).all():
-        raise ValueError(f"--ref: expected two finite numbers, got {ref}")
+    if ref.shape != (len(objs),) or not np.isfinite(ref).all():
+        raise ValueError(f"--ref: expected {len(objs)} finite numbers (one per objective), got {ref}")
     names = [f.controller for f in frs]
     labels = [f"{n} ({f.path.parent.name})" if names.count(n) > 1 else n for n, f in zip(names, frs)]
     labels = [f"{lab} [{k}]" if labels.count(lab) > 1 else lab for lab, k in zip(labels, _letters(len(frs)))]
@@ -111,8 +120,8 @@ def compare_fronts(*fronts, ref=None) -> Comparison:
         labels=tuple(labels), reference_point=ref, hv=tuple(hypervolume(f.F, f.G, ref) for f in frs),
         sizes=tuple(f.size for f in frs),
         coverage_matrix=tuple(tuple(_coverage(fi.F, fj.F) for fj in frs) for fi in frs),
-        regions=tuple(_regions(*[f.F for f in frs])), defaults=tuple(f.table2_F for f in frs),
-        systems=tuple(f.system for f in frs),
+        regions=tuple(_regions(*[f.F for f in frs])) if len(objs) == 2 else (), defaults=tuple(f.table2_F for f in frs),
+        systems=tuple(f.system for f in frs), objectives=tuple(objs),
     )
 
 
@@ -120,11 +129,12 @@ def format_comparison(c: Comparison) -> str:
     n = len(c.labels)
     letters = c.letters
     w = max(*(len(x) for x in c.labels), 5)
-    dname = f"{'Table 2' if c.systems and not any(c.systems) else 'defaults'} (f_chat, f_rmse)"
-    lines = [f"reference point (f_chat, f_rmse) = ({c.reference_point[0]:.6g}, {c.reference_point[1]:.6g})",
+    fl = ", ".join(f"f_{n}" for n in c.objectives)
+    dname = f"{'Table 2' if c.systems and not any(c.systems) else 'defaults'} ({fl})"
+    lines = [f"reference point ({fl}) = ({', '.join(f'{x:.6g}' for x in c.reference_point)})",
              f"{'front':<{w}}  {'members':>7}  {'hypervolume':>12}  {dname:>26}"]
     for lab, k, hv, t2 in zip(c.labels, c.sizes, c.hv, c.defaults):
-        t2s = f"({t2[0]:.4g}, {t2[1]:.4g})" if np.isfinite(t2).all() else "diverged"
+        t2s = f"({', '.join(f'{x:.4g}' for x in t2)})" if np.isfinite(t2).all() else "diverged"
         lines.append(f"{lab:<{w}}  {k:>7}  {hv:>12.6g}  {t2s:>26}")
     lines.append(f"{'larger' if n == 2 else 'largest'} hypervolume: {c.better}")
     if n == 2:
@@ -142,8 +152,13 @@ def format_comparison(c: Comparison) -> str:
     for k, lab in zip(letters, c.labels):
         names[k] = f"{lab} {'lower' if n == 2 else 'lowest'} RMSE"
         names[f"{k} only"] = f"only {lab} reaches"
-    lines.append("where (best f_rmse attainable at f_chat <= x):")
+    if len(c.objectives) != 2:
+        return "\n".join(lines)
+    fa, fb = (f"f_{n}" for n in c.objectives)
+    if fb != "f_rmse":
+        names.update({k: f"{lab} {'lower' if n == 2 else 'lowest'} {fb}" for k, lab in zip(letters, c.labels)})
+    lines.append(f"where (best {fb} attainable at {fa} <= x):")
     for lo, hi, who in c.regions:
         his = "inf" if np.isinf(hi) else f"{hi:.4g}"
-        lines.append(f"  f_chat in [{lo:.4g}, {his}): {names[who]}")
+        lines.append(f"  {fa} in [{lo:.4g}, {his}): {names[who]}")
     return "\n".join(lines)

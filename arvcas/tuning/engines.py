@@ -49,14 +49,17 @@ class EvalTask:
     ref: tuple | None = None  # per-DOF (chat, rmse) normalisation; None: the paper's Table 3 AGSTA
     plugins: tuple[str, ...] = ()  # plugin files or modules a worker loads first (the controller's)
     chat: str = "commanded"  # CHAT on the command (eq. 42) or on the delivered wrench ([objectives] chat)
+    # other objectives or constraints than the paper's (docs/objectives.md): the accumulators the compiled run
+    # carries for them; none: the paper's run and evaluation, unchanged
+    accumulators: tuple = ()
 
 
-def run_key(controller: str, cfg: ScenarioConfig, params: Params | None = None) -> str:
+def run_key(controller: str, cfg: ScenarioConfig, params: Params | None = None, accumulators: tuple = ()) -> str:
     """Content hash of the compiled metrics-only run (built or loaded from the cache)."""
     from arvcas.build import codegen
     from arvcas.sim.simulation import compiled_run
 
-    m = codegen.artifact_of(compiled_run(controller, params, cfg).function(False))
+    m = codegen.artifact_of(compiled_run(controller, params, cfg, accumulators=accumulators).function(False))
     return "" if m is None else str(m["key"])
 
 
@@ -73,8 +76,14 @@ def evaluate_rows(task: EvalTask, gains: np.ndarray, n_threads: int | None = Non
     Returns ``(chat (K, n, 6), rmse (K, n, 6), ok (K, n), t_fail (K, n), key)``.
     Top level (importable) so that Dask workers can run it.
     """
-    from arvcas.sim.simulation import simulate_batch
+    from arvcas.sim.simulation import compiled_run, simulate_batch
 
+    if task.accumulators:  # every output by name, per draw (docs/objectives.md)
+        run = compiled_run(task.controller, task.params, task.cfg, accumulators=task.accumulators)
+        kind = "chat" if task.chat == "commanded" else "chat_delivered"
+        outs = [run.outputs(gains, seed, unc, ph, n_threads) for seed, unc, ph in task.draws]
+        outs = [{**o, "chat": o[kind]} for o in outs]
+        return outs, run_key(task.controller, task.cfg, task.params, task.accumulators)
     outs = [simulate_batch(task.controller, gains, seed=seed, params=task.params, cfg=task.cfg,
                            uncertainty=unc, phase=ph, n_threads=n_threads, return_status=True, chat=task.chat)
             for seed, unc, ph in task.draws]
@@ -98,14 +107,15 @@ class LocalEngine:
         return f"local, {self.threads} thread(s)"
 
     def prepare(self, task: EvalTask) -> str:
-        k = (task.controller, task.cfg.graph_key(), task.params.structure)
+        k = (task.controller, task.cfg.graph_key(), task.params.structure, task.accumulators)
         if k not in self._key:
-            self._key[k] = run_key(task.controller, task.cfg, task.params)
+            self._key[k] = run_key(task.controller, task.cfg, task.params, task.accumulators)
         return self._key[k]
 
     def evaluate(self, task: EvalTask, gains: np.ndarray):
-        chat, rmse, ok, t_fail, _ = evaluate_rows(task, gains, n_threads=self.threads)
-        return chat, rmse, ok, t_fail
+        """``(chat, rmse, ok, t_fail)`` (K, n, ...); with accumulators a list of K dicts of outputs."""
+        res = evaluate_rows(task, gains, n_threads=self.threads)
+        return res[0] if task.accumulators else res[:4]
 
     def close(self) -> None:
         pass
@@ -203,10 +213,11 @@ class DaskEngine:
         """The run's key; compiles it here (once) and scatters its libraries to every worker."""
         from arvcas.sim.simulation import compiled_run
 
-        k = (task.controller, task.cfg.graph_key(), task.params.structure)
+        k = (task.controller, task.cfg.graph_key(), task.params.structure, task.accumulators)
         if k not in self._keys:
-            self._keys[k] = run_key(task.controller, task.cfg, task.params)
-            self._raw[k] = ship_bundle(compiled_run(task.controller, task.params, task.cfg))
+            self._keys[k] = run_key(task.controller, task.cfg, task.params, task.accumulators)
+            self._raw[k] = ship_bundle(compiled_run(task.controller, task.params, task.cfg,
+                                                    accumulators=task.accumulators))
             self._scatter(k)
         return self._keys[k]
 
@@ -216,7 +227,7 @@ class DaskEngine:
 
     def evaluate(self, task: EvalTask, gains: np.ndarray):
         key = self.prepare(task)
-        k = (task.controller, task.cfg.graph_key(), task.params.structure)
+        k = (task.controller, task.cfg.graph_key(), task.params.structure, task.accumulators)
         n = gains.shape[0]
         for attempt in range(self.RETRIES + 1):
             try:
@@ -238,6 +249,13 @@ class DaskEngine:
                     continue
                 raise EngineError(f"engine dask: evaluating the generation failed ({type(e).__name__}: {msg})"
                                   + (f" after {attempt} retries" if attempt else "")) from None
+        if task.accumulators:  # each part: (K dicts of outputs, key)
+            for p in parts:
+                if p[1] != key:
+                    raise EngineError(f"engine dask: a worker ran compiled code {p[1][:20] or '?'}, this process "
+                                      f"{key[:20]}: results would not be identical (different arvcas, CasADi or compiler)")
+            return [{name: np.concatenate([p[0][d][name] for p in parts], axis=0) for name in parts[0][0][d]}
+                    for d in range(len(task.draws))]
         assert sum(p[0].shape[1] for p in parts) == n
         for p in parts:
             if p[4] != key:

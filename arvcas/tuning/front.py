@@ -3,10 +3,12 @@
 Front members are the feasible, non-dominated rows of the study's final (or latest) population,
 sorted by ``f_chat``; member ``i`` of every function here is row ``i`` of that order.
 
-Knee point: pymoo's :class:`~pymoo.mcdm.pseudo_weights.PseudoWeights` with equal weights (0.5, 0.5):
-the member whose pseudo-weight vector ``w_i ~ (f_i,max - f_i) / (f_i,max - f_i,min)`` (normalised to
-sum 1) is closest to equal weights, i.e. the balanced compromise where both objectives are the same
-fraction of the way from their worst to their best value on the front. Always exactly one member,
+Knee point: pymoo's :class:`~pymoo.mcdm.pseudo_weights.PseudoWeights` with equal weights (0.5, 0.5; for m
+objectives 1/m each, docs/objectives.md): the member whose pseudo-weight vector
+``w_i ~ (f_i,max - f_i) / (f_i,max - f_i,min)`` (normalised to sum 1; Deb, *Multi-Objective Optimization
+using Evolutionary Algorithms*, Wiley 2001, the pseudo-weight vector approach) is closest to equal weights,
+i.e. the balanced compromise where every objective is the same fraction of the way from its worst to its
+best value on the front. Always exactly one member,
 and insensitive to the scale of either objective. pymoo's ``HighTradeoffPoints`` was tried first and
 rejected: on these fronts (noisy at the scale of neighbouring members) its local trade-off ratios
 pick an end of the front (a nearly vertical step between two neighbours), not the bend.
@@ -100,10 +102,20 @@ class Front:
     versions: dict
     system: str = ""  # the study's system ("": Haidou-1, objectives normalised by the paper's Table 3)
     plugin: dict | None = None  # a controller from outside the package: where it came from (checkpoint.py)
+    objectives: tuple = ("chat", "rmse")  # the study's objectives, the columns of F (docs/objectives.md)
 
     @property
     def size(self) -> int:
         return int(self.F.shape[0])
+
+    @property
+    def labels(self) -> list[str]:
+        """The columns of F: ``f_chat``, ``f_rmse``, ``f_<objective>``."""
+        return [f"f_{n}" for n in self.objectives]
+
+    def describe(self, i: int, fmt: str = ".4g") -> str:
+        """Member ``i``'s objectives: ``"f_chat 1.2, f_rmse 3.4"``."""
+        return ", ".join(f"{lab} {v:{fmt}}" for lab, v in zip(self.labels, self.F[i]))
 
     @property
     def hv(self) -> float:
@@ -138,11 +150,23 @@ def read_front(path: str | Path) -> Front:
         reference_point=c.reference_point, history=c.history, seed=c.seed, draw_seeds=c.draw_seeds,
         draw_uncertainty=c.draw_uncertainty, draw_phase=c.draw_phase, scenario_text=c.scenario_text,
         study_text=c.study_text, versions=c.versions, system=c.system, plugin=c.plugin or None,
+        objectives=objective_names(c),
     )
 
 
+def objective_names(c: ck.Checkpoint) -> tuple:
+    """The objectives of a checkpoint's study (its identity's ``objectives.names``)."""
+    try:
+        names = json.loads(c.identity)["objectives"]["names"]
+    except (ValueError, KeyError, TypeError):
+        names = None
+    if not (isinstance(names, list) and len(names) == c.reference_point.size):
+        return ("chat", "rmse")[:c.reference_point.size]
+    return tuple(str(n) for n in names)
+
+
 def knee_index(F: np.ndarray) -> int:
-    """Knee of a 2-objective front: pymoo's PseudoWeights(0.5, 0.5); see the module docstring."""
+    """Knee of an m-objective front: pymoo's PseudoWeights(1/m, ..., 1/m); see the module docstring."""
     from pymoo.mcdm.pseudo_weights import PseudoWeights
 
     F = np.asarray(F, dtype=float)
@@ -153,7 +177,7 @@ def knee_index(F: np.ndarray) -> int:
         return 0
     if np.any(F.max(axis=0) == F.min(axis=0)):  # a degenerate front: pseudo-weights undefined
         return int(np.argmin(_normalise(F).sum(axis=1)))
-    return int(PseudoWeights(np.array([0.5, 0.5])).do(F))
+    return int(PseudoWeights(np.full(F.shape[1], 1.0 / F.shape[1]) if F.shape[1] != 2 else np.array([0.5, 0.5])).do(F))
 
 
 def _normalise(F: np.ndarray) -> np.ndarray:
@@ -167,12 +191,12 @@ def _normalise(F: np.ndarray) -> np.ndarray:
 
 def _records(fr: Front) -> tuple[list[str], list[list]]:
     knee = fr.knee() if fr.size else -1
-    head = ["member", "population_row", "f_chat", "f_rmse", "G", "knee"] + list(fr.names) \
+    head = ["member", "population_row", *fr.labels, "G", "knee"] + list(fr.names) \
         + [f"chat.{d}" for d in DOFS] + [f"rmse.{d}" for d in DOFS]
     chat, rmse = fr.chat.mean(axis=0), fr.rmse.mean(axis=0)  # over draws (one draw: that draw)
     rows = []
-    for i in range(fr.size):
-        rows.append([i, int(fr.index[i]), float(fr.F[i, 0]), float(fr.F[i, 1]), float(fr.G[i, 0]), i == knee]
+    for i in range(fr.size):  # G: the largest constraint value (the one constraint of the paper's studies)
+        rows.append([i, int(fr.index[i]), *[float(x) for x in fr.F[i]], float(fr.G[i].max()), i == knee]
                     + [float(x) for x in fr.gains[i]] + [float(x) for x in chat[i]] + [float(x) for x in rmse[i]])
     return head, rows
 
@@ -180,7 +204,8 @@ def _records(fr: Front) -> tuple[list[str], list[list]]:
 def export_front(path: str | Path, fmt: str) -> str:
     """The front as CSV or JSON text (floats in shortest round-trip form: reading them back is exact).
 
-    CSV: one row per member: ``member, population_row, f_chat, f_rmse, G, knee``, the gains by name,
+    CSV: one row per member: ``member, population_row, f_chat, f_rmse`` (or the study's ``f_<objective>``),
+    ``G, knee``, the gains by name,
     then per-DOF CHAT and RMSE (mean over the draws). JSON: the same members plus provenance (study,
     seed, draws, reference point, hypervolume, Table 2's objectives, versions).
     """
@@ -196,20 +221,21 @@ def export_front(path: str | Path, fmt: str) -> str:
             w.writerow([repr(x) if isinstance(x, float) else x for x in r])
         return buf.getvalue()
     members = []
+    m, g = len(fr.labels), 4 + len(fr.labels)  # g: the first gain's column
     for r in rows:
         members.append({
-            "member": r[0], "population_row": r[1], "f_chat": r[2], "f_rmse": r[3], "G": r[4], "knee": r[5],
-            "gains": dict(zip(fr.names, r[6:6 + len(fr.names)])),
-            "chat": r[6 + len(fr.names):12 + len(fr.names)], "rmse": r[12 + len(fr.names):],
+            "member": r[0], "population_row": r[1], **dict(zip(fr.labels, r[2:2 + m])), "G": r[2 + m],
+            "knee": r[3 + m], "gains": dict(zip(fr.names, r[g:g + len(fr.names)])),
+            "chat": r[g + len(fr.names):g + 6 + len(fr.names)], "rmse": r[g + 6 + len(fr.names):],
         })
     doc = {
         "format": "arvcas.tuning.front.export", "format_version": 1, "controller": fr.controller,
         "study": fr.study_name, "status": fr.status, "generations": fr.n_gen, "evaluations": fr.n_eval,
-        "seed": fr.seed, "objectives": ["f_chat", "f_rmse"],
+        "seed": fr.seed, "objectives": fr.labels,
         "draws": [{"noise_seed": int(s), "uncertainty": u.tolist(), "phase_rad": p.tolist()}
                   for s, u, p in zip(fr.draw_seeds, fr.draw_uncertainty, fr.draw_phase)],
         "reference_point": fr.reference_point.tolist(), "hypervolume": fr.hv,
-        "table2": {"f_chat": _num(fr.table2_F[0]), "f_rmse": _num(fr.table2_F[1]), "G": _num(fr.table2_G[0]),
+        "table2": {**{lab: _num(v) for lab, v in zip(fr.labels, fr.table2_F)}, "G": _num(np.max(fr.table2_G)),
                    "gains": dict(zip(fr.names, fr.table2.tolist()))},
         "knee": fr.knee() if fr.size else None, "gain_names": fr.names, "dofs": list(DOFS), "members": members,
         "versions": fr.versions,
@@ -243,6 +269,13 @@ def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bo
     from arvcas.io import style
 
     fronts = list(fronts)
+    if any(fr.objectives != fronts[0].objectives for fr in fronts):
+        raise ValueError("plot: the fronts have different objectives (" + "; ".join(
+            ", ".join(fr.objectives) for fr in fronts) + ")")
+    if len(fronts[0].objectives) != 2 or fronts[0].objectives != ("chat", "rmse"):
+        if paper:
+            raise ValueError("--paper: the paper's Table 3 points are of f_chat and f_rmse alone")
+        return _plot_pairs(fronts, labels, population)
     if paper and any(fr.system for fr in fronts):
         raise ValueError("--paper: the paper's Table 3 points are Haidou-1's; these fronts are of "
                          f"{', '.join(sorted({fr.system for fr in fronts if fr.system}))}")
@@ -293,6 +326,57 @@ def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bo
         return fig
 
     return draw(ax)
+
+
+def _plot_pairs(fronts, labels=None, population: bool = True):
+    """Fronts of m objectives other than the paper's two: one panel per pair of objectives (m = 3: three
+    panels), each front's members, its knee (diamond) and the default gains (star); log axes where the
+    values are positive and span more than a decade."""
+    from itertools import combinations
+
+    from arvcas.io import style
+    from arvcas.io.plots import controller_color
+
+    labs = fronts[0].labels
+    pairs = list(combinations(range(len(labs)), 2))
+
+    @style.styled
+    def draw(_):
+        fig = style.figure("page", 2.4 * ((len(pairs) + 2) // 3) + 0.6)
+        axes = fig.subplots((len(pairs) + 2) // 3, min(3, len(pairs)), squeeze=False).ravel()
+        distinct = len({fr.controller for fr in fronts}) == len(fronts)
+        for ax, (a, b) in zip(axes, pairs):
+            for j, fr in enumerate(fronts):
+                col = controller_color(fr.controller, j) if distinct else style.color("", j)
+                lab = labels[j] if labels else fr.controller
+                if population:
+                    feas = (fr.population_G <= 0).all(axis=1) & np.isfinite(fr.population_F).all(axis=1)
+                    ax.scatter(fr.population_F[feas, a], fr.population_F[feas, b], s=4, color=col, alpha=0.25,
+                               linewidths=0)
+                if fr.size:
+                    ax.scatter(fr.F[:, a], fr.F[:, b], s=8, color=col, label=f"{lab}: {fr.size} members, HV {fr.hv:.4g}")
+                    k = fr.knee()
+                    ax.plot(fr.F[k, a], fr.F[k, b], "D", color=col, ms=5, mec="k", mew=0.6, label=f"{lab}: knee")
+                if np.isfinite(fr.table2_F).all():
+                    ax.plot(fr.table2_F[a], fr.table2_F[b], "*", color=col, ms=8, mec="k", mew=0.5,
+                            label=f"{lab}: default gains")
+            ax.set_xlabel(labs[a])
+            ax.set_ylabel(labs[b])
+            logs = 0
+            for axis, i in ((ax.set_xscale, a), (ax.set_yscale, b)):
+                vals = np.concatenate([fr.F[:, i] for fr in fronts])
+                if vals.size and (vals > 0).all() and vals.max() > 10 * vals.min():  # log where a decade is spanned
+                    axis("log")
+                    logs += 1
+            if logs:
+                style.log_labels(ax)
+            ax.grid(True, which="both", alpha=0.3)
+        for ax in axes[len(pairs):]:
+            ax.set_visible(False)
+        fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=3, fontsize=6)
+        return fig
+
+    return draw(None)
 
 
 def plot_front(front: Front | str | Path, ax=None, **kw):

@@ -15,6 +15,10 @@ One inequality constraint ``G <= 0`` (pymoo's convention):
   failure, so NSGA-II's constraint domination prefers candidates that survive longer;
 * ``G = 2`` when a run completed but returned non-finite metrics (not expected; never silent).
 
+A study with other objectives or constraints (docs/objectives.md, :func:`assemble_objectives`): ``F`` has
+one column per objective (each draw's value, averaged over the draws), ``G`` the column above and one per
+constraint (its largest relative violation over the draws, 0 for a diverged candidate).
+
 An infeasible candidate's objectives are unknown. pymoo needs finite numbers, so it is given the
 placeholder :data:`INFEASIBLE_F` for both; it can never win, because NSGA-II ranks any feasible
 candidate above every infeasible one and infeasible ones among themselves by ``G``. The stored
@@ -30,7 +34,7 @@ from pymoo.core.problem import Problem
 
 from arvcas.metrics import normalised_objectives
 
-__all__ = ["INFEASIBLE_F", "Evaluation", "GainProblem", "to_gains", "assemble"]
+__all__ = ["INFEASIBLE_F", "Evaluation", "GainProblem", "to_gains", "assemble", "assemble_objectives"]
 
 INFEASIBLE_F = 1.0e6  # pymoo's F for infeasible candidates (never stored, never on a front)
 
@@ -54,10 +58,11 @@ class Evaluation:
     t_fail: np.ndarray
     F: np.ndarray
     G: np.ndarray
+    values: np.ndarray | None = None  # (K, n, m) each draw's objectives (other objectives than the paper's)
 
     @property
     def feasible(self) -> np.ndarray:
-        return self.G[:, 0] <= 0
+        return (self.G <= 0).all(axis=1)
 
     @property
     def F_pymoo(self) -> np.ndarray:
@@ -94,6 +99,36 @@ def assemble(chat, rmse, ok, t_fail, duration: float, ref=None) -> Evaluation:
     return Evaluation(chat=chat, rmse=rmse, ok=ok, t_fail=t_fail, F=F, G=G)
 
 
+def assemble_objectives(outs: list, objectives, constraints, ctx, duration: float) -> Evaluation:
+    """Objectives and constraints (docs/objectives.md) from each draw's run outputs (``outs``: K dicts of
+    :meth:`arvcas.sim.run.CompiledRun.outputs`, with ``chat`` the study's CHAT); ``objectives``:
+    :class:`arvcas.metrics.objectives.Objective` s; ``constraints``: (objective, Constraint) pairs;
+    ``ctx``: their :class:`arvcas.metrics.objectives.Context`."""
+    K, n, m = len(outs), len(outs[0]["ok"]), len(objectives)
+    ok = np.stack([np.asarray(o["ok"]) > 0.5 for o in outs])
+    t_fail = np.stack([np.where(k, np.nan, o["t_fail"]) for k, o in zip(ok, outs)])
+    chat = np.stack([np.where(k[:, None], o["chat"], np.nan) for k, o in zip(ok, outs)])
+    rmse = np.stack([np.where(k[:, None], o["rmse"], np.nan) for k, o in zip(ok, outs)])
+    ev = assemble(chat, rmse, ok, t_fail, duration, ctx.ref)  # G's first column: divergence, as the paper's
+    G = np.zeros((n, 1 + len(constraints)))
+    G[:, 0] = np.where(ev.G[:, 0] == 2.0, 0.0, ev.G[:, 0])
+    vals = np.full((K, n, m), np.nan)
+    with np.errstate(all="ignore"):
+        for d, out in enumerate(outs):
+            for j, o in enumerate(objectives):
+                vals[d, :, j] = np.where(ok[d], o.values(out, ctx), np.nan)
+        F = vals[0].copy() if K == 1 else vals.mean(axis=0)
+        for j, (o, c) in enumerate(constraints):
+            v = np.stack([c.violation(o, out, ctx) for out in outs]).max(axis=0)
+            G[:, 1 + j] = np.where(ok.all(axis=0), v, 0.0)
+    alive = ok.all(axis=0)
+    bad = alive & ~(np.isfinite(F).all(axis=1) & np.isfinite(G).all(axis=1))
+    G[bad] = 0.0
+    G[bad, 0] = 2.0
+    F[~alive | bad] = np.nan
+    return Evaluation(chat=chat, rmse=rmse, ok=ok, t_fail=t_fail, F=F, G=G, values=vals)
+
+
 class GainProblem(Problem):
     """``x = log10(gains)`` -> ``F = (f_chat, f_rmse)``, ``G`` (see the module docstring).
 
@@ -102,11 +137,11 @@ class GainProblem(Problem):
     loop can store the per-DOF metrics with the population.
     """
 
-    def __init__(self, names, log_lower, log_upper, evaluate_gains):
+    def __init__(self, names, log_lower, log_upper, evaluate_gains, n_obj: int = 2, n_constr: int = 1):
         self.names = list(names)
         self.evaluate_gains = evaluate_gains
         self.last: Evaluation | None = None
-        super().__init__(n_var=len(self.names), n_obj=2, n_ieq_constr=1,
+        super().__init__(n_var=len(self.names), n_obj=n_obj, n_ieq_constr=n_constr,
                          xl=np.asarray(log_lower, dtype=float), xu=np.asarray(log_upper, dtype=float))
 
     def _evaluate(self, X, out, *args, **kwargs):

@@ -36,6 +36,7 @@ from typing import Callable
 
 import numpy as np
 from pymoo.algorithms.moo.nsga2 import NSGA2
+from pymoo.algorithms.moo.nsga3 import NSGA3
 from pymoo.core.population import Population
 from pymoo.core.termination import Termination
 from pymoo.operators.crossover.sbx import SBX
@@ -46,7 +47,7 @@ from arvcas.build.provenance import model_hash
 from arvcas.controllers.base import provenance
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.engines import EngineError, EvalTask, make_engine
-from arvcas.tuning.problem import Evaluation, GainProblem, assemble, pymoo_F
+from arvcas.tuning.problem import Evaluation, GainProblem, assemble, assemble_objectives, pymoo_F
 from arvcas.tuning.study import Study, StudyError
 
 __all__ = ["TuningError", "Outcome", "StudyTermination", "hypervolume", "run_study", "front_path", "evaluate_gains"]
@@ -77,7 +78,7 @@ def hypervolume(F: np.ndarray, G: np.ndarray, ref) -> float:
 
     ref = np.asarray(ref, dtype=float)
     idx = ck.front_indices(F, G)
-    P = F[idx] if idx.size else np.zeros((0, 2))
+    P = F[idx] if idx.size else np.zeros((0, ref.size))
     P = P[np.all(P < ref, axis=1)]
     if P.shape[0] == 0:
         return 0.0
@@ -157,10 +158,59 @@ def front_path(out: Path, study: Study, controller: str) -> Path:
     return out / ck.FRONT_NAME if len(study.controllers) == 1 else out / controller / ck.FRONT_NAME
 
 
-def make_algorithm(study: Study, controller: str) -> NSGA2:
+def reference_directions(study: Study) -> np.ndarray:
+    """NSGA-III's reference directions (pymoo): Das-Dennis on the unit simplex with ``partitions`` (default:
+    the most partitions whose point count does not exceed the population), or ``energy`` (Riesz s-energy,
+    as many as the population, seeded by the study's seed)."""
+    from math import comb
+
+    from pymoo.util.ref_dirs import get_reference_directions
+
+    a, m = study.algorithm, len(study.objectives.names)
+    if a.ref_dirs == "energy":
+        return get_reference_directions("energy", m, a.population, seed=study.seed)
+    p = a.partitions
+    if p is None:
+        p = 1
+        while comb(p + 1 + m - 1, m - 1) <= a.population:
+            p += 1
+    return get_reference_directions("das-dennis", m, n_partitions=p)
+
+
+def _comp_by_cv_then_random(pop, P, random_state=None, **kwargs):
+    """pymoo 0.6.2's NSGA-III tournament (``nsga3.comp_by_cv_then_random``: the smaller constraint violation
+    wins; between feasible ones a random pick) with the algorithm's generator also for a tie of violations:
+    pymoo's own calls ``compare(..., return_random_if_equal=True)`` without it, so such a tie draws from a
+    fresh unseeded generator and a study with constraints would not repeat (nor resume) bit for bit."""
+    from pymoo.algorithms.moo.nsga3 import compare
+
+    S = np.full(P.shape[0], np.nan)
+    for i in range(P.shape[0]):
+        a, b = P[i, 0], P[i, 1]
+        if pop[a].CV > 0.0 or pop[b].CV > 0.0:
+            S[i] = compare(a, pop[a].CV, b, pop[b].CV, method="smaller_is_better", return_random_if_equal=True,
+                           random_state=random_state)
+        else:
+            S[i] = random_state.choice([a, b])
+    return S[:, None].astype(int)
+
+
+def make_algorithm(study: Study, controller: str):
     a = study.algorithm
     _, _, _, g0 = study.bounds(controller)
     sampling = _Table2Sampling(np.log10(g0)) if a.include_table2 else FloatRandomSampling()
+    if a.name == "nsga3":
+        dirs = reference_directions(study)
+        if dirs.shape[0] > a.population:
+            raise StudyError(f"{study.path}: algorithm.population: {a.population} is below the {dirs.shape[0]} reference "
+                             f"directions of NSGA-III (give population >= {dirs.shape[0]} or fewer partitions)")
+        from pymoo.operators.selection.tournament import TournamentSelection
+
+        return NSGA3(ref_dirs=dirs, pop_size=a.population, n_offsprings=a.n_offspring, sampling=sampling,
+                     selection=TournamentSelection(func_comp=_comp_by_cv_then_random),
+                     crossover=SBX(prob=a.crossover_prob, eta=a.crossover_eta),
+                     mutation=PM(eta=a.mutation_eta, prob_var=a.mutation_prob_var),
+                     eliminate_duplicates=a.eliminate_duplicates, seed=study.seed, output=None)
     return NSGA2(
         pop_size=a.population, n_offsprings=a.n_offspring, sampling=sampling,
         crossover=SBX(prob=a.crossover_prob, eta=a.crossover_eta),
@@ -175,8 +225,18 @@ def eval_task(study: Study, controller: str, params=None) -> EvalTask:
     params = params if params is not None else study.system_params()
     src = provenance(controller)
     ship = (src["spec"],) if src.get("kind") in ("file", "module") else ()  # an entry point is found by itself
+    accs = ()
+    if not study.objectives.default:
+        from arvcas.metrics import objectives as objectives_mod
+
+        objs, cons = study.objectives.objects()
+        accs = objectives_mod.accumulators_of(list(objs) + [o for o, _ in cons])
+        for o in list(objs) + [o for o, _ in cons]:
+            src = objectives_mod.origin(o.name)
+            if src.get("kind") in ("file", "module") and src["spec"] not in ship:
+                ship += (src["spec"],)
     return EvalTask(controller=controller, draws=draws, cfg=cfg, params=params, ref=reference(study, params, draws),
-                    plugins=ship, chat=study.objectives.chat)
+                    plugins=ship, chat=study.objectives.chat, accumulators=accs)
 
 
 def reference(study: Study, params, draws) -> tuple | None:
@@ -197,9 +257,20 @@ def reference(study: Study, params, draws) -> tuple | None:
     return tuple(chat[0].tolist()), tuple(rmse[0].tolist())
 
 
-def evaluate_gains(engine, task: EvalTask, gains: np.ndarray) -> Evaluation:
-    """One batched evaluation of gain sets (n, n_var) through ``engine``: objectives and constraint."""
-    chat, rmse, ok, t_fail = engine.evaluate(task, np.atleast_2d(np.asarray(gains, dtype=float)))
+def evaluate_gains(engine, task: EvalTask, gains: np.ndarray, objectives=None) -> Evaluation:
+    """One batched evaluation of gain sets (n, n_var) through ``engine``: objectives and constraint.
+    ``objectives``: the study's :meth:`ObjectivesConfig.objects` when they are not the paper's (the task then
+    carries their accumulators)."""
+    G = np.atleast_2d(np.asarray(gains, dtype=float))
+    if task.accumulators:
+        from arvcas.metrics import objectives as objectives_mod
+
+        objs, cons = objectives
+        ctx = objectives_mod.Context(cfg=task.cfg, params=task.params, ref=task.ref, chat="chat",
+                                     slices=objectives_mod.slices(task.accumulators, task.params.structure.n_thrusters,
+                                                                  task.cfg))
+        return assemble_objectives(engine.evaluate(task, G), objs, cons, ctx, task.cfg.time_duration)
+    chat, rmse, ok, t_fail = engine.evaluate(task, G)
     return assemble(chat, rmse, ok, t_fail, task.cfg.time_duration, task.ref)
 
 
@@ -307,9 +378,24 @@ def _restore(alg: NSGA2, term: StudyTermination, c: ck.Checkpoint) -> None:
     alg.n_iter = c.n_gen + 1  # pymoo increments after each tell
     alg.evaluator.n_eval = c.n_eval
     alg.random_state.bit_generator.state = json.loads(c.rng_state)
+    if isinstance(alg, NSGA3) and c.survival:  # the hyperplane normalisation NSGA-III carries between generations
+        st, norm = json.loads(c.survival), alg.survival.norm
+        norm.ideal_point, norm.worst_point = np.array(st["ideal"], dtype=float), np.array(st["worst"], dtype=float)
+        norm.extreme_points = None if st["extreme"] is None else np.array(st["extreme"], dtype=float)
+        alg.survival.opt = pop[[i for i, r in enumerate(rank) if r == 0 and (c.G[i] <= 0).all()]]  # the result only
     alg._set_optimum()
     term.hv = {int(g): float(h) for g, h in zip(c.history["gen"], c.history["hv"])}
     term.progress(c.n_gen, c.n_eval)
+
+
+def _survival_json(alg) -> str:
+    """NSGA-III's normalisation state (ideal, worst and extreme points) as JSON ("" for NSGA-II)."""
+    if not isinstance(alg, NSGA3):
+        return ""
+    n = alg.survival.norm
+    ext = None if n.extreme_points is None else np.asarray(n.extreme_points).tolist()
+    return json.dumps({"ideal": np.asarray(n.ideal_point).tolist(), "worst": np.asarray(n.worst_point).tolist(),
+                       "extreme": ext})
 
 
 def _rng_json(alg: NSGA2) -> str:
@@ -420,7 +506,10 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
     say(f"{controller}: {len(names)} gains, population {study.algorithm.population}, engine {engine.describe()}; "
         f"preparing the compiled run ...")
     key = engine.prepare(task)
-    problem = GainProblem(names, np.log10(lo), np.log10(hi), lambda G: evaluate_gains(engine, task, G))
+    objs = study.objectives.objects() if task.accumulators else None
+    n_constr = 1 + len(study.objectives.constraints)
+    problem = GainProblem(names, np.log10(lo), np.log10(hi), lambda G: evaluate_gains(engine, task, G, objs),
+                          n_obj=len(study.objectives.names), n_constr=n_constr)
     alg = make_algorithm(study, controller)
     term = StudyTermination(study.termination, len(names), study.objectives.reference_point)
     alg.setup(problem, termination=term, verbose=False)
@@ -428,12 +517,13 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
     if c is None:
         c = _new_checkpoint(study, controller, task)
         c.artifact_key, c.engine = key, engine.describe()
-        t2 = evaluate_gains(engine, task, g0[None, :])
+        t2 = evaluate_gains(engine, task, g0[None, :], objs)
         c.table2_F, c.table2_G = t2.F[0], t2.G[0]
         c.table2_chat, c.table2_rmse = t2.chat[:, 0], t2.rmse[:, 0]
         c.table2_ok, c.table2_t_fail = t2.ok[:, 0], t2.t_fail[:, 0]
         ck.write_checkpoint(c, path)
-        t2txt = (f"f_chat {t2.F[0, 0]:.4g}, f_rmse {t2.F[0, 1]:.4g}" if t2.G[0, 0] <= 0 else "infeasible (diverged)")
+        t2txt = (", ".join(f"f_{n} {v:.4g}" for n, v in zip(study.objectives.names, t2.F[0])) if t2.G[0, 0] <= 0
+                 else "infeasible (diverged)")
         which = "Table 2 gains" if study.system is None else f"default gains of {task.params.structure.name}"
         say(f"{controller}: {which} on the study's draws: {t2txt}")
     else:
@@ -482,15 +572,16 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
         for k, v in arrays.items():
             setattr(c, k, v)
         c.gains = np.power(10.0, c.X)
-        feas = c.G[:, 0] <= 0
+        feas = (c.G <= 0).all(axis=1)
         hv = term.hv[n_gen]
-        best = np.nanmin(c.F[feas], axis=0) if feas.any() else np.array([np.nan, np.nan])
+        best = np.nanmin(c.F[feas], axis=0) if feas.any() else np.full(c.F.shape[1], np.nan)
         row = {"gen": n_gen, "n_eval": n_eval, "n_feasible": int(feas.sum()), "hv": hv, "best_chat": best[0],
                "best_rmse": best[1], "gen_time_s": dt, "elapsed_s": elapsed0 + time.time() - t_session}
         for k in ck.HISTORY_FIELDS:
             hist[k].append(float(row[k]))
         c.history = {k: np.array(v) for k, v in hist.items()}
         c.n_gen, c.n_eval, c.rng_state = n_gen, n_eval, _rng_json(alg)
+        c.survival = _survival_json(alg)
         done = term.perc >= 1.0
         halted = stop.requested or (stop_after is not None and n_gen >= stop_after)
         c.status = "finished" if done else ("interrupted" if halted else "running")
@@ -503,8 +594,13 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
         of = f"/{max_gen}" if max_gen is not None else ""
         bc = f"{best[0]:.4g}" if np.isfinite(best[0]) else "-"
         br = f"{best[1]:.4g}" if np.isfinite(best[1]) else "-"
+        if study.objectives.names == ("chat", "rmse"):
+            bests = f"best CHAT {bc}  best RMSE {br}"
+        else:  # the smallest value of each objective in the population
+            bests = "  ".join(f"best {n} {b:.4g}" if np.isfinite(b) else f"best {n} -"
+                              for n, b in zip(study.objectives.names, best))
         say(f"{controller} gen {n_gen}{of}  evals {n_eval}  feasible {int(feas.sum())}/{len(feas)}  "
-            f"HV {hv:.5g}  best CHAT {bc}  best RMSE {br}  {dt:.1f} s/gen{eta}")
+            f"HV {hv:.5g}  {bests}  {dt:.1f} s/gen{eta}")
         if done:
             say(f"{controller}: finished: {term.reason}; {c.front.size} on the front; {path}")
             return _outcome(c, path, time.time() - t_session)

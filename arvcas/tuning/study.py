@@ -16,12 +16,15 @@ Layout (see ``studies/*.toml`` for commented examples)::
                    controllers are looked up: docs/plugins.md)
     [variables]    scale (> 1: default bounds [g / scale, g * scale] around each Table 2 gain g),
                    bounds? (table: column name "c" for every DOF, or gain name "x.c" -> [lower, upper])
-    [algorithm]    name = "nsga2", population (>= 4), offspring?, include_table2?, crossover_prob?,
-                   crossover_eta?, mutation_eta?, mutation_prob_var?, eliminate_duplicates?
+    [algorithm]    name = "nsga2" | "nsga3" (three or more objectives), population (>= 4), offspring?,
+                   include_table2?, crossover_prob?, crossover_eta?, mutation_eta?, mutation_prob_var?,
+                   eliminate_duplicates?, ref_dirs? (nsga3: "das-dennis" | "energy"), partitions? (das-dennis)
     [termination]  max_generations | max_generations_per_variable, max_evaluations?,
                    stall_generations? with ftol?
-    [objectives]   names = ["chat", "rmse"], reference_point = [f_chat, f_rmse], chat? ("commanded": eq. 42 on
-                   the command, the paper's, the default; "delivered": on the thrusters' delivered wrench)
+    [objectives]   names = ["chat", "rmse"] (2 to 4 registered objectives: docs/objectives.md), reference_point
+                   (one value per objective), chat? ("commanded": eq. 42 on the command, the paper's, the
+                   default; "delivered": on the thrusters' delivered wrench), constraints? (["peak_thrust <=
+                   0.8 * limit", ...]), settling_band? ([m, rad] of settling_time)
     [evaluation]   system? (a shipped system's name or a system file; default Haidou-1), scenario? (path,
                    relative to the study file; default the system's), [[evaluation.draws]] noise_seed,
                    uncertainty? ([C, D, g, arm] factors), phase_deg? (6 disturbance phases, deg)
@@ -42,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from arvcas.system import config, tomlfile
-from arvcas.system.config import Choices, Count, Equals, Invalid, Unique, ge, gt, le, quantity, setting
+from arvcas.system.config import Choices, Count, Invalid, Unique, ge, gt, le, quantity, setting
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim import scenario as scenario_mod
 
@@ -55,7 +58,12 @@ __all__ = [
 ENGINES = ("local", "dask")
 OBJECTIVES = ("chat", "rmse")
 CHAT_KINDS = ("commanded", "delivered")  # what CHAT is computed on (arvcas.sim.run.CHAT_KINDS)
-ALGORITHMS = ("nsga2",)
+ALGORITHMS = ("nsga2", "nsga3")
+REF_DIRS = ("das-dennis", "energy")  # pymoo's reference directions for NSGA-III
+MAX_OBJECTIVES = 4
+# keys added after the paper's fronts were tuned: left out of a study's identity at these values, so that the
+# committed checkpoints keep theirs (arvcas tune --resume compares it)
+_NEW_ALGORITHM_DEFAULTS = {"ref_dirs": "das-dennis", "partitions": None}
 
 # Sizes a study may ask for (each is a rule on its field; the tables of one generation are also held
 # under arvcas.system.config.MEMORY_CAP_BYTES, see _check_memory).
@@ -89,6 +97,15 @@ class AlgorithmConfig:
     mutation_eta: float = quantity("1", gt(0), default=20.0)
     mutation_prob_var: float | None = quantity("1", gt(0), le(1), default=None)  # None: pymoo's min(0.5, 1 / n_var)
     eliminate_duplicates: bool = setting(default=True)
+    ref_dirs: str = setting(Choices(REF_DIRS, "reference directions"), default="das-dennis")  # nsga3
+    partitions: int | None = setting(ge(1), le(1000), default=None)  # nsga3 das-dennis; None: the most that fit
+
+    def _config_check(self, given: frozenset[str]) -> None:
+        for k in ("ref_dirs", "partitions"):
+            if k in given and self.name != "nsga3":
+                raise Invalid(k, 'only for algorithm.name = "nsga3"')
+        if "partitions" in given and self.ref_dirs != "das-dennis":
+            raise Invalid("partitions", 'only for ref_dirs = "das-dennis"')
 
     @property
     def n_offspring(self) -> int:
@@ -124,15 +141,52 @@ class TerminationConfig:
             raise Invalid("ftol", "needs termination.stall_generations")
 
 
+def _objective_names() -> tuple[str, ...]:
+    from arvcas.metrics import objectives as objectives_mod
+
+    return objectives_mod.names()
+
+
 @dataclass(frozen=True)
 class ObjectivesConfig:
     """The paper's two objectives: mean normalised CHAT and mean normalised RMSE (AGSTA = (1, 1))."""
 
-    names: tuple[str, ...] = setting(Equals(OBJECTIVES, "mean normalised CHAT and RMSE"), default=OBJECTIVES,
+    names: tuple[str, ...] = setting(Choices(_objective_names, "objective"), Unique(),
+                                     Count(2, MAX_OBJECTIVES, "a study takes 2 to 4 objectives"), default=OBJECTIVES,
                                      required=True)
-    reference_point: tuple[float, float] = quantity("1", gt(0), default=(10.0, 10.0), required=True)
+    reference_point: tuple[float, ...] = quantity("1", gt(0), n=config.ANY_LENGTH, default=(10.0, 10.0),
+                                                  required=True)
     # eq. 42 on the commanded wrench (the paper's) or on the wrench the thrusters deliver (docs/model.md §6)
     chat: str = setting(Choices(CHAT_KINDS, "CHAT signal"), default="commanded")
+    constraints: tuple[str, ...] = setting(Unique(), scalar_ok=True, default=())  # "peak_thrust <= 0.8 * limit"
+    settling_band: tuple[float, ...] | None = quantity(("length", "angle"), gt(0), default=None)  # settling_time
+
+    def _config_check(self, given: frozenset[str]) -> None:
+        if len(self.reference_point) != len(self.names):
+            raise Invalid("reference_point", f"{len(self.reference_point)} values for {len(self.names)} objectives "
+                                             f"({', '.join(self.names)}): give one per objective")
+        from arvcas.metrics import objectives as objectives_mod
+
+        for c in self.constraints:
+            try:
+                objectives_mod.parse_constraint(c, "", self.settling_band)
+            except objectives_mod.ObjectiveError as e:
+                raise Invalid("constraints", str(e)) from None
+
+    @property
+    def default(self) -> bool:
+        """The paper's objectives and no constraint: the study's evaluation is the paper's, unchanged."""
+        return tuple(self.names) == OBJECTIVES and not self.constraints
+
+    def objects(self) -> tuple:
+        """(the objectives, the constraints' objective and :class:`~arvcas.metrics.objectives.Constraint` pairs)."""
+        from arvcas.metrics import objectives as objectives_mod
+
+        objs = tuple(objectives_mod.get(n, self.settling_band) for n in self.names)
+        cons = tuple((objectives_mod.get(c.objective, self.settling_band), c) for c in
+                     (objectives_mod.parse_constraint(t, "objectives.constraints", self.settling_band)
+                      for t in self.constraints))
+        return objs, cons
 
 
 @dataclass(frozen=True)
@@ -240,11 +294,15 @@ class Study:
             "controller": controller,
             "seed": self.seed,
             "variables": {"names": names, "lower": lo.tolist(), "upper": hi.tolist()},
-            "algorithm": dataclasses.asdict(self.algorithm),
+            "algorithm": {k: v for k, v in dataclasses.asdict(self.algorithm).items()
+                          if k not in _NEW_ALGORITHM_DEFAULTS or v != _NEW_ALGORITHM_DEFAULTS[k]},
             "objectives": {"names": list(self.objectives.names),
                            "reference_point": list(self.objectives.reference_point),
                            # only when not the paper's, so that earlier checkpoints keep their identity
-                           **({"chat": self.objectives.chat} if self.objectives.chat != "commanded" else {})},
+                           **({"chat": self.objectives.chat} if self.objectives.chat != "commanded" else {}),
+                           **({"constraints": list(self.objectives.constraints)} if self.objectives.constraints else {}),
+                           **({"settling_band": list(self.objectives.settling_band)}
+                              if self.objectives.settling_band is not None else {})},
             "draws": [dataclasses.asdict(d) for d in self.draws],
             "scenario_text": self.scenario.text if self.scenario is not None else "",
             **({"system": self.params.structure.name} if self.system is not None else {}),
@@ -330,6 +388,10 @@ def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | N
             cfg = scenario_mod.load_scenario(sp)
         except scenario_mod.ScenarioError as e:
             raise StudyError(f"{where}: evaluation.scenario: {e}") from None
+    m = len(f.objectives.names)
+    if m >= 3 and f.algorithm.name != "nsga3":
+        raise StudyError(f'{where}: algorithm.name: {m} objectives need "nsga3" (NSGA-II\'s crowding distance does '
+                         f'not spread a front of three or more objectives; docs/objectives.md)')
     controllers = f.study.controllers
     variables = _variables(f.variables, controllers, cfg, where, params)
     per_gen = f.algorithm.population + f.algorithm.n_offspring
@@ -358,6 +420,20 @@ def _load_plugins(doc: dict, where: str, base_dir) -> None:
                 plugins.load(spec, base_dir, what=f"{where}: study.plugins:")
             except plugins.PluginError as e:
                 raise StudyError(str(e)) from None
+    obj = doc.get("objectives") if isinstance(doc.get("objectives"), dict) else {}
+    wanted = obj.get("names") if isinstance(obj.get("names"), list) else []
+    cons = obj.get("constraints") if isinstance(obj.get("constraints"), list) else [obj.get("constraints")]
+    wanted = wanted + [c.split("<")[0].split(">")[0].strip() for c in cons if isinstance(c, str)]
+    from arvcas.metrics import objectives as objectives_mod
+
+    for n in wanted:  # an objective of an entry point, not registered yet
+        if isinstance(n, str) and n.isidentifier() and n not in objectives_mod.names():
+            try:
+                objectives_mod.get(n)
+            except plugins.PluginError as e:
+                raise StudyError(f"{where}: objectives.names: {e}") from None
+            except objectives_mod.ObjectiveError:
+                pass  # not a plugin's either: the validation names it with the allowed ones
     names = sec.get("controllers")
     for n in (names,) if isinstance(names, str) else names if isinstance(names, list) else ():
         if isinstance(n, str) and n not in base.names():
