@@ -76,6 +76,7 @@ class Run:
         if not isinstance(self.options, ModelOptions):
             raise SimulationError(f"options: expected arvcas.model.uvms.ModelOptions, got {type(self.options).__name__}")
         scenario.check_joint_limits(cfg, params)
+        scenario.check_trajectory_limits(cfg, params)
         _check_lag(cfg, params)
         return CompiledRun(with_law, cfg, params, self.options)
 
