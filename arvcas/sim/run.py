@@ -224,7 +224,8 @@ class CompiledRun:
         above 1e12), or else the plant's state that the step from ``t_fail`` made non-finite (or >= 1e6)."""
         cfg = self.cfg
         k = min(int(round(t_fail / cfg.time_h)), len(series["eta"]) - 1)
-        e = np.abs(series["eta"][k] - series["eta_ref"][k])
+        ref = cfg.reference()[:6, k] if cfg.has_trajectory else series["eta_ref"][k]  # docs/tasks.md
+        e = np.abs(series["eta"][k] - ref)
         lim = np.array([cfg.limits_e_position] * 3 + [cfg.limits_e_attitude] * 3)
         dofs = "x y z phi theta psi".split()
         bad = [i for i in range(6) if not e[i] < lim[i]]

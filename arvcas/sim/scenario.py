@@ -419,7 +419,7 @@ class ScenarioConfig:
 
     def trajectory(self) -> "trajectory_mod.Trajectory":
         """The desired trajectory (:class:`arvcas.sim.trajectory.Trajectory`); the lawnmower and the approach
-        start from the initial pose ``initial.eta0``."""
+        start from the set point ``initial.eta_d``, the station held until the task starts."""
         pat, seg = self.trajectory_pattern, self.trajectory_segment
         if pat == "waypoints":
             ws = self.trajectory_waypoint
@@ -429,12 +429,12 @@ class ScenarioConfig:
                 rates = [auto[j] if w.rate is None else w.rate for j, w in enumerate(ws)]
             return trajectory_mod.from_waypoints([w.t for w in ws], [w.eta for w in ws], seg, rates)
         if pat == "lawnmower":
-            t, P = trajectory_mod.lawnmower(self.initial_eta0, self.trajectory_start, self.trajectory_legs,
+            t, P = trajectory_mod.lawnmower(self.initial_eta_d, self.trajectory_start, self.trajectory_legs,
                                             self.trajectory_leg_length, self.trajectory_spacing, self.trajectory_speed,
                                             self.trajectory_heading)
             return trajectory_mod.from_waypoints(t, P, seg)
         if pat == "approach":
-            t, P = trajectory_mod.approach(self.initial_eta0, self.trajectory_target, self.trajectory_start,
+            t, P = trajectory_mod.approach(self.initial_eta_d, self.trajectory_target, self.trajectory_start,
                                            self.trajectory_duration)
             return trajectory_mod.from_waypoints(t, P, "minimum_jerk")
         raise ValueError(f"trajectory: no pattern {pat!r} (a graph key has no trajectory to sample)")
