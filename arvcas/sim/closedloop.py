@@ -429,7 +429,7 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
     Rec = schedule.records(lay)
     TS, AS, ns = Rec.time_size, Rec.arm_size, schedule.n_stages(cfg)
     Sm, Km, tkm, nm = ca.MX.sym("S", i_const), ca.MX.sym("K", L.size - i_const), ca.MX.sym("t"), ca.MX.sym("noise", 12)
-    sch_t, sch_a = ca.MX.sym("sched_time", ns * TS), ca.MX.sym("sched_arm", ns * AS)
+    sch_t, sch_a = ca.MX.sym("sched_time", schedule.time_rows(cfg, lay)), ca.MX.sym("sched_arm", ns * AS)
     dyn, n_thr = parts.thr is not None, lay.structure.n_thrusters
     names = ("p", "consts", "phase_cs", "pc", "water") + (("thr_E", "thr_tab") if dyn else ())
     kslice = {name: slice(L.slices[name].start - i_const, L.slices[name].stop - i_const) for name in names}
@@ -440,7 +440,7 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
     hp = cfg.time_h_plant
     steps = []
     for first, ctrl in zip(firsts, ctrls):
-        res = ctrl(Sm, Km, tkm, nm, sch_t[0:TS], sch_a[0:AS])
+        res = ctrl(Sm, Km, tkm, nm, sch_t[0:TS], sch_a[0:AS], *([sch_t[ns * TS:]] if cfg.has_trajectory else []))
         Cm, thrust_out = res[0], res[1]
         outs = list(res[2:])
         if dyn:  # thrust_out: the allocation's thrust per thruster; the lag gives the stage wrenches
@@ -489,7 +489,7 @@ class ControllerSample:
 
 
 def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, memory: dict, gains, unc, ekf, Mhat,
-                      eta_d, tau_arm) -> ControllerSample:
+                      eta_d, tau_arm, ref=None) -> ControllerSample:
     """One sample of the controller, from the measurement to the thrust: steps 2-5 of the module docstring.
 
     The one definition of the controller: the run's sample (:func:`_controller_part`) and the exported
@@ -500,7 +500,8 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
     (name -> expression, :func:`controller_memory`); ``gains`` (the law's flat vector), ``unc`` (nominal
     factors [C, D, g, arm]), ``ekf`` ([q_eta, q_nu, var_position, var_attitude, var_velocity]),
     ``Mhat`` (:func:`nominal_inertia`), ``eta_d`` (the set point), ``tau_arm`` (the arm's wrench on the
-    vehicle plus the trim, {b}: the run's true value, which only a nominal model reads).
+    vehicle plus the trim, {b}: the run's true value, which only a nominal model reads); ``ref``: a task's
+    desired ``(eta_d(t_k), eta_d_dot(t_k))`` (docs/tasks.md), None for station keeping at ``eta_d``.
     """
     cols = law.columns()
     k = len(cols)
@@ -519,10 +520,13 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
     eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
 
     # 3. ATD reference (docs/model.md §5): y1(0) = eta_hat(0), y2(0) = 0, A = max(|eta_d - eta_hat(0)|, A_min)
-    r0_first, h0 = atd.atd_params(eta_d - eta_hat, cfg.atd_T, h, cfg.atd_A_min)
-    r0 = ca.if_else(first, r0_first, memory["r0"])
-    y1 = ca.if_else(first, eta_hat, memory["y1"])
-    y2 = ca.if_else(first, ca.DM.zeros(6), memory["y2"])
+    if ref is not None:  # a task (docs/tasks.md): the ATD takes the start's offset from eta_d(t) to zero
+        eta_d, (y1, y2), r0, h0, y1n, y2n = _task_reference(cfg, ref, eta_hat, first, memory, h)
+    else:
+        r0_first, h0 = atd.atd_params(eta_d - eta_hat, cfg.atd_T, h, cfg.atd_A_min)
+        r0 = ca.if_else(first, r0_first, memory["r0"])
+        y1 = ca.if_else(first, eta_hat, memory["y1"])
+        y2 = ca.if_else(first, ca.DM.zeros(6), memory["y2"])
     e = eta_hat - y1
     e_dot = eta_dot_hat - y2
 
@@ -540,11 +544,26 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
     # (issue 22: a thruster command map, thrust -> the unit the thrusters take, belongs here, after the
     # saturation, so that the run and the exported controller send the same commands)
 
-    y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
+    if ref is None:
+        y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
     memory_next = {"xh": _ekf_f(xh, h), "Pc": _ekf_cov(xh, Pc, h, ekf[0], ekf[1]), "y1": y1n, "y2": y2n, "r0": r0,
                    **{f"c_{name}": xc_next[name] for name, _ in law.state}}
     assert list(memory_next) == [name for name, _ in controller_memory(law)]
     return ControllerSample(ctx, tau_v, u_cmd, u_sat, memory_next)
+
+
+def _task_reference(cfg: ScenarioConfig, ref, eta_hat, first, memory: dict, h):
+    """A task's reference (docs/tasks.md): ``y1 = eta_d(t) + z1``, ``y2 = eta_d_dot(t) + z2``, with the ATD's
+    state ``(z1, z2)`` (the memory's ``y1``, ``y2``) started at ``(eta_hat(0) - eta_d(0), -eta_d_dot(0))`` (so
+    that ``y1(0) = eta_hat(0)``, ``y2(0) = 0``, as station keeping) and driven to zero by eq. 12 with input 0.
+    Returns ``(eta_d(t_k), (y1, y2), r0, h0, z1(k+1), z2(k+1))``."""
+    pd, vd = ref
+    r0_first, h0 = atd.atd_params(pd - eta_hat, cfg.atd_T, h, cfg.atd_A_min)
+    r0 = ca.if_else(first, r0_first, memory["r0"])
+    z1 = ca.if_else(first, eta_hat - pd, memory["y1"])
+    z2 = ca.if_else(first, -vd, memory["y2"])
+    z1n, z2n = atd.atd_step(z1, z2, ca.DM.zeros(6), r0, h0, h)
+    return pd, (pd + z1, vd + z2), r0, h0, z1n, z2n
 
 
 # ---- the controller alone (arvcas export-controller: arvcas.io.export_controller) ------------------------
@@ -614,6 +633,9 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
     the terms of ``k`` alone are taken out (:func:`casadi.extract_parametric`), not changed.
     """
     law = get_controller(law)
+    if cfg.has_trajectory:
+        raise ValueError("export-controller: the scenario has a [trajectory] (docs/tasks.md); the exported controller "
+                         "takes a set point eta_d only")
     sz = controller_sizes(law, layout, cfg)
     p = ca.SX.sym("p", sz.n_p)
     fns = {"mhat": ca.Function(prefix + "mhat", [p], [nominal_inertia(view(p, layout))], ["p"], ["Mhat"])}
@@ -716,6 +738,7 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
     Rec = schedule.records(lay)
     rec0_t, rec0_a = ca.SX.sym("rec0_time", Rec.time_size), ca.SX.sym("rec0_arm", Rec.arm_size)
     R0 = schedule.unpack(ca.vertcat(rec0_t, rec0_a), lay)  # the time table's record at t_k
+    ref = ca.SX.sym("ref", schedule.REF_ROWS) if cfg.has_trajectory else None  # eta_d, eta_d_dot at t_k (docs/tasks.md)
     P = view(L.get(S, "p"), lay)
     consts = L.get(S, "consts")
     Fz, Mx, My, Mhat = consts[0], consts[1], consts[2], consts[3:9]
@@ -740,7 +763,7 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
     # 2-5. the controller: EKF, reference, law, allocation and saturation
     memory = {name: L.get(S, name) for name, _ in controller_memory(law)}
     cs = controller_sample(law, cfg, P, y, tk, first, memory, L.get(S, "gains"), unc, L.get(S, "ekf"), Mhat, eta_d,
-                           tau_m_true + trim)
+                           tau_m_true + trim, None if ref is None else (ref[0:6], ref[6:12]))
     ctx, tau_v, u_sat, y1 = cs.ctx, cs.tau_v, cs.u_sat, cs.ctx.eta_ref
     tau_real = ca.mtimes(thrusters.B_T(P), u_sat)
 
@@ -750,7 +773,7 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
     f_true = Mhat * eta_ddot - ca.mtimes(J_inv(eta).T, tau_real_held)
 
     # metrics (docs/model.md §6) and divergence of the controller part
-    e_true = eta - y1
+    e_true = eta - (y1 if ref is None else ref[0:6])  # a task's error is against the desired trajectory (docs/tasks.md)
     chat_sum = L.get(S, "chat_sum") + ca.if_else(first, 0, ca.fabs(tau_v - L.get(S, "tau_prev")))
     # CHAT on the delivered wrench (what the water sees): the realised B sat(u) of each sample, or with
     # dynamics the rotors' wrench at each sample time (docs/model.md §6)
@@ -785,7 +808,7 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
                             payload=pl)
         outs.append(ca.vertcat(*[sig.value(ctx) for sig in signals_mod.trace_signals(law, lay.structure)]))
     name = f"cl_ctrl_{law.name}" + ("_first" if first.is_one() else "") + ("_tr" if trace else "")
-    return ca.Function(name, [*ins, tk, noise, rec0_t, rec0_a], ca.cse(outs))
+    return ca.Function(name, [*ins, tk, noise, rec0_t, rec0_a] + ([] if ref is None else [ref]), ca.cse(outs))
 
 
 def _accumulate(spec: RunSpec, acc, last, view):
@@ -928,7 +951,7 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     water = ca.MX.sym("water", cfg.water_vector.size)
     p = ca.MX.sym("p", len(spec.lay))
     Rec = schedule.records(spec.lay)
-    sched_t = ca.MX.sym("sched_time", schedule.n_stages(cfg) * Rec.time_size, n)
+    sched_t = ca.MX.sym("sched_time", schedule.time_rows(cfg, spec.lay), n)
     sched_a = ca.MX.sym("sched_arm", schedule.n_stages(cfg) * Rec.arm_size, n)
     S0, K = run_start(spec, L, pc_fn, G, unc, phase, ekf, water, p)
     tgrid = ca.DM(sample_times(cfg)).T

@@ -84,6 +84,7 @@ class Run:
         if not isinstance(self.options, ModelOptions):
             raise SimulationError(f"options: expected arvcas.model.uvms.ModelOptions, got {type(self.options).__name__}")
         scenario.check_joint_limits(cfg, params)
+        scenario.check_trajectory_limits(cfg, params)
         _check_lag(cfg, params)
         return CompiledRun(with_law, cfg, params, self.options, tuple(self.accumulators))
 
@@ -237,7 +238,8 @@ class CompiledRun:
         above 1e12), or else the plant's state that the step from ``t_fail`` made non-finite (or >= 1e6)."""
         cfg = self.cfg
         k = min(int(round(t_fail / cfg.time_h)), len(series["eta"]) - 1)
-        e = np.abs(series["eta"][k] - series["eta_ref"][k])
+        ref = cfg.reference()[:6, k] if cfg.has_trajectory else series["eta_ref"][k]  # docs/tasks.md
+        e = np.abs(series["eta"][k] - ref)
         lim = np.array([cfg.limits_e_position] * 3 + [cfg.limits_e_attitude] * 3)
         dofs = "x y z phi theta psi".split()
         bad = [i for i in range(6) if not e[i] < lim[i]]
@@ -354,17 +356,18 @@ class CompiledRun:
         if lockstep is not None:
             if not isinstance(lockstep, bool):
                 raise SimulationError(f"lockstep: expected True, False or None, got {lockstep!r}")
-            if lockstep and self.accumulators:
-                raise SimulationError("lockstep: a run with accumulators (objectives beyond CHAT and RMSE) runs "
-                                      "one at a time")
+            if lockstep and (self.accumulators or self.cfg.has_trajectory):
+                raise SimulationError("lockstep: a run with accumulators (objectives beyond CHAT and RMSE) or a "
+                                      "trajectory runs one at a time")
             return lockstep
         mode = os.environ.get(LOCKSTEP_ENV, "auto")
         if mode not in ("auto", "0", "1"):
             raise SimulationError(f"{LOCKSTEP_ENV}={mode!r}: expected 0 (never), 1 (always) or auto (n >= "
                                   f"{LOCKSTEP_MIN_RUNS})")
-        # a run with accumulators (a study's own objectives) runs one at a time: the lockstep library
-        # carries the paper's outputs only
-        if mode == "0" or (mode == "auto" and n < LOCKSTEP_MIN_RUNS) or self._lockstep_failed or self.accumulators:
+        # a run with accumulators (a study's own objectives) or a task's trajectory runs one at a time: the
+        # lockstep library carries the paper's outputs and the station-keeping reference only
+        if mode == "0" or (mode == "auto" and n < LOCKSTEP_MIN_RUNS) or self._lockstep_failed or self.accumulators \
+                or self.cfg.has_trajectory:
             return False
         try:
             self.lockstep()

@@ -17,13 +17,14 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from arvcas.sim import trajectory as trajectory_mod
 from arvcas.system import config, tomlfile
 from arvcas.system.config import ge, gt, le, quantity
 
 __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
     "quintic", "joint_trajectory", "payload_profile", "disturbance", "disturbance_tabulated", "noise_sequence",
-    "check_joint_limits", "n_samples", "table_bytes", "ScenarioFile", "MAX_SUBSTEPS",
+    "check_joint_limits", "check_trajectory_limits", "n_samples", "table_bytes", "ScenarioFile", "MAX_SUBSTEPS",
 ]
 
 
@@ -188,6 +189,63 @@ class _Limits:
 
 
 @dataclass(frozen=True)
+class _TrajPoint:
+    """A vehicle waypoint: the pose ``eta`` at time ``t``; ``rate`` its eta_dot there (``quintic`` segments)."""
+
+    t: float = quantity("time", ge(0))
+    eta: tuple[float, ...] = quantity(_POSE)
+    rate: tuple[float, ...] | None = quantity(_RATE, default=None)
+
+
+# the keys of each trajectory pattern (docs/tasks.md): required, then optional
+TRAJECTORY_PATTERNS = {
+    "waypoints": (("waypoint",), ("segment",)),
+    "lawnmower": (("legs", "leg_length", "spacing", "speed"), ("segment", "start", "heading")),
+    "approach": (("target", "duration"), ("start",)),
+}
+
+
+@dataclass(frozen=True)
+class _Trajectory:
+    """The vehicle's desired trajectory (docs/tasks.md): waypoints with times, a lawnmower, or approach then
+    hold, with minimum-jerk or quintic segments."""
+
+    pattern: str = config.setting(config.Choices(tuple(TRAJECTORY_PATTERNS), "trajectory pattern"))
+    segment: str = config.setting(config.Choices(("minimum_jerk", "quintic"), "segment shape"), default="minimum_jerk")
+    waypoint: tuple[_TrajPoint, ...] | None = config.setting(config.Count(2, 10_000), default=None)
+    start: float = quantity("time", ge(0), default=0.0)
+    legs: int | None = config.setting(ge(1), le(1000), default=None)
+    leg_length: float | None = quantity("length", gt(0), default=None)
+    spacing: float | None = quantity("length", gt(0), default=None)
+    speed: float | None = quantity("velocity", gt(0), default=None)
+    heading: float | None = quantity("angle", default=None)
+    target: tuple[float, ...] | None = quantity(_POSE, default=None)
+    duration: float | None = quantity("time", gt(0), default=None)
+
+    def _config_check(self, given: frozenset[str]) -> None:
+        need, opt = TRAJECTORY_PATTERNS[self.pattern]
+        for k in sorted(given - {"pattern"}):
+            if k not in need + opt:
+                raise config.Invalid(k, f"not a key of pattern '{self.pattern}' (its keys: {', '.join(need + opt)})")
+        for k in need:
+            if k not in given:
+                raise config.Invalid(k, f"missing: pattern '{self.pattern}' needs {', '.join(need)}")
+        ws = self.waypoint or ()
+        for j, w in enumerate(ws, start=1):
+            if j > 1 and not w.t > ws[j - 2].t:
+                raise config.Invalid(f"waypoint[{j}].t", f"{w.t:g} s must be after waypoint {j - 1}'s {ws[j - 2].t:g} s "
+                                                         f"(times increase strictly)")
+            if w.rate is not None and self.segment != "quintic":
+                raise config.Invalid(f"waypoint[{j}].rate", f"a waypoint's rate goes with segment = \"quintic\" (a "
+                                                            f"{self.segment} segment is rest to rest)")
+        poses = [(f"waypoint[{j}].eta", w.eta) for j, w in enumerate(ws, start=1)] + [("target", self.target or (0,) * 6)]
+        for key, eta in poses:
+            if not abs(eta[4]) < math.pi / 2:
+                raise config.Invalid(key, f"pitch {math.degrees(eta[4]):g} deg is at or beyond +-90 deg, where the "
+                                          f"Euler angles are singular")
+
+
+@dataclass(frozen=True)
 class ScenarioFile:
     """The scenario file's schema; key ``a.b`` of the file is field ``a_b`` of :class:`ScenarioConfig`."""
 
@@ -203,6 +261,7 @@ class ScenarioFile:
     payload: _Payload | None = config.setting(default=None)  # events, with [[arm.waypoint]]
     current: _Current | None = config.setting(default=None)  # the water's velocity (docs/model.md §10)
     tether: _Tether | None = config.setting(default=None)
+    trajectory: _Trajectory | None = config.setting(default=None)  # the vehicle's task (docs/tasks.md)
 
 
 _LEAVES = config.leaves(ScenarioFile)
@@ -257,6 +316,17 @@ class ScenarioConfig:
     tether_diameter: float | None = None
     tether_Cn: float | None = None
     tether_pull: tuple | None = None
+    trajectory_pattern: str | None = None  # the vehicle's desired trajectory (docs/tasks.md); None: station keeping
+    trajectory_segment: str | None = None
+    trajectory_waypoint: tuple | None = None
+    trajectory_start: float | None = None
+    trajectory_legs: int | None = None
+    trajectory_leg_length: float | None = None
+    trajectory_spacing: float | None = None
+    trajectory_speed: float | None = None
+    trajectory_heading: float | None = None
+    trajectory_target: tuple | None = None
+    trajectory_duration: float | None = None
     text: str = ""  # the file's text, stored in result files
     path: str = ""
 
@@ -337,6 +407,44 @@ class ScenarioConfig:
             out += [f"tether.pull.{c}" for c in "NED"]
         return out
 
+    # the vehicle's task (docs/tasks.md): the desired trajectory, sampled into the run's time table -------
+    @property
+    def has_trajectory(self) -> bool:
+        """A desired trajectory replaces the set point ``initial.eta_d`` (docs/tasks.md)."""
+        return self.trajectory_pattern is not None
+
+    def trajectory_values(self) -> tuple:
+        """The trajectory's fields (hashable): with :meth:`graph_key` they key the time table."""
+        return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.name.startswith("trajectory_"))
+
+    def trajectory(self) -> "trajectory_mod.Trajectory":
+        """The desired trajectory (:class:`arvcas.sim.trajectory.Trajectory`); the lawnmower and the approach
+        start from the set point ``initial.eta_d``, the station held until the task starts."""
+        pat, seg = self.trajectory_pattern, self.trajectory_segment
+        if pat == "waypoints":
+            ws = self.trajectory_waypoint
+            rates = None
+            if seg == "quintic" and any(w.rate is not None for w in ws):
+                auto = trajectory_mod.default_rates([w.t for w in ws], [w.eta for w in ws])
+                rates = [auto[j] if w.rate is None else w.rate for j, w in enumerate(ws)]
+            return trajectory_mod.from_waypoints([w.t for w in ws], [w.eta for w in ws], seg, rates)
+        if pat == "lawnmower":
+            t, P = trajectory_mod.lawnmower(self.initial_eta_d, self.trajectory_start, self.trajectory_legs,
+                                            self.trajectory_leg_length, self.trajectory_spacing, self.trajectory_speed,
+                                            self.trajectory_heading)
+            return trajectory_mod.from_waypoints(t, P, seg)
+        if pat == "approach":
+            t, P = trajectory_mod.approach(self.initial_eta_d, self.trajectory_target, self.trajectory_start,
+                                           self.trajectory_duration)
+            return trajectory_mod.from_waypoints(t, P, "minimum_jerk")
+        raise ValueError(f"trajectory: no pattern {pat!r} (a graph key has no trajectory to sample)")
+
+    def reference(self) -> np.ndarray:
+        """The desired trajectory at the sample times t_k, ``(12, N + 1)``: ``eta_d`` then ``eta_d_dot`` (rows)
+        (the time table's reference rows, :func:`arvcas.sim.schedule.table`)."""
+        p, v, _ = self.trajectory().sample(np.arange(n_samples(self)) * self.time_h)
+        return np.vstack([p.T, v.T])
+
     def to_toml(self) -> str:
         """The effective configuration as scenario TOML (SI values): ``loads_scenario`` gives it back.
 
@@ -350,7 +458,7 @@ class ScenarioConfig:
         for leaf in _LEAVES:
             sec, key = leaf.key.split(".")
             v = getattr(self, _field(leaf.key))
-            if v is None:
+            if v is None or (sec == "trajectory" and key not in ("pattern", *sum(TRAJECTORY_PATTERNS[self.trajectory_pattern], ()))):
                 continue
             if sec != section:
                 lines.append(f"\n[{sec}]")
@@ -360,6 +468,8 @@ class ScenarioConfig:
                     tables.append(f"\n[[{sec}.{key}]]")
                     for f in dataclasses.fields(item):
                         x = getattr(item, f.name)
+                        if x is None:
+                            continue
                         tables.append('q = "stow"' if f.name == "q" and len(x) == 0 else entry(f.name, x))
                 continue
             lines.append(entry(key, v))
@@ -389,6 +499,9 @@ class ScenarioConfig:
         if self.has_tether:
             water |= {"tether_attachment": (0.0,) * 3, "tether_length": 0.0, "tether_diameter": 0.0,
                       "tether_Cn": 0.0, "tether_pull": (0.0,) * 3}
+        if self.has_trajectory:  # sampled into the time table: only its presence shapes the graph
+            water |= {f.name: None for f in dataclasses.fields(self) if f.name.startswith("trajectory_")}
+            water["trajectory_pattern"] = "table"
         return replace(self, text="", path="", ekf_q_eta=0.0, ekf_q_nu=0.0,
                        sensors_var_position=0.0 if group else None, sensors_var_attitude=0.0 if group else None,
                        sensors_var_velocity=0.0 if group else None, sensors_var_eta=None if group else z6,
@@ -465,6 +578,11 @@ def loads_scenario(text: str, where: str = "<scenario text>") -> ScenarioConfig:
         stow = {"value": [], "unit": "rad", "source": "q = \"stow\": the system's stow pose"}
         arm["waypoint"] = [dict(w, q=stow) if isinstance(w, dict) and w.get("q") == "stow" else w
                            for w in arm["waypoint"]]
+    traj = doc.get("trajectory")
+    if isinstance(traj, dict):  # pattern = "lawnmower": a name needs no unit or source
+        for k in ("pattern", "segment"):
+            if isinstance(traj.get(k), str):
+                traj[k] = {"value": traj[k], "unit": "1", "source": "a name"}
     loaded = config.load_doc(ScenarioFile, doc, where, ScenarioError, entries=True)
     values = {_field(leaf.key): _get(loaded.value, leaf.attrs) for leaf in _LEAVES}
     cfg = _wrap_angles(ScenarioConfig(**values, text=text, path=where), where)
@@ -553,6 +671,10 @@ def _check_current(cfg: ScenarioConfig, where: str) -> None:
 
 
 def _num(v) -> str:
+    if isinstance(v, str):
+        return '"' + v + '"'  # a pattern or segment name (one of the schema's choices)
+    if isinstance(v, int) and not isinstance(v, bool):
+        return repr(v)
     return "[" + ", ".join(repr(float(x)) for x in v) + "]" if isinstance(v, tuple) else repr(float(v))
 
 
@@ -754,3 +876,39 @@ def check_joint_limits(cfg: ScenarioConfig, params) -> None:
                     f"{label}: joint {i} target {math.degrees(qi):.2f} deg outside Table 1 limits "
                     f"[{math.degrees(lo):.0f}, {math.degrees(hi):.0f}] deg"
                 )
+
+
+def check_trajectory_limits(cfg: ScenarioConfig, params) -> None:
+    """The desired trajectory asks no thruster for more than its limit (docs/tasks.md): at every sample time,
+    the wrench that moves the vehicle alone along it in still water, ``M nu_dot + C(nu) nu + D(nu) nu + g(eta)``
+    (nu, nu_dot from eta_d and its derivatives), allocated to the thrusters, stays within each thruster's
+    [u_min, u_max] (the system file's stated limits). One line naming the key and the thruster otherwise."""
+    if not cfg.has_trajectory:
+        return
+    from arvcas.model import thrusters, vehicle  # the models sit below; only this check needs them
+    from arvcas.model.spatial import J_dot, J_inv
+    from arvcas.system.params import view
+
+    lay = params.layout
+    e, ed, edd, p = ca.SX.sym("e", 6), ca.SX.sym("ed", 6), ca.SX.sym("edd", 6), ca.SX.sym("p", len(lay))
+    P = view(p, lay)
+    nu = ca.mtimes(J_inv(e), ed)
+    nud = ca.mtimes(J_inv(e), edd - ca.mtimes(J_dot(e, ed), nu))
+    u = thrusters.allocate(P, ca.mtimes(vehicle.M(P), nud) + vehicle.forces(P, e, nu))
+    lo, hi = thrusters.limits(P)
+    f = ca.Function("trajectory_thrust", [e, ed, edd, p], [u, ca.if_else(u >= 0, u / hi, u / lo)])
+    traj = cfg.trajectory()
+    t = np.arange(n_samples(cfg)) * cfg.time_h
+    pd, vd, ad = traj.sample(t)
+    _, ratio = f.map(t.size)(pd.T, vd.T, ad.T, params.vector())
+    ratio = np.asarray(ratio)
+    if not (ratio <= 1.0).all():
+        i, k = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+        names = params.structure.thrusters or [str(j + 1) for j in range(ratio.shape[0])]
+        seg = int(np.clip(np.searchsorted(traj.times, t[k], side="right"), 1, len(traj.times) - 1))
+        key = {"waypoints": f"trajectory.waypoint[{seg + 1}].t", "lawnmower": "trajectory.speed",
+               "approach": "trajectory.duration"}[cfg.trajectory_pattern]
+        raise ScenarioError(f"{cfg.path or 'scenario'}: {key}: the trajectory asks thruster {names[i]} for "
+                            f"{100 * ratio[i, k]:.0f} % of its limit at t = {t[k]:g} s (segment {seg} of "
+                            f"{len(traj.times) - 1}, the vehicle alone in still water; system "
+                            f"'{params.structure.name}'): give the move more time")

@@ -41,7 +41,7 @@ from arvcas.model.uvms import ModelOptions
 __all__ = [
     "Records", "records", "RECORD_FIELDS", "RECORD_SIZE", "ARM_FIELDS", "ARM_SIZE", "TIME_FIELDS", "TIME_SIZE",
     "Table", "record_slices", "unpack", "stage_times", "n_stages", "record_expr", "table", "functions",
-    "clear_cache",
+    "clear_cache", "REF_ROWS", "time_rows",
 ]
 
 
@@ -220,10 +220,20 @@ def _arm_batch(f_arm: ca.Function, states: np.ndarray, p: np.ndarray) -> np.ndar
     return out[:, :n]
 
 
+REF_ROWS = 12  # the desired trajectory's eta_d and eta_d_dot at t_k (scenarios with a [trajectory])
+
+
+def time_rows(cfg: ScenarioConfig, layout=None) -> int:
+    """Rows of the time table's ``time`` input: the stage records' time parts, then with a desired
+    trajectory its :data:`REF_ROWS` rows at t_k (docs/tasks.md)."""
+    return n_stages(cfg) * records(layout).time_size + (REF_ROWS if cfg.has_trajectory else 0)
+
+
 class Table(NamedTuple):
     """The run's time table as its two inputs: column k holds sample k's stage-time records.
 
-    ``time``: ``(n_stages * TIME_SIZE, N + 1)``, the time parts one after the other;
+    ``time``: ``(n_stages * TIME_SIZE, N + 1)``, the time parts one after the other, then with a desired
+    trajectory ``eta_d(t_k)`` and ``eta_d_dot(t_k)`` (:func:`time_rows`);
     ``arm``: ``(n_stages * ARM_SIZE, N + 1)``, the arm parts. Read-only, Fortran-ordered.
     """
 
@@ -246,7 +256,7 @@ def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions(
     p = np.ascontiguousarray(p, dtype=float).ravel()
     lay = layout or default_layout()
     R = records(lay)
-    key = (cfg.graph_key(), hashlib.sha256(p.tobytes()).hexdigest(), opts, lay.structure)
+    key = (cfg.graph_key(), cfg.trajectory_values(), hashlib.sha256(p.tobytes()).hexdigest(), opts, lay.structure)
     with _FUNCS_LOCK:
         tab = _TABLES.get(key)
         if tab is not None:
@@ -261,7 +271,10 @@ def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions(
     first, rep = _changes(rec_t[:na].T)
     arm_first = _arm_batch(f_arm, np.asfortranarray(rec_t[:na, first]), p)
     rec_a = arm_first.T[rep].T  # a row gather of the transpose: contiguous copies, Fortran-ordered result
-    tab = Table(rec_t.reshape(ns * R.time_size, n, order="F"), rec_a.reshape(ns * R.arm_size, n, order="F"))
+    rec_t = rec_t.reshape(ns * R.time_size, n, order="F")
+    if cfg.has_trajectory:  # the desired trajectory at t_k: REF_ROWS rows after the records (docs/tasks.md)
+        rec_t = np.asfortranarray(np.vstack([rec_t, cfg.reference()]))
+    tab = Table(rec_t, rec_a.reshape(ns * R.arm_size, n, order="F"))
     for a in tab:
         a.setflags(write=False)
     with _FUNCS_LOCK:

@@ -392,6 +392,12 @@ def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | N
     if m >= 3 and f.algorithm.name != "nsga3":
         raise StudyError(f'{where}: algorithm.name: {m} objectives need "nsga3" (NSGA-II\'s crowding distance does '
                          f'not spread a front of three or more objectives; docs/objectives.md)')
+    try:  # a task the vehicle cannot follow is refused before any work (docs/tasks.md)
+        from arvcas.system.params import load as load_params
+
+        scenario_mod.check_trajectory_limits(cfg, params if params is not None else load_params())
+    except scenario_mod.ScenarioError as e:
+        raise StudyError(f"{where}: evaluation.scenario: {e}") from None
     controllers = f.study.controllers
     variables = _variables(f.variables, controllers, cfg, where, params)
     per_gen = f.algorithm.population + f.algorithm.n_offspring
