@@ -35,7 +35,7 @@ def test_every_front_dataset_has_units_and_description(tmp_path):
 
 @pytest.mark.parametrize("attr, value", [
     ("versions", "not json {"), ("versions", "[1, 2]"), ("seed", "three"), ("n_gen", 1.5),
-    ("reference_point", np.array([1.0, 2.0, 3.0])), ("model_changes", "{}"), ("status", None),
+    ("reference_point", np.array([1.0, 2.0, 3.0, 4.0, 5.0])), ("model_changes", "{}"), ("status", None),
 ])
 def test_damaged_attributes_are_named(tmp_path, capsys, attr, value):
     path = synthetic_front(tmp_path / "front.h5")
