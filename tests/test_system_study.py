@@ -143,6 +143,8 @@ def test_explore_page_holds_every_front_and_the_members_own_responses(study_dir,
 
     doc = _page_data(page)
     assert doc["system"] == "bluerov2_heavy_alpha5" and [f["controller"] for f in doc["fronts"]] == ["agsta", "proposed"]
+    assert [(o["label"], o["log"]) for o in doc["objectives"]] == [("f_chat (mean CHAT, normalised)", True),
+                                                                   ("f_rmse (mean RMSE, normalised)", True)]
     for f in doc["fronts"]:
         fr = read_front(study_dir / "out" / f["controller"])
         assert f["F"] == fr.F.tolist() and f["knee"] == fr.knee() and f["thrusters"] == [f"T{i}" for i in range(1, 9)]
@@ -237,3 +239,100 @@ def test_no_output_for_the_bluerov2_names_a_paper_table(study_dir, page, tmp_pat
     assert not found, found
     joined = "\n".join(texts)
     assert "default gains" in joined and "AGSTA's value at the default gains" in joined
+
+
+# ---- the front explorer on a study of three objectives (docs/objectives.md) ----------------------------------
+
+
+@pytest.fixture(scope="module")
+def page3(study_dir):
+    """A tiny NSGA-III study of the BlueROV2 on three objectives (the short scenario of ``study_dir``) and
+    its page."""
+    d = study_dir / "three"
+    d.mkdir()
+    (d / "study.toml").write_text("""
+[study]
+name = "b2three"
+controllers = ["agsta"]
+seed = 7
+[variables]
+scale = 3.0
+[algorithm]
+name = "nsga3"
+population = 12
+include_table2 = true
+[termination]
+max_generations = 3
+[objectives]
+names = ["chat", "rmse", "energy"]
+reference_point = [2.0, 2.0, 1e6]
+[evaluation]
+system = "bluerov2_heavy_alpha5"
+scenario = "../short.toml"
+[[evaluation.draws]]
+noise_seed = 1
+""", encoding="utf-8")
+    assert cli.main(["tune", str(d / "study.toml"), "--out", str(d / "out")]) == 0
+    out = d / "front.html"
+    assert cli.main(["front", "explore", str(d / "out"), "--out", str(out)]) == 0
+    return d, out
+
+
+def test_explore_page_of_three_objectives_holds_every_member_with_all_objectives(page3):
+    from arvcas.tuning.front import read_front
+
+    d, page = page3
+    doc = _page_data(page)
+    fr = read_front(d / "out")
+    assert fr.objectives == ("chat", "rmse", "energy") and fr.size > 1
+    assert [o["name"] for o in doc["objectives"]] == ["chat", "rmse", "energy"]
+    assert doc["objectives"][2]["label"] == "f_energy (N^1.5 s)" and all(o["log"] for o in doc["objectives"])
+    (f,) = doc["fronts"]
+    assert f["F"] == fr.F.tolist() and all(len(p) == 3 for p in f["F"]) and f["knee"] == fr.knee()
+    assert len(f["defaults"]["F"]) == 3 and f["defaults"]["F"] == fr.table2_F.tolist()
+    assert sorted(f["traces"], key=str) == sorted([str(i) for i in range(fr.size)] + ["defaults"], key=str)
+    assert f["replay"]["reproduced"]  # the replays (without the energy accumulator) give the stored CHAT and RMSE
+
+
+@pytest.mark.parametrize("view", ["", "#x=energy&y=chat"])
+def test_explore_page_of_three_objectives_loads_in_headless_chromium(page3, tmp_path, view):
+    _, page = page3
+    shot = tmp_path / "shot.png"
+    dom, err = _chromium(["--window-size=1280,1100", f"--screenshot={shot}", "--dump-dom", page.as_uri() + view])
+    console = [ln for ln in err.splitlines() if ":CONSOLE" in ln]
+    assert not console, console
+    assert 'data-ready="1"' in dom and '<p id="status">ready</p>' in dom
+    assert f'data-axes="{"energy,chat" if view else "chat,rmse"}"' in dom  # the axes drawn
+    assert dom.count("<option") == 6 and 'id="axis-x"' in dom and 'id="axis-y"' in dom  # the two selectors
+    from matplotlib.image import imread
+
+    img = (imread(shot)[..., :3] * 255).round()
+    f = _page_data(page)["fronts"][0]
+    rgb = np.array([int(f["color"][k:k + 2], 16) for k in (1, 3, 5)], dtype=float)
+    assert (np.abs(img[:600] - rgb).max(axis=2) <= 12).sum() > 100  # the front is drawn in its colour
+
+
+def test_explore_axes_are_the_objectives_with_units_and_log_only_where_every_value_is_positive():
+    from arvcas.experiments.explore import _objectives
+
+    def front(F, pop, dflt):
+        return {"F": F, "population": pop, "defaults": {"F": dflt}}
+
+    fronts = [front([[0.5, 0.0], [1.0, 2.0]], [[2.0, 3.0]], [1.0, None]),
+              front([[0.7, 1.0]], [[0.9, 4.0]], [None, None])]
+    obj = _objectives(("chat", "saturation_time"), fronts, "the AGSTA's value")
+    assert [o["label"] for o in obj] == ["f_chat (mean CHAT, normalised)", "f_saturation_time (s)"]
+    assert [o["log"] for o in obj] == [True, False]  # a time in saturation of 0 s: a linear axis
+    assert "the AGSTA's value" in obj[0]["description"] and obj[1]["unit"] == "s"
+    fronts[1]["defaults"]["F"][0] = -1.0  # a negative value anywhere on the plot: linear as well
+    assert [o["log"] for o in _objectives(("chat", "energy"), fronts, "n")] == [False, False]
+
+
+def test_explore_refuses_fronts_of_different_objectives(study_dir, page3, tmp_path, capsys):
+    d, _ = page3
+    out = tmp_path / "p.html"
+    assert cli.main(["front", "explore", str(study_dir / "out" / "agsta"), str(d / "out"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("arvcas: error: front explore: the fronts have different objectives (chat, rmse in ") \
+        and "; chat, rmse, energy in " in err and err.count("\n") == 1, err
+    assert not out.exists()

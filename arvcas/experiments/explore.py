@@ -99,6 +99,32 @@ def _keep(n: int, samples: int) -> np.ndarray:
     return idx if idx[-1] == n - 1 else np.append(idx, n - 1)
 
 
+def _objectives(names, fronts, norm: str) -> list[dict]:
+    """The page's objectives, the columns of every front's F: name, axis title, unit, description, and
+    whether the axis is logarithmic (every value the page draws on it, members, population and default
+    gains, positive). CHAT and RMSE keep the paper-style titles; another objective is titled as ``front
+    plot`` names it (``f_<name>``) with its unit from the objective registry (none if it is not loaded)."""
+    from arvcas.metrics import objectives as objectives_mod
+
+    out = []
+    for j, n in enumerate(names):
+        if n in ("chat", "rmse"):
+            unit, label = "1", f"f_{n} (mean {n.upper()}, normalised)"
+            desc = f"mean over the six DOF of {n.upper()}, divided by {norm}"
+        else:
+            try:
+                o = objectives_mod.get(n)
+                unit, desc = o.unit, o.description
+            except (objectives_mod.ObjectiveError, ValueError):
+                unit, desc = "", ""
+            label = f"f_{n} ({unit})" if unit else f"f_{n}"
+        vals = [v for f in fronts for v in [*(p[j] for p in f["F"]), *(p[j] for p in f["population"]),
+                                             f["defaults"]["F"][j]] if v is not None]
+        out.append({"name": n, "label": label, "unit": unit, "description": desc,
+                    "log": bool(vals) and all(v > 0 for v in vals)})
+    return out
+
+
 def _checked(path: Path, allow_model_change: bool):
     """A front, its checkpoint, system, scenario and what changed since the study (checked before any run)."""
     from arvcas.sim.scenario import loads_scenario
@@ -106,9 +132,6 @@ def _checked(path: Path, allow_model_change: bool):
     from arvcas.tuning.front import check_provenance, read_front, system_params
 
     fr = read_front(path)
-    if fr.objectives != ("chat", "rmse"):  # the page draws the f_chat-f_rmse plane (docs/objectives.md)
-        raise ValueError(f"front explore {fr.path}: the page shows fronts of f_chat and f_rmse; this study's objectives "
-                         f"are {', '.join(fr.objectives)} (plot it with arvcas front plot)")
     c = ck.read_checkpoint(fr.path)
     params = system_params(c)
     changed = check_provenance(fr.path, params, allow_model_change, "front explore")
@@ -151,7 +174,9 @@ def _front_data(path: Path, checked, members, samples: int, say) -> dict:
         replay(str(i), fr.gains[i], fr.chat[0, i], fr.rmse[0, i])
     replay("defaults", fr.table2, c.table2_chat[0] if c.table2_chat is not None else None,
            c.table2_rmse[0] if c.table2_rmse is not None else None)
-    feas = fr.population_G[:, 0] <= 0
+    m = len(fr.objectives)  # Table 2's objectives: one per objective, NaN where it diverged or was not evaluated
+    defaults_F = fr.table2_F if fr.table2_F.size == m else np.full(m, np.nan)
+    feas = (fr.population_G <= 0).all(axis=1) & np.isfinite(fr.population_F).all(axis=1)  # as the front's members
     return {
         "path": str(path), "controller": fr.controller, "label": controller_label(fr.controller),
         "color": controller_color(fr.controller), "study": fr.study_name, "status": fr.status, "n_gen": fr.n_gen,
@@ -160,7 +185,7 @@ def _front_data(path: Path, checked, members, samples: int, say) -> dict:
         "gain_names": list(fr.names), "F": fr.F.tolist(), "gains": _rounded(fr.gains),
         "chat": _rounded(fr.chat.mean(axis=0)), "rmse": _rounded(fr.rmse.mean(axis=0)),
         "population": fr.population_F[feas].tolist(),
-        "defaults": {"F": [None if not np.isfinite(x) else float(x) for x in fr.table2_F], "gains": _rounded(fr.table2),
+        "defaults": {"F": [None if not np.isfinite(x) else float(x) for x in defaults_F], "gains": _rounded(fr.table2),
                      "chat": _rounded(c.table2_chat.mean(axis=0)) if c.table2_chat is not None else None,
                      "rmse": _rounded(c.table2_rmse.mean(axis=0)) if c.table2_rmse is not None else None},
         "t": _rounded(t, 9), "k": int(keep[1] - keep[0]) if keep.size > 1 else 1, "h": cfg.time_h,
@@ -183,6 +208,12 @@ def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_
         member_selection(1, 0, members)  # a bad count is refused before any run
     paths = explore_fronts(paths)
     checked = [_checked(p, allow_model_change) for p in paths]
+    sets = {}  # objective set -> the first front that has it
+    for ch in checked:
+        sets.setdefault(ch[0].objectives, ch[0].path)
+    if len(sets) > 1:
+        raise ValueError("front explore: the fronts have different objectives (" + "; ".join(
+            f"{', '.join(o)} in {p}" for o, p in sets.items()) + "); one page shows fronts of one set of objectives")
     systems = sorted({ch[0].system or "haidou1" for ch in checked})
     if len(systems) > 1:
         raise ValueError(f"front explore: the fronts are of different systems ({', '.join(systems)}); their objectives "
@@ -190,11 +221,13 @@ def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_
     system = systems[0]
     fronts = [_front_data(p, ch, members, samples, say) for p, ch in zip(paths, checked)]
     norm = norm_name("" if system == "haidou1" else system)
+    objectives = _objectives(checked[0][0].objectives, fronts, norm)
     return {
         "format": FORMAT, "format_version": FORMAT_VERSION, "arvcas_version": __version__, "system": system,
         "title": f"Fronts of {', '.join(dict.fromkeys(f['study'] for f in fronts))} ({system})",
         "normalisation": norm, "defaults_name": "Table 2" if system == "haidou1" else "default gains",
-        "dofs": list(DOFS), "dof_units": ["m", "m", "m", "rad", "rad", "rad"], "fronts": fronts,
+        "dofs": list(DOFS), "dof_units": ["m", "m", "m", "rad", "rad", "rad"], "objectives": objectives,
+        "fronts": fronts,
     }
 
 

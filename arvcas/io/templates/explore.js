@@ -1,6 +1,8 @@
 // arvcas front explore: the page's script (arvcas/experiments/explore.py writes the data it reads).
-// Front plot: every front, its knee and its default gains; hover: a member's metrics and gains; click: its
-// time response (tracking errors of every selected member, thrust of the last one) and its details.
+// Front plot: every front, its knee and its default gains, on two of the study's objectives (three or four:
+// chosen with the selectors above the plot, or #x=NAME&y=NAME in the address; the others in the hover);
+// hover: a member's objectives, metrics and gains; click: its time response (tracking errors of every
+// selected member, thrust of the last one) and its details.
 (function () {
   "use strict";
   var status = document.getElementById("status");
@@ -8,6 +10,7 @@
 
   var doc = JSON.parse(document.getElementById("data").textContent);
   var fronts = doc.fronts;
+  var OBJ = doc.objectives;  // the columns of every front's F: name, label (axis title), unit, description, log
   var DASH = ["solid", "dash", "dot", "dashdot"];
   var MAX_SELECTED = 4;
   var THRUST_COLORS = ["#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442",
@@ -79,10 +82,15 @@
              chat: f.chat[m], rmse: f.rmse[m] };
   }
 
+  // a member's objectives: "f_chat 1.2, f_rmse 3.4, f_energy 5.6e+04"
+  function objectivesText(F, d) {
+    return OBJ.map(function (o, j) { return "f_" + esc(o.name) + " " + fmt(F[j], d); }).join(", ");
+  }
+
   function hoverText(fi, key) {
     var f = fronts[fi], info = memberInfo(fi, key);
     var lines = ["<b>" + esc(info.name) + "</b>",
-                 "f_chat " + fmt(info.F[0]) + ", f_rmse " + fmt(info.F[1]),
+                 objectivesText(info.F),
                  "DOF:  " + doc.dofs.join("  "),
                  "CHAT: " + (info.chat || []).map(function (v) { return fmt(v, 3); }).join("  "),
                  "RMSE: " + (info.rmse || []).map(function (v) { return fmt(v, 3); }).join("  "),
@@ -96,52 +104,112 @@
     return lines.join("<br>");
   }
 
-  // ---- the front plot ------------------------------------------------------------------------------------
-  var frontTraces = [], meta = [];
-  fronts.forEach(function (f, fi) {
-    var pop = f.population;
-    frontTraces.push({ x: pop.map(function (p) { return p[0]; }), y: pop.map(function (p) { return p[1]; }),
-                       mode: "markers", type: "scatter", marker: { color: f.color, size: 4, opacity: 0.2 },
-                       hoverinfo: "skip", showlegend: false, legendgroup: f.path });
+  // ---- the front plot: objectives ix (x) and iy (y); with three or four objectives they are chosen --------
+  var ix = 0, iy = 1;
+  (function () {  // #x=NAME&y=NAME in the address: the first view's axes
+    var names = OBJ.map(function (o) { return o.name; }), want = {};
+    window.location.hash.replace(/^#/, "").split("&").forEach(function (kv) {
+      var p = kv.split("=");
+      if (p.length === 2) { want[p[0]] = names.indexOf(decodeURIComponent(p[1])); }
+    });
+    if (want.x >= 0) { ix = want.x; }
+    if (want.y >= 0) { iy = want.y; }
+    if (ix === iy) { iy = ix === 0 ? 1 : 0; }
+  }());
+  var LINES = OBJ.length === 2;  // two objectives: each front is a curve (members sorted by the first)
+
+  var meta = [], selTrace;
+  function frontTraces() {
+    var out = [];
+    meta = [];
+    function xy(F) { return { x: F.map(function (p) { return p[ix]; }), y: F.map(function (p) { return p[iy]; }) }; }
+    fronts.forEach(function (f, fi) {
+      var pop = xy(f.population), mem = xy(f.F);
+      out.push({ x: pop.x, y: pop.y, mode: "markers", type: "scatter", marker: { color: f.color, size: 4, opacity: 0.2 },
+                 hoverinfo: "skip", showlegend: false, legendgroup: f.path });
+      meta.push(null);
+      var keys = f.F.map(function (_, i) { return String(i); });
+      out.push({ x: mem.x, y: mem.y, customdata: keys, text: keys.map(function (k) { return hoverText(fi, k); }),
+                 hoverinfo: "text", mode: LINES ? "lines+markers" : "markers", type: "scatter", legendgroup: f.path,
+                 name: f.label + ": front (" + f.F.length + "), HV " + fmt(f.hv),
+                 line: { color: f.color, width: 1.2 }, marker: { color: f.color, size: 6 } });
+      meta.push({ front: fi });
+      if (f.knee >= 0) {
+        out.push({ x: [f.F[f.knee][ix]], y: [f.F[f.knee][iy]], customdata: [String(f.knee)],
+                   text: [hoverText(fi, String(f.knee))], hoverinfo: "text", mode: "markers", type: "scatter",
+                   legendgroup: f.path, name: f.label + ": knee (member " + f.knee + ")",
+                   marker: { color: f.color, size: 13, symbol: "diamond", line: { color: "#000", width: 1 } } });
+        meta.push({ front: fi });
+      }
+      if (f.defaults.F[ix] !== null && f.defaults.F[iy] !== null) {
+        out.push({ x: [f.defaults.F[ix]], y: [f.defaults.F[iy]], customdata: ["defaults"],
+                   text: [hoverText(fi, "defaults")], hoverinfo: "text", mode: "markers", type: "scatter",
+                   legendgroup: f.path, name: f.label + ": " + doc.defaults_name + ", same draw",
+                   marker: { color: f.color, size: 16, symbol: "star", line: { color: "#000", width: 1 } } });
+        meta.push({ front: fi });
+      }
+    });
+    selTrace = out.length;
+    var pts = selected.map(point);
+    out.push({ x: pts.map(function (p) { return p[ix]; }), y: pts.map(function (p) { return p[iy]; }),
+               mode: "markers", type: "scatter", hoverinfo: "skip", name: "selected",
+               marker: { size: 18, color: "rgba(0,0,0,0)", line: { color: "#000", width: 2 } } });
     meta.push(null);
-    var keys = f.F.map(function (_, i) { return String(i); });
-    frontTraces.push({ x: f.F.map(function (p) { return p[0]; }), y: f.F.map(function (p) { return p[1]; }),
-                       customdata: keys, text: keys.map(function (k) { return hoverText(fi, k); }),
-                       hoverinfo: "text", mode: "lines+markers", type: "scatter", legendgroup: f.path,
-                       name: f.label + ": front (" + f.F.length + "), HV " + fmt(f.hv),
-                       line: { color: f.color, width: 1.2 }, marker: { color: f.color, size: 6 } });
-    meta.push({ front: fi });
-    if (f.knee >= 0) {
-      frontTraces.push({ x: [f.F[f.knee][0]], y: [f.F[f.knee][1]], customdata: [String(f.knee)],
-                         text: [hoverText(fi, String(f.knee))], hoverinfo: "text", mode: "markers", type: "scatter",
-                         legendgroup: f.path, name: f.label + ": knee (member " + f.knee + ")",
-                         marker: { color: f.color, size: 13, symbol: "diamond", line: { color: "#000", width: 1 } } });
-      meta.push({ front: fi });
+    return out;
+  }
+
+  function frontLayout() {
+    function axis(o) {
+      return { type: o.log ? "log" : "linear", title: { text: o.label }, gridcolor: "#e5e5e5" };
     }
-    if (f.defaults.F[0] !== null && f.defaults.F[1] !== null) {
-      frontTraces.push({ x: [f.defaults.F[0]], y: [f.defaults.F[1]], customdata: ["defaults"],
-                         text: [hoverText(fi, "defaults")], hoverinfo: "text", mode: "markers", type: "scatter",
-                         legendgroup: f.path, name: f.label + ": " + doc.defaults_name + ", same draw",
-                         marker: { color: f.color, size: 16, symbol: "star", line: { color: "#000", width: 1 } } });
-      meta.push({ front: fi });
-    }
-  });
-  var selTrace = frontTraces.length;
-  frontTraces.push({ x: [], y: [], mode: "markers", type: "scatter", hoverinfo: "skip", name: "selected",
-                     marker: { size: 18, color: "rgba(0,0,0,0)", line: { color: "#000", width: 2 } } });
-  meta.push(null);
+    return {
+      margin: { l: 55, r: 10, t: 30, b: 40 }, hovermode: "closest", hoverlabel: { align: "left", font: { size: 11 } },
+      xaxis: axis(OBJ[ix]), yaxis: axis(OBJ[iy]),
+      legend: { font: { size: 10 }, orientation: "h", y: -0.15, traceorder: "normal" },
+      title: { text: "click members to see their time responses", font: { size: 12 } }, plot_bgcolor: "#fff"
+    };
+  }
 
   var frontDiv = document.getElementById("front");
-  Plotly.newPlot(frontDiv, frontTraces, {
-    margin: { l: 55, r: 10, t: 30, b: 40 }, hovermode: "closest", hoverlabel: { align: "left", font: { size: 11 } },
-    xaxis: { type: "log", title: { text: "f_chat (mean CHAT, normalised)" }, gridcolor: "#e5e5e5" },
-    yaxis: { type: "log", title: { text: "f_rmse (mean RMSE, normalised)" }, gridcolor: "#e5e5e5" },
-    legend: { font: { size: 10 }, orientation: "h", y: -0.15, traceorder: "normal" },
-    title: { text: "click members to see their time responses", font: { size: 12 } }, plot_bgcolor: "#fff"
-  }, { displaylogo: false, responsive: true });
+  var selected = [];
+  function drawFront() {
+    Plotly.react(frontDiv, frontTraces(), frontLayout(), { displaylogo: false, responsive: true });
+    frontDiv.setAttribute("data-axes", OBJ[ix].name + "," + OBJ[iy].name);
+  }
+  drawFront();
+
+  // three or four objectives: a selector for each axis (changing one to the other's objective swaps them)
+  if (OBJ.length > 2) {
+    var axesDiv = document.getElementById("axes");
+    var pick = {};
+    ["x", "y"].forEach(function (a) {
+      var sel = document.createElement("select");
+      sel.id = "axis-" + a;
+      OBJ.forEach(function (o, j) {
+        var opt = document.createElement("option");
+        opt.value = String(j);
+        opt.textContent = o.label;
+        sel.appendChild(opt);
+      });
+      var lab = document.createElement("label");
+      lab.textContent = (a === "x" ? "x axis " : " y axis ");
+      lab.appendChild(sel);
+      axesDiv.appendChild(lab);
+      pick[a] = sel;
+      sel.onchange = function () {
+        var j = Number(sel.value);
+        if (a === "x") { if (j === iy) { iy = ix; } ix = j; } else { if (j === ix) { ix = iy; } iy = j; }
+        pick.x.value = String(ix);
+        pick.y.value = String(iy);
+        drawFront();
+      };
+    });
+    pick.x.value = String(ix);
+    pick.y.value = String(iy);
+    axesDiv.appendChild(document.createTextNode(" (the other objectives: in the hover and the details)"));
+  }
 
   // ---- the selection ---------------------------------------------------------------------------------------
-  var selected = [];
 
   function selectMember(fi, key, add) {
     if (!trace(fi, key)) {
@@ -163,7 +231,7 @@
 
   function draw() {
     var pts = selected.map(point);
-    Plotly.restyle(frontDiv, { x: [pts.map(function (p) { return p[0]; })], y: [pts.map(function (p) { return p[1]; })] },
+    Plotly.restyle(frontDiv, { x: [pts.map(function (p) { return p[ix]; })], y: [pts.map(function (p) { return p[iy]; })] },
                    [selTrace]);
     response();
     var last = selected[selected.length - 1];
@@ -216,7 +284,7 @@
   function details(fi, key) {
     var f = fronts[fi], info = memberInfo(fi, key), g = gainTable(f.gain_names, info.gains);
     var h = ["<b>" + esc(info.name) + "</b> &mdash; study " + esc(f.study) + " (" + esc(f.path) + ")",
-             "<br>f_chat " + fmt(info.F[0], 6) + ", f_rmse " + fmt(info.F[1], 6)];
+             "<br>" + objectivesText(info.F, 6)];
     if (!f.traces[key]) { h.push("<br><i>no stored time response for this member (written with --members)</i>"); }
     h.push("<table><tr><th></th>" + doc.dofs.map(function (d) { return "<th>" + d + "</th>"; }).join("") + "</tr>");
     [["CHAT", info.chat], ["RMSE", info.rmse]].forEach(function (r) {
@@ -261,9 +329,18 @@
     return "<b>" + esc(f.label) + "</b>: " + f.F.length + " members, " + n + " with a stored time response, " +
            esc(f.n_gen) + " generations (" + esc(f.status) + "), " + what + dflt;
   });
-  document.getElementById("about").innerHTML = "System " + esc(doc.system) + ". Objectives: mean over the six DOF of " +
-    "CHAT and RMSE, each divided by " + esc(doc.normalisation) + ". Diamonds: knees; stars: " + esc(doc.defaults_name) +
-    " on the study's draw. " + notes.join("; ") + ". Written by arvcas " + esc(doc.arvcas_version) + ".";
+  var objectives = OBJ.length === 2 && OBJ[0].name === "chat" && OBJ[1].name === "rmse" ?
+    "Objectives: mean over the six DOF of CHAT and RMSE, each divided by " + esc(doc.normalisation) +
+    ". Diamonds: knees; stars: " :
+    "Objectives: " + OBJ.map(function (o) {
+      return "f_" + esc(o.name) + (o.unit && o.unit !== "1" ? " (" + esc(o.unit) + ")" : "") +
+             (o.description ? ": " + esc(o.description) : "");
+    }).join("; ") + "." + (OBJ.length > 2 ? " The plot shows two of the " + OBJ.length + " objectives: a member " +
+    "that looks dominated there is better in another." : "") + " Diamonds: knees (pseudo-weights closest to 1/" +
+    OBJ.length + " each); stars: ";
+  document.getElementById("about").innerHTML = "System " + esc(doc.system) + ". " + objectives +
+    esc(doc.defaults_name) + " on the study's draw. " + notes.join("; ") + ". Written by arvcas " +
+    esc(doc.arvcas_version) + ".";
 
   fronts.forEach(function (f, fi) {
     if (f.knee >= 0 && f.traces[String(f.knee)]) { selectMember(fi, String(f.knee), true); }
