@@ -246,32 +246,20 @@ def test_no_output_for_the_bluerov2_names_a_paper_table(study_dir, page, tmp_pat
 
 @pytest.fixture(scope="module")
 def page3(study_dir):
-    """A tiny NSGA-III study of the BlueROV2 on three objectives (the short scenario of ``study_dir``) and
-    its page."""
+    """``study_dir``'s tiny study of the BlueROV2 on three objectives (NSGA-III, AGSTA alone) and its page."""
     d = study_dir / "three"
     d.mkdir()
-    (d / "study.toml").write_text("""
-[study]
-name = "b2three"
-controllers = ["agsta"]
-seed = 7
-[variables]
-scale = 3.0
-[algorithm]
-name = "nsga3"
-population = 12
-include_table2 = true
-[termination]
-max_generations = 3
-[objectives]
-names = ["chat", "rmse", "energy"]
-reference_point = [2.0, 2.0, 1e6]
-[evaluation]
-system = "bluerov2_heavy_alpha5"
-scenario = "../short.toml"
-[[evaluation.draws]]
-noise_seed = 1
-""", encoding="utf-8")
+    text = (study_dir / "study.toml").read_text(encoding="utf-8")
+    for old, new in (('name = "b2tiny"', 'name = "b2three"'), ('["proposed", "agsta"]', '["agsta"]'),
+                     ("seed = 5", "seed = 7"),
+                     ("[algorithm]\npopulation = 6", '[algorithm]\nname = "nsga3"\npopulation = 12'),
+                     ('names = ["chat", "rmse"]\nreference_point = [2.0, 2.0]',
+                      'names = ["chat", "rmse", "energy"]\nreference_point = [2.0, 2.0, 1e6]\n'
+                      'constraints = ["peak_thrust <= 0.17 * limit"]'),
+                     ('scenario = "short.toml"', 'scenario = "../short.toml"')):
+        assert text.count(old) == 1, old
+        text = text.replace(old, new)
+    (d / "study.toml").write_text(text, encoding="utf-8")
     assert cli.main(["tune", str(d / "study.toml"), "--out", str(d / "out")]) == 0
     out = d / "front.html"
     assert cli.main(["front", "explore", str(d / "out"), "--out", str(out)]) == 0
@@ -292,6 +280,9 @@ def test_explore_page_of_three_objectives_holds_every_member_with_all_objectives
     assert len(f["defaults"]["F"]) == 3 and f["defaults"]["F"] == fr.table2_F.tolist()
     assert sorted(f["traces"], key=str) == sorted([str(i) for i in range(fr.size)] + ["defaults"], key=str)
     assert f["replay"]["reproduced"]  # the replays (without the energy accumulator) give the stored CHAT and RMSE
+    c = ck.read_checkpoint(d / "out" / "front.h5")  # the population drawn: its feasible rows (every constraint)
+    feasible = (c.G <= 0).all(axis=1)
+    assert 0 < feasible.sum() < len(feasible) and f["population"] == c.F[feasible].tolist()
 
 
 @pytest.mark.parametrize("view", ["", "#x=energy&y=chat"])

@@ -347,7 +347,8 @@ def add_explore(p: argparse.ArgumentParser) -> None:
     from arvcas.io.cliargs import count_arg
 
     p.add_argument("fronts", type=Path, nargs="+", metavar="DIR",
-                   help="study output directories (every front in them) or front.h5 files, of one system")
+                   help="study output directories (every front in them) or front.h5 files, of one system and "
+                        "one set of objectives")
     p.add_argument("--out", type=Path, required=True, metavar="FILE.html", help="the page (self-contained HTML)")
     p.add_argument("--members", type=_members, default="all", metavar="all|knee|N",
                    help="whose time responses the page stores: every member (default), the knee, or N members "

@@ -1,8 +1,16 @@
 """Fronts you can explore: one self-contained HTML page (``arvcas front explore DIR --out front.html``).
 
-The page holds every front of the given studies in one log-log plot (f_chat against f_rmse), each
-controller in its colour, its knee (diamond) and its default gains on the same draw (star; Haidou-1:
-Table 2). Hovering a member shows its objectives, per-DOF CHAT and RMSE and its gains; clicking it
+The page holds every front of the given studies in one plot, each controller in its colour, its knee
+(diamond: :meth:`arvcas.tuning.front.Front.knee`, pseudo-weights closest to 1/m for m objectives) and its
+default gains on the same draw (star, where they did not diverge; Haidou-1: Table 2). The plot's axes are
+the studies' objectives (docs/objectives.md): the paper's two, f_chat against f_rmse, as before; two other
+objectives, those two; three or four, two at a time, chosen by a selector for each axis above the plot
+(default the first two; ``#x=NAME&y=NAME`` in the page's address opens another pair), the others in the
+hover and the details. An axis is titled as ``front plot`` names the objective (``f_<name>``, with its
+unit from the objective registry; f_chat and f_rmse: "mean CHAT, normalised") and is logarithmic only
+where every value drawn on it (members, feasible population, default gains, of every front) is
+positive. Fronts of different systems or of different objectives are refused (one line naming both).
+Hovering a member shows all its objectives, per-DOF CHAT and RMSE and its gains; clicking it
 shows its time response: the tracking error e = eta - y1 of the six DOF (one line per selected
 member, so members can be compared) and the thrust of every thruster of the last one selected, with
 its gains, metrics and the command that replays it (``arvcas simulate --from-front ... --index I``).

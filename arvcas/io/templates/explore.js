@@ -125,8 +125,8 @@
     function xy(F) { return { x: F.map(function (p) { return p[ix]; }), y: F.map(function (p) { return p[iy]; }) }; }
     fronts.forEach(function (f, fi) {
       var pop = xy(f.population), mem = xy(f.F);
-      out.push({ x: pop.x, y: pop.y, mode: "markers", type: "scatter", marker: { color: f.color, size: 4, opacity: 0.2 },
-                 hoverinfo: "skip", showlegend: false, legendgroup: f.path });
+      out.push({ x: pop.x, y: pop.y, mode: "markers", type: "scatter",
+                 marker: { color: f.color, size: 4, opacity: 0.2 }, hoverinfo: "skip", showlegend: false, legendgroup: f.path });
       meta.push(null);
       var keys = f.F.map(function (_, i) { return String(i); });
       out.push({ x: mem.x, y: mem.y, customdata: keys, text: keys.map(function (k) { return hoverText(fi, k); }),
@@ -231,8 +231,8 @@
 
   function draw() {
     var pts = selected.map(point);
-    Plotly.restyle(frontDiv, { x: [pts.map(function (p) { return p[ix]; })], y: [pts.map(function (p) { return p[iy]; })] },
-                   [selTrace]);
+    Plotly.restyle(frontDiv, { x: [pts.map(function (p) { return p[ix]; })],
+                               y: [pts.map(function (p) { return p[iy]; })] }, [selTrace]);
     response();
     var last = selected[selected.length - 1];
     details(last.front, last.key);
