@@ -150,28 +150,9 @@ class HeaveYaw(Objective):
 '''
 
 
-@pytest.fixture
-def no_user_objective(monkeypatch):
-    """A process that has loaded no plugin and registered no user objective (restored afterwards)."""
-    import sys
-
-    from arvcas.io import plugins
-    from arvcas.metrics import objectives as O
-
-    for name in ("_LOADED", "_EP_DONE", "_FAILED"):
-        monkeypatch.setattr(plugins, name, {})
-    monkeypatch.setattr(plugins, "_YIELDED", [])
-    monkeypatch.setattr(plugins, "_EP_ALL", set())
-    monkeypatch.setattr(O, "_REGISTRY", dict(O._REGISTRY))
-    monkeypatch.setattr(O, "_ORIGIN", dict(O._ORIGIN))
-    yield
-    for m in [m for m in sys.modules if m.startswith(("lab_objective", "arvcas_plugin_lab_objective"))]:
-        del sys.modules[m]
-
-
 @pytest.mark.filterwarnings("ignore::arvcas.sim.scenario.ScenarioWarning")  # the 3 s copy keeps the 100 s run's events
-def test_a_plugin_objective_tunes_through_the_command_line(tmp_path, capsys, no_user_objective):
-    """``arvcas tune STUDY --plugin lab_objective.py`` with the plugin's objective beside RMSE: the study runs
+def test_a_plugin_objective_tunes_through_the_command_line(tmp_path, capsys, fresh):
+    """``arvcas tune STUDY --plugin toy_objective.py`` with the plugin's objective beside RMSE: the study runs
     (NSGA-II, 6 candidates, 2 generations, a 3 s scenario), its front exports the objective's column, and
     every member's value is the plugin's ``values`` applied to its replayed run (bit for bit), which is
     the weighted integral of the traced error of ``simulate --from-front`` (to 1e-12)."""
@@ -180,7 +161,7 @@ def test_a_plugin_objective_tunes_through_the_command_line(tmp_path, capsys, no_
     from arvcas.io.results import read_result
     from arvcas.sim.run import Run
 
-    plugin = tmp_path / "lab_objective.py"
+    plugin = tmp_path / "toy_objective.py"
     plugin.write_text(USER_OBJECTIVE)
     (tmp_path / "short.toml").write_text(
         dataclasses.replace(scenario.load_scenario(), time_duration=3.0).to_toml())

@@ -289,34 +289,14 @@ class LabTaskPD(arvcas.Controller):
 '''
 
 
-@pytest.fixture
-def no_lab_law(monkeypatch):
-    """A process that has loaded no plugin; the law the test's plugin registers is removed afterwards."""
-    import sys
-
-    from arvcas.controllers import base
-    from arvcas.io import plugins
-
-    for name in ("_LOADED", "_EP_DONE", "_FAILED"):
-        monkeypatch.setattr(plugins, name, {})
-    monkeypatch.setattr(plugins, "_YIELDED", [])
-    monkeypatch.setattr(plugins, "_EP_ALL", set())
-    before = set(base.names())
-    yield
-    for n in set(base.names()) - before:
-        base.unregister(n)
-    for m in [m for m in sys.modules if m.startswith(("lab_task_law", "arvcas_plugin_lab_task_law"))]:
-        del sys.modules[m]
-
-
-def test_a_plugin_controller_tracks_a_task_from_the_command_line(tmp_path, capsys, no_lab_law):
-    """``arvcas simulate --plugin lab_task_law.py --controller lab_task_pd --config task.toml`` (a scenario
+def test_a_plugin_controller_tracks_a_task_from_the_command_line(tmp_path, capsys, fresh):
+    """``arvcas simulate --plugin toy_task_law.py --controller lab_task_pd --config task.toml`` (a scenario
     with a [trajectory]): it runs, its RMSE is against eta_d(t_k) (eq. 43 on the written trace), equals the
     Python API's run of the same law, scenario and seed bit for bit, and is what the command printed."""
     from arvcas import cli
     from arvcas.io.results import read_result
 
-    law = tmp_path / "lab_task_law.py"
+    law = tmp_path / "toy_task_law.py"
     law.write_text(CLI_LAW)
     scen = tmp_path / "task.toml"
     scen.write_text(BASE + APPROACH)
