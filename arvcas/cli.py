@@ -826,8 +826,8 @@ def _parser() -> argparse.ArgumentParser:
         if cmd.plugins:
             sp.add_argument("--plugin", action="append", default=None, metavar="MODULE|FILE.py",
                             help="load a plugin first: a Python file or an importable module defining controllers "
-                                 "(repeatable; installed entry points of arvcas.controllers are found by themselves; "
-                                 "docs/plugins.md)")
+                                 "or objectives (repeatable; installed entry points of arvcas.controllers and "
+                                 "arvcas.objectives are found by themselves; docs/plugins.md, docs/objectives.md)")
         if cmd.outputs is not None:
             sp.add_argument("--force", action="store_true",
                             help="replace existing output files that arvcas did not write")

@@ -20,6 +20,41 @@ def cache(tmp_path_factory):
         yield d
 
 
+@pytest.fixture
+def fresh(monkeypatch):
+    """A process that has loaded no plugin: empty plugin state; the controllers and objectives a test's
+    plugins register, and their modules (named ``toy_*`` by the tests), are removed by ``clean()`` (the
+    fixture's value: a test calls it to stand for a new process) and afterwards."""
+    import sys
+
+    from arvcas.controllers import base
+    from arvcas.io import plugins
+    from arvcas.metrics import objectives
+
+    for name in ("_LOADED", "_EP_DONE", "_FAILED"):
+        monkeypatch.setattr(plugins, name, {})
+    monkeypatch.setattr(plugins, "_YIELDED", [])
+    monkeypatch.setattr(plugins, "_EP_ALL", set())
+    monkeypatch.setattr(objectives, "_REGISTRY", dict(objectives._REGISTRY))
+    monkeypatch.setattr(objectives, "_ORIGIN", dict(objectives._ORIGIN))
+    laws, objs = set(base.names()), set(objectives._REGISTRY)
+
+    def clean():
+        for state in (plugins._LOADED, plugins._EP_DONE, plugins._FAILED, plugins._YIELDED, plugins._EP_ALL):
+            state.clear()
+        for n in set(base.names()) - laws:
+            base.unregister(n)
+        for n in set(objectives._REGISTRY) - objs:
+            del objectives._REGISTRY[n]
+            objectives._ORIGIN.pop(n, None)
+        for m in [m for m in sys.modules if m.startswith(("toy_", "arvcas_plugin_"))]:
+            del sys.modules[m]
+
+    clean()
+    yield clean
+    clean()
+
+
 @pytest.fixture(scope="session")
 def params():
     """The packaged parameter file, loaded and validated (SI values)."""

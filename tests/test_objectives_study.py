@@ -123,3 +123,90 @@ def test_paper_studies_keep_their_identity_and_evaluation():
         for k in ("objectives", "algorithm", "variables", "draws", "seed"):
             assert new[k] == old[k], (f, k)
         assert s.objectives.default  # eval_task then gives no accumulators: the paper's compiled run
+
+
+# ---- a user's objective from a --plugin file, through the command line ---------------------------------------
+
+USER_OBJECTIVE = '''\
+"""A lab's objective (a test's plugin): the integrated absolute heave and yaw error, weighted."""
+import casadi as ca
+
+from arvcas.metrics.objectives import Objective
+from arvcas.sim.accumulate import Accumulator
+
+
+def heave_yaw(v):
+    return ca.vertcat(v.h * ca.fabs(v.e[2]), v.h * ca.fabs(v.e[5]))
+
+
+class HeaveYaw(Objective):
+    name, unit = "lab_heave_yaw", "m s"
+    description = "integrated |heave error| + 0.5 m/rad x integrated |yaw error|"
+    accumulators = (Accumulator("lab_heave_yaw", "sum", 2, heave_yaw),)
+
+    def values(self, out, ctx):
+        a = ctx.acc(out, "lab_heave_yaw")
+        return a[:, 0] + 0.5 * a[:, 1]
+'''
+
+
+@pytest.mark.filterwarnings("ignore::arvcas.sim.scenario.ScenarioWarning")  # the 3 s copy keeps the 100 s run's events
+def test_a_plugin_objective_tunes_through_the_command_line(tmp_path, capsys, fresh):
+    """``arvcas tune STUDY --plugin toy_objective.py`` with the plugin's objective beside RMSE: the study runs
+    (NSGA-II, 6 candidates, 2 generations, a 3 s scenario), its front exports the objective's column, and
+    every member's value is the plugin's ``values`` applied to its replayed run (bit for bit), which is
+    the weighted integral of the traced error of ``simulate --from-front`` (to 1e-12)."""
+    from arvcas import cli
+    from arvcas.metrics import objectives as O
+    from arvcas.io.results import read_result
+    from arvcas.sim.run import Run
+
+    plugin = tmp_path / "toy_objective.py"
+    plugin.write_text(USER_OBJECTIVE)
+    (tmp_path / "short.toml").write_text(
+        dataclasses.replace(scenario.load_scenario(), time_duration=3.0).to_toml())
+    study = tmp_path / "s.toml"
+    study.write_text(tiny_study(population=6, generations=2)
+                     .replace('names = ["chat", "rmse"]\nreference_point = [300.0, 4.0]',
+                              'names = ["rmse", "lab_heave_yaw"]\nreference_point = [4.0, 10.0]')
+                     .replace("[evaluation]\n", '[evaluation]\nscenario = "short.toml"\n'))
+
+    def cmd(*argv):
+        rc = cli.main([str(a) for a in argv])
+        out = capsys.readouterr()
+        assert rc == 0, out.err
+        return out.out
+
+    # without the plugin the study's objective is unknown: one line, nothing written
+    assert cli.main(["tune", str(study), "--out", str(tmp_path / "none")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "lab_heave_yaw" in err and not (tmp_path / "none").exists(), err
+    cmd("tune", study, "--out", tmp_path / "out", "--plugin", plugin)
+    assert O.origin("lab_heave_yaw")["kind"] == "file"
+    path = tmp_path / "out" / "front.h5"
+    fr = read_front(path)
+    assert fr.objectives == ("rmse", "lab_heave_yaw") and fr.labels == ["f_rmse", "f_lab_heave_yaw"]
+    assert fr.size >= 1 and np.isfinite(fr.F).all()
+    rows = list(csv.DictReader(io.StringIO(cmd("front", "export", path, "--format", "csv"))))
+    assert [float(r["f_lab_heave_yaw"]) for r in rows] == fr.F[:, 1].tolist()  # repr round-trips a float
+    # the members' runs replayed with the objective's accumulators: the plugin's function gives the column
+    obj = O.get("lab_heave_yaw")
+    cfg = scenario.loads_scenario(fr.scenario_text)
+    run = Run(fr.controller, cfg, accumulators=O.accumulators_of([obj])).compile()
+    out = run.outputs(fr.gains, seed=int(fr.draw_seeds[0]), uncertainty=fr.draw_uncertainty[0],
+                      phase=fr.draw_phase[0], n_threads=1)
+    ctx = O.Context(cfg=cfg, params=run.params, ref=None, chat="chat",
+                    slices=O.slices(run.accumulators, run.params.structure.n_thrusters, cfg))
+    got = obj.values(out, ctx)
+    assert out["ok"].all() and (got > 0).all()
+    np.testing.assert_array_equal(got, fr.F[:, 1])
+    # and from the trace of the command line's replay: h sum_k (|e_z| + 0.5 |e_psi|), k = 0 .. N-1
+    for i in sorted({0, fr.size - 1}):
+        r_path = tmp_path / f"replay{i}.h5"
+        cmd("simulate", "--from-front", path, "--index", i, "--out", r_path)
+        r = read_result(r_path)
+        assert r.t[-1] == pytest.approx(3.0)
+        e = (r.eta - r.eta_ref)[:scenario.n_samples(cfg) - 1]
+        want = cfg.time_h * (np.abs(e[:, 2]).sum() + 0.5 * np.abs(e[:, 5]).sum())
+        assert fr.F[i, 1] == pytest.approx(want, rel=1e-12, abs=0), (i, fr.F[i, 1], want)
+        np.testing.assert_array_equal(r.rmse, fr.rmse[0, i])

@@ -65,28 +65,6 @@ BROKEN = 'import arvcas\nraise RuntimeError("the lab licence server is down")\n'
 
 
 @pytest.fixture
-def fresh(monkeypatch):
-    """A process that has loaded no plugin: empty plugin state, no toy controller, no toy module."""
-    for name in ("_LOADED", "_EP_DONE", "_FAILED"):
-        monkeypatch.setattr(plugins, name, {})
-    monkeypatch.setattr(plugins, "_YIELDED", [])
-    monkeypatch.setattr(plugins, "_EP_ALL", set())
-    before = set(base.names())
-
-    def clean():
-        for state in (plugins._LOADED, plugins._EP_DONE, plugins._FAILED, plugins._YIELDED, plugins._EP_ALL):
-            state.clear()
-        for n in set(base.names()) - before:
-            base.unregister(n)
-        for m in [m for m in sys.modules if m.startswith(("toy_", "arvcas_plugin_"))]:
-            del sys.modules[m]
-
-    clean()
-    yield clean
-    clean()
-
-
-@pytest.fixture
 def site(tmp_path, monkeypatch):
     """The installed distribution: toy_plugin.py, toy_broken.py and their .dist-info, on sys.path."""
     d = tmp_path / "site"

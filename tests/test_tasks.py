@@ -258,3 +258,73 @@ def test_export_controller_refuses_a_task():
 
     with pytest.raises(ValueError, match=r"export-controller: the scenario has a \[trajectory\]"):
         closedloop.controller_functions("pid", task(), arvcas.load_system("haidou1").params.layout)
+
+
+# ---- a user's controller from a --plugin file on a task, through the command line ----------------------------
+
+CLI_LAW = '''\
+"""A lab's law (a test's plugin): PD on the reference error in {n}, with its own signal."""
+import casadi as ca
+
+import arvcas
+from arvcas.model.spatial import J
+from arvcas.sim.signals import DOFS, Signal
+
+
+class LabTaskPD(arvcas.Controller):
+    name = "lab_task_pd"
+    description = "tau_eta = -Mhat (kp e + kd e_dot)"
+    gains = (arvcas.Gain("kp", "1/s^2", "proportional"), arvcas.Gain("kd", "1/s", "derivative"))
+    defaults = [0.6, 1.6] * 6
+    defaults_block = "lab_task_pd"
+    signals = (Signal("e_seen", 6, "m,m,m,rad,rad,rad", "{n}", DOFS, "the error the law sees",
+                      lambda c: c.out["e"]),)
+
+    def initial(self, ctx, G):
+        return {}
+
+    def step(self, ctx, G, x):
+        ctx.out["e"] = ctx.e
+        return ca.mtimes(J(ctx.eta_hat).T, ctx.Mhat * (-G["kp"] * ctx.e - G["kd"] * ctx.e_dot)), {}
+'''
+
+
+def test_a_plugin_controller_tracks_a_task_from_the_command_line(tmp_path, capsys, fresh):
+    """``arvcas simulate --plugin toy_task_law.py --controller lab_task_pd --config task.toml`` (a scenario
+    with a [trajectory]): it runs, its RMSE is against eta_d(t_k) (eq. 43 on the written trace), equals the
+    Python API's run of the same law, scenario and seed bit for bit, and is what the command printed."""
+    from arvcas import cli
+    from arvcas.io.results import read_result
+
+    law = tmp_path / "toy_task_law.py"
+    law.write_text(CLI_LAW)
+    scen = tmp_path / "task.toml"
+    scen.write_text(BASE + APPROACH)
+    out = tmp_path / "r.h5"
+    rc = cli.main(["simulate", "--plugin", str(law), "--controller", "lab_task_pd", "--config", str(scen),
+                   "--seed", "1", "--out", str(out)])
+    text, err = capsys.readouterr()
+    assert rc == 0, err
+    assert text.startswith("lab_task_pd: seed 1, 20 s, ok"), text
+    r = read_result(out)
+    assert r.ok and r.controller == "lab_task_pd" and r.meta["controller_source"]["kind"] == "file"
+    cfg = scenario.load_scenario(scen)
+    assert cfg.has_trajectory and scenario.loads_scenario(r.config_text).trajectory_values() == cfg.trajectory_values()
+    # RMSE against the desired trajectory, eq. 43 over k = 0..N-1 on the true pose
+    eta_d = cfg.trajectory().sample(r.t)[0]
+    e = r.eta[:-1] - eta_d[:-1]
+    np.testing.assert_allclose(r.rmse, np.sqrt((e**2).mean(axis=0)), rtol=1e-12)
+    # the law saw the error to the reference that joins the trajectory, and the vehicle followed the move
+    np.testing.assert_array_equal(r.e_seen[1:], (r.eta_hat - r.eta_ref)[1:])
+    assert np.abs(r.eta[-1, :3] - [0.2, 0.05, 0.05]).max() < 0.02 and np.abs(e[r.t[:-1] > 6, :3]).max() < 0.02
+    # the Python API on the same law (registered by the plugin), scenario and seed: the same run
+    api = arvcas.Run("lab_task_pd", scenario=cfg).compile()
+    p = api.simulate(seed=1)
+    np.testing.assert_array_equal(p.rmse, r.rmse)
+    np.testing.assert_array_equal(p.chat, r.chat)
+    np.testing.assert_array_equal(p.eta, r.eta)
+    chat, rmse = api.batch(api.default_gains()[None, :], seed=1)  # the metrics-only run agrees
+    np.testing.assert_array_equal(rmse[0], r.rmse)
+    # the printed table is the run's RMSE
+    table = [line.split() for line in text.splitlines()[2:8]]
+    np.testing.assert_allclose([float(row[2]) for row in table], r.rmse, rtol=1e-4)

@@ -82,6 +82,48 @@ def test_many_bounds_its_memory_before_allocating(monkeypatch):
         assert isinstance(e, SimulationError) and message in str(e), repr(e)
 
 
+def test_batch_bounds_its_memory_before_compiling_or_allocating(monkeypatch):
+    """Run.batch (and Run.outputs, its every-output sibling) estimate the memory of n gain sets' runs (the
+    outputs and their copies, the accumulators' rows, the gains as float64) and refuse, in one line naming
+    ``gains``, before the run is compiled or any output allocated (here on a 64 MiB machine: 32 MiB allowed)."""
+    import arvcas
+    from arvcas.build import calls
+    from arvcas.metrics import objectives as O
+    from arvcas.sim.run import _OUT_BYTES, SimulationError
+
+    plain = arvcas.Run("agsta").compile()  # compiles nothing yet: the C is built on the first evaluation
+    acc = arvcas.Run("agsta", accumulators=O.accumulators_of([O.get("peak_thrust")])).compile()
+    monkeypatch.setattr(calls, "total_memory", lambda: 64 * 2**20)
+
+    def never(*_a, **_k):
+        raise AssertionError("compiled or evaluated before the memory bound")
+
+    for run in (plain, acc):
+        monkeypatch.setattr(run, "function", never)
+        monkeypatch.setattr(run, "lockstep", never)
+    monkeypatch.setattr(calls, "call_named", never)
+    g = plain.default_gains()
+    per_run = _OUT_BYTES + 8 * g.size  # the outputs and their copies, the gains as float64
+    assert [a.width for a in acc.accumulators] == ["thrusters", "thrusters"]  # peak_thrust: forward, reverse
+    acc_rows = 2 * acc.params.structure.n_thrusters  # 12 with Haidou-1's 6 thrust units
+    # 80,000 runs: their outputs alone (80,000 x 320 B = 24 MiB) fit in 32 MiB, with the gains they do not;
+    # 42,000 runs fit without accumulators, not with their 12 rows (and copies)
+    assert 80_000 * _OUT_BYTES < 32 * 2**20 < 80_000 * per_run
+    assert 42_000 * per_run < 32 * 2**20 < 42_000 * (per_run + 16 * acc_rows)
+    G = np.tile(g, (80_000, 1))
+    for run, n, method in ((plain, 80_000, "batch"), (plain, 80_000, "outputs"), (acc, 42_000, "batch"),
+                           (acc, 42_000, "outputs")):
+        e = bounded(lambda: getattr(run, method)(G[:n]), timeout=60)
+        assert isinstance(e, SimulationError), repr(e)
+        msg = str(e)
+        assert msg.startswith(f"gains: {n} gain sets ({method}: one run each): would need about ") and \
+            "\n" not in msg, msg
+    # below the bound the same calls go on to compile (here: the stub that stands for it)
+    for run, method in ((plain, "batch"), (plain, "outputs"), (acc, "batch")):
+        e = bounded(lambda: getattr(run, method)(G[:1000]), timeout=60)
+        assert isinstance(e, AssertionError) and "before the memory bound" in str(e), repr(e)
+
+
 def test_xacro_files_and_their_includes_are_read_without_a_dtd(tmp_path):
     """xacro (``arvcas import-system uuv``) parses the file and every include through the same refusal."""
     pytest.importorskip("xacro")

@@ -101,3 +101,85 @@ def test_scenario_rules(tmp_path):
         assert math.isclose(math.degrees(c.initial_eta_d[5]), want, abs_tol=1e-9), c.initial_eta_d
     with pytest.raises(ScenarioError, match=r"initial.eta_d: pitch 95 deg is at or beyond \+-90 deg"):
         load_scenario(scenario_variant(tmp_path, line, 'eta_d = { value = [0.0, 0.0, 0.0, 0.0, 95.0, 0.0], unit = "m,m,m,deg,deg,deg",'))
+
+
+# ---- thrust limits against the vehicle's weight (systems without a command map: instantaneous thrusters) ----
+
+def _shipped_variant(tmp_path, name: str, key: str, value: str, accept: bool = False):
+    """A shipped system file without thruster maps, copied to ``tmp_path`` with every ``key`` line (the
+    thrusters' ``u_min`` or ``u_max``) given ``value``; its relative files named by absolute path."""
+    src = shipped()[name]
+    text, n = re.subn(rf"^{key} = \{{ value = [^,]+,", f"{key} = {{ value = {value},", src.read_text(), flags=re.M)
+    assert n >= 1 and "[thrusters.map" not in text, (name, key)
+    for rel in ("scenario.toml", "gains.toml"):
+        text = text.replace(f'"{rel}"', f'"{src.parent / rel}"')
+    if accept:
+        text = text.replace("[system]\n", "[system]\naccept_implausible = true\n", 1)
+    p = tmp_path / f"{name}_{key}_{value.replace('-', 'm')}{'_ok' if accept else ''}.toml"
+    p.write_text(text)
+    return p
+
+
+# (system, its thrust-limit key as the loader names it, the vehicle's weight m g in N as the message prints it)
+THRUST_SYSTEMS = [("haidou1", "thrusters.u_max", "4.239e+04"),  # Haidou-1's parametric layout: one pair of limits
+                  ("hinsdale_bluerov2_alpha5", "thrusters.T1.u_max", "143")]  # a thruster list: T1 is named first
+
+
+@pytest.mark.parametrize("name, key, weight", THRUST_SYSTEMS)
+def test_thrust_limits_against_the_weight(tmp_path, name, key, weight):
+    """docs/system-file.md, Plausibility: |u_min|, |u_max| / (m g) above 10 is warned, above 1000 refused in
+    one line naming the key, and ``accept_implausible = true`` loads it deliberately (as a warning)."""
+    W = load(shipped()[name])
+    mg = W["vehicle.m"] * W["env.g"]
+    assert f"{mg:.4g}" == weight
+    leaf = key.rsplit(".", 1)[-1]
+    # within the rule: 9 times the weight loads without a warning (the limit is the file's, unchanged rule)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PlausibilityWarning)
+        P = load(_shipped_variant(tmp_path, name, leaf, f"{9 * mg:.6g}"))
+    assert P[key] == pytest.approx(9 * mg, rel=1e-5)
+    # implausible: 20 times the weight is warned (once per limit of the file) and loads
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        P = load(_shipped_variant(tmp_path, name, leaf, f"{20 * mg:.6g}"))
+    msgs = [str(w.message) for w in rec if issubclass(w.category, PlausibilityWarning)]
+    assert any(f"{key}: {20 * mg:g} N against the vehicle's weight {weight} N (20 times), more than 10 times" in m
+               for m in msgs), msgs
+    # one warning per edited limit, nothing else judged implausible
+    assert len(msgs) == sum(k.endswith(f".{leaf}") for k in P.layout.names), msgs
+    assert all(f".{leaf}: " in m and "N against the vehicle's weight" in m for m in msgs), msgs
+    assert P[key] == pytest.approx(20 * mg, rel=1e-5)
+    # impossible: 2000 times the weight is refused, one line naming the key and the flag
+    with pytest.raises(ParamsError) as e:
+        load(_shipped_variant(tmp_path, name, leaf, f"{2000 * mg:.6g}"))
+    msg = str(e.value)
+    assert "\n" not in msg and f"{key}: " in msg and "more than 1000 times is not a vehicle" in msg, msg
+    assert "accept_implausible = true" in msg, msg
+    # a reverse limit of the same size: the rule takes |u_min|
+    with pytest.raises(ParamsError, match=rf"{re.escape(key[:-3])}min: -?[\d.e+]+ N against the vehicle's weight"):
+        load(_shipped_variant(tmp_path, name, "u_min", f"{-2000 * mg:.6g}"))
+    # deliberately: accepted, warned as what it is
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        P = load(_shipped_variant(tmp_path, name, leaf, f"{2000 * mg:.6g}", accept=True))
+    msgs = [str(w.message) for w in rec if issubclass(w.category, PlausibilityWarning)]
+    assert any(f"{key}: " in m and "more than 1000 times is not a vehicle" in m for m in msgs), msgs
+    assert P[key] == pytest.approx(2000 * mg, rel=1e-5)
+
+
+def test_thrust_limit_refused_and_warned_by_the_command_line(tmp_path, capsys):
+    """The same rule through the CLI: the impossible limit is one line (exit 2, nothing written), the
+    implausible one a single warning line."""
+    from arvcas import cli
+
+    H = load(shipped()["haidou1"])
+    mg = H["vehicle.m"] * H["env.g"]
+    bad = _shipped_variant(tmp_path, "haidou1", "u_max", f"{2000 * mg:.6g}")
+    assert_refused(["simulate", "--controller", "pid", "--system", bad], capsys, tmp_path,
+                   "thrusters.u_max: ")
+    odd = _shipped_variant(tmp_path, "haidou1", "u_max", f"{20 * mg:.6g}")
+    assert cli.main(["systems"]) == 0
+    capsys.readouterr()
+    assert cli.main(["demo", "--system", str(odd)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("arvcas: warning: ") == 1 and "thrusters.u_max: " in err and "more than 10 times" in err, err

@@ -33,7 +33,7 @@ from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller, provenance
 from arvcas.model.uvms import ModelOptions
 from arvcas.system.params import Params, default_layout, system_tag
-from arvcas.sim import closedloop, scenario, schedule, signals as signals_mod
+from arvcas.sim import accumulate, closedloop, scenario, schedule, signals as signals_mod
 from arvcas.sim.result import Result
 from arvcas.sim.scenario import ScenarioConfig
 
@@ -274,13 +274,27 @@ class CompiledRun:
         A diverged run has ``ok = False`` and NaN metrics. ``chat``: ``"commanded"`` (eq. 42 on tau_v) or
         ``"delivered"`` (on the thrusters' delivered wrench, docs/model.md §6). ``lockstep``: run W runs at
         once per core (:mod:`arvcas.sim.lockstep`; the same bits); None: when :meth:`uses_lockstep` says so.
+        More gain sets than half this machine's memory holds the runs of are refused (one line naming
+        ``gains``) before anything is compiled or allocated.
         """
         g = self._gains(gains, batch=True)
+        self._check_batch_memory("batch", g)
         unc, ph = self._unc_phase(uncertainty, phase)
         noise = scenario.noise_sequence(self.cfg, seed)
         chat, rmse, ok, t_fail = self._evaluate(g.shape[0], {"gains": g.T, "noise": noise, "unc": unc, "phase": ph},
                                                 {"gains"}, n_threads, chat, lockstep)
         return (chat, rmse, ok, t_fail) if return_status else (chat, rmse)
+
+    def _check_batch_memory(self, method: str, g: np.ndarray) -> None:
+        """Refuse (one line naming ``gains``) n gain sets whose runs' outputs (with their copies and the
+        accumulators' rows) and the gains as float64 (a copy when given as a list or another dtype) would
+        take more than half this machine's memory: before the run is compiled or its outputs allocated
+        (issue 25 item 2; :meth:`many` bounds its noise blocks the same way)."""
+        n, st = g.shape[0], self.params.structure
+        n_events = len(accumulate.event_times(self.cfg)) if self.accumulators else 0
+        acc = sum(accumulate.width(a, st.n_thrusters, n_events) for a in self.accumulators)
+        calls.check_memory(f"gains: {n} gain sets ({method}: one run each)",
+                           n * (8 * g.shape[1] + _OUT_BYTES + 2 * 8 * acc), error=SimulationError)
 
     def many(self, gains, seeds, uncertainty=None, phase=None, n_threads: int | None = None, chat: str = "commanded",
              lockstep: bool | None = None):
@@ -333,6 +347,7 @@ class CompiledRun:
         n = g.shape[0]
         if n > MAX_RUNS:
             raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
+        self._check_batch_memory("outputs", g)
         out = calls.call_named(self.function(trace=False), {"gains": g.T, "noise": scenario.noise_sequence(self.cfg, seed),
                                                             "unc": unc, "phase": ph, **self._shared()},
                                n=n, per_run={"gains"}, n_threads=_n_threads(n_threads))
