@@ -30,6 +30,11 @@ needed 0.005 s with instantaneous thrusters and needs 0.0025 s with its T200 dyn
 (3) **The accuracy rule.** The rule's tolerance (1e-6 m, rad) against the run's own scales: the state
     error as a fraction of the RMSE the metrics report.
 
+(4) **A candidate.** The same run's open-loop error against the same CVODES reference for RK4 on the plant with
+    the thrusters' forcing taken out of its stages (:func:`transformed_states`: the forcing's contribution to the
+    velocities and positions integrated by Gauss-Legendre quadrature of the lag's closed form, RK4 on the rest at
+    long or graded substeps), with the work per sample it would take (plant evaluations, thrust-map points).
+
 The BlueROV2's runs are 60 s (the shipped scenario); ``--quick``: the first 10 s and fewer steps (a check
 that the script works, not for the record).
 """
@@ -234,6 +239,137 @@ def non_smooth_counts(cfg, r, pv, lay) -> dict:
             "thrust_sign_changes_total": int(tc.sum()), "nu_sign_changes_total": int(sc.sum())}
 
 
+# ---- (4) a candidate: the forcing integrated into the step ----------------------------------------------
+
+# (substeps of one 0.1 s sample (s), Gauss-Legendre nodes per half substep, how A = (M + M_arm)^-1 is had at the nodes)
+TRANSFORM_CASES = (((0.05,) * 2, 5, "exact"), ((0.025,) * 4, 3, "exact"), ((0.025,) * 4, 5, "exact"),
+                   ((0.025,) * 4, 8, "exact"), ((0.025,) * 4, 5, "quadratic"), ((0.02,) * 5, 3, "exact"),
+                   ((0.02,) * 5, 5, "exact"), ((0.0125,) * 8, 3, "exact"), ((0.0125,) * 8, 5, "exact"),
+                   ((0.01,) * 10, 3, "exact"), ((0.01,) * 10, 5, "exact"), ((0.01, 0.01, 0.02, 0.03, 0.03), 5, "exact"),
+                   ((0.01, 0.015, 0.025, 0.05), 5, "exact"))
+TRANSFORM_QUICK = (((0.025,) * 4, 5, "exact"), ((0.01, 0.01, 0.02, 0.03, 0.03), 5, "exact"))
+
+
+def transformed_states(sa, cfg, pv, x0, targets, phase, lay, substeps, ng: int, n: int, a_mode: str = "exact"):
+    """Plant states at t_k (rows, (n+1, 12)) by RK4 on the plant with the thrusters' forcing taken out of the stages.
+
+    Within a substep [a, a + H] the forcing enters the velocities linearly, nu_dot = A(t) (B F(s(t)) + R(eta, nu, t))
+    with A = (M + M_arm(q(t)))^-1 a function of time alone (the joints are prescribed), so with
+    w(t) = int_a^t A B F and omega(t) = int_a^t w, nu = z + w(t) and eta = zeta + J(eta_a) omega(t), RK4 integrates
+    z_dot = A R(eta, z + w, t) and zeta_dot = J(eta) (z + w) - J(eta_a) w: the fast rotor transient lives in w and
+    omega, integrated by Gauss-Legendre quadrature (``ng`` nodes per half substep) of the lag's closed form through
+    the T200 table, not sampled at three stage times. ``a_mode``: A at every node ("exact"), or interpolated
+    quadratically from its values at the three stage times ("quadratic": what generated code has from the time
+    table's LU factors). Only the lag with one time constant and no rate limit (the BlueROV2's T200s).
+    """
+    from arvcas.model import thrusters
+    from arvcas.model.spatial import J
+    from arvcas.system.params import layout_for, view
+
+    if any(d.asymmetric or d.rate_limit for d in lay.structure.thruster_dynamics):
+        raise ValueError("transformed_states: only the lag with one time constant and no rate limit")
+    inst = layout_for(lay.structure.instantaneous())
+    pv_inst = np.asarray(pv, float)[[lay.index[k] for k in inst.names]]
+    x, s, par, xdot = sa._plant_ode(cfg, None, inst)
+    f = ca.Function("f", [x, s, par], [xdot])
+    A_fn = ca.Function("A", [x, s, par], [ca.jacobian(xdot[6:12], par[0:6])])  # linear in the wrench: = A(t)
+    e = ca.SX.sym("e", 6)
+    J_fn = ca.Function("J", [e], [J(e)])
+    P = view(ca.DM(np.asarray(pv, float)), lay)
+    maps = thrusters.thruster_maps(P)
+    B = np.array(ca.DM(thrusters.B_T(P)))
+    taus = np.array([float(ca.DM(thrusters.time_constants(P, i)[0])) for i in range(len(maps))])
+    tables = {m.name: tuple(np.array(ca.DM(a)).ravel() for a in thrusters.map_table(P, m))
+              for m in lay.structure.thruster_maps if m.kind == "table"}
+    H = np.asarray(substeps, float)
+    if abs(H.sum() - cfg.time_h) > 1e-12:
+        raise ValueError(f"substeps {tuple(substeps)} do not add up to the sample {cfg.time_h} s")
+    starts = np.r_[0.0, np.cumsum(H)[:-1]]
+    gx, gw = np.polynomial.legendre.leggauss(ng)
+    # every node of the sample: per substep, ng in each half; weights (hi - lo) / 2 w_i
+    tn, wn, sub, half = [], [], [], []
+    for i, (a, hh) in enumerate(zip(starts, H)):
+        for j, (lo, hi) in enumerate(((a, a + hh / 2), (a + hh / 2, a + hh))):
+            tn += list(lo + (hi - lo) * (gx + 1) / 2)
+            wn += list((hi - lo) / 2 * gw)
+            sub += [i] * ng
+            half += [j] * ng
+    tn, wn, sub, half = np.array(tn), np.array(wn), np.array(sub), np.array(half)
+    stage_t = np.unique(np.r_[starts, starts + H / 2, starts + H])
+    xk, sk = np.asarray(x0, float).copy(), np.zeros(len(maps))
+    out = [xk]
+    zero6 = np.zeros(6)
+    for k in range(n):
+        y = np.asarray(targets[k], float)
+        base = np.r_[k * cfg.time_h, np.asarray(phase, float), cfg.water_vector, pv_inst]
+        S = y[:, None] + (sk - y)[:, None] * np.exp(-tn[None, :] / taus[:, None])
+        T = np.array([thrusters._pchip_np(*tables[maps[i].name], S[i]) for i in range(len(maps))])
+        Wn = B @ T  # (6, nodes)
+        tq = tn if a_mode == "exact" else stage_t
+        Aq = np.array(A_fn.map(len(tq))(np.tile(xk[:, None], (1, len(tq))), tq[None, :],
+                                        np.tile(np.r_[zero6, base][:, None], (1, len(tq))))).reshape(6, len(tq), 6)
+        Aq = np.transpose(Aq, (1, 0, 2))  # (times, 6, 6): the map stacks the 6 x 6 blocks side by side
+        if a_mode == "exact":
+            AW = np.einsum("tij,jt->it", Aq, Wn)
+        else:  # quadratic in t through A at the substep's three stage times
+            AW = np.empty((6, len(tn)))
+            for j, t in enumerate(tn):
+                a, hh = starts[sub[j]], H[sub[j]]
+                ts = (a, a + hh / 2, a + hh)
+                lw = [np.prod([(t - ts[m]) / (ts[l] - ts[m]) for m in range(3) if m != l]) for l in range(3)]
+                A3 = [Aq[np.searchsorted(stage_t, tt - 1e-15)] for tt in ts]
+                AW[:, j] = sum(c * Am for c, Am in zip(lw, A3)) @ Wn[:, j]
+        fx = lambda xx, t: np.array(f(xx, t, np.r_[zero6, base])).ravel()  # noqa: E731
+        for i, (a, hh) in enumerate(zip(starts, H)):
+            m1, m2 = (sub == i) & (half == 0), sub == i
+            v1, v2 = AW[:, m1] * wn[m1], AW[:, m2] * wn[m2]
+            w1, w2 = v1.sum(1), v2.sum(1)
+            o1, o2 = v1 @ (a + hh / 2 - tn[m1]), v2 @ (a + hh - tn[m2])
+            Jm = np.array(ca.DM(J_fn(xk[0:6])))
+
+            def g(zz, t, w, om):
+                d = fx(np.r_[zz[0:6] + Jm @ om, zz[6:12] + w], t)
+                return np.r_[d[0:6] - Jm @ w, d[6:12]]
+
+            k1 = g(xk, a, zero6, zero6)
+            k2 = g(xk + hh / 2 * k1, a + hh / 2, w1, o1)
+            k3 = g(xk + hh / 2 * k2, a + hh / 2, w1, o1)
+            k4 = g(xk + hh * k3, a + hh, w2, o2)
+            z = xk + hh / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            xk = np.r_[z[0:6] + Jm @ o2, z[6:12] + w2]
+        sk = y + (sk - y) * np.exp(-cfg.time_h / taus)
+        out.append(xk)
+    return np.vstack(out)
+
+
+def transform_study(sa, blue, cfg, r, n, quick: bool, log) -> dict:
+    """:func:`transformed_states` against CVODES (plant (a)'s reference) for :data:`TRANSFORM_CASES`; the work per
+    sample in plant evaluations and thrust-map points beside the shipped RK4's."""
+    lay = blue.layout
+    pv = np.asarray(blue.params.vector(), float)
+    X = np.hstack([r.eta, r.nu])
+    targets = sa.plant_inputs(pv, r, lay)
+    ref = _reference(sa, cfg, pv, X[0], targets, r.phase, lay, n, False)
+    n_thr = lay.structure.n_thrusters
+    rows = []
+    for subs, ng, mode in (TRANSFORM_QUICK if quick else TRANSFORM_CASES):
+        t0 = time.time()
+        A = transformed_states(sa, cfg, pv, X[0], targets, r.phase, lay, subs, ng, n, mode)
+        d = np.abs(A - ref)
+        e10 = d[:min(len(d), int(round(10 / cfg.time_h)) + 1)]
+        rows.append({"substeps": list(subs), "nodes_per_half": ng, "A": mode,
+                     "position_m": float(d[:, 0:3].max()), "angle_rad": float(d[:, 3:6].max()),
+                     "velocity": float(d[:, 6:12].max()),
+                     "first_10s": {"position_m": float(e10[:, 0:3].max()), "angle_rad": float(e10[:, 3:6].max())},
+                     "t_of_max": float(np.argmax(d[:, 0:6].max(axis=1)) * cfg.time_h),
+                     "plant_evaluations_per_sample": 4 * len(subs), "map_points_per_sample": 2 * ng * len(subs) * n_thr,
+                     "wall_s": time.time() - t0})
+        log(f"transformed {subs} ng {ng} {mode}: {rows[-1]['position_m']:.3g} m / {rows[-1]['angle_rad']:.3g} rad")
+    m_ship = int(round(cfg.time_h / cfg.time_h_plant))
+    return {"cases": rows, "n_thrusters": n_thr, "shipped": {"h_plant": cfg.time_h_plant, "plant_evaluations_per_sample": 4 * m_ship,
+                                       "map_points_per_sample": (2 * m_ship + 1) * n_thr}}
+
+
 # ---- run it all -------------------------------------------------------------------------------------------
 
 def study(quick: bool = False, log=print) -> dict:
@@ -283,6 +419,8 @@ def study(quick: bool = False, log=print) -> dict:
     for label in [k for k in traced if k.startswith("bluerov2")][:1]:
         log(f"forcing: {label} ...")
         res["forcing"][label] = forcing_study(sa, blue, cfg_b, traced[label], steps, n, log)
+        log(f"transformed: {label} ...")
+        res["transform"] = {"run": label, **transform_study(sa, blue, cfg_b, traced[label], n, quick, log)}
     res["load_avg_end"] = list(os.getloadavg())
     return res
 
@@ -356,8 +494,40 @@ def markdown(res: dict) -> str:
     for label, c in res["counts"].items():
         L.append(f"| {label} | {', '.join(f'{v:.2g}' for v in c['nu_sign_changes_per_s'])} | "
                  f"{', '.join(f'{v:.2g}' for v in c['thrust_sign_changes_per_s'])} | {', '.join(f'{v:.2g}' for v in c['rmse'])} |")
+    L += transform_markdown(res.get("transform"))
     L += ["", *findings(res)]
     return "\n".join(L) + "\n"
+
+
+def _within(row) -> bool:
+    return max(row["position_m"], row["angle_rad"]) <= RULE
+
+
+def transform_markdown(tr) -> list[str]:
+    if not tr:
+        return []
+    sh = tr["shipped"]
+    a = tr.get("shipped_errors", {})
+    L = ["", "## 3. A candidate measured: the thrusters' forcing taken out of the RK4 stages", "",
+         f"{tr['run']}, the same open-loop run and CVODES reference as section 2. `transformed_states` (this script): "
+         "within each substep the thrusters' forcing enters the velocities linearly through A(t) = (M + M_arm(q(t)))^-1, "
+         "a function of time alone, so RK4 integrates the plant in the variables z = nu - w(t), zeta = eta - J(eta_a) omega(t), "
+         "where w = int A B F(s(t)) dt and omega = int w dt come from Gauss-Legendre quadrature of the lag's closed form "
+         "through the T200 table (nodes per half substep), not from three stage samples. A at the nodes: exact, or "
+         "quadratic through its values at the three stage times (what generated code has from the time table's LU "
+         "factors). Work per 0.1 s sample: plant evaluations (RK4 stages) and thrust-map points (table lookups, "
+         f"all {tr['n_thrusters']} thrusters); the shipped RK4 at {sh['h_plant']:g} s: {sh['plant_evaluations_per_sample']} and "
+         f"{sh['map_points_per_sample']}. Rule: both errors <= {RULE:g}.", "",
+         "| substeps of a sample (s) | nodes per half | A | plant evaluations | map points | whole run: m / rad | "
+         "first 10 s: m / rad | t of the largest (s) | within the rule |", "|---|--:|---|--:|--:|---|---|--:|---|"]
+    for row in tr["cases"]:
+        subs = row["substeps"]
+        st = f"{len(subs)} x {subs[0]:g}" if len(set(subs)) == 1 else ", ".join(f"{v:g}" for v in subs)
+        L.append(f"| {st} | {row['nodes_per_half']} | {row['A']} | {row['plant_evaluations_per_sample']} | "
+                 f"{row['map_points_per_sample']} | {_g(row['position_m'])} / {_g(row['angle_rad'])} | "
+                 f"{_g(row['first_10s']['position_m'])} / {_g(row['first_10s']['angle_rad'])} | {row['t_of_max']:g} | "
+                 f"{'yes' if _within(row) else 'no'} |")
+    return L
 
 
 def findings(res: dict) -> list[str]:
@@ -393,12 +563,54 @@ def findings(res: dict) -> list[str]:
             f"{float(k):g} s: {_g(a['steps'][k]['position_m'])} m / {_g(a['steps'][k]['angle_rad'])} rad" for k in steps)
             + f"; the coarsest step within the rule: {_g(a['coarsest_within_rule'])} s (the error grows along the open-loop "
               f"run: its largest at t = {a['steps'][steps[-2]]['t_of_max']:g} s at {float(steps[-2]):g} s).")
-    L += ["- So a faster integrator for the vehicle (higher order, exponential or implicit) cannot buy a longer step "
-          "here: what needs resolving is the thrust forcing B F(s(t)) within a sample, whose rotor states follow the "
-          "lag's closed form and whose thrust goes through the table (and its dead band). The candidate this points to: "
-          "keep the vehicle's RK4 at a long step and integrate the forcing's contribution more finely (its time "
-          "profile is known in closed form within each sample), checked against CVODES as here. Not built in this "
-          "session (see the issue's report)."]
+    L.append("- So a faster integrator for the vehicle alone (higher order, exponential or implicit) cannot buy a "
+             "longer step here: what needs resolving is the thrust forcing B F(s(t)) within a sample, whose rotor "
+             "states follow the lag's closed form and whose thrust goes through the table.")
+    tr = res.get("transform")
+    if tr:
+        sh = tr["shipped"]
+        ok = [r for r in tr["cases"] if _within(r)]
+        best = min(tr["cases"], key=lambda r: max(r["position_m"], r["angle_rad"]))
+        def _desc(r):
+            return (f"{len(r['substeps'])} substeps ({', '.join(f'{v:g}' for v in r['substeps'])} s), {r['nodes_per_half']} "
+                    f"nodes per half: {_g(r['position_m'])} m / {_g(r['angle_rad'])} rad over the run "
+                    f"({r['plant_evaluations_per_sample']} plant evaluations and {r['map_points_per_sample']} map points "
+                    f"per sample against the shipped {sh['plant_evaluations_per_sample']} and {sh['map_points_per_sample']})")
+        err = lambda r: max(r["position_m"], r["angle_rad"])  # noqa: E731
+        same = lambda r, q: r["substeps"] == q["substeps"] and r["A"] == q["A"]  # noqa: E731
+        ng_pairs = [(r, q) for r in tr["cases"] for q in tr["cases"] if same(r, q) and q["nodes_per_half"] > r["nodes_per_half"]]
+        graded = [r for r in tr["cases"] if len(set(r["substeps"])) > 1 and r["A"] == "exact"]
+        uniform = {len(r["substeps"]): r for r in tr["cases"] if len(set(r["substeps"])) == 1 and r["A"] == "exact"
+                   and r["nodes_per_half"] == 5}
+        quad = [(r, q) for r in tr["cases"] for q in tr["cases"] if r["A"] == "quadratic" and q["A"] == "exact"
+                and r["substeps"] == q["substeps"] and r["nodes_per_half"] == q["nodes_per_half"]]
+        a_sh = next(iter(res["forcing"].values()))["(a) shipped: T200 lags through the table"]["steps"].get(repr(sh["h_plant"]))
+        L.append("- The candidate of section 3 (the forcing integrated by quadrature into a change of variables, RK4 at "
+                 "long substeps): " + (f"within the rule with the fewest plant evaluations: {_desc(min(ok, key=lambda r: r['plant_evaluations_per_sample']))}"
+                                        if ok else f"no case within the rule; the best: {_desc(best)}")
+                 + f"; the shipped RK4 at {sh['h_plant']:g} s: "
+                 + (f"{_g(a_sh['position_m'])} m / {_g(a_sh['angle_rad'])} rad." if a_sh else "not measured here."))
+        for r, q in ng_pairs:
+            L.append(f"- More nodes ({r['nodes_per_half']} -> {q['nodes_per_half']} per half, substeps "
+                     f"{', '.join(f'{v:g}' for v in r['substeps'])} s): {_g(err(r))} -> {_g(err(q))} (largest of m, rad); "
+                     f"the largest errors at t = {r['t_of_max']:g} and {q['t_of_max']:g} s.")
+        for g in graded:
+            u = uniform.get(len(g["substeps"]))
+            if u is not None:
+                L.append(f"- Graded against uniform substeps of the same count ({len(g['substeps'])}): "
+                         f"{', '.join(f'{v:g}' for v in g['substeps'])} s gives {_g(err(g))}, {len(u['substeps'])} x "
+                         f"{u['substeps'][0]:g} s gives {_g(err(u))} (largest of m, rad).")
+        for r, q in quad:
+            L.append(f"- A interpolated quadratically from its three stage times against A at every node "
+                     f"({', '.join(f'{v:g}' for v in r['substeps'])} s, {r['nodes_per_half']} nodes): {_g(err(r))} against "
+                     f"{_g(err(q))}; generated code would need no records beyond the time table's.")
+        pick = min(ok or [best], key=lambda r: r["plant_evaluations_per_sample"])
+        L.append(f"- So at an accuracy within the rule (which the shipped {sh['h_plant']:g} s step misses on this run), the "
+                 f"candidate takes {sh['plant_evaluations_per_sample'] / pick['plant_evaluations_per_sample']:.0f}x fewer plant "
+                 f"evaluations per sample ({pick['plant_evaluations_per_sample']} against {sh['plant_evaluations_per_sample']}) "
+                 f"and {pick['map_points_per_sample']} thrust-map points against {sh['map_points_per_sample']}: what it saves "
+                 "is the vehicle's part of a sample, not the thrusters' (results/bench.md §5 has the split of a sample's time "
+                 "between the two).")
     return L + [""]
 
 
