@@ -20,6 +20,7 @@ from arvcas.system.params import load as load_params
 from benchmarks.bench.closed_loop import _bench_closed_loop
 from benchmarks.bench.common import Settings, _CpuMeter, _default_opt_level, _machine, _wait_for_load
 from benchmarks.bench.compiling import _bench_compile, _recommend
+from benchmarks.bench.cost import _bench_cost, write_files as _write_cost_files
 from benchmarks.bench.controller import _bench_controller
 from benchmarks.bench.identification import _bench_identification
 from benchmarks.bench.lanes import _bench_lanes
@@ -29,7 +30,8 @@ from benchmarks.bench.startup import _bench_startup
 from benchmarks.bench.systems import _bench_systems
 from benchmarks.bench.targets import _bench_targets
 
-SECTIONS = ("plant", "closed_loop", "targets", "compile", "startup", "systems", "identification", "controller", "lanes")
+SECTIONS = ("plant", "closed_loop", "targets", "compile", "startup", "systems", "identification", "controller", "lanes",
+            "cost")
 
 
 def run(out: str | Path | None = "results", quick: bool = False, wait_load: float | None = None,
@@ -90,6 +92,7 @@ def _section_functions(s, cfg, P, driver, work, log):
             ("identification", lambda: _bench_identification(s, log)),
             ("controller", lambda: _bench_controller(s, log)),
             ("lanes", lambda: _bench_lanes(s, log)),
+            ("cost", lambda: _bench_cost(s, log)),
     )
 
 
@@ -123,7 +126,8 @@ def _run_only(out, quick: bool, only: tuple[str, ...], log) -> dict:
 
 def write(res: dict, out: str | Path) -> tuple[Path, Path]:
     """Write ``bench.json`` and ``bench.md`` into the directory ``out`` (created if its parent exists),
-    atomically and only over files arvcas wrote (:mod:`arvcas.io.files`)."""
+    atomically and only over files arvcas wrote (:mod:`arvcas.io.files`); with a ``cost`` section, its
+    figures and README into ``out/cost/`` (:func:`benchmarks.bench.cost.write_files`)."""
     from arvcas.io import files
 
     d = files.prepare_dir(Path(out), f"bench: --out {out}")
@@ -131,4 +135,6 @@ def write(res: dict, out: str | Path) -> tuple[Path, Path]:
     text_json = json.dumps(res, indent=1, allow_nan=False) + "\n"
     files.write_text(pj, text_json)
     files.write_text(pm, render_markdown(res))
+    if res.get("cost"):
+        _write_cost_files(res["cost"], d / "cost")
     return pj, pm
