@@ -68,6 +68,9 @@ LENGTH_BATCH = {"full": 64, "quick": 8}  # gain sets of the per-run batches of (
 BATCH_BUDGET_S = {"full": 10.0, "quick": 0.2}  # wall time per batch size and path the rounds may take
 MIN_ROUNDS = {"full": 2, "quick": 1}
 LINEAR_TOL = 0.10  # a point is on the line within this relative residual
+# the fits take each point's fastest round, as timeit does (on this shared machine the least disturbed round
+# measures the code, the spread above it the neighbours); the medians stand beside them in the tables
+FIT_ON = "min"
 QG7_DEG = 60.0  # the 7th joint's grasp angle (the generated arm's only number not Haidou-1's): within its limits
 FIGURES = ("cost_length.png", "cost_batch.png", "cost_joints.png")
 
@@ -86,8 +89,10 @@ def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 def linear_fit(x, y, tol: float = LINEAR_TOL) -> dict:
     """The line ``y = a + b x`` of a sweep and where it holds.
 
-    ``window``: the longest run of consecutive points (x in sweep order) whose own line has every
-    relative residual within ``tol`` (of equal length: the smallest largest residual, then the higher x);
+    ``window``: the longest run of at least three consecutive points (two in a sweep of two; x in sweep
+    order) whose own line has every relative residual within ``tol`` (of equal length: the smallest
+    largest residual, then the higher x); when no three consecutive points lie on a line, the line
+    through every point, with ``n_points`` 0;
     ``slope``, ``intercept``: that line; ``residual``: every point's relative residual against it (the
     points outside the window show how far the sweep leaves it); ``linear_everywhere``: the window is the
     whole sweep; ``proportional_from``: the x above which the fixed part |a| is at most ``tol`` of the line
@@ -98,7 +103,7 @@ def linear_fit(x, y, tol: float = LINEAR_TOL) -> dict:
         raise BenchError(f"cost: a line needs >= 2 finite points with y > 0, got x={x.tolist()} y={y.tolist()}")
     n = x.size
     best = None  # (first index, length, a, b, largest residual)
-    for length in range(n, 1, -1):
+    for length in range(n, min(3, n) - 1, -1):
         for i in range(n - length + 1):
             sl = slice(i, i + length)
             a, b = _line(x[sl], y[sl])
@@ -107,11 +112,13 @@ def linear_fit(x, y, tol: float = LINEAR_TOL) -> dict:
                 best = (i, length, a, b, worst)
         if best is not None:
             break
-    i0, length, a, b, worst = best
     a_all, b_all = _line(x, y)
     res_all = (y - a_all - b_all * x) / y
+    if best is None:
+        best = (0, 0, a_all, b_all, float(np.max(np.abs(res_all))))
+    i0, length, a, b, worst = best
     return {
-        "slope": b, "intercept": a, "from": float(x[i0]), "to": float(x[i0 + length - 1]), "n_points": length,
+        "slope": b, "intercept": a, "from": float(x[i0]), "to": float(x[max(i0, i0 + length - 1)]), "n_points": length,
         "max_residual": worst, "residual": [float(r) for r in (y - a - b * x) / y],
         "linear_everywhere": length == n,
         "proportional_from": (abs(a) / tol - a) / b if b > 0 else None,
@@ -195,14 +202,14 @@ def _bench_length(s: Settings, log) -> dict:
             run.table
             tabs.append(time.perf_counter() - t0)
         row["table_s"] = _stat(tabs)
-        row["rtf_call"] = L / row["call_s"]["median"]
-        row["rtf_lanes"] = L / row["batch_lanes_s_per_run"]["median"]
+        row["rtf_call"] = L / row["call_s"][FIT_ON]
+        row["rtf_lanes"] = L / row["batch_lanes_s_per_run"][FIT_ON]
         log(f"cost: run length {L:g} s: {row['call_s']['median'] * 1e3:.2f} ms the call, "
             f"{row['one_run_s']['median'] * 1e3:.2f} ms one run, {row['batch_lanes_s_per_run']['median'] * 1e3:.3f} ms "
             f"per run in lockstep")
         rows.append(row)
     x = [r["length_s"] for r in rows]
-    fits = {k: linear_fit(x, [r[key]["median"] for r in rows]) for k, key in LENGTH_SERIES.items()}
+    fits = {k: linear_fit(x, [r[key][FIT_ON] for r in rows]) for k, key in LENGTH_SERIES.items()}
     return {"system": SYSTEM, "controller": CONTROLLER, "h": cfg0.time_h, "h_plant": cfg0.time_h_plant,
             "opt_level": level, "rows": rows, "fits": fits}
 
@@ -246,12 +253,13 @@ def _bench_batch(s: Settings, log) -> dict:
             raise BenchError(f"cost: a batch of {N} runs: the lockstep outputs differ from the one at a time")
         sc, ln = _stat(t[False]), _stat(t[True])
         rows.append({"n_runs": N, "rounds": rounds, "ok_share": float(np.mean(outs[False][2])),
-                     "scalar_s": sc, "lanes_s": ln, "scalar_s_per_run": sc["median"] / N,
-                     "lanes_s_per_run": ln["median"] / N, "speedup": sc["median"] / ln["median"],
+                     "scalar_s": sc, "lanes_s": ln, "scalar_s_per_run": sc[FIT_ON] / N,
+                     "lanes_s_per_run": ln[FIT_ON] / N, "speedup": sc[FIT_ON] / ln[FIT_ON],
+                     "speedup_median": sc["median"] / ln["median"],
                      "bitwise_equal": True})
     x = [r["n_runs"] for r in rows]
-    fits = {"scalar": linear_fit(x, [r["scalar_s"]["median"] for r in rows]),
-            "lanes": linear_fit(x, [r["lanes_s"]["median"] for r in rows])}
+    fits = {"scalar": linear_fit(x, [r["scalar_s"][FIT_ON] for r in rows]),
+            "lanes": linear_fit(x, [r["lanes_s"][FIT_ON] for r in rows])}
     return {"system": SYSTEM, "controller": CONTROLLER, "length_s": BATCH_LENGTH, "W": ls.W, "threads": 1,
             "rows": rows, "fits": fits}
 
@@ -358,7 +366,9 @@ def _bench_joints(s: Settings, work: Path, log) -> dict:
                 "table_functions_build_s": max(1e-6, (t3 - t2) - table_s), "table_s": table_s,
                 "instructions_per_sample": ins["total"], "step_calls": ins["calls"],
                 "call_s": call, "lanes_s_per_run": lanes,
-                "call_us_per_sample": call["median"] / ns * 1e6, "lanes_us_per_sample": lanes["median"] / ns * 1e6,
+                "call_us_per_sample": call[FIT_ON] / ns * 1e6, "lanes_us_per_sample": lanes[FIT_ON] / ns * 1e6,
+                "call_us_per_sample_median": call["median"] / ns * 1e6,
+                "lanes_us_per_sample_median": lanes["median"] / ns * 1e6,
             })
             log(f"cost: {n} joints: {ins['total']:,} instructions per sample, {rows[-1]['call_us_per_sample']:.2f} us "
                 f"per sample ({rows[-1]['lanes_us_per_sample']:.2f} in lockstep), builds {run_build_s:.1f} + {lanes_build_s:.1f} s")
@@ -405,18 +415,23 @@ def _fmt_s(x: float) -> str:
 
 def _where(f: dict, unit: str, fmt=lambda v: f"{v:g}") -> str:
     """Where a fit's line holds, in words."""
+    off = ", ".join(f"{r:+.0%}" for r in f["residual"] if abs(r) > LINEAR_TOL)
+    if f["n_points"] == 0:
+        return f"no three consecutive points on one line within {LINEAR_TOL:.0%}; the line through all: {off} off it"
     span = f"{fmt(f['from'])}-{fmt(f['to'])} {unit}".strip()
     if f["linear_everywhere"]:
         return f"linear over the whole sweep ({span}; largest residual {f['max_residual']:.1%})"
-    return (f"linear over {span} ({f['n_points']} points, largest residual {f['max_residual']:.1%}); outside it "
-            + ", ".join(f"{r:+.0%}" for r in f["residual"] if abs(r) > LINEAR_TOL) + " off the line")
+    return (f"linear over {span} ({f['n_points']} points, largest residual {f['max_residual']:.1%}); the other points "
+            + (f"{off} off the line" if off else "within the tolerance of it too"))
 
 
 def _prop(f: dict, unit: str) -> str:
     p = f["proportional_from"]
     if p is None:
         return "no positive slope"
-    return "the fixed part below 10 % everywhere" if p <= 0 else f"the fixed part below 10 % from {p:,.3g} {unit}"
+    if f["intercept"] <= 0 or p <= 0:
+        return "no fixed part (intercept <= 0)"
+    return f"the fixed part below 10 % from {p:,.0f} {unit}" if p >= 10 else f"the fixed part below 10 % from {p:.2g} {unit}"
 
 
 def _fixed(f: dict, label: str, x0: float) -> str:
@@ -435,34 +450,40 @@ def _measured_line(ms: dict) -> str:
             f"measuring: {ms['other_cpu_share']:.1%} of the machine.")
 
 
+def _fm(st: dict, scale: float = 1.0) -> str:
+    """A timing as 'fastest (median)'."""
+    return f"{_fmt_s(st[FIT_ON] * scale)} ({_fmt_s(st['median'] * scale)})"
+
+
 def _body(r: dict, fig_prefix: str | None) -> list[str]:
     """The section's text (bench.md and results/cost/README.md), figures linked under ``fig_prefix``."""
-    from benchmarks.bench.report import _g, _spread
+    from benchmarks.bench.report import _g
 
     ln, bt, jt = r["length"], r["batch"], r["joints"]
     tol = r["tolerance"]
     F = ln["fits"]
-    L = [f"Every series is fitted with a line `t = a + b x` (least squares on relative residuals); *linear* means "
-         f"every point of a run of consecutive sweep points lies within {tol:.0%} of that run's own line (the longest "
-         f"such run is reported, and each point's residual against it); *proportional* means the fixed part `a` is "
-         f"below {tol:.0%} of the cost. One thread throughout.", ""]
+    L = [f"Every series is fitted with a line `t = a + b x` (least squares on relative residuals) through each "
+         f"point's fastest round (as `timeit` takes it: on this shared machine the least disturbed round measures the "
+         f"code; the tables give the median in brackets). *Linear* means every point of a run of at least three "
+         f"consecutive sweep points lies within {tol:.0%} of that run's own line (the longest such run is reported, "
+         f"with every point's residual against its line); *proportional* means the fixed part `a` is below {tol:.0%} "
+         f"of the cost. One thread throughout.", ""]
     L += [f"### (a) Run length: {ln['system']}, `{ln['controller']}`, h = {ln['h']:g} s, plant step {ln['h_plant']:g} s",
           "",
           f"Each length its own compiled run ({ln['opt_level']}). *call*: the compiled run function alone (time table "
           f"built beforehand); *one run*: `CompiledRun.batch` of one gain set, one at a time (the Python around the "
           f"call, the noise drawn, the inputs checked); *in a batch*: per run of a batch of {ln['rows'][0]['batch_n']} "
           f"(the defaults times U(0.95, 1.05)), one at a time and in lockstep (W = {ln['rows'][0]['W']}; outputs equal "
-          f"to the bit); *table*: the run's time table from scratch (a new scenario's first run pays it). Median "
-          f"(spread) over alternated rounds.", ""]
+          f"to the bit); *table*: the run's time table from scratch (a new scenario's first run pays it). Fastest "
+          f"(median) of {ln['rows'][0]['call_s']['n']} alternated rounds.", ""]
     if fig_prefix is not None:
         L += [f"![run time against run length]({fig_prefix}cost_length.png)", ""]
-    L += ["| run length s | samples | call (spread) | one run (spread) | per run, batch one at a time | per run, batch in "
-          "lockstep | table | real-time factor: call / lockstep |", "|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    L += ["| run length s | samples | call | one run | per run, batch one at a time | per run, batch in "
+          "lockstep | table | real-time factor (fastest): call / lockstep |", "|--:|--:|--:|--:|--:|--:|--:|--:|"]
     for x in ln["rows"]:
-        L.append(f"| {x['length_s']:g} | {x['n_samples']:,} | {_fmt_s(x['call_s']['median'])} ({_spread(x['call_s'])}) | "
-                 f"{_fmt_s(x['one_run_s']['median'])} ({_spread(x['one_run_s'])}) | "
-                 f"{_fmt_s(x['batch_scalar_s_per_run']['median'])} | {_fmt_s(x['batch_lanes_s_per_run']['median'])} | "
-                 f"{_fmt_s(x['table_s']['median'])} | {x['rtf_call']:,.0f}x / {x['rtf_lanes']:,.0f}x |")
+        L.append(f"| {x['length_s']:g} | {x['n_samples']:,} | {_fm(x['call_s'])} | {_fm(x['one_run_s'])} | "
+                 f"{_fm(x['batch_scalar_s_per_run'])} | {_fm(x['batch_lanes_s_per_run'])} | {_fm(x['table_s'])} | "
+                 f"{x['rtf_call']:,.0f}x / {x['rtf_lanes']:,.0f}x |")
     L += ["", "| series | slope b (per simulated s) | intercept a | asymptotic real-time factor 1/b | where linear | "
           "proportional |", "|---|--:|--:|--:|---|---|"]
     names = {"call": "call", "one_run": "one run", "batch_scalar": "per run, batch one at a time",
@@ -480,12 +501,13 @@ def _body(r: dict, fig_prefix: str | None) -> list[str]:
               f"{bt['threads']} thread", ""]
     if fig_prefix is not None:
         L += [f"![batch time against batch size]({fig_prefix}cost_batch.png)", ""]
-    L += ["| runs | rounds | running share | one at a time: batch (spread) | per run | lockstep: batch (spread) | "
-          "per run | lockstep speed-up |", "|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    L += ["Fastest (median) of the rounds; per run: the fastest round over the runs.", "",
+          "| runs | rounds | running share | one at a time: batch | per run | lockstep: batch | per run | "
+          "lockstep speed-up (fastest; medians) |", "|--:|--:|--:|--:|--:|--:|--:|--:|"]
     for x in bt["rows"]:
-        L.append(f"| {x['n_runs']:,} | {x['rounds']} | {x['ok_share']:.0%} | {_fmt_s(x['scalar_s']['median'])} "
-                 f"({_spread(x['scalar_s'])}) | {_fmt_s(x['scalar_s_per_run'])} | {_fmt_s(x['lanes_s']['median'])} "
-                 f"({_spread(x['lanes_s'])}) | {_fmt_s(x['lanes_s_per_run'])} | {x['speedup']:.2f}x |")
+        L.append(f"| {x['n_runs']:,} | {x['rounds']} | {x['ok_share']:.0%} | {_fm(x['scalar_s'])} | "
+                 f"{_fmt_s(x['scalar_s_per_run'])} | {_fm(x['lanes_s'])} | {_fmt_s(x['lanes_s_per_run'])} | "
+                 f"{x['speedup']:.2f}x; {x['speedup_median']:.2f}x |")
     L += ["", "| path | slope b (per run) | intercept a (per batch) | runs per second 1/b | where linear | proportional |",
           "|---|--:|--:|--:|---|---|"]
     for k, label in (("scalar", "one at a time"), ("lanes", "lockstep")):
@@ -497,14 +519,16 @@ def _body(r: dict, fig_prefix: str | None) -> list[str]:
           f"The system files are written by `benchmarks/bench/cost.py` (`arm_system_text`: joint and link i are "
           f"{jt['base']}'s i, joint 7 a copy of joint 6; the paper's arm motion as waypoints, joint 7 to "
           f"{jt['qg7_deg']:g} deg). Builds: cold, into a fresh empty cache (graph, C, compiler, load); cc: the "
-          f"compiler's share. Per sample: the compiled run alone, and a run in a lockstep batch of {jt['batch_n']}.", ""]
+          f"compiler's share; one cold build each. Per sample: the compiled run alone, and a run in a lockstep batch of "
+          f"{jt['batch_n']}, fastest (median) of {jt['rows'][0]['call_s']['n']} rounds.", ""]
     if fig_prefix is not None:
         L += [f"![per-sample time, instructions and compile time against joints]({fig_prefix}cost_joints.png)", ""]
-    L += ["| joints | instructions / sample | µs / sample, call (spread) | µs / sample, lockstep | run build s (cc) | "
+    L += ["| joints | instructions / sample | µs / sample, call | µs / sample, lockstep | run build s (cc) | "
           "lockstep build s (cc) | table functions build s | table s |", "|--:|--:|--:|--:|--:|--:|--:|--:|"]
     for x in jt["rows"]:
         L.append(f"| {x['joints']} | {x['instructions_per_sample']:,} | {_g(x['call_us_per_sample'])} "
-                 f"({_spread(x['call_s'])}) | {_g(x['lanes_us_per_sample'])} | {_g(x['run_build_s'])} "
+                 f"({_g(x['call_us_per_sample_median'])}) | {_g(x['lanes_us_per_sample'])} "
+                 f"({_g(x['lanes_us_per_sample_median'])}) | {_g(x['run_build_s'])} "
                  f"({_g(x['run_cc_s'])}) | {_g(x['lanes_build_s'])} ({_g(x['lanes_cc_s'])}) | "
                  f"{_g(x['table_functions_build_s'])} | {_g(x['table_s'])} |")
     units = {"call_us_per_sample": ("µs per sample, call", "µs"), "lanes_us_per_sample": ("µs per sample, lockstep", "µs"),
@@ -514,8 +538,8 @@ def _body(r: dict, fig_prefix: str | None) -> list[str]:
     L += ["", "| series | slope b (per joint) | intercept a (no arm) | b / a | where linear |", "|---|--:|--:|--:|---|"]
     for k, f in jt["fits"].items():
         label, u = units[k]
-        L.append(f"| {label} | {_g(f['slope'])} {u} | {_g(f['intercept'])} {u} | {f['slope'] / f['intercept']:.1%} | "
-                 f"{_where(f, 'joints')} |")
+        ratio = f"{f['slope'] / f['intercept']:.1%}" if f["intercept"] > 0 else "-"
+        L.append(f"| {label} | {_g(f['slope'])} {u} | {_g(f['intercept'])} {u} | {ratio} | {_where(f, 'joints')} |")
     return L
 
 
@@ -563,11 +587,12 @@ def figures(r: dict) -> dict:
                 ("batch_lanes", "batch_lanes_s_per_run", f"per run, batch of {ln['rows'][0]['batch_n']}, lockstep"),
                 ("table", "table_s", "time table from scratch"))):
             c = style.color("", i)
-            ax.plot(x, [row[key]["median"] for row in ln["rows"]], "o", color=c, label=label)
+            ax.plot(x, [row[key][FIT_ON] for row in ln["rows"]], "o", color=c, label=label)
+            ax.plot(x, [row[key]["median"] for row in ln["rows"]], "o", mfc="none", mew=0.5, ms=2.5, color=c)
             _plot_fit(ax, ln["fits"][k], c, x)
         ax.set_xlabel("run length (s)")
         ax.set_ylabel("wall time (s)")
-        ax.set_title(f"{ln['system']}: cost against run length (dashed: a + b x)")
+        ax.set_title(f"{ln['system']}: cost against run length\n(filled: fastest round, open: median; dashed: a + b x)")
         ax.legend(loc="upper left")
         ax.grid(True, which="major")
         style.log_labels(ax)
@@ -579,7 +604,8 @@ def figures(r: dict) -> dict:
         x = [row["n_runs"] for row in bt["rows"]]
         for i, (k, label) in enumerate((("scalar", "one at a time"), ("lanes", f"lockstep (W = {bt['W']})"))):
             c = style.color("", i)
-            a1.plot(x, [row[f"{k}_s"]["median"] for row in bt["rows"]], "o", color=c, label=label)
+            a1.plot(x, [row[f"{k}_s"][FIT_ON] for row in bt["rows"]], "o", color=c, label=label)
+            a1.plot(x, [row[f"{k}_s"]["median"] for row in bt["rows"]], "o", mfc="none", mew=0.5, ms=2.5, color=c)
             a2.plot(x, [row[f"{k}_s_per_run"] * 1e3 for row in bt["rows"]], "o-", color=c, label=label)
             for ax in (a1,):
                 ax.set_xscale("log")
@@ -589,11 +615,11 @@ def figures(r: dict) -> dict:
         style.log_labels(a2)
         a1.set_xlabel("runs in the batch")
         a1.set_ylabel("batch wall time (s)")
-        a1.set_title(f"{bt['length_s']:g} s runs, {bt['threads']} thread (dashed: a + b n)")
+        a1.set_title(f"{bt['length_s']:g} s runs, {bt['threads']} thread (open: median; dashed: a + b n)")
         a2.set_xlabel("runs in the batch")
         a2.set_ylabel("wall time per run (ms)")
         a2.set_ylim(bottom=0)
-        a2.set_title("per run")
+        a2.set_title("per run (fastest round)")
         for ax in (a1, a2):
             ax.grid(True, which="major")
             ax.legend(loc="upper left")
@@ -608,6 +634,7 @@ def figures(r: dict) -> dict:
                                         ("lanes_us_per_sample", "lockstep batch"))):
             c = style.color("", i)
             axs[0].plot(x, [row[k] for row in jt["rows"]], "o", color=c, label=label)
+            axs[0].plot(x, [row[f"{k}_median"] for row in jt["rows"]], "o", mfc="none", mew=0.5, ms=2.5, color=c)
             _plot_fit(axs[0], jt["fits"][k], c, x)
         axs[0].set_ylabel("µs per controller sample")
         c = style.color("", 2)

@@ -42,12 +42,13 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
     figures are not for the record). ``wait_load``: first wait (at most ``wait_max_s``) until the
     1-min load average is at most this. ``only``: measure just these sections (:data:`SECTIONS`) and put
     them into ``out``'s existing ``bench.json`` (the others keep their figures; ``partial`` records the
-    date, commit and load of each section measured so). Returns the result dictionary.
+    date, commit and load of each section measured so, and the wait). Returns the result dictionary.
     """
-    if only:
-        return _run_only(out, quick, only, log)
-    s = Settings.quick() if quick else Settings.full()
     log = log or (lambda m: print(f"bench: {m}", file=sys.stderr, flush=True))
+    if only:
+        return _run_only(out, quick, only, log, lambda: _wait_for_load(wait_load, wait_max_s, log)
+                         if wait_load is not None else 0.0)
+    s = Settings.quick() if quick else Settings.full()
     waited = _wait_for_load(wait_load, wait_max_s, log) if wait_load is not None else 0.0
     machine = _machine()
     machine["load_avg_start"] = [round(x, 2) for x in os.getloadavg()]
@@ -96,8 +97,9 @@ def _section_functions(s, cfg, P, driver, work, log):
     )
 
 
-def _run_only(out, quick: bool, only: tuple[str, ...], log) -> dict:
-    """:func:`run` with ``only``: the named sections measured into ``out``'s bench.json."""
+def _run_only(out, quick: bool, only: tuple[str, ...], log, wait: Callable[[], float] = lambda: 0.0) -> dict:
+    """:func:`run` with ``only``: the named sections measured into ``out``'s bench.json (after ``wait()``,
+    which returns the seconds it waited for a quiet machine)."""
     bad = [k for k in only if k not in SECTIONS]
     if bad:
         raise ValueError(f"bench: --only {','.join(bad)}: unknown section; allowed: {', '.join(SECTIONS)}")
@@ -105,7 +107,7 @@ def _run_only(out, quick: bool, only: tuple[str, ...], log) -> dict:
         raise ValueError(f"bench: --only needs an existing {Path(out or '.') / 'bench.json'} to put the sections into")
     res = json.loads((Path(out) / "bench.json").read_text(encoding="utf-8"))
     s = Settings.quick() if quick else Settings.full()
-    log = log or (lambda m: print(f"bench: {m}", file=sys.stderr, flush=True))
+    waited = wait()
     cfg, P = scenario.load_scenario(), load_params()
     work = Path(tempfile.mkdtemp(prefix="arvcas-bench-"))
     try:
@@ -117,7 +119,7 @@ def _run_only(out, quick: bool, only: tuple[str, ...], log) -> dict:
             res.setdefault("partial", {})[key] = {
                 "date": mach["date"], "git_commit": mach["git_commit"], "mode": s.mode, "wall_s": time.perf_counter() - t0,
                 "load_avg_start": la0, "load_avg_end": [round(x, 2) for x in os.getloadavg()],
-                "other_cpu_share": m.share()}
+                "other_cpu_share": m.share(), "waited_for_load_s": round(waited, 1)}
     finally:
         shutil.rmtree(work, ignore_errors=True)
     write(res, out)
