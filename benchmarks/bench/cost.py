@@ -67,6 +67,7 @@ JOINTS = {"full": tuple(range(8)), "quick": (0, 1)}
 LENGTH_BATCH = {"full": 64, "quick": 8}  # gain sets of the per-run batches of (a) and (c)
 BATCH_BUDGET_S = {"full": 10.0, "quick": 0.2}  # wall time per batch size and path the rounds may take
 MIN_ROUNDS = {"full": 2, "quick": 1}
+COMPILE_REPS = {"full": 3, "quick": 1}  # cold builds of each arm's two libraries (the fastest is fitted)
 LINEAR_TOL = 0.10  # a point is on the line within this relative residual
 # the fits take each point's fastest round, as timeit does (on this shared machine the least disturbed round
 # measures the code, the spread above it the neighbours); the medians stand beside them in the tables
@@ -191,7 +192,7 @@ def _bench_length(s: Settings, log) -> dict:
         if not all(a.tobytes() == b.tobytes() for a, b in zip(ref, got)):
             raise BenchError(f"cost: run length {L:g} s: the lockstep batch differs from the one at a time")
         n = scenario.n_samples(run.cfg)
-        row = {"length_s": L, "n_samples": n, "W": ls.W, "batch_n": nb, "ok_share": float(np.mean(ref[2])),
+        row = {"length_s": L, "n_samples": n, "table_mb": scenario.table_bytes(run.cfg) / 1e6, "W": ls.W, "batch_n": nb, "ok_share": float(np.mean(ref[2])),
                "call_s": _stat(t["call"]), "one_run_s": _stat(t["one_run"]),
                "batch_scalar_s_per_run": _stat([v / nb for v in t["batch_scalar"]]),
                "batch_lanes_s_per_run": _stat([v / nb for v in t["batch_lanes"]])}
@@ -324,28 +325,40 @@ def _bench_joints(s: Settings, work: Path, log) -> dict:
 
     level, nb = _level(s), LENGTH_BATCH[s.mode]
     rows = []
-    with _temp_cache():  # every build cold: one fresh cache, every system's libraries distinct
-        for n in JOINTS[s.mode]:
-            ps, pc = work / f"{SYSTEM}_arm{n}.toml", work / f"{SYSTEM}_arm{n}.scenario.toml"
-            ps.write_text(arm_system_text(n), encoding="utf-8")
-            pc.write_text(arm_scenario_text(n), encoding="utf-8")
-            sysm = load_system(ps)
-            if sysm.n_joints != n:
-                raise BenchError(f"cost: {ps}: {sysm.n_joints} joints, expected {n}")
-            run = Run(CONTROLLER, scenario=scenario.load_scenario(pc), params=sysm).compile()
-            log(f"cost: {n} joints: compiling the run and the lockstep run cold ...")
+    for n in JOINTS[s.mode]:
+        ps, pc = work / f"{SYSTEM}_arm{n}.toml", work / f"{SYSTEM}_arm{n}.scenario.toml"
+        ps.write_text(arm_system_text(n), encoding="utf-8")
+        pc.write_text(arm_scenario_text(n), encoding="utf-8")
+        sysm = load_system(ps)
+        if sysm.n_joints != n:
+            raise BenchError(f"cost: {ps}: {sysm.n_joints} joints, expected {n}")
+        run = Run(CONTROLLER, scenario=scenario.load_scenario(pc), params=sysm).compile()
+        log(f"cost: {n} joints: compiling the run and the lockstep run cold ...")
+        builds = {"run": [], "run_cc": [], "lanes": [], "lanes_cc": []}
+
+        def cold_builds(expected: int):
+            """The run's two libraries built into the current (fresh, empty) cache; their times kept."""
             before = codegen.stats()["compile"]
-            fn, ls, run_build_s, lanes_build_s = _prepare(run, level)
-            t2 = time.perf_counter()
-            run.table  # compiles the table's two functions, then builds it
-            t3 = time.perf_counter()
-            if codegen.stats()["compile"] != before + 4:
-                raise BenchError(f"cost: {n} joints: expected 4 cold builds (run, lockstep, table x 2), got "
+            fn, ls, run_s, lanes_s = _prepare(run, level)
+            run.table  # the first time (expected 4): also compiles the table's two functions
+            if codegen.stats()["compile"] != before + expected:
+                raise BenchError(f"cost: {n} joints: expected {expected} cold builds, got "
                                  f"{codegen.stats()['compile'] - before}")
+            for k, v in (("run", run_s), ("run_cc", codegen.artifact_of(fn)["compile_time_s"]), ("lanes", lanes_s),
+                         ("lanes_cc", codegen.artifact_of(ls.function)["compile_time_s"])):
+                builds[k].append(float(v))
+            return fn, ls
+
+        with _temp_cache():  # a fresh, empty cache: every build cold
             schedule.clear_cache()
-            t4 = time.perf_counter()
+            t0 = time.perf_counter()
+            fn, ls = cold_builds(4)
+            first_s = time.perf_counter() - t0
+            schedule.clear_cache()
+            t0 = time.perf_counter()
             run.table
-            table_s = time.perf_counter() - t4
+            table_s = time.perf_counter() - t0
+            table_functions_s = max(1e-6, first_s - builds["run"][0] - builds["lanes"][0] - table_s)
             g = run.default_gains()
             G = _batches(run, nb, ls.W)["running"]
             args = _run_args(fn, g, scenario.noise_sequence(run.cfg, 0), run.cfg, sysm.params.vector(),
@@ -355,23 +368,28 @@ def _bench_joints(s: Settings, work: Path, log) -> dict:
             _rounds(series, 1)
             t = _rounds(series, s.reps)
             ok = run.batch(G, n_threads=1, lockstep=True, return_status=True)[2]
-            ins = _step_instructions(closedloop.RunSpec(run.controller, run.cfg.graph_key(), run.opts, sysm.layout),
-                                     trace=False)
-            ns = scenario.n_samples(run.cfg)
-            call, lanes = _stat(t["call"]), _stat([v / nb for v in t["batch_lanes"]])
-            rows.append({
-                "joints": n, "n_samples": ns, "length_s": run.cfg.time_duration, "ok_share": float(np.mean(ok)),
-                "run_build_s": run_build_s, "run_cc_s": float(codegen.artifact_of(fn)["compile_time_s"]),
-                "lanes_build_s": lanes_build_s, "lanes_cc_s": float(codegen.artifact_of(ls.function)["compile_time_s"]),
-                "table_functions_build_s": max(1e-6, (t3 - t2) - table_s), "table_s": table_s,
-                "instructions_per_sample": ins["total"], "step_calls": ins["calls"],
-                "call_s": call, "lanes_s_per_run": lanes,
-                "call_us_per_sample": call[FIT_ON] / ns * 1e6, "lanes_us_per_sample": lanes[FIT_ON] / ns * 1e6,
-                "call_us_per_sample_median": call["median"] / ns * 1e6,
-                "lanes_us_per_sample_median": lanes["median"] / ns * 1e6,
-            })
-            log(f"cost: {n} joints: {ins['total']:,} instructions per sample, {rows[-1]['call_us_per_sample']:.2f} us "
-                f"per sample ({rows[-1]['lanes_us_per_sample']:.2f} in lockstep), builds {run_build_s:.1f} + {lanes_build_s:.1f} s")
+        for _ in range(COMPILE_REPS[s.mode] - 1):  # the two libraries again, each time into a fresh cache
+            with _temp_cache():
+                cold_builds(2)
+        ins = _step_instructions(closedloop.RunSpec(run.controller, run.cfg.graph_key(), run.opts, sysm.layout),
+                                 trace=False)
+        ns = scenario.n_samples(run.cfg)
+        call, lanes = _stat(t["call"]), _stat([v / nb for v in t["batch_lanes"]])
+        st = {k: _stat(v) for k, v in builds.items()}
+        rows.append({
+            "joints": n, "n_samples": ns, "length_s": run.cfg.time_duration, "ok_share": float(np.mean(ok)),
+            "run_build_s": st["run"][FIT_ON], "run_cc_s": st["run_cc"][FIT_ON], "lanes_build_s": st["lanes"][FIT_ON],
+            "lanes_cc_s": st["lanes_cc"][FIT_ON], "builds": st,
+            "table_functions_build_s": table_functions_s, "table_s": table_s,
+            "instructions_per_sample": ins["total"], "step_calls": ins["calls"],
+            "call_s": call, "lanes_s_per_run": lanes,
+            "call_us_per_sample": call[FIT_ON] / ns * 1e6, "lanes_us_per_sample": lanes[FIT_ON] / ns * 1e6,
+            "call_us_per_sample_median": call["median"] / ns * 1e6,
+            "lanes_us_per_sample_median": lanes["median"] / ns * 1e6,
+        })
+        log(f"cost: {n} joints: {ins['total']:,} instructions per sample, {rows[-1]['call_us_per_sample']:.2f} us "
+            f"per sample ({rows[-1]['lanes_us_per_sample']:.2f} in lockstep), builds (fastest of "
+            f"{len(builds['run'])}) {st['run'][FIT_ON]:.1f} + {st['lanes'][FIT_ON]:.1f} s")
     x = [r["joints"] for r in rows]
     fits = {k: linear_fit(x, [r[k] for r in rows]) for k in JOINT_SERIES}
     return {"base": SYSTEM, "controller": CONTROLLER, "opt_level": level, "batch_n": nb, "qg7_deg": QG7_DEG,
@@ -478,10 +496,10 @@ def _body(r: dict, fig_prefix: str | None) -> list[str]:
           f"(median) of {ln['rows'][0]['call_s']['n']} alternated rounds.", ""]
     if fig_prefix is not None:
         L += [f"![run time against run length]({fig_prefix}cost_length.png)", ""]
-    L += ["| run length s | samples | call | one run | per run, batch one at a time | per run, batch in "
-          "lockstep | table | real-time factor (fastest): call / lockstep |", "|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    L += ["| run length s | samples | time table MB | call | one run | per run, batch one at a time | per run, batch in "
+          "lockstep | table | real-time factor (fastest): call / lockstep |", "|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]
     for x in ln["rows"]:
-        L.append(f"| {x['length_s']:g} | {x['n_samples']:,} | {_fm(x['call_s'])} | {_fm(x['one_run_s'])} | "
+        L.append(f"| {x['length_s']:g} | {x['n_samples']:,} | {x['table_mb']:.3g} | {_fm(x['call_s'])} | {_fm(x['one_run_s'])} | "
                  f"{_fm(x['batch_scalar_s_per_run'])} | {_fm(x['batch_lanes_s_per_run'])} | {_fm(x['table_s'])} | "
                  f"{x['rtf_call']:,.0f}x / {x['rtf_lanes']:,.0f}x |")
     L += ["", "| series | slope b (per simulated s) | intercept a | asymptotic real-time factor 1/b | where linear | "
@@ -519,7 +537,8 @@ def _body(r: dict, fig_prefix: str | None) -> list[str]:
           f"The system files are written by `benchmarks/bench/cost.py` (`arm_system_text`: joint and link i are "
           f"{jt['base']}'s i, joint 7 a copy of joint 6; the paper's arm motion as waypoints, joint 7 to "
           f"{jt['qg7_deg']:g} deg). Builds: cold, into a fresh empty cache (graph, C, compiler, load); cc: the "
-          f"compiler's share; one cold build each. Per sample: the compiled run alone, and a run in a lockstep batch of "
+          f"compiler's share; the fastest of {len(jt['rows'][0]['builds']['run'])} cold builds each (the time table's two "
+          f"functions: once, with the first). Per sample: the compiled run alone, and a run in a lockstep batch of "
           f"{jt['batch_n']}, fastest (median) of {jt['rows'][0]['call_s']['n']} rounds.", ""]
     if fig_prefix is not None:
         L += [f"![per-sample time, instructions and compile time against joints]({fig_prefix}cost_joints.png)", ""]
