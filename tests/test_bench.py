@@ -121,7 +121,9 @@ def test_cost_quick_section_is_complete_finite_and_in_sweep_order(tmp_path):
     assert set(jt["fits"]) == set(cost.JOINT_SERIES)
     for sweep in (ln, bt, jt):
         for f in sweep["fits"].values():
-            assert len(f["residual"]) == len(sweep["rows"]) and f["n_points"] >= 2
+            n = len(sweep["rows"])
+            assert len(f["residual"]) == n and (f["n_points"] == 0 or min(3, n) <= f["n_points"] <= n)
+            assert f["linear_everywhere"] == (f["n_points"] == n)
     time_keys = ("median", "min", "max")
     for where, v in _numbers(c, "cost"):
         assert math.isfinite(v), f"{where} = {v}"
@@ -150,5 +152,7 @@ def test_linear_fit_finds_where_the_line_holds():
     assert not f["linear_everywhere"] and (f["from"], f["to"], f["n_points"]) == (10.0, 300.0, 4)
     assert abs(f["slope"] - 0.01) < 1e-12 and abs(f["residual"][4] - 0.5) < 1e-9 and f["max_residual"] < 1e-9
     assert f["all_points"]["max_residual"] > cost.LINEAR_TOL
+    f = cost.linear_fit([1.0, 2.0, 3.0, 4.0], [1.0, 10.0, 1.0, 10.0])  # no three consecutive points on a line
+    assert f["n_points"] == 0 and not f["linear_everywhere"] and f["slope"] == f["all_points"]["slope"]
     with pytest.raises(bench.BenchError, match=r"cost: a line needs >= 2 finite points with y > 0"):
         cost.linear_fit([1.0, 2.0], [1.0, 0.0])

@@ -468,6 +468,21 @@ def _measured_line(ms: dict) -> str:
             f"measuring: {ms['other_cpu_share']:.1%} of the machine.")
 
 
+def _fit_table(fits: dict, names: dict, heads: tuple, unit: str, rate_suffix: str, fmt) -> list[str]:
+    """The table of a sweep's time fits: slope, intercept, 1 / slope, where linear, where proportional."""
+    L = ["", f"| series | {' | '.join(heads)} | where linear | proportional |", "|---|--:|--:|--:|---|---|"]
+    for k, f in fits.items():
+        L.append(f"| {names[k]} | {_fmt_s(f['slope'])} | {_fmt_s(f['intercept'])} | {1 / f['slope']:,.0f}{rate_suffix} | "
+                 f"{_where(f, unit, fmt)} | {_prop(f, unit)} |")
+    return L
+
+
+def _figure_and_head(fig_prefix: str | None, fig: str, alt: str, cols: tuple) -> list[str]:
+    """The figure's link (when ``fig_prefix`` is given) and a table's head of right-aligned columns."""
+    link = [f"![{alt}]({fig_prefix}{fig})", ""] if fig_prefix is not None else []
+    return link + ["| " + " | ".join(cols) + " |", "|" + "--:|" * len(cols)]
+
+
 def _fm(st: dict, scale: float = 1.0) -> str:
     """A timing as 'fastest (median)'."""
     return f"{_fmt_s(st[FIT_ON] * scale)} ({_fmt_s(st['median'] * scale)})"
@@ -494,21 +509,17 @@ def _body(r: dict, fig_prefix: str | None) -> list[str]:
           f"(the defaults times U(0.95, 1.05)), one at a time and in lockstep (W = {ln['rows'][0]['W']}; outputs equal "
           f"to the bit); *table*: the run's time table from scratch (a new scenario's first run pays it). Fastest "
           f"(median) of {ln['rows'][0]['call_s']['n']} alternated rounds.", ""]
-    if fig_prefix is not None:
-        L += [f"![run time against run length]({fig_prefix}cost_length.png)", ""]
-    L += ["| run length s | samples | time table MB | call | one run | per run, batch one at a time | per run, batch in "
-          "lockstep | table | real-time factor (fastest): call / lockstep |", "|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    L += _figure_and_head(fig_prefix, "cost_length.png", "run time against run length", (
+        "run length s", "samples", "time table MB", "call", "one run", "per run, batch one at a time",
+        "per run, batch in lockstep", "table", "real-time factor (fastest): call / lockstep"))
     for x in ln["rows"]:
         L.append(f"| {x['length_s']:g} | {x['n_samples']:,} | {x['table_mb']:.3g} | {_fm(x['call_s'])} | {_fm(x['one_run_s'])} | "
                  f"{_fm(x['batch_scalar_s_per_run'])} | {_fm(x['batch_lanes_s_per_run'])} | {_fm(x['table_s'])} | "
                  f"{x['rtf_call']:,.0f}x / {x['rtf_lanes']:,.0f}x |")
-    L += ["", "| series | slope b (per simulated s) | intercept a | asymptotic real-time factor 1/b | where linear | "
-          "proportional |", "|---|--:|--:|--:|---|---|"]
-    names = {"call": "call", "one_run": "one run", "batch_scalar": "per run, batch one at a time",
-             "batch_lanes": "per run, batch in lockstep", "table": "time table"}
-    for k, f in F.items():
-        L.append(f"| {names[k]} | {_fmt_s(f['slope'])} | {_fmt_s(f['intercept'])} | {1 / f['slope']:,.0f}x | "
-                 f"{_where(f, 's')} | {_prop(f, 's')} |")
+    L += _fit_table(F, {"call": "call", "one_run": "one run", "batch_scalar": "per run, batch one at a time",
+                        "batch_lanes": "per run, batch in lockstep", "table": "time table"},
+                    ("slope b (per simulated s)", "intercept a", "asymptotic real-time factor 1/b"), "s", "x",
+                    lambda v: f"{v:g}")
     fo, fc = F["one_run"], F["call"]
     x0 = ln["rows"][0]["length_s"]
     L += ["", f"A run's cost is its length times {_fmt_s(fc['slope'])} per simulated second "
@@ -517,21 +528,17 @@ def _body(r: dict, fig_prefix: str | None) -> list[str]:
           + ". In a batch the fixed part of the API is paid once per batch (b)."]
     L += ["", f"### (b) Batch size: the {bt['length_s']:g} s run, one at a time and in lockstep (W = {bt['W']}), "
               f"{bt['threads']} thread", ""]
-    if fig_prefix is not None:
-        L += [f"![batch time against batch size]({fig_prefix}cost_batch.png)", ""]
-    L += ["Fastest (median) of the rounds; per run: the fastest round over the runs.", "",
-          "| runs | rounds | running share | one at a time: batch | per run | lockstep: batch | per run | "
-          "lockstep speed-up (fastest; medians) |", "|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    L += ["Fastest (median) of the rounds; per run: the fastest round over the runs.", ""]
+    L += _figure_and_head(fig_prefix, "cost_batch.png", "batch time against batch size", (
+        "runs", "rounds", "running share", "one at a time: batch", "per run", "lockstep: batch", "per run",
+        "lockstep speed-up (fastest; medians)"))
     for x in bt["rows"]:
         L.append(f"| {x['n_runs']:,} | {x['rounds']} | {x['ok_share']:.0%} | {_fm(x['scalar_s'])} | "
                  f"{_fmt_s(x['scalar_s_per_run'])} | {_fm(x['lanes_s'])} | {_fmt_s(x['lanes_s_per_run'])} | "
                  f"{x['speedup']:.2f}x; {x['speedup_median']:.2f}x |")
-    L += ["", "| path | slope b (per run) | intercept a (per batch) | runs per second 1/b | where linear | proportional |",
-          "|---|--:|--:|--:|---|---|"]
-    for k, label in (("scalar", "one at a time"), ("lanes", "lockstep")):
-        f = bt["fits"][k]
-        L.append(f"| {label} | {_fmt_s(f['slope'])} | {_fmt_s(f['intercept'])} | {1 / f['slope']:,.0f} | "
-                 f"{_where(f, 'runs', lambda v: f'{v:,.0f}')} | {_prop(f, 'runs')} |")
+    L += _fit_table(bt["fits"], {"scalar": "one at a time", "lanes": "lockstep"},
+                    ("slope b (per run)", "intercept a (per batch)", "runs per second 1/b"), "runs", "",
+                    lambda v: f"{v:,.0f}")
     L += ["", f"### (c) Arm joints: {jt['base']}'s vehicle with a generated arm of 0..{jt['rows'][-1]['joints']} joints "
               f"(100 s, `{jt['controller']}`, {jt['opt_level']})", "",
           f"The system files are written by `benchmarks/bench/cost.py` (`arm_system_text`: joint and link i are "
@@ -540,10 +547,9 @@ def _body(r: dict, fig_prefix: str | None) -> list[str]:
           f"compiler's share; the fastest of {len(jt['rows'][0]['builds']['run'])} cold builds each (the time table's two "
           f"functions: once, with the first). Per sample: the compiled run alone, and a run in a lockstep batch of "
           f"{jt['batch_n']}, fastest (median) of {jt['rows'][0]['call_s']['n']} rounds.", ""]
-    if fig_prefix is not None:
-        L += [f"![per-sample time, instructions and compile time against joints]({fig_prefix}cost_joints.png)", ""]
-    L += ["| joints | instructions / sample | µs / sample, call | µs / sample, lockstep | run build s (cc) | "
-          "lockstep build s (cc) | table functions build s | table s |", "|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    L += _figure_and_head(fig_prefix, "cost_joints.png", "per-sample time, instructions and compile time against joints", (
+        "joints", "instructions / sample", "µs / sample, call", "µs / sample, lockstep", "run build s (cc)",
+        "lockstep build s (cc)", "table functions build s", "table s"))
     for x in jt["rows"]:
         L.append(f"| {x['joints']} | {x['instructions_per_sample']:,} | {_g(x['call_us_per_sample'])} "
                  f"({_g(x['call_us_per_sample_median'])}) | {_g(x['lanes_us_per_sample'])} "
