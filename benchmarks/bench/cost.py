@@ -544,7 +544,7 @@ def _body(r: dict, fig_prefix: str | None) -> list[str]:
           f"The system files are written by `benchmarks/bench/cost.py` (`arm_system_text`: joint and link i are "
           f"{jt['base']}'s i, joint 7 a copy of joint 6; the paper's arm motion as waypoints, joint 7 to "
           f"{jt['qg7_deg']:g} deg). Builds: cold, into a fresh empty cache (graph, C, compiler, load); cc: the "
-          f"compiler's share; the fastest of {len(jt['rows'][0]['builds']['run'])} cold builds each (the time table's two "
+          f"compiler's share; the fastest of {jt['rows'][0]['builds']['run']['n']} cold builds each (the time table's two "
           f"functions: once, with the first). Per sample: the compiled run alone, and a run in a lockstep batch of "
           f"{jt['batch_n']}, fastest (median) of {jt['rows'][0]['call_s']['n']} rounds.", ""]
     L += _figure_and_head(fig_prefix, "cost_joints.png", "per-sample time, instructions and compile time against joints", (
@@ -645,9 +645,9 @@ def figures(r: dict) -> dict:
         a2.set_ylabel("wall time per run (ms)")
         a2.set_ylim(bottom=0)
         a2.set_title("per run (fastest round)")
-        for ax in (a1, a2):
+        for ax, where in ((a1, "upper left"), (a2, "upper right")):
             ax.grid(True, which="major")
-            ax.legend(loc="upper left")
+            ax.legend(loc=where)
         style.log_labels(a1)
         out["cost_batch.png"] = fig
 
@@ -672,13 +672,15 @@ def figures(r: dict) -> dict:
             axs[2].plot(x, [row[k] for row in jt["rows"]], "o", color=c, label=label)
             _plot_fit(axs[2], jt["fits"][k], c, x)
         axs[2].set_ylabel(f"cold build (s), {jt['opt_level']}")
+        top = max(row[k] for row in jt["rows"] for k in ("run_build_s", "lanes_build_s", "table_functions_build_s"))
         for ax in axs:
             ax.set_xticks(x)
             ax.set_xlabel("arm joints")
             ax.set_ylim(bottom=0)
             ax.grid(True, which="major")
         axs[0].legend(loc="upper left")
-        axs[2].legend(loc="lower right")
+        axs[2].legend(loc="upper left")
+        axs[2].set_ylim(top=1.45 * top)  # the legend above the points
         fig.suptitle(f"{jt['base']}'s vehicle with generated arms: cost per joint (dashed: a + b n)")
         out["cost_joints.png"] = fig
         return out
