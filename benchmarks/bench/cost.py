@@ -42,10 +42,10 @@ The figures (``cost_length.png``, ``cost_batch.png``, ``cost_joints.png``) and a
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import os
 import re
-import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -277,13 +277,14 @@ def _section(text: str, name: str) -> str:
     return m.group(1).strip() + "\n"
 
 
-def arm_system_text(n: int) -> str:
-    """Haidou-1's system file with an arm of ``n`` (0..7) revolute joints (module docstring, (c))."""
+def arm_system_text(n: int, tag: str = "") -> str:
+    """Haidou-1's system file with an arm of ``n`` (0..7) revolute joints (module docstring, (c)), named
+    ``haidou1_arm<n><tag>``."""
     from arvcas.system import load_system
 
     src = Path(load_system(SYSTEM).params.path)
     text = src.read_text(encoding="utf-8")
-    head = text[:text.index("[arm.mount]")].replace(f'name = "{SYSTEM}"', f'name = "{SYSTEM}_arm{n}"')
+    head = text[:text.index("[arm.mount]")].replace(f'name = "{SYSTEM}"', f'name = "{SYSTEM}_arm{n}{tag}"')
     for key in ("scenario", "gains"):  # the defaults beside the shipped file
         head = re.sub(rf'(?m)^{key} = "([^"]+)"', lambda m: f'{key} = "{(src.parent / m.group(1)).as_posix()}"', head)
     if n == 0:
@@ -324,10 +325,14 @@ def _bench_joints(s: Settings, work: Path, log) -> dict:
     from arvcas.system import load_system
 
     level, nb = _level(s), LENGTH_BATCH[s.mode]
+    # a name of its own each time in a process: the time table's functions are kept per process by the
+    # system's structure (its name too), so a second measurement in the same process compiles them again
+    k = next(_MEASUREMENTS)
+    tag = f"_m{k}" if k else ""
     rows = []
     for n in JOINTS[s.mode]:
         ps, pc = work / f"{SYSTEM}_arm{n}.toml", work / f"{SYSTEM}_arm{n}.scenario.toml"
-        ps.write_text(arm_system_text(n), encoding="utf-8")
+        ps.write_text(arm_system_text(n, tag), encoding="utf-8")
         pc.write_text(arm_scenario_text(n), encoding="utf-8")
         sysm = load_system(ps)
         if sysm.n_joints != n:
@@ -396,6 +401,7 @@ def _bench_joints(s: Settings, work: Path, log) -> dict:
             "rows": rows, "fits": fits}
 
 
+_MEASUREMENTS = itertools.count()  # of the arm sweep in this process (the first: no tag)
 JOINT_SERIES = ("call_us_per_sample", "lanes_us_per_sample", "instructions_per_sample", "run_build_s",
                 "run_cc_s", "lanes_build_s", "table_functions_build_s")
 
