@@ -24,8 +24,9 @@ and link i (i <= 6), joint and link 7 copies of its joint and link 6; the stow p
 at joint 6's; mount, tool and payload Haidou-1's. The scenario is Haidou-1's with the paper's arm motion
 written as waypoints (stow until 5 s, the paper's qg at 20-25 s, joint 7 to :data:`QG7_DEG`, stow at
 40 s, the payload grasped at 22 s; no arm: the stow pose held), 100 s. For each: the run's library and
-the lockstep library compiled cold into a fresh empty cache (wall time of the build: graph, C, compiler,
-load; and the compiler's share), the time table's two functions compiled with the first table, the
+the lockstep library compiled cold into a fresh empty cache :data:`COMPILE_REPS` times (wall time of the
+build: graph, C, compiler, load; and the compiler's share; the fastest is fitted), the time table's two
+functions compiled with the first table, the
 CasADi instructions of one controller sample, and the time per controller sample of the compiled run
 called alone and of a run in a lockstep batch of :data:`LENGTH_BATCH`.
 
