@@ -648,7 +648,8 @@ def _add_bench(p: argparse.ArgumentParser) -> None:
                    help="first wait (up to 15 min) until the 1-min load average is at most L")
     p.add_argument("--only", default="", metavar="S1,S2",
                    help="measure only these sections (plant, closed_loop, targets, compile, startup, systems, "
-                        "identification, controller, lanes) into the existing bench.json in --out")
+                        "identification, controller, lanes, cost) into the existing bench.json in --out "
+                        "(cost: also its figures and README in --out/cost/)")
 
 
 def _load_arg(text: str) -> float:

@@ -10,7 +10,7 @@ state), :mod:`~benchmarks.bench.plant` (1), :mod:`~benchmarks.bench.closed_loop`
 :mod:`~benchmarks.bench.startup` (4), :mod:`~benchmarks.bench.systems` (5),
 :mod:`~benchmarks.bench.identification` (6), :mod:`~benchmarks.bench.controller` (7: the exported
 controller's time per step), :mod:`~benchmarks.bench.lanes` (8: lockstep lanes against one run at a time,
-the 40,000-run study),
+the 40,000-run study), :mod:`~benchmarks.bench.cost` (9: cost against run length, batch size and arm joints),
 :mod:`~benchmarks.bench.runner` (:func:`run`: every section in one process, and :func:`write`) and
 :mod:`~benchmarks.bench.report` (``bench.md``).
 
@@ -43,6 +43,10 @@ What is measured:
 8. Lockstep lanes (:mod:`arvcas.sim.lockstep`): batches on one thread W runs at a time against one at
    a time, alternated, outputs compared to the bit, with running, mixed and diverging members; a
    40,000-run study on 2 threads: its runs alone, and ``run_study`` end to end.
+9. Cost against work (:mod:`~benchmarks.bench.cost`): Haidou-1's run time against its length (10-1000 s) and
+   against the batch size (1-100,000 runs, one at a time and in lockstep), and per controller sample, CasADi
+   instructions and cold compile time against the arm's joints (0-7, generated system files); a line with
+   intercept fitted to each series and where it holds; the figures and a README in ``<out>/cost/``.
 
 Interference: the load average before and after, and the share of the machine's CPU time used by
 other processes while measuring (from ``/proc/stat`` minus this process and its children), are

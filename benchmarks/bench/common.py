@@ -72,6 +72,8 @@ REQUIRED_KEYS = (
     "controller.haidou1.proposed.ns_per_step", "controller.haidou1.proposed.instructions_per_step",
     "lanes.batches.haidou1.W", "lanes.batches.haidou1.running.rtf_lanes", "lanes.batches.haidou1.running.speedup",
     "lanes.study.lanes_s", "lanes.study.scalar_part_s", "lanes.study.runs_only.study_runs_s_lanes",
+    "cost.length.fits.call.slope", "cost.length.fits.one_run.intercept", "cost.batch.fits.scalar.slope",
+    "cost.batch.fits.lanes.slope", "cost.joints.fits.instructions_per_sample.slope", "cost.joints.fits.run_build_s.slope",
 )
 
 

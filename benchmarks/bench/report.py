@@ -9,6 +9,7 @@ import math
 
 from benchmarks.bench.common import CONTROLLER, N_INPUT_SETS
 from benchmarks.bench.controller import _controller_markdown
+from benchmarks.bench.cost import cost_markdown
 from benchmarks.bench.lanes import _lanes_markdown
 from benchmarks.bench.targets import STUDY_RUNS
 
@@ -297,6 +298,7 @@ def render_markdown(res: dict) -> str:
     L += _identification_markdown(res.get("identification"))
     L += _controller_markdown(res.get("controller"))
     L += _lanes_markdown(res.get("lanes"))
+    L += cost_markdown(res.get("cost"))
     L += ["", "## Recommendation", "", rec["text"], ""]
     return "\n".join(L)
 

@@ -20,6 +20,7 @@ from arvcas.system.params import load as load_params
 from benchmarks.bench.closed_loop import _bench_closed_loop
 from benchmarks.bench.common import Settings, _CpuMeter, _default_opt_level, _machine, _wait_for_load
 from benchmarks.bench.compiling import _bench_compile, _recommend
+from benchmarks.bench.cost import _bench_cost, write_files as _write_cost_files
 from benchmarks.bench.controller import _bench_controller
 from benchmarks.bench.identification import _bench_identification
 from benchmarks.bench.lanes import _bench_lanes
@@ -29,7 +30,8 @@ from benchmarks.bench.startup import _bench_startup
 from benchmarks.bench.systems import _bench_systems
 from benchmarks.bench.targets import _bench_targets
 
-SECTIONS = ("plant", "closed_loop", "targets", "compile", "startup", "systems", "identification", "controller", "lanes")
+SECTIONS = ("plant", "closed_loop", "targets", "compile", "startup", "systems", "identification", "controller", "lanes",
+            "cost")
 
 
 def run(out: str | Path | None = "results", quick: bool = False, wait_load: float | None = None,
@@ -40,12 +42,13 @@ def run(out: str | Path | None = "results", quick: bool = False, wait_load: floa
     figures are not for the record). ``wait_load``: first wait (at most ``wait_max_s``) until the
     1-min load average is at most this. ``only``: measure just these sections (:data:`SECTIONS`) and put
     them into ``out``'s existing ``bench.json`` (the others keep their figures; ``partial`` records the
-    date, commit and load of each section measured so). Returns the result dictionary.
+    date, commit and load of each section measured so, and the wait). Returns the result dictionary.
     """
-    if only:
-        return _run_only(out, quick, only, log)
-    s = Settings.quick() if quick else Settings.full()
     log = log or (lambda m: print(f"bench: {m}", file=sys.stderr, flush=True))
+    if only:
+        return _run_only(out, quick, only, log, lambda: _wait_for_load(wait_load, wait_max_s, log)
+                         if wait_load is not None else 0.0)
+    s = Settings.quick() if quick else Settings.full()
     waited = _wait_for_load(wait_load, wait_max_s, log) if wait_load is not None else 0.0
     machine = _machine()
     machine["load_avg_start"] = [round(x, 2) for x in os.getloadavg()]
@@ -90,11 +93,13 @@ def _section_functions(s, cfg, P, driver, work, log):
             ("identification", lambda: _bench_identification(s, log)),
             ("controller", lambda: _bench_controller(s, log)),
             ("lanes", lambda: _bench_lanes(s, log)),
+            ("cost", lambda: _bench_cost(s, log)),
     )
 
 
-def _run_only(out, quick: bool, only: tuple[str, ...], log) -> dict:
-    """:func:`run` with ``only``: the named sections measured into ``out``'s bench.json."""
+def _run_only(out, quick: bool, only: tuple[str, ...], log, wait: Callable[[], float] = lambda: 0.0) -> dict:
+    """:func:`run` with ``only``: the named sections measured into ``out``'s bench.json (after ``wait()``,
+    which returns the seconds it waited for a quiet machine)."""
     bad = [k for k in only if k not in SECTIONS]
     if bad:
         raise ValueError(f"bench: --only {','.join(bad)}: unknown section; allowed: {', '.join(SECTIONS)}")
@@ -102,7 +107,7 @@ def _run_only(out, quick: bool, only: tuple[str, ...], log) -> dict:
         raise ValueError(f"bench: --only needs an existing {Path(out or '.') / 'bench.json'} to put the sections into")
     res = json.loads((Path(out) / "bench.json").read_text(encoding="utf-8"))
     s = Settings.quick() if quick else Settings.full()
-    log = log or (lambda m: print(f"bench: {m}", file=sys.stderr, flush=True))
+    waited = wait()
     cfg, P = scenario.load_scenario(), load_params()
     work = Path(tempfile.mkdtemp(prefix="arvcas-bench-"))
     try:
@@ -114,7 +119,7 @@ def _run_only(out, quick: bool, only: tuple[str, ...], log) -> dict:
             res.setdefault("partial", {})[key] = {
                 "date": mach["date"], "git_commit": mach["git_commit"], "mode": s.mode, "wall_s": time.perf_counter() - t0,
                 "load_avg_start": la0, "load_avg_end": [round(x, 2) for x in os.getloadavg()],
-                "other_cpu_share": m.share()}
+                "other_cpu_share": m.share(), "waited_for_load_s": round(waited, 1)}
     finally:
         shutil.rmtree(work, ignore_errors=True)
     write(res, out)
@@ -123,7 +128,8 @@ def _run_only(out, quick: bool, only: tuple[str, ...], log) -> dict:
 
 def write(res: dict, out: str | Path) -> tuple[Path, Path]:
     """Write ``bench.json`` and ``bench.md`` into the directory ``out`` (created if its parent exists),
-    atomically and only over files arvcas wrote (:mod:`arvcas.io.files`)."""
+    atomically and only over files arvcas wrote (:mod:`arvcas.io.files`); with a ``cost`` section, its
+    figures and README into ``out/cost/`` (:func:`benchmarks.bench.cost.write_files`)."""
     from arvcas.io import files
 
     d = files.prepare_dir(Path(out), f"bench: --out {out}")
@@ -131,4 +137,6 @@ def write(res: dict, out: str | Path) -> tuple[Path, Path]:
     text_json = json.dumps(res, indent=1, allow_nan=False) + "\n"
     files.write_text(pj, text_json)
     files.write_text(pm, render_markdown(res))
+    if res.get("cost"):
+        _write_cost_files(res["cost"], d / "cost")
     return pj, pm
