@@ -1,6 +1,7 @@
 """The plant step with thruster dynamics (issue 22): issue 14's rule on the BlueROV2 with its T200s.
 
     python benchmarks/thruster_step.py     # writes results/step/bluerov2_heavy_alpha5/thrusters.md and .json
+    python benchmarks/thruster_step.py --quadrature   # adds time.thrust_quadrature = 5 at h_plant = 0.01 s
 
 For the default gains of the proposed controller and AGSTA (PID's diverge) and the knee of each front of
 results/bluerov2/t200 (its study's draw), at plant steps 0.005, 0.0025 and 0.00125 s: (a) the closed loop's
@@ -27,7 +28,10 @@ STEPS = (0.005, 0.0025, 0.00125)
 OUT = ROOT / "results" / "step" / "bluerov2_heavy_alpha5"
 
 
-def main() -> dict:
+QUAD = (0.01, 5)  # time.h_plant, time.thrust_quadrature of the quadrature variant (--quadrature)
+
+
+def main(quadrature: bool = False, res: dict | None = None) -> dict:
     import arvcas
     from arvcas.io.results import read_result
     from arvcas.sim import scenario
@@ -42,9 +46,26 @@ def main() -> dict:
     for c in ("proposed", "agsta", "pid"):
         k = read_result(ROOT / f"results/bluerov2/t200/knees/knee_{c}.h5")
         cases.append((f"{c} knee", c, k.gains, (k.seed, k.uncertainty, k.phase)))
-    out = {"steps": list(STEPS), "cases": {}, "machine_load": open("/proc/loadavg").read().split()[:3]}
+    out = res or {"steps": list(STEPS), "cases": {}, "machine_load": open("/proc/loadavg").read().split()[:3]}
     for label, c, g, draw in cases:
         seed, unc, ph = draw if draw is not None else (0, None, None)
+        if quadrature:  # the quadrature variant added to a finished run's figures (docs/model.md §9)
+            hp, ng = QUAD
+            cfg = dataclasses.replace(cfg0, time_h_plant=hp, time_thrust_quadrature=ng)
+            t0 = time.time()
+            r = arvcas.Run(c, scenario=cfg, params=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
+            X = np.hstack([r.eta, r.nu])
+            ref = sa.cvodes_states(cfg, pv, X[0], sa.plant_inputs(pv, r, blue.layout), r.phase, tol=1e-14,
+                                   layout=blue.layout)
+            d = np.abs(X - ref)
+            fine = dataclasses.replace(cfg0, time_h_plant=STEPS[-1])
+            rb = arvcas.Run(c, scenario=fine, params=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
+            base, m = np.r_[rb.chat, rb.chat_delivered, rb.rmse], np.r_[r.chat, r.chat_delivered, r.rmse]
+            out["cases"][label]["quadrature"] = {"h_plant": hp, "nodes": ng, "position_m": float(d[:, 0:3].max()),
+                                                 "angle_rad": float(d[:, 3:6].max()), "cvodes_s": time.time() - t0,
+                                                 "metrics_rel_vs_finest": float(np.max(np.abs(m - base) / np.abs(base)))}
+            print(label, "quadrature", out["cases"][label]["quadrature"], flush=True)
+            continue
         rec = {}
         metrics = {}
         for hp in STEPS:
@@ -82,11 +103,28 @@ def markdown(res: dict) -> str:
             m = r.get("metrics_rel_vs_finest")
             cells.append(f"{r['position_m']:.2e} / {r['angle_rad']:.2e} / " + (f"{m:.1e}" if m is not None else "(base)"))
         L.append(f"| {label} | " + " | ".join(cells) + " |")
+    if any("quadrature" in rec for rec in res["cases"].values()):
+        q = next(rec["quadrature"] for rec in res["cases"].values() if "quadrature" in rec)
+        L += ["", f"With `time.thrust_quadrature = {q['nodes']}` at `time.h_plant = {q['h_plant']:g}` s (the thrusters' "
+              "forcing by Gauss-Legendre quadrature, docs/model.md §9; `python benchmarks/thruster_step.py --quadrature` "
+              "adds it to the figures above):", "",
+              "| run | position m / angle rad / metrics against the 0.00125 s run | within the rule |", "|---|---|---|"]
+        for label, rec in res["cases"].items():
+            if "quadrature" in rec:
+                r = rec["quadrature"]
+                ok = max(r["position_m"], r["angle_rad"]) <= 1e-6 and r["metrics_rel_vs_finest"] <= 1e-5
+                L.append(f"| {label} | {r['position_m']:.2e} / {r['angle_rad']:.2e} / {r['metrics_rel_vs_finest']:.1e} | "
+                         f"{'yes' if ok else 'no'} |")
     return "\n".join(L) + "\n"
 
 
 if __name__ == "__main__":
-    res = main()
+    import sys
+
+    if "--quadrature" in sys.argv[1:]:
+        res = main(True, json.loads((OUT / "thrusters.json").read_text()))
+    else:
+        res = main()
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "thrusters.json").write_text(json.dumps(res, indent=1))
     (OUT / "thrusters.md").write_text(markdown(res))

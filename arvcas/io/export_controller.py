@@ -1032,6 +1032,10 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     from arvcas.sim import scenario, schedule
 
     cfg, P = run.cfg, run.params
+    if cfg.time_thrust_quadrature:
+        raise ExportError(f"{WHAT}: close_loop integrates the exported plant by RK4 with the thrust at its stage times; "
+                          f"this run's scenario sets time.thrust_quadrature ({cfg.time_thrust_quadrature}), another "
+                          f"integration of the thrusters' forcing (docs/model.md §9); give a scenario without it")
     if cfg.current != "none":
         raise ExportError(f"{WHAT}: close_loop integrates the exported plant (arvcas export-c's uvms_rhs and thrust), "
                           f"which takes a body wrench: a current acts inside its hydrodynamic terms (the relative "

@@ -134,11 +134,60 @@ def stage_offsets(cfg: ScenarioConfig) -> list[float]:
     return [j * 0.5 * cfg.time_h_plant for j in range(schedule.n_stages(cfg))]
 
 
+def quadrature(cfg: ScenarioConfig) -> int | None:
+    """Gauss-Legendre nodes per half plant step for the thrusters' forcing (``time.thrust_quadrature``), or None."""
+    return cfg.time_thrust_quadrature or None
+
+
+def lag_offsets(cfg: ScenarioConfig) -> list[float]:
+    """The times after a sample's start at which the thrusters' rotor states and thrust are evaluated: RK4's
+    stage times (:func:`stage_offsets`), or with ``time.thrust_quadrature`` the Gauss-Legendre nodes of every
+    half plant step in order, then the sample's end (docs/model.md §9)."""
+    ng = quadrature(cfg)
+    if ng is None:
+        return stage_offsets(cfg)
+    gx = np.polynomial.legendre.leggauss(ng)[0]
+    hp = cfg.time_h_plant
+    out = [float(i * hp + j * 0.5 * hp + 0.25 * hp * (x + 1)) for i in range(cfg.substeps) for j in range(2) for x in gx]
+    return out + [stage_offsets(cfg)[-1]]
+
+
+N_MOMENTS = 12  # per plant step: (w(hp/2), w(hp), omega(hp/2), omega(hp)) x the three stage records' A
+
+
+def moment_weights(cfg: ScenarioConfig) -> np.ndarray:
+    """(nodes, 12 substeps) weights of the thrusters' forcing moments (:func:`_plant_substep_quadrature`).
+
+    Within plant step i (start a, length hp), ``A(t) = (M + M_arm(q(t)))^-1`` is the quadratic through its
+    values A_j at the stage times a, a + hp/2, a + hp (Lagrange basis l_j), so
+    ``w(tau) = int_a^tau A B F dt = sum_j A_j B int_a^tau l_j F dt`` and ``omega(tau) = int_a^tau w =
+    sum_j A_j B int_a^tau (tau - t) l_j F dt``; column ``12 i + 3 k + j`` holds node weights of
+    ``int l_j F`` for k = 0: w(a + hp/2), 1: w(a + hp), 2: omega(a + hp/2), 3: omega(a + hp)."""
+    ng, hp, n_sub = quadrature(cfg), cfg.time_h_plant, cfg.substeps
+    gx, gw = np.polynomial.legendre.leggauss(ng)
+    C = np.zeros((2 * ng * n_sub, N_MOMENTS * n_sub))
+    for i in range(n_sub):
+        ts = (0.0, 0.5 * hp, hp)  # stage times, relative to the step's start
+        for half in range(2):
+            for q in range(ng):
+                row = (2 * i + half) * ng + q
+                t = half * 0.5 * hp + 0.25 * hp * (gx[q] + 1)  # relative to the step's start
+                wq = 0.25 * hp * gw[q]
+                for j in range(3):
+                    lj = np.prod([(t - ts[m]) / (ts[j] - ts[m]) for m in range(3) if m != j])
+                    if half == 0:
+                        C[row, N_MOMENTS * i + j] = wq * lj
+                        C[row, N_MOMENTS * i + 6 + j] = wq * lj * (0.5 * hp - t)
+                    C[row, N_MOMENTS * i + 3 + j] = wq * lj
+                    C[row, N_MOMENTS * i + 9 + j] = wq * lj * (hp - t)
+    return C
+
+
 def thruster_constants(P, cfg: ScenarioConfig):
     """Per-run constants of the thruster dynamics, from p: the lag's ``exp(-t / tau)`` at the stage offsets
     (:func:`arvcas.model.thrusters.lag_constants`) and each table map's rotor-state grid, thrust and slopes
     (:func:`arvcas.model.thrusters.map_table`). ``(E, tables)``."""
-    E = thrusters.lag_constants(P, stage_offsets(cfg))
+    E = thrusters.lag_constants(P, lag_offsets(cfg))
     tabs = [ca.vertcat(*thrusters.map_table(P, m)) for m in P.s.thruster_maps if m.kind == "table"]
     return E, (ca.vertcat(*tabs) if tabs else ca.DM.zeros(0, 1))
 
@@ -195,7 +244,7 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     cfg, opts, lay = spec.cfg, spec.opts, spec.lay
     hp = cfg.time_h_plant
     dyn = lay.structure.has_thruster_dynamics
-    xs, tr_s = ca.SX.sym("x", 12), ca.SX.sym("tau", 18 if dyn else 6)
+    xs, tr_s = ca.SX.sym("x", 12), ca.SX.sym("tau", tau_size(spec))
     p_s, c_s, ph_s = ca.SX.sym("p", len(lay)), ca.SX.sym("consts", 9), ca.SX.sym("phase_cs", 12)
     w_s, t_s = ca.SX.sym("water", cfg.water_vector.size), ca.SX.sym("t")
     R = schedule.records(lay)
@@ -216,11 +265,14 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
             nud, _ = coupled_terms_scheduled(Ps, ee, nn, thrust + dist + tether, rec, tr, opts, current)
         return ca.vertcat(ca.mtimes(J(ee), nn), nud)
 
-    k_1 = f_plant(xs, 0)
-    k_2 = f_plant(xs + 0.5 * hp * k_1, 1)
-    k_3 = f_plant(xs + 0.5 * hp * k_2, 1)
-    k_4 = f_plant(xs + hp * k_3, 2)
-    x_next = ca.cse(xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4))
+    if quadrature(cfg) is None:
+        k_1 = f_plant(xs, 0)
+        k_2 = f_plant(xs + 0.5 * hp * k_1, 1)
+        k_3 = f_plant(xs + 0.5 * hp * k_2, 1)
+        k_4 = f_plant(xs + hp * k_3, 2)
+        x_next = ca.cse(xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4))
+    else:
+        x_next = ca.cse(_substep_quadrature(cfg, opts, Ps, xs, tr_s, recs_t, recs_a, c_s, ph_s, w_s, t_s, lay))
     x_next, pc_syms, pc_vals = ca.extract_parametric(x_next, ca.vertcat(p_s, c_s, ph_s, w_s), {"prefix": "pc_"})
     pc_s = ca.vertcat(*pc_syms) if pc_syms else ca.SX(0, 1)
     rk4 = ca.Function("cl_rk4", [xs, recs_t, recs_a, tr_s, p_s, c_s, ph_s, pc_s, w_s, t_s], [x_next],
@@ -228,6 +280,62 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     pc_fn = ca.Function("cl_rk4_consts", [p_s, c_s, ph_s, w_s], [ca.vertcat(*pc_vals) if pc_vals else ca.SX(0, 1)],
                         ["p", "consts", "phase_cs", "water"], ["pc"])
     return rk4, pc_fn
+
+
+def tau_size(spec: RunSpec) -> int:
+    """The thrusters' input of one plant step: the held wrench (6), the wrench at its three stage times (18),
+    or with ``time.thrust_quadrature`` the forcing's moments (6 x 12, :func:`moment_weights`)."""
+    if not spec.lay.structure.has_thruster_dynamics:
+        return 6
+    return 6 * N_MOMENTS if quadrature(spec.cfg) is not None else 18
+
+
+def tau_stride(spec: RunSpec) -> int:
+    """Where plant step i's thrusters' input starts in the sample's wrench vector, divided by i: the stage
+    wrenches overlap (12: a step's last stage is the next one's first), the moments do not."""
+    return 6 * N_MOMENTS if quadrature(spec.cfg) is not None else 12
+
+
+def _substep_quadrature(cfg, opts, Ps, xs, mom, recs_t, recs_a, c_s, ph_s, w_s, t_s, lay):
+    """One plant step with the thrusters' forcing taken out of the RK4 stages (docs/model.md §9).
+
+    The forcing enters the velocities linearly, ``nu_dot = A(t) (B F(t) + R(eta, nu, t))`` with
+    ``A = (M + M_arm(q(t)))^-1`` known at the stage times (the time table's LU factors), so RK4 integrates
+    ``z = nu - w(t)`` and ``zeta = eta - J(eta_a) omega(t)``: ``z_dot = A R(eta, z + w, t)``,
+    ``zeta_dot = J(eta) (z + w) - J(eta_a) w``, with ``w`` and ``omega`` from the moments ``mom`` (6 x 12, the
+    quadrature of the lag's closed form through the map: :func:`moment_weights`)."""
+    from arvcas.model.linalg import lu_solve
+
+    hp = cfg.time_h_plant
+    R = schedule.records(lay)
+    TS, AS = R.time_size, R.arm_size
+    recs = [schedule.unpack(ca.vertcat(recs_t[j * TS:(j + 1) * TS], recs_a[j * AS:(j + 1) * AS]), lay) for j in range(3)]
+
+    def moment(k):  # sum_j A_j (B int l_j F): w(hp/2), w(hp), omega(hp/2), omega(hp)
+        return sum(lu_solve(*recs[j]["lu"], mom[6 * (3 * k + j):6 * (3 * k + j) + 6]) for j in range(3))
+
+    w1, w2, o1, o2 = (moment(k) for k in range(4))
+    Ja = J(xs[0:6])
+    zero = ca.SX.zeros(6)
+
+    def g(zz, j, w, om):
+        rec = recs[j]
+        ee, nn = zz[0:6] + ca.mtimes(Ja, om), zz[6:12] + w
+        tr = _trim(Ps, c_s[0], c_s[1], c_s[2], ee)
+        dist = scenario.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
+        if not cfg.has_water:
+            nud, _ = coupled_terms_scheduled(Ps, ee, nn, dist, rec, tr, opts)
+        else:
+            current, tether = _water(cfg, Ps, w_s, t_s + j * 0.5 * hp, ee, nn)
+            nud, _ = coupled_terms_scheduled(Ps, ee, nn, dist + tether, rec, tr, opts, current)
+        return ca.vertcat(ca.mtimes(J(ee), nn) - ca.mtimes(Ja, w), nud)
+
+    k_1 = g(xs, 0, zero, zero)
+    k_2 = g(xs + 0.5 * hp * k_1, 1, w1, o1)
+    k_3 = g(xs + 0.5 * hp * k_2, 1, w1, o1)
+    k_4 = g(xs + hp * k_3, 2, w2, o2)
+    z = xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4)
+    return ca.vertcat(z[0:6] + ca.mtimes(Ja, o2), z[6:12] + w2)
 
 
 def _pchip(g, v, d, x, mode: str):
@@ -274,7 +382,7 @@ def _thruster_functions(spec: RunSpec):
     """
     cfg, lay = spec.cfg, spec.lay
     st = lay.structure
-    n, offs = st.n_thrusters, stage_offsets(spec.cfg)
+    n, offs = st.n_thrusters, lag_offsets(spec.cfg)
     m_off = len(offs)
     p_s = ca.SX.sym("p", len(lay))
     P = view(p_s, lay)
@@ -290,7 +398,13 @@ def _thruster_functions(spec: RunSpec):
     T = [[T_tab[i * m_off + j] if m.kind == "table" else thrusters.map_thrust(P, m, s_all[i * m_off + j])
           for j in range(m_off)] for i, m in enumerate(maps)]
     B = thrusters.B_T(P)
-    W = ca.vertcat(*[ca.mtimes(B, ca.vertcat(*[T[i][j] for i in range(n)])) for j in range(m_off)])
+    if quadrature(cfg) is None:  # the wrench at every stage
+        W = ca.vertcat(*[ca.mtimes(B, ca.vertcat(*[T[i][j] for i in range(n)])) for j in range(m_off)])
+    else:  # per plant step, the forcing's 12 moments (6 x 12, column-major): B (T at the nodes) C
+        Tn = ca.vertcat(*[ca.horzcat(*T[i][:m_off - 1]) for i in range(n)])  # n x nodes (the sample's end left out)
+        C = moment_weights(cfg)
+        W = ca.vertcat(*[ca.vec(ca.mtimes(B, ca.mtimes(Tn, ca.DM(C[:, N_MOMENTS * i:N_MOMENTS * (i + 1)]))))
+                         for i in range(cfg.substeps)])
     wrench = ca.Function("cl_thr_wrench", [T_tab, s_all, p_s], [W, ca.vertcat(*[T[i][-1] for i in range(n)])],
                          ["T_tab", "s", "p"], ["W", "T_end"])
     return lag, wrench
@@ -327,7 +441,7 @@ def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, 
     """One sample of the thruster dynamics in MX: the inverse maps (table lookups and Newton), the lag, the
     maps at every stage (table lookups), the wrenches. Returns ``(W (6 n_stages), s_end, T_end, command)``."""
     st = spec.lay.structure
-    n, m_off = st.n_thrusters, schedule.n_stages(spec.cfg)
+    n, m_off = st.n_thrusters, len(lag_offsets(spec.cfg))
     maps, grids = _table_grids(st, tabs)
     s_all, cmd = lag(s0, u, _table_targets(st, grids, u), E, p)
     T_tab = [ca.MX.zeros(m_off, 1)] * n
@@ -452,7 +566,7 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
                 outs[0] = ca.vertcat(tr[:i_cmd], cmd, tr[i_cmd + n_thr:])
         xm = Sm[L.slices["x"]]
         for i in range(n_sub):
-            tau_i = W[12 * i:12 * i + 18] if dyn else thrust_out
+            tau_i = W[tau_stride(spec) * i:tau_stride(spec) * i + tau_size(spec)] if dyn else thrust_out
             xm = rk4(xm, sch_t[2 * i * TS:(2 * i + 3) * TS], sch_a[2 * i * AS:(2 * i + 3) * AS], tau_i, pm, cm, phm, pcm,
                      wm, tkm + i * hp)
         steps.append(ca.Function(f"cl_step_{law.name}" + ("_first" if first else ""), [Sm, Km, tkm, nm, sch_t, sch_a],

@@ -145,21 +145,24 @@ def loop_c(name: str, spec: closedloop.RunSpec, parts: closedloop.StepParts, mai
         arg[11] = k0 + {off.get('thr_tab', 0)};
         res[{2 + n_out}] = tw; res[{3 + n_out}] = tse; res[{4 + n_out}] = tte;
         if ({name}(arg, res, iw, w, 0)) goto fail;
-        for (j = 0; j < 6 * NST; ++j) WB[j * W + l] = tw[j];
+        for (j = 0; j < NWB; ++j) WB[j * W + l] = tw[j];
         for (j = 0; j < NT; ++j) {{ Sn[(12 + j) * W + l] = tse[j]; Sn[(12 + NT + j) * W + l] = tte[j]; }}
       }}""" if dyn else ""
-    tau_i = "WB + 12 * i * W" if dyn else "TAU"
+    # the thrusters' part's wrench vector (stage wrenches, or the forcing's moments with time.thrust_quadrature)
+    # and where plant step i's input starts in it (closedloop.tau_stride)
+    nwb = parts.thr[1].size1_out(0) if dyn else 0
+    tau_i = f"WB + {closedloop.tau_stride(spec)} * i * W" if dyn else "TAU"
     return lanes.header(W) + fns + f"""
 /* arvcas: {n} samples of W = {W} runs in lockstep (arvcas.sim.lockstep) */
 CASADI_SYMBOL_EXPORT int {name}{ENTRY}(long long int n, long long int chunk, long long int* next, int* stop,
     long long int* failed, const double* const* a, const long long int* sa, double* const* r,
     const long long int* sr, casadi_int* iw, double* w) {{
   enum {{ W = LN_W, NS = {NS}, NK = {NK}, NSAMP = {n}, NSUB = {parts.n_sub}, TS = {TS}, AS = {AS},
-         RT = {ns * TS}, RA = {ns * AS}, IOK = {i_ok}, NT = {NT}, NST = {ns}, OFFC = {12 + 2 * NT}, NO = {n_out} }};
+         RT = {ns * TS}, RA = {ns * AS}, IOK = {i_ok}, NT = {NT}, NST = {ns}, OFFC = {12 + 2 * NT}, NO = {n_out}, NWB = {nwb} }};
   static const double h = {h!r}, tsub[NSUB] = {{{t_sub}}};
   static const double zero = 0, one = 1;
   double SB[2][NS * W], K[NK * W + 1], X[2][12 * W], TAU[{ntau} * W], NZ[12 * W], OKV[W], SF[NS * W], s0[NS], k0[NK + 1];
-  double WB[6 * NST * W + 1], tu[NT + 1], ts0[NT + 1], tw[6 * NST + 1], tse[NT + 1], tte[NT + 1];
+  double WB[NWB * W + 1], tu[NT + 1], ts0[NT + 1], tw[NWB + 1], tse[NT + 1], tte[NT + 1];
   double *S, *Sn;
   const double* arg[{sz_arg}];
   double* res[{sz_res}];

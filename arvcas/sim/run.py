@@ -94,6 +94,10 @@ def _check_lag(cfg: ScenarioConfig, params: Params) -> None:
     (one line naming the parameter) before anything is built (docs/model.md §9)."""
     st = params.structure
     if not st.has_thruster_dynamics:
+        if cfg.time_thrust_quadrature:
+            raise SimulationError(f"{cfg.path or 'scenario'}: time.thrust_quadrature: only for a system with thruster "
+                                  f"dynamics (docs/model.md §9); {params.path}'s thrusters deliver their thrust at once "
+                                  f"(held over a sample, RK4 integrates it exactly): remove the key")
         return
     from arvcas.model.thrusters import LAG_EXP_LIMIT
 

@@ -38,6 +38,7 @@ _RATE = ("velocity",) * 3 + ("angular_velocity",) * 3  # u, v, w, p, q, r
 _WRENCH = ("force",) * 3 + ("torque",) * 3  # X, Y, Z, K, M, N
 MAX_SUBSTEPS = 1000  # h / h_plant: the plant's RK4 steps of one sample are unrolled in the compiled graph
 MAX_CURRENT_POINTS = 10_000
+MAX_THRUST_NODES = 16  # time.thrust_quadrature: Gauss-Legendre nodes per half plant step
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,9 @@ class _Time:
     duration: float = quantity("time", gt(0), le(1e6))
     h_plant: float = quantity("time", gt(0), ge(1e-6))
     h: float = quantity("time", gt(0), ge(1e-6))
+    # the thrusters' forcing within a plant step by Gauss-Legendre quadrature (docs/model.md §9): nodes per
+    # half step; absent: RK4 samples the thrust at its stage times (systems with thruster dynamics only)
+    thrust_quadrature: int | None = config.setting(ge(1), le(MAX_THRUST_NODES), default=None)
 
 
 @dataclass(frozen=True)
@@ -327,6 +331,7 @@ class ScenarioConfig:
     trajectory_heading: float | None = None
     trajectory_target: tuple | None = None
     trajectory_duration: float | None = None
+    time_thrust_quadrature: int | None = None  # nodes per half plant step for the thrusters' forcing (docs/model.md §9)
     text: str = ""  # the file's text, stored in result files
     path: str = ""
 

@@ -19,6 +19,7 @@ run equals the lockstep one to the bit, so NSGA-II takes the same path), timed p
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import statistics
 import tempfile
@@ -29,7 +30,7 @@ import numpy as np
 
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim.run import Run
-from benchmarks.bench.common import CONTROLLER, Settings, _stat
+from benchmarks.bench.common import CONTROLLER, QUADRATURE, QUADRATURE_KEY, Settings, _stat
 from benchmarks.bench.targets import _env
 
 PAPER_STUDY = Path(__file__).resolve().parents[2] / "studies" / "paper.toml"
@@ -73,32 +74,45 @@ def _bench_batches(s: Settings, log) -> dict:
         sysm = load_system(name)
         if sysm.params.default("scenario") is None or (s.mode == "quick" and name != "haidou1"):
             continue  # --quick: Haidou-1 only (one lockstep library to build)
-        run = Run(CONTROLLER, params=sysm).compile()
-        log(f"lanes: {name}: the lockstep library (W = {run.lockstep().W}) ...")
-        W = run.lockstep().W
-        r = {"W": W, "n_runs": s.study_pop, "duration_s": run.cfg.time_duration}
-        for kind, G in _batches(run, s.study_pop, W).items():
-            ref = run.batch(G, n_threads=1, return_status=True, lockstep=False)  # warm-up and the reference
-            got = run.batch(G, n_threads=1, return_status=True, lockstep=True)
-            equal = all(a.tobytes() == b.tobytes() for a, b in zip(ref, got))
-            if not equal:
-                raise RuntimeError(f"lanes: {name} {kind}: the lockstep batch differs from the scalar one")
-            t = {False: [], True: []}
-            for _ in range(2 * s.reps_slow if kind == "running" else s.reps_slow):
-                for lock in (False, True):
-                    t0 = time.perf_counter()
-                    run.batch(G, n_threads=1, lockstep=lock)
-                    t[lock].append((time.perf_counter() - t0) / len(G))
-            sc, ln = _stat(t[False]), _stat(t[True])
-            r[kind] = {"ok_share": float(np.mean(ref[2])), "scalar_s_per_run": sc, "lanes_s_per_run": ln,
-                       "rtf_scalar": run.cfg.time_duration / sc["median"], "rtf_lanes": run.cfg.time_duration / ln["median"],
-                       "rtf_lanes_best": run.cfg.time_duration / ln["min"],
-                       "speedup": sc["median"] / ln["median"], "speedup_best": sc["min"] / ln["min"],
-                       "speedup_paired": statistics.median(a / b for a, b in zip(t[False], t[True])),
-                       "bitwise_equal": equal}
-            log(f"lanes: {name} {kind}: {sc['median'] * 1e3:.2f} ms scalar, {ln['median'] * 1e3:.2f} ms lanes per run")
-        out[name] = r
+        for key, run in _lane_runs(s, name, sysm):
+            out[key] = _bench_lane_run(s, key, run, log)
     return out
+
+
+def _lane_runs(s: Settings, name: str, sysm):
+    """The system's run at its default scenario and, with thruster dynamics (not --quick), with the forcing by
+    quadrature (:data:`benchmarks.bench.common.QUADRATURE`)."""
+    run = Run(CONTROLLER, params=sysm).compile()
+    yield name, run
+    if sysm.structure.has_thruster_dynamics and s.mode != "quick":
+        yield f"{name}{QUADRATURE_KEY}", Run(CONTROLLER, params=sysm, scenario=dataclasses.replace(run.cfg, **QUADRATURE)).compile()
+
+
+def _bench_lane_run(s: Settings, name: str, run, log) -> dict:
+    log(f"lanes: {name}: the lockstep library (W = {run.lockstep().W}) ...")
+    W = run.lockstep().W
+    r = {"W": W, "n_runs": s.study_pop, "duration_s": run.cfg.time_duration}
+    for kind, G in _batches(run, s.study_pop, W).items():
+        ref = run.batch(G, n_threads=1, return_status=True, lockstep=False)  # warm-up and the reference
+        got = run.batch(G, n_threads=1, return_status=True, lockstep=True)
+        equal = all(a.tobytes() == b.tobytes() for a, b in zip(ref, got))
+        if not equal:
+            raise RuntimeError(f"lanes: {name} {kind}: the lockstep batch differs from the scalar one")
+        t = {False: [], True: []}
+        for _ in range(2 * s.reps_slow if kind == "running" else s.reps_slow):
+            for lock in (False, True):
+                t0 = time.perf_counter()
+                run.batch(G, n_threads=1, lockstep=lock)
+                t[lock].append((time.perf_counter() - t0) / len(G))
+        sc, ln = _stat(t[False]), _stat(t[True])
+        r[kind] = {"ok_share": float(np.mean(ref[2])), "scalar_s_per_run": sc, "lanes_s_per_run": ln,
+                   "rtf_scalar": run.cfg.time_duration / sc["median"], "rtf_lanes": run.cfg.time_duration / ln["median"],
+                   "rtf_lanes_best": run.cfg.time_duration / ln["min"],
+                   "speedup": sc["median"] / ln["median"], "speedup_best": sc["min"] / ln["min"],
+                   "speedup_paired": statistics.median(a / b for a, b in zip(t[False], t[True])),
+                   "bitwise_equal": equal}
+        log(f"lanes: {name} {kind}: {sc['median'] * 1e3:.2f} ms scalar, {ln['median'] * 1e3:.2f} ms lanes per run")
+    return r
 
 
 def _study(pop: int, generations: int, lockstep: bool, stop_after: int | None) -> dict:

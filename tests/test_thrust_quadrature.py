@@ -1,0 +1,108 @@
+"""The thrusters' forcing by quadrature (``time.thrust_quadrature``, issue 26 item 1; docs/model.md §9).
+
+- the closed loop of the BlueROV2 with its T200s at h_plant = 0.01 s and 5 nodes per half step against
+  CVODES (1e-14) with the rotor states as ODE states (benchmarks/step_accuracy.py's reference, as
+  tests/test_thruster_loop.py does for the shipped step), and the plain RK4 at the same step, measured in
+  the same test: the quadrature must be within 2e-7 m, rad and at least 10x closer than the plain RK4;
+- the generated plant step against an independent implementation of the same method in NumPy
+  (benchmarks/bluerov2_step.py's ``transformed_states``, A interpolated from the three stage times as the
+  generated code does): equal to round-off;
+- lockstep lanes equal to the scalar run bit for bit;
+- refused without thruster dynamics (Haidou-1) and by the exported controller's ``close_loop``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import arvcas
+from arvcas.build import codegen
+from arvcas.controllers import gains as gains_mod
+from arvcas.sim import closedloop, lockstep, scenario
+from arvcas.sim.run import Run, SimulationError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _module(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    m = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(m)
+    return m
+
+
+@pytest.fixture(scope="module")
+def blue():
+    return arvcas.load_system("bluerov2_heavy_alpha5")
+
+
+@pytest.fixture(scope="module")
+def runs(blue):
+    """3 s of the shipped scenario at h_plant = 0.01 s: with quadrature (5 nodes) and without."""
+    cfg = dataclasses.replace(scenario.load_scenario(blue.params.default("scenario")), time_duration=3.0,
+                              time_h_plant=0.01)
+    quad = Run("proposed", scenario=dataclasses.replace(cfg, time_thrust_quadrature=5), params=blue).compile()
+    plain = Run("proposed", scenario=cfg, params=blue).compile()
+    return quad, quad.simulate(seed=4), plain, plain.simulate(seed=4)
+
+
+def test_quadrature_is_closer_to_cvodes_than_rk4_at_the_same_step(runs, blue):
+    sa = _module("step_accuracy")
+    quad, rq, plain, rp = runs
+    pv, n = blue.params.vector(), 20
+    errs = {}
+    for name, r in (("quadrature", rq), ("rk4", rp)):
+        X = np.hstack([r.eta, r.nu])
+        ref = sa.cvodes_states(quad.cfg, pv, X[0], sa.plant_inputs(pv, r, blue.layout), r.phase, tol=1e-14,
+                               n_samples=n, layout=blue.layout)
+        errs[name] = np.abs(X[:n + 1, :6] - ref[:, :6]).max()
+        assert np.abs(X[n] - X[0]).max() > 1e-3  # it does move
+    print("closed loop vs CVODES over 2 s at h_plant 0.01 s (m, rad):", errs)
+    assert errs["quadrature"] < 2e-7
+    assert errs["quadrature"] * 10 < errs["rk4"]
+
+
+def test_generated_step_equals_the_numpy_method(runs, blue):
+    """The compiled run's states against ``transformed_states`` driven by the run's own rotor targets, A
+    quadratic through the stage times: the same method, written independently, equal to round-off."""
+    sa, bs = _module("step_accuracy"), _module("bluerov2_step")
+    quad, rq, _, _ = runs
+    pv, n = blue.params.vector(), 20
+    X = np.hstack([rq.eta, rq.nu])
+    cfg = quad.cfg
+    A = bs.transformed_states(sa, cfg, pv, X[0], sa.plant_inputs(pv, rq, blue.layout), rq.phase, blue.layout,
+                              (cfg.time_h_plant,) * cfg.substeps, cfg.time_thrust_quadrature, n, "quadratic")
+    d = np.abs(A - X[:n + 1]).max()
+    print("generated vs NumPy, same method:", d)
+    assert d < 1e-10
+
+
+def test_lockstep_equals_the_scalar_run_bitwise(runs):
+    quad = runs[0]
+    spec = closedloop.RunSpec(quad.controller, quad.cfg.graph_key(), quad.opts, quad.params.layout)
+    quad._fns[False] = codegen.build(closedloop.build_run(spec, False), opt_level="-O0")
+    quad._lockstep = lockstep.build(quad, opt_level="-O0")
+    g0 = quad.default_gains()
+    rng = np.random.default_rng(2)
+    up = gains_mod.upper_limits(quad.controller, quad.cfg.time_h) * 0.95
+    G = np.vstack([g0 * rng.uniform(0.8, 1.2, (5, g0.size)), np.minimum(g0 * 100, up)])  # the last one diverges
+    ref = quad.batch(G, seed=3, n_threads=1, return_status=True, lockstep=False)
+    got = quad.batch(G, seed=3, n_threads=2, return_status=True, lockstep=True)
+    for a, b in zip(ref, got):
+        assert a.tobytes() == b.tobytes()
+    assert ref[2][:5].all() and not ref[2][5]
+
+
+def test_refused_without_thruster_dynamics_and_by_close_loop(runs):
+    cfg = dataclasses.replace(scenario.load_scenario(), time_thrust_quadrature=3)
+    with pytest.raises(SimulationError, match=r"time.thrust_quadrature: only for a system with thruster dynamics"):
+        Run("proposed", scenario=cfg).compile()
+    from arvcas.io.export_controller import ExportError, close_loop
+
+    with pytest.raises(ExportError, match=r"time.thrust_quadrature"):
+        close_loop(None, runs[0])
