@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from benchmarks.bench.common import CONTROLLER, N_INPUT_SETS
+from benchmarks.bench.common import CONTROLLER, N_INPUT_SETS, QUADRATURE, QUADRATURE_KEY
 from benchmarks.bench.controller import _controller_markdown
 from benchmarks.bench.cost import cost_markdown
 from benchmarks.bench.lanes import _lanes_markdown
@@ -287,7 +287,10 @@ def render_markdown(res: dict) -> str:
               f"Each shipped system's run at its own default scenario and gains, controller {CONTROLLER}, metrics "
               f"only; the systems timed in interleaved rounds in this run (median). A system with thruster "
               f"dynamics (issue 22) is also timed without them (`+instantaneous`, the same scenario and step) and "
-              f"at the former plant step (`+h_plant_0.005`); instructions count the step's SX functions, not the "
+              f"at the former plant step (`+h_plant_0.005`), and with its forcing by quadrature (issue 26: "
+              f"`{QUADRATURE_KEY}`, time.thrust_quadrature = {QUADRATURE['time_thrust_quadrature']} at h_plant = "
+              f"{QUADRATURE['time_h_plant']:g} s, docs/model.md §9, within the accuracy rule that the shipped step "
+              f"misses: results/bluerov2_step §3); instructions count the step's SX functions, not the "
               f"table lookups in MX between them.", "",
               "| system | thrusters | joints | duration s | samples x plant steps | run s (spread) | real-time factor | "
               "instructions / sample | instructions / s |", "|---|---|---|---|---|---|---|---|---|"]
