@@ -47,38 +47,35 @@ def main(quadrature: bool = False, res: dict | None = None) -> dict:
         k = read_result(ROOT / f"results/bluerov2/t200/knees/knee_{c}.h5")
         cases.append((f"{c} knee", c, k.gains, (k.seed, k.uncertainty, k.phase)))
     out = res or {"steps": list(STEPS), "cases": {}, "machine_load": open("/proc/loadavg").read().split()[:3]}
-    for label, c, g, draw in cases:
+    def against_cvodes(c, cfg, g, draw):
+        """(state error against CVODES over the run, with CVODES' time; the metrics) of law c at scenario cfg."""
         seed, unc, ph = draw if draw is not None else (0, None, None)
+        t0 = time.time()
+        r = arvcas.Run(c, scenario=cfg, params=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
+        X = np.hstack([r.eta, r.nu])
+        ref = sa.cvodes_states(cfg, pv, X[0], sa.plant_inputs(pv, r, blue.layout), r.phase, tol=1e-14,
+                               layout=blue.layout)
+        d = np.abs(X - ref)
+        return ({"position_m": float(d[:, 0:3].max()), "angle_rad": float(d[:, 3:6].max()), "cvodes_s": time.time() - t0},
+                np.r_[r.chat, r.chat_delivered, r.rmse])
+
+    def metrics_only(c, cfg, g, draw):
+        seed, unc, ph = draw if draw is not None else (0, None, None)
+        r = arvcas.Run(c, scenario=cfg, params=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
+        return np.r_[r.chat, r.chat_delivered, r.rmse]
+
+    for label, c, g, draw in cases:
         if quadrature:  # the quadrature variant added to a finished run's figures (docs/model.md §9)
             hp, ng = QUAD
-            cfg = dataclasses.replace(cfg0, time_h_plant=hp, time_thrust_quadrature=ng)
-            t0 = time.time()
-            r = arvcas.Run(c, scenario=cfg, params=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
-            X = np.hstack([r.eta, r.nu])
-            ref = sa.cvodes_states(cfg, pv, X[0], sa.plant_inputs(pv, r, blue.layout), r.phase, tol=1e-14,
-                                   layout=blue.layout)
-            d = np.abs(X - ref)
-            fine = dataclasses.replace(cfg0, time_h_plant=STEPS[-1])
-            rb = arvcas.Run(c, scenario=fine, params=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
-            base, m = np.r_[rb.chat, rb.chat_delivered, rb.rmse], np.r_[r.chat, r.chat_delivered, r.rmse]
-            out["cases"][label]["quadrature"] = {"h_plant": hp, "nodes": ng, "position_m": float(d[:, 0:3].max()),
-                                                 "angle_rad": float(d[:, 3:6].max()), "cvodes_s": time.time() - t0,
-                                                 "metrics_rel_vs_finest": float(np.max(np.abs(m - base) / np.abs(base)))}
-            print(label, "quadrature", out["cases"][label]["quadrature"], flush=True)
+            rec, m = against_cvodes(c, dataclasses.replace(cfg0, time_h_plant=hp, time_thrust_quadrature=ng), g, draw)
+            base = metrics_only(c, dataclasses.replace(cfg0, time_h_plant=STEPS[-1]), g, draw)
+            rec = {"h_plant": hp, "nodes": ng, **rec, "metrics_rel_vs_finest": float(np.max(np.abs(m - base) / np.abs(base)))}
+            out["cases"][label]["quadrature"] = rec
+            print(label, "quadrature", rec, flush=True)
             continue
-        rec = {}
-        metrics = {}
+        rec, metrics = {}, {}
         for hp in STEPS:
-            cfg = dataclasses.replace(cfg0, time_h_plant=hp)
-            t0 = time.time()
-            r = arvcas.Run(c, scenario=cfg, params=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
-            X = np.hstack([r.eta, r.nu])
-            ref = sa.cvodes_states(cfg, pv, X[0], sa.plant_inputs(pv, r, blue.layout), r.phase, tol=1e-14,
-                                   layout=blue.layout)
-            d = np.abs(X - ref)
-            rec[repr(hp)] = {"position_m": float(d[:, 0:3].max()), "angle_rad": float(d[:, 3:6].max()),
-                             "cvodes_s": time.time() - t0}
-            metrics[hp] = np.r_[r.chat, r.chat_delivered, r.rmse]
+            rec[repr(hp)], metrics[hp] = against_cvodes(c, dataclasses.replace(cfg0, time_h_plant=hp), g, draw)
             print(label, hp, rec[repr(hp)], flush=True)
         base = metrics[STEPS[-1]]
         for hp in STEPS[:-1]:

@@ -166,8 +166,8 @@ def moment_weights(cfg: ScenarioConfig) -> np.ndarray:
     ng, hp, n_sub = quadrature(cfg), cfg.time_h_plant, cfg.substeps
     gx, gw = np.polynomial.legendre.leggauss(ng)
     C = np.zeros((2 * ng * n_sub, N_MOMENTS * n_sub))
+    ts = (0.0, 0.5 * hp, hp)  # stage times, relative to a step's start
     for i in range(n_sub):
-        ts = (0.0, 0.5 * hp, hp)  # stage times, relative to the step's start
         for half in range(2):
             for q in range(ng):
                 row = (2 * i + half) * ng + q
@@ -252,18 +252,23 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     recs_t, recs_a = ca.SX.sym("recs_time", 3 * TS), ca.SX.sym("recs_arm", 3 * AS)
     Ps = view(p_s, lay)
 
-    def f_plant(xx, j):
-        rec = schedule.unpack(ca.vertcat(recs_t[j * TS:(j + 1) * TS], recs_a[j * AS:(j + 1) * AS]), lay)
-        ee, nn = xx[0:6], xx[6:12]
+    def record(j):  # the time table's record at stage time t + j hp / 2
+        return schedule.unpack(ca.vertcat(recs_t[j * TS:(j + 1) * TS], recs_a[j * AS:(j + 1) * AS]), lay)
+
+    def accel(ee, nn, j, rec, force):
+        """nu_dot at stage j under the body wrench ``force`` of the thrusters (None: the forcing is taken out)."""
         tr = _trim(Ps, c_s[0], c_s[1], c_s[2], ee)
         dist = scenario.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
-        thrust = tr_s[6 * j:6 * j + 6] if dyn else tr_s
+        f = dist if force is None else force + dist
         if not cfg.has_water:
-            nud, _ = coupled_terms_scheduled(Ps, ee, nn, thrust + dist, rec, tr, opts)
-        else:
-            current, tether = _water(cfg, Ps, w_s, t_s + j * 0.5 * hp, ee, nn)
-            nud, _ = coupled_terms_scheduled(Ps, ee, nn, thrust + dist + tether, rec, tr, opts, current)
-        return ca.vertcat(ca.mtimes(J(ee), nn), nud)
+            return coupled_terms_scheduled(Ps, ee, nn, f, rec, tr, opts)[0]
+        current, tether = _water(cfg, Ps, w_s, t_s + j * 0.5 * hp, ee, nn)
+        return coupled_terms_scheduled(Ps, ee, nn, f + tether, rec, tr, opts, current)[0]
+
+    def f_plant(xx, j):
+        ee, nn = xx[0:6], xx[6:12]
+        thrust = tr_s[6 * j:6 * j + 6] if dyn else tr_s
+        return ca.vertcat(ca.mtimes(J(ee), nn), accel(ee, nn, j, record(j), thrust))
 
     if quadrature(cfg) is None:
         k_1 = f_plant(xs, 0)
@@ -272,7 +277,7 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
         k_4 = f_plant(xs + hp * k_3, 2)
         x_next = ca.cse(xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4))
     else:
-        x_next = ca.cse(_substep_quadrature(cfg, opts, Ps, xs, tr_s, recs_t, recs_a, c_s, ph_s, w_s, t_s, lay))
+        x_next = ca.cse(_substep_quadrature(hp, xs, tr_s, [record(j) for j in range(3)], accel))
     x_next, pc_syms, pc_vals = ca.extract_parametric(x_next, ca.vertcat(p_s, c_s, ph_s, w_s), {"prefix": "pc_"})
     pc_s = ca.vertcat(*pc_syms) if pc_syms else ca.SX(0, 1)
     rk4 = ca.Function("cl_rk4", [xs, recs_t, recs_a, tr_s, p_s, c_s, ph_s, pc_s, w_s, t_s], [x_next],
@@ -296,20 +301,16 @@ def tau_stride(spec: RunSpec) -> int:
     return 6 * N_MOMENTS if quadrature(spec.cfg) is not None else 12
 
 
-def _substep_quadrature(cfg, opts, Ps, xs, mom, recs_t, recs_a, c_s, ph_s, w_s, t_s, lay):
+def _substep_quadrature(hp, xs, mom, recs, accel):
     """One plant step with the thrusters' forcing taken out of the RK4 stages (docs/model.md §9).
 
     The forcing enters the velocities linearly, ``nu_dot = A(t) (B F(t) + R(eta, nu, t))`` with
-    ``A = (M + M_arm(q(t)))^-1`` known at the stage times (the time table's LU factors), so RK4 integrates
-    ``z = nu - w(t)`` and ``zeta = eta - J(eta_a) omega(t)``: ``z_dot = A R(eta, z + w, t)``,
+    ``A = (M + M_arm(q(t)))^-1`` known at the stage times (the time table's LU factors in ``recs``), so RK4
+    integrates ``z = nu - w(t)`` and ``zeta = eta - J(eta_a) omega(t)``: ``z_dot = A R(eta, z + w, t)``,
     ``zeta_dot = J(eta) (z + w) - J(eta_a) w``, with ``w`` and ``omega`` from the moments ``mom`` (6 x 12, the
-    quadrature of the lag's closed form through the map: :func:`moment_weights`)."""
+    quadrature of the lag's closed form through the map: :func:`moment_weights`). ``accel(eta, nu, j, rec,
+    None)``: ``A R`` at stage j (:func:`_plant_substep`'s, without the thrusters' wrench)."""
     from arvcas.model.linalg import lu_solve
-
-    hp = cfg.time_h_plant
-    R = schedule.records(lay)
-    TS, AS = R.time_size, R.arm_size
-    recs = [schedule.unpack(ca.vertcat(recs_t[j * TS:(j + 1) * TS], recs_a[j * AS:(j + 1) * AS]), lay) for j in range(3)]
 
     def moment(k):  # sum_j A_j (B int l_j F): w(hp/2), w(hp), omega(hp/2), omega(hp)
         return sum(lu_solve(*recs[j]["lu"], mom[6 * (3 * k + j):6 * (3 * k + j) + 6]) for j in range(3))
@@ -319,16 +320,8 @@ def _substep_quadrature(cfg, opts, Ps, xs, mom, recs_t, recs_a, c_s, ph_s, w_s, 
     zero = ca.SX.zeros(6)
 
     def g(zz, j, w, om):
-        rec = recs[j]
         ee, nn = zz[0:6] + ca.mtimes(Ja, om), zz[6:12] + w
-        tr = _trim(Ps, c_s[0], c_s[1], c_s[2], ee)
-        dist = scenario.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
-        if not cfg.has_water:
-            nud, _ = coupled_terms_scheduled(Ps, ee, nn, dist, rec, tr, opts)
-        else:
-            current, tether = _water(cfg, Ps, w_s, t_s + j * 0.5 * hp, ee, nn)
-            nud, _ = coupled_terms_scheduled(Ps, ee, nn, dist + tether, rec, tr, opts, current)
-        return ca.vertcat(ca.mtimes(J(ee), nn) - ca.mtimes(Ja, w), nud)
+        return ca.vertcat(ca.mtimes(J(ee), nn) - ca.mtimes(Ja, w), accel(ee, nn, j, recs[j], None))
 
     k_1 = g(xs, 0, zero, zero)
     k_2 = g(xs + 0.5 * hp * k_1, 1, w1, o1)
@@ -552,6 +545,7 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
         lag, wrench = parts.thr
         i_cmd = _trace_offset(spec, "command")
     hp = cfg.time_h_plant
+    stride, size = tau_stride(spec), tau_size(spec)  # plant step i's slice of the thrusters' wrench vector
     steps = []
     for first, ctrl in zip(firsts, ctrls):
         res = ctrl(Sm, Km, tkm, nm, sch_t[0:TS], sch_a[0:AS], *([sch_t[ns * TS:]] if cfg.has_trajectory else []))
@@ -566,7 +560,7 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
                 outs[0] = ca.vertcat(tr[:i_cmd], cmd, tr[i_cmd + n_thr:])
         xm = Sm[L.slices["x"]]
         for i in range(n_sub):
-            tau_i = W[tau_stride(spec) * i:tau_stride(spec) * i + tau_size(spec)] if dyn else thrust_out
+            tau_i = W[stride * i:stride * i + size] if dyn else thrust_out
             xm = rk4(xm, sch_t[2 * i * TS:(2 * i + 3) * TS], sch_a[2 * i * AS:(2 * i + 3) * AS], tau_i, pm, cm, phm, pcm,
                      wm, tkm + i * hp)
         steps.append(ca.Function(f"cl_step_{law.name}" + ("_first" if first else ""), [Sm, Km, tkm, nm, sch_t, sch_a],
