@@ -44,12 +44,14 @@ def _cfg(s):
     """The system's scenario; the BlueROV2's with its T200 dynamics (the rotors in close_loop) and its tether's
     pull, without its current (the exported plant the controller is closed around, export-c's uvms_rhs, takes a
     body wrench: the relative-velocity current acts inside its hydrodynamics, and without it the tether has no
-    drag; docs/exporting-a-controller.md)."""
+    drag; docs/exporting-a-controller.md) and with plain RK4 at its 0.01 s step in place of its thrust quadrature
+    (close_loop integrates the exported plant by RK4 with the thrust at the stage times)."""
     cfg = scenario.load_scenario(s.params.default("scenario"))
     if s.name == "haidou1":
         return cfg
     assert cfg.has_tether and cfg.current == "constant"
-    return replace(cfg, time_duration=20.0, current_velocity=None)
+    assert cfg.time_thrust_quadrature
+    return replace(cfg, time_duration=20.0, current_velocity=None, time_thrust_quadrature=None)
 
 
 def _run(cmd, **kw):
@@ -249,16 +251,19 @@ def test_front_of_another_system_gives_its_controller(tmp_path, capsys):
     assert "#define ARVCAS_BLUEROV2_HEAVY_ALPHA5_AGSTA_USES_TAU_ARM 1" in h
 
 
-def test_close_loop_refuses_a_current():
-    """The exported plant cannot carry a current: one line, before any work."""
+def test_close_loop_refuses_a_current_and_the_thrust_quadrature():
+    """The exported plant cannot carry a current, and close_loop's RK4 is not the thrust quadrature: one line
+    each, before any work."""
     from types import SimpleNamespace
 
     from arvcas.io.export_controller import ExportError
 
     blue = load_system("bluerov2_heavy_alpha5")
     cfg = scenario.load_scenario(blue.params.default("scenario"))
-    with pytest.raises(ExportError, match=r"^export-controller: close_loop .* a current acts inside .*\[current\]$"):
+    with pytest.raises(ExportError, match=r"^export-controller: close_loop .* sets time.thrust_quadrature \(5\), .* without it$"):
         close_loop(None, SimpleNamespace(cfg=cfg, params=blue.params))
+    with pytest.raises(ExportError, match=r"^export-controller: close_loop .* a current acts inside .*\[current\]$"):
+        close_loop(None, SimpleNamespace(cfg=replace(cfg, time_thrust_quadrature=None), params=blue.params))
 
 
 def teardown_module(module):

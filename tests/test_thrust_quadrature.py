@@ -44,9 +44,9 @@ def blue():
 
 @pytest.fixture(scope="module")
 def runs(blue):
-    """3 s of the shipped scenario at h_plant = 0.01 s: with quadrature (5 nodes) and without."""
+    """3 s of the shipped scenario at h_plant = 0.01 s: with quadrature (5 nodes, the shipped setting) and without."""
     cfg = dataclasses.replace(scenario.load_scenario(blue.params.default("scenario")), time_duration=3.0,
-                              time_h_plant=0.01)
+                              time_h_plant=0.01, time_thrust_quadrature=None)
     quad = Run("proposed", scenario=dataclasses.replace(cfg, time_thrust_quadrature=5), params=blue).compile()
     plain = Run("proposed", scenario=cfg, params=blue).compile()
     return quad, quad.simulate(seed=4), plain, plain.simulate(seed=4)
@@ -96,7 +96,8 @@ def test_asymmetric_lag_with_rate_limit_against_cvodes(asymmetric):
     s = asymmetric
     assert all(d.asymmetric and d.rate_limit for d in s.structure.thruster_dynamics)
     sa = _module("step_accuracy")
-    cfg = dataclasses.replace(scenario.load_scenario(s.params.default("scenario")), time_duration=3.0, time_h_plant=0.01)
+    cfg = dataclasses.replace(scenario.load_scenario(s.params.default("scenario")), time_duration=3.0, time_h_plant=0.01,
+                              time_thrust_quadrature=None)
     pv, n, errs = s.params.vector(), 20, {}
     for name, c in (("quadrature", dataclasses.replace(cfg, time_thrust_quadrature=5)), ("rk4", cfg)):
         r = Run("proposed", scenario=c, params=s).compile().simulate(seed=4)

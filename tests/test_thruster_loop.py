@@ -84,8 +84,9 @@ def test_delivered_thrust_is_the_lag_of_the_command(short, blue):
 def test_plant_equals_cvodes_with_the_rotor_states(short, blue):
     """The closed loop's trajectory over its first 2 s against CVODES (1e-14) integrating the plant with the
     rotor states as ODE states (the textbook lag through the map's cubic, benchmarks/step_accuracy.py), the
-    current and the tether: the RK4 at the scenario's h_plant = 0.0025 s driven by the closed form's stage
-    thrusts stays within 2e-7 m, rad (measured 6.9e-8 over 3 s; results/step's rule: 1e-6)."""
+    current and the tether: the scenario's plant step (h_plant = 0.01 s, the forcing by quadrature,
+    ``time.thrust_quadrature = 5``) stays within 2e-7 m, rad (results/step's rule: 1e-6; plain RK4 with the
+    thrust at its stage times and its own bound: tests/test_thrust_quadrature.py)."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("step_accuracy", ROOT / "benchmarks" / "step_accuracy.py")

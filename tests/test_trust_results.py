@@ -58,11 +58,11 @@ def test_a_neutrally_buoyant_arm_has_a_finite_trim(tmp_path):
 
 
 def test_an_arm_motion_shorter_than_the_plant_step_is_refused(tmp_path):
-    """A reach of 1 ms (the plant step is 5 ms): between two RK4 stage times, the arm would jump with no
+    """A reach of 1 ms (the plant step is 10 ms): between two RK4 stage times, the arm would jump with no
     reaction on the vehicle."""
     p = scenario_variant(tmp_path, 't = { value = 19.0, unit = "s"', 't = { value = 5.001, unit = "s"')
     with pytest.raises(ScenarioError, match=r"arm.waypoint\[2\].t: the motion from waypoint 1 takes 0.001 s, less "
-                                            r"than the plant step time.h_plant \(0.0025 s\)") as e:
+                                            r"than the plant step time.h_plant \(0.01 s\)") as e:
         load_scenario(p)
     assert "\n" not in str(e.value)
 
