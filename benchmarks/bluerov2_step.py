@@ -3,8 +3,9 @@
     python benchmarks/bluerov2_step.py [--quick]     # writes results/bluerov2_step/ (README.md, JSON, figure)
 
 Haidou-1 meets issue 14's accuracy rule (results/step) at h_plant = 0.05 s; the BlueROV2 Heavy + Alpha 5
-needed 0.005 s with instantaneous thrusters and needs 0.0025 s with its T200 dynamics
-(arvcas/data/bluerov2_heavy_alpha5.scenario.toml). Three measurements separate the candidate causes:
+needed 0.005 s with instantaneous thrusters and 0.0025 s with its T200 dynamics under plain RK4 (the step shipped
+until 2026-12-05; since then the shipped scenario, arvcas/data/bluerov2_heavy_alpha5.scenario.toml, takes 0.01 s with
+the thrust quadrature that section (4) measured). The runs here are integrated by plain RK4 at 0.0025 s (``BASE_H``). Three measurements separate the candidate causes:
 
 (1) **Stiffness.** Along each system's default run (controller ``proposed``, its default gains; the
     BlueROV2 also at the knee of its proposed front, results/bluerov2/t200), the Jacobian d xdot / d x
@@ -58,6 +59,7 @@ RK4_LIMIT = 2.785293563405282  # RK4's stability interval on the negative real a
 STEPS = (0.01, 0.005, 0.0025, 0.00125)
 COARSE = (0.1, 0.05, 0.025)  # plant (b) only: Haidou-1's step and around it
 RULE = 1e-6
+BASE_H = 0.0025  # s: the plain RK4 step the runs here are integrated at (the BlueROV2's shipped step until 2026-12-05)
 EPS_SMOOTH = 1e-3  # m/s, rad/s: |v| -> sqrt(v^2 + eps^2) in variant (c)
 
 
@@ -246,7 +248,9 @@ TRANSFORM_CASES = (((0.05,) * 2, 5, "exact"), ((0.025,) * 4, 3, "exact"), ((0.02
                    ((0.025,) * 4, 8, "exact"), ((0.025,) * 4, 5, "quadratic"), ((0.02,) * 5, 3, "exact"),
                    ((0.02,) * 5, 5, "exact"), ((0.0125,) * 8, 3, "exact"), ((0.0125,) * 8, 5, "exact"),
                    ((0.01,) * 10, 3, "exact"), ((0.01,) * 10, 5, "exact"), ((0.01, 0.01, 0.02, 0.03, 0.03), 5, "exact"),
-                   ((0.01, 0.015, 0.025, 0.05), 5, "exact"))
+                   ((0.01, 0.015, 0.025, 0.05), 5, "exact"),
+                   # long substeps with many nodes: is the forcing's quadrature what limits them? (issue 26 item 1)
+                   ((0.1,), 80, "exact"), ((0.05,) * 2, 40, "exact"), ((0.025,) * 4, 20, "exact"))
 TRANSFORM_QUICK = (((0.025,) * 4, 5, "exact"), ((0.01, 0.01, 0.02, 0.03, 0.03), 5, "exact"))
 
 
@@ -381,7 +385,8 @@ def study(quick: bool = False, log=print) -> dict:
     res = {"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "quick": quick,
            "load_avg_start": list(os.getloadavg()), "eigen": {}, "forcing": {}, "diagonal": {}, "counts": {}}
     blue = arvcas.load_system("bluerov2_heavy_alpha5")
-    cfg_b = scenario.load_scenario(blue.params.default("scenario"))
+    cfg_b = dataclasses.replace(scenario.load_scenario(blue.params.default("scenario")), time_h_plant=BASE_H,
+                                time_thrust_quadrature=None)
     hai = arvcas.load_system("haidou1")
     cfg_h = scenario.load_scenario()
     if quick:
@@ -516,7 +521,7 @@ def transform_markdown(tr) -> list[str]:
          "through the T200 table (nodes per half substep), not from three stage samples. A at the nodes: exact, or "
          "quadratic through its values at the three stage times (what generated code has from the time table's LU "
          "factors). Work per 0.1 s sample: plant evaluations (RK4 stages) and thrust-map points (table lookups, "
-         f"all {tr['n_thrusters']} thrusters); the shipped RK4 at {sh['h_plant']:g} s: {sh['plant_evaluations_per_sample']} and "
+         f"all {tr['n_thrusters']} thrusters); plain RK4 at {sh['h_plant']:g} s (shipped until 2026-12-05): {sh['plant_evaluations_per_sample']} and "
          f"{sh['map_points_per_sample']}. Rule: both errors <= {RULE:g}.", "",
          "| substeps of a sample (s) | nodes per half | A | plant evaluations | map points | whole run: m / rad | "
          "first 10 s: m / rad | t of the largest (s) | within the rule |", "|---|--:|---|--:|--:|---|---|--:|---|"]
@@ -542,16 +547,16 @@ def findings(res: dict) -> list[str]:
                        reverse=True)
         L.append(f"- {label}: the largest eigenvalue is {lam:.3g} 1/s (Haidou-1: "
                  f"{res['eigen']['haidou1 proposed default']['variants']['shipped']['max_abs_lambda']:.3g} 1/s), so h |lambda| = "
-                 f"{lam * 0.05:.3g} even at Haidou-1's 0.05 s and {lam * e['h_plant']:.3g} at the shipped "
-                 f"{e['h_plant']:g} s, far inside RK4's stability limit {RK4_LIMIT:.2f}; RK4's one-step error factor on that mode "
-                 f"at the shipped step: {v['rk4_step_error_factor_max']:.2g}. The terms that move it most: "
+                 f"{lam * 0.05:.3g} even at Haidou-1's 0.05 s and {lam * e['h_plant']:.3g} at the "
+                 f"{e['h_plant']:g} s plain RK4 step, far inside RK4's stability limit {RK4_LIMIT:.2f}; RK4's one-step error factor on that mode "
+                 f"at that step: {v['rk4_step_error_factor_max']:.2g}. The terms that move it most: "
                  + "; ".join(f"{k} ({100 * d:.0f}%)" for d, k in moves[:3]) + ". The plant is not stiff at these steps.")
     for label, f in res["forcing"].items():
         a = f["(a) shipped: T200 lags through the table"]
         b = f["(b) vehicle alone, delivered wrench held per sample"]
         c = f["(c) (a) with |nu| smoothed (eps 1e-3)"]
         s0 = next(iter(a["steps"]))  # the coarsest step of the shipped plant
-        L.append(f"- {label}: at {float(s0):g} s the shipped plant is off CVODES by {_g(a['steps'][s0]['position_m'])} m / "
+        L.append(f"- {label}: at {float(s0):g} s the shipped plant under plain RK4 is off CVODES by {_g(a['steps'][s0]['position_m'])} m / "
                  f"{_g(a['steps'][s0]['angle_rad'])} rad; the vehicle alone with the same delivered wrench held per sample by "
                  f"{_g(b['steps'][s0]['position_m'])} m / {_g(b['steps'][s0]['angle_rad'])} rad (within the rule from "
                  f"{_g(b['coarsest_within_rule'])} s); smoothing |nu| changes the shipped error to {_g(c['steps'][s0]['position_m'])} m / "
@@ -559,7 +564,7 @@ def findings(res: dict) -> list[str]:
                  f"lag through the T200 table, sampled by RK4 at its stage times), not by the vehicle's dynamics, its "
                  f"|nu| nu kinks or the arm.")
         steps = sorted(a["steps"], key=float)
-        L.append(f"- {label}, the shipped plant over the whole run: " + "; ".join(
+        L.append(f"- {label}, the shipped plant under plain RK4 over the whole run: " + "; ".join(
             f"{float(k):g} s: {_g(a['steps'][k]['position_m'])} m / {_g(a['steps'][k]['angle_rad'])} rad" for k in steps)
             + f"; the coarsest step within the rule: {_g(a['coarsest_within_rule'])} s (the error grows along the open-loop "
               f"run: its largest at t = {a['steps'][steps[-2]]['t_of_max']:g} s at {float(steps[-2]):g} s).")
@@ -575,7 +580,7 @@ def findings(res: dict) -> list[str]:
             return (f"{len(r['substeps'])} substeps ({', '.join(f'{v:g}' for v in r['substeps'])} s), {r['nodes_per_half']} "
                     f"nodes per half: {_g(r['position_m'])} m / {_g(r['angle_rad'])} rad over the run "
                     f"({r['plant_evaluations_per_sample']} plant evaluations and {r['map_points_per_sample']} map points "
-                    f"per sample against the shipped {sh['plant_evaluations_per_sample']} and {sh['map_points_per_sample']})")
+                    f"per sample against plain RK4's {sh['plant_evaluations_per_sample']} and {sh['map_points_per_sample']})")
         err = lambda r: max(r["position_m"], r["angle_rad"])  # noqa: E731
         same = lambda r, q: r["substeps"] == q["substeps"] and r["A"] == q["A"]  # noqa: E731
         ng_pairs = [(r, q) for r in tr["cases"] for q in tr["cases"] if same(r, q) and q["nodes_per_half"] > r["nodes_per_half"]]
@@ -588,12 +593,26 @@ def findings(res: dict) -> list[str]:
         L.append("- The candidate of section 3 (the forcing integrated by quadrature into a change of variables, RK4 at "
                  "long substeps): " + (f"within the rule with the fewest plant evaluations: {_desc(min(ok, key=lambda r: r['plant_evaluations_per_sample']))}"
                                         if ok else f"no case within the rule; the best: {_desc(best)}")
-                 + f"; the shipped RK4 at {sh['h_plant']:g} s: "
+                 + f"; plain RK4 at {sh['h_plant']:g} s: "
                  + (f"{_g(a_sh['position_m'])} m / {_g(a_sh['angle_rad'])} rad." if a_sh else "not measured here."))
         for r, q in ng_pairs:
             L.append(f"- More nodes ({r['nodes_per_half']} -> {q['nodes_per_half']} per half, substeps "
                      f"{', '.join(f'{v:g}' for v in r['substeps'])} s): {_g(err(r))} -> {_g(err(q))} (largest of m, rad); "
                      f"the largest errors at t = {r['t_of_max']:g} and {q['t_of_max']:g} s.")
+        many = {}  # the most nodes measured at each uniform substep length (exact A)
+        for r in tr["cases"]:
+            if len(set(r["substeps"])) == 1 and r["A"] == "exact":
+                h = r["substeps"][0]
+                if h not in many or r["nodes_per_half"] > many[h]["nodes_per_half"]:
+                    many[h] = r
+        longest = [many[h] for h in sorted(many, reverse=True) if h >= 0.025]
+        if longest:
+            L.append("- The forcing's quadrature is not what limits the long substeps: with many nodes per half the error "
+                     "settles far above the rule (" + "; ".join(
+                         f"{len(r['substeps'])} x {r['substeps'][0]:g} s, {r['nodes_per_half']} nodes: {_g(r['position_m'])} m / "
+                         f"{_g(r['angle_rad'])} rad" for r in longest)
+                     + "): what remains is RK4's own error on the transformed plant at that substep, so the "
+                       "candidate's fewest plant evaluations within the rule, above, bound its speed.")
         for g in graded:
             u = uniform.get(len(g["substeps"]))
             if u is not None:
@@ -605,13 +624,14 @@ def findings(res: dict) -> list[str]:
                      f"({', '.join(f'{v:g}' for v in r['substeps'])} s, {r['nodes_per_half']} nodes): {_g(err(r))} against "
                      f"{_g(err(q))}: the generated code (`time.thrust_quadrature`) takes A this way, from the time table's LU factors.")
         pick = min(ok or [best], key=lambda r: r["plant_evaluations_per_sample"])
-        L.append(f"- So at an accuracy within the rule (which the shipped {sh['h_plant']:g} s step misses on this run), the "
+        L.append(f"- So at an accuracy within the rule (which plain RK4 at {sh['h_plant']:g} s, the step shipped until 2026-12-05, misses on this run), the "
                  f"candidate takes {sh['plant_evaluations_per_sample'] / pick['plant_evaluations_per_sample']:.0f}x fewer plant "
                  f"evaluations per sample ({pick['plant_evaluations_per_sample']} against {sh['plant_evaluations_per_sample']}) "
                  f"and {pick['map_points_per_sample']} thrust-map points against {sh['map_points_per_sample']}: what it saves "
                  "is the vehicle's part of a sample, not the thrusters' (results/bench.md §5 has the split of a sample's time "
                  "between the two).")
-        L.append("- Built as the opt-in scenario key `time.thrust_quadrature` (docs/model.md §9): the generated step equals "
+        L.append("- Built as the scenario key `time.thrust_quadrature` (docs/model.md §9), the BlueROV2's shipped step since 2026-12-05 "
+                 "(5 nodes per half at 0.01 s): the generated step equals "
                  "this script's method to round-off (tests/test_thrust_quadrature.py), and "
                  "results/step/bluerov2_heavy_alpha5/thrusters.md runs it over whole closed-loop runs against CVODES.")
     return L + [""]
