@@ -22,6 +22,7 @@ from arvcas.build import codegen, lanes
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim import closedloop, lockstep, run as run_mod
 from arvcas.sim.run import Run, SimulationError
+from arvcas.sim.scenario import load_scenario
 
 SPECIAL = [0.0, -0.0, 1.0, -1.0, 0.5, -2.5, 3.7, 1e-310, -1e-310, 1e308, -1e308, np.inf, -np.inf, np.nan, 1e6,
            0.9, 1.2, -1.7, 2.2, 1e22, 7.0]
@@ -80,8 +81,11 @@ def test_lane_rewrite_refuses_what_it_does_not_know():
 
 def _short_run(system: str, law: str, duration: float = 3.0, limit: float | None = None):
     # hinsdale_bluerov2_alpha5 (validation only) has no scenario of its own: the BlueROV2's (with its current
-    # and tether; instantaneous thrusters)
-    scen = str(SYSTEMS / "bluerov2_heavy_alpha5.scenario.toml") if system == "hinsdale_bluerov2_alpha5" else None
+    # and tether), without its thrust quadrature (the Hinsdale thrusters deliver their thrust at once)
+    scen = None
+    if system == "hinsdale_bluerov2_alpha5":
+        scen = dataclasses.replace(load_scenario(SYSTEMS / "bluerov2_heavy_alpha5.scenario.toml"),
+                                   time_thrust_quadrature=None)
     r = Run(controller=law, params=system, scenario=scen).compile()
     cfg = dataclasses.replace(r.cfg, time_duration=duration)
     if limit is not None:  # tracking-error bounds that some members cross (a stop by the error bound)
