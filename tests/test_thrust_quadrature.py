@@ -92,7 +92,7 @@ def asymmetric(tmp_path_factory):
 def test_asymmetric_lag_with_rate_limit_against_cvodes(asymmetric):
     """Spin-up and spin-down constants and a rate limit (reversals: the rotor stops, then spins up; ramps):
     the quadrature at h_plant = 0.01 s against CVODES over 2 s, beside the plain RK4 at the same step
-    (measured 4.7e-8 against 1.5e-5 m, rad; the shipped step 0.0025 s gives 1.1e-7)."""
+    (measured 4.7e-8 against 1.5e-5 m, rad; plain RK4 at 0.0025 s gives 1.1e-7)."""
     s = asymmetric
     assert all(d.asymmetric and d.rate_limit for d in s.structure.thruster_dynamics)
     sa = _module("step_accuracy")
