@@ -30,7 +30,7 @@ import numpy as np
 
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim.run import Run
-from benchmarks.bench.common import CONTROLLER, QUADRATURE, QUADRATURE_KEY, Settings, _stat
+from benchmarks.bench.common import CONTROLLER, PLAIN_RK4, PLAIN_RK4_KEY, Settings, _stat
 from benchmarks.bench.targets import _env
 
 PAPER_STUDY = Path(__file__).resolve().parents[2] / "studies" / "paper.toml"
@@ -80,12 +80,12 @@ def _bench_batches(s: Settings, log) -> dict:
 
 
 def _lane_runs(s: Settings, name: str, sysm):
-    """The system's run at its default scenario and, with thruster dynamics (not --quick), with the forcing by
-    quadrature (:data:`benchmarks.bench.common.QUADRATURE`)."""
+    """The system's run at its default scenario and, with thruster dynamics (not --quick), by plain RK4 at the
+    step shipped before the quadrature (:data:`benchmarks.bench.common.PLAIN_RK4`)."""
     run = Run(CONTROLLER, params=sysm).compile()
     yield name, run
     if sysm.structure.has_thruster_dynamics and s.mode != "quick":
-        yield f"{name}{QUADRATURE_KEY}", Run(CONTROLLER, params=sysm, scenario=dataclasses.replace(run.cfg, **QUADRATURE)).compile()
+        yield f"{name}{PLAIN_RK4_KEY}", Run(CONTROLLER, params=sysm, scenario=dataclasses.replace(run.cfg, **PLAIN_RK4)).compile()
 
 
 def _bench_lane_run(s: Settings, name: str, run, log) -> dict:

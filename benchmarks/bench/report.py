@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from benchmarks.bench.common import CONTROLLER, N_INPUT_SETS, QUADRATURE, QUADRATURE_KEY
+from benchmarks.bench.common import CONTROLLER, N_INPUT_SETS, PLAIN_RK4, PLAIN_RK4_KEY
 from benchmarks.bench.controller import _controller_markdown
 from benchmarks.bench.cost import cost_markdown
 from benchmarks.bench.lanes import _lanes_markdown
@@ -286,11 +286,11 @@ def render_markdown(res: dict) -> str:
         L += ["", "## 5. Systems (issue 12)", "",
               f"Each shipped system's run at its own default scenario and gains, controller {CONTROLLER}, metrics "
               f"only; the systems timed in interleaved rounds in this run (median). A system with thruster "
-              f"dynamics (issue 22) is also timed without them (`+instantaneous`, the same scenario and step) and "
-              f"at the former plant step (`+h_plant_0.005`), and with its forcing by quadrature (issue 26: "
-              f"`{QUADRATURE_KEY}`, time.thrust_quadrature = {QUADRATURE['time_thrust_quadrature']} at h_plant = "
-              f"{QUADRATURE['time_h_plant']:g} s, docs/model.md §9, within the accuracy rule that the shipped step "
-              f"misses: results/bluerov2_step §3); instructions count the step's SX functions, not the "
+              f"dynamics (issue 22) is also timed without them (`+instantaneous`, the same scenario and step, plain "
+              f"RK4) and by plain RK4, the thrust at the stage times (`{PLAIN_RK4_KEY}`: h_plant = "
+              f"{PLAIN_RK4['time_h_plant']:g} s, the BlueROV2's shipped step until 2026-12-05, which misses the "
+              f"accuracy rule that its shipped thrust quadrature at 0.01 s meets: docs/model.md §9, "
+              f"results/bluerov2_step §3); instructions count the step's SX functions, not the "
               f"table lookups in MX between them.", "",
               "| system | thrusters | joints | duration s | samples x plant steps | run s (spread) | real-time factor | "
               "instructions / sample | instructions / s |", "|---|---|---|---|---|---|---|---|---|"]

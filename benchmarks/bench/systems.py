@@ -12,7 +12,7 @@ from arvcas.build import calls
 from arvcas.sim import closedloop, scenario
 from arvcas.sim.run import Run
 from benchmarks.bench.closed_loop import _run_args, _step_instructions
-from benchmarks.bench.common import CONTROLLER, QUADRATURE, QUADRATURE_KEY, Settings, _stat
+from benchmarks.bench.common import CONTROLLER, PLAIN_RK4, PLAIN_RK4_KEY, Settings, _stat
 
 def _bench_systems(s: Settings, log) -> dict:
     """Each shipped system with a default scenario: its run at that scenario and gains, side by side in one
@@ -28,10 +28,10 @@ def _bench_systems(s: Settings, log) -> dict:
             continue
         cfg0 = scenario.load_scenario(sysm.params.default("scenario"))
         variants = [(name, sysm, cfg0)]
-        if sysm.structure.has_thruster_dynamics and s.mode != "quick":  # issue 22: without them, at 0.005 s; issue 26: by quadrature
-            variants += [(f"{name}+instantaneous", System(sysm.params.instantaneous()), cfg0),
-                         (f"{name}+h_plant_0.005", sysm, dataclasses.replace(cfg0, time_h_plant=0.005)),
-                         (f"{name}{QUADRATURE_KEY}", sysm, dataclasses.replace(cfg0, **QUADRATURE))]
+        if sysm.structure.has_thruster_dynamics and s.mode != "quick":  # issue 22: without them; issue 26: plain RK4
+            plain = dataclasses.replace(cfg0, time_thrust_quadrature=None)  # instantaneous thrusters have no quadrature
+            variants += [(f"{name}+instantaneous", System(sysm.params.instantaneous()), plain),
+                         (f"{name}{PLAIN_RK4_KEY}", sysm, dataclasses.replace(cfg0, **PLAIN_RK4))]
         for key, sv, cfg_v in variants:
             log(f"systems: {key} ...")
             run = Run(CONTROLLER, scenario=cfg_v, params=sv).compile()
