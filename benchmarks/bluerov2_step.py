@@ -591,10 +591,12 @@ def findings(res: dict) -> list[str]:
                    and r["nodes_per_half"] == 5}
         quad = [(r, q) for r in tr["cases"] for q in tr["cases"] if r["A"] == "quadratic" and q["A"] == "exact"
                 and r["substeps"] == q["substeps"] and r["nodes_per_half"] == q["nodes_per_half"]]
+        built = [r for r in ok if len(set(r["substeps"])) == 1 and r["A"] == "exact"]  # what the generated step can take
         a_sh = next(iter(res["forcing"].values()))["(a) shipped: T200 lags through the table"]["steps"].get(repr(sh["h_plant"]))
         L.append("- The candidate of section 3 (the forcing integrated by quadrature into a change of variables, RK4 at "
-                 "long substeps): " + (f"within the rule with the fewest plant evaluations: {_desc(min(ok, key=lambda r: r['plant_evaluations_per_sample']))}"
-                                        if ok else f"no case within the rule; the best: {_desc(best)}")
+                 "long substeps): " + (f"within the rule with the fewest plant evaluations at equal substeps (what the generated step takes): "
+                                        f"{_desc(min(built, key=lambda r: r['plant_evaluations_per_sample']))}"
+                                        if built else f"no case at equal substeps within the rule; the best of all: {_desc(best)}")
                  + f"; plain RK4 at {sh['h_plant']:g} s: "
                  + (f"{_g(a_sh['position_m'])} m / {_g(a_sh['angle_rad'])} rad." if a_sh else "not measured here."))
         for r, q in ng_pairs:
@@ -625,7 +627,6 @@ def findings(res: dict) -> list[str]:
             L.append(f"- A interpolated quadratically from its three stage times against A at every node "
                      f"({', '.join(f'{v:g}' for v in r['substeps'])} s, {r['nodes_per_half']} nodes): {_g(err(r))} against "
                      f"{_g(err(q))}: the generated code (`time.thrust_quadrature`) takes A this way, from the time table's LU factors.")
-        built = [r for r in ok if len(set(r["substeps"])) == 1 and r["A"] == "exact"]  # what the generated step can take
         pick = min(built or ok or [best], key=lambda r: r["plant_evaluations_per_sample"])
         L.append(f"- So at an accuracy within the rule (which plain RK4 at {sh['h_plant']:g} s, the step shipped until 2026-12-05, misses on this run), the "
                  f"candidate takes {sh['plant_evaluations_per_sample'] / pick['plant_evaluations_per_sample']:.0f}x fewer plant "
@@ -637,7 +638,7 @@ def findings(res: dict) -> list[str]:
                  "(5 nodes per half at 0.01 s): the generated step equals "
                  "this script's method to round-off (tests/test_thrust_quadrature.py), and "
                  "results/step/bluerov2_heavy_alpha5/thrusters.md runs it over whole closed-loop runs against CVODES.")
-        gr_ok = [r for r in ok if len(set(r["substeps"])) > 1]
+        gr_ok = [r for r in graded if _within(r)]
         if gr_ok and built:
             g = min(gr_ok, key=lambda r: (r["plant_evaluations_per_sample"], err(r)))
             L.append(f"- Graded substeps are measured here, not built (the generated step takes equal substeps): "
