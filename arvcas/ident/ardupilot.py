@@ -1,0 +1,317 @@
+"""ArduPilot's own logs: DataFlash ``.bin`` files (the autopilot's SD card) and MAVLink telemetry ``.tlog``
+files (QGroundControl's, MAVProxy's), read through pymavlink (``pip install 'arvcas[ardupilot]'``).
+
+:func:`read` makes one pass over the file and keeps, for every message the mapping names, its times on the
+autopilot's boot clock (s) and the named fields; besides them the arming and flight-mode changes and the
+parameters. :func:`segments` cuts the log into the stretches the vehicle was armed (and in given modes).
+
+Time base: the autopilot's boot clock, never the ground station's wall clock: ``TimeUS`` in a DataFlash
+log; ``time_boot_ms`` in a telemetry log, else ``time_usec`` (which ArduPilot fills with its boot clock
+too; a value beyond 30 years is a Unix time and is refused; a 32-bit ``time_usec`` such as
+``SERVO_OUTPUT_RAW``'s is unwrapped after 71.6 min). A telemetry log keeps the messages of one vehicle: the
+system id whose ``HEARTBEAT`` names an ArduPilot autopilot; a message that repeats its predecessor's boot
+time is a repeated transmission and is dropped.
+
+Arming and modes: a DataFlash log's ``ARM`` messages (``ArmState``) or, in older logs, its ``EV`` events 10
+(armed) and 11 (disarmed), and its ``MODE`` messages (``Mode``, ArduSub's mode number); a telemetry log's
+``HEARTBEAT`` (``base_mode``'s safety-armed flag, ``custom_mode``), placed on the boot clock at the latest
+message of the same vehicle that carries ``time_boot_ms`` (heartbeats come at 1 Hz: a cut is known to that
+period). Mode names are pymavlink's for ArduSub (``mavutil.mode_mapping_sub``); a mode it does not name is
+``MODE<n>``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["AutopilotLog", "Segment", "read", "segments", "mode_name", "KINDS", "BOOT_TIME_FIELDS"]
+
+KINDS = {".bin": "DataFlash", ".tlog": "MAVLink telemetry"}
+# the boot-clock fields, in the order a stream's default time is chosen, and their counts per second
+BOOT_TIME_FIELDS = {"TimeUS": 1e6, "time_boot_ms": 1e3, "time_usec": 1e6}
+_UNIX_TIME_S = 30 * 365.25 * 86400  # a "boot time" beyond 30 years is a Unix time (the wall clock)
+_EV_ARMED, _EV_DISARMED = 10, 11  # DataFlash EV ids (ArduPilot libraries/AP_Logger/LogStructure.h LogEvent)
+_ARMED_FLAG = 128  # MAV_MODE_FLAG_SAFETY_ARMED in HEARTBEAT.base_mode
+_AUTOPILOT_ARDUPILOT = 3  # MAV_AUTOPILOT_ARDUPILOTMEGA
+# the log's own unit labels (MAVLink XML units, DataFlash UNIT labels) -> arvcas units (arvcas.system.config)
+LOG_UNITS = {"rad": "rad", "deg": "deg", "degheading": "deg", "rad/s": "rad/s", "deg/s": "deg/s", "mrad/s": "mrad/s",
+             "m": "m", "cm": "cm", "mm": "mm", "m/s": "m/s", "cm/s": "cm/s", "mm/s": "mm/s", "m/s/s": "m/s^2",
+             "m/s2": "m/s^2", "mG": "mG", "Pa": "Pa", "hPa": "hPa", "us": "us", "PWM": "us"}
+
+
+class Error(ValueError):
+    """One line: the log file, the message or field, the reason (arvcas.ident.logs turns it into LogError)."""
+
+
+@dataclass
+class AutopilotLog:
+    path: Path
+    kind: str  # "DataFlash" | "MAVLink telemetry"
+    tables: dict = field(default_factory=dict)  # (message, instance) -> (t (s, boot clock), {field: values})
+    fields: dict = field(default_factory=dict)  # message -> its field names (every message the log holds)
+    units: dict = field(default_factory=dict)  # message -> {field: the log's unit label}
+    instances: dict = field(default_factory=dict)  # message -> the instance numbers present (DataFlash)
+    params: dict = field(default_factory=dict)  # parameter name -> value (the last one logged)
+    changes: list = field(default_factory=list)  # (t, armed, mode number) at every change, in time order
+    t_first: float = math.inf
+    t_last: float = -math.inf
+    arming_logged: bool = False
+
+
+@dataclass(frozen=True)
+class Segment:
+    start: float  # s, boot clock
+    end: float
+    modes: tuple[str, ...]
+
+    def __str__(self) -> str:
+        return f"{self.start:.3f}-{self.end:.3f} s ({', '.join(self.modes)})"
+
+
+def mode_name(number: int | None) -> str:
+    from pymavlink import mavutil
+
+    if number is None:
+        return "unknown"
+    return mavutil.mode_mapping_sub.get(int(number), f"MODE{int(number)}")
+
+
+def _import(mapping: str):
+    try:
+        from pymavlink import mavutil
+    except ImportError:
+        raise Error(f"{mapping}: reading ArduPilot logs needs the pymavlink package: pip install 'arvcas[ardupilot]'") \
+            from None
+    return mavutil
+
+
+def read(path: Path, wanted: dict[str, set[str]], mapping: str) -> AutopilotLog:
+    """The messages ``wanted`` (message -> field names) of the log ``path``, with arming, modes and parameters.
+
+    Unknown messages and fields are refused (one line listing what the log holds) after the pass."""
+    mavutil = _import(mapping)
+    kind = KINDS.get(path.suffix.lower())
+    if kind is None:
+        raise Error(f"{path}: not an ArduPilot log: the file name ends in .bin (DataFlash) or .tlog (MAVLink "
+                    f"telemetry), got {path.suffix or 'no suffix'!r}")
+    try:
+        if kind == "DataFlash":
+            out = _read_dataflash(mavutil, path, wanted)
+        else:
+            out = _read_tlog(mavutil, path, wanted)
+    except Error:
+        raise
+    except Exception as e:  # pymavlink's own errors on a damaged file
+        raise Error(f"{path}: not a readable {kind} log ({type(e).__name__}: {' '.join(str(e).split())[:160]})") \
+            from None
+    for msg, names in wanted.items():
+        if msg not in out.fields:
+            raise Error(f"{path}: no message {msg!r} (named in {mapping}); the log holds "
+                        f"{', '.join(sorted(out.fields)) or 'none'}")
+        missing = [n for n in sorted(names) if _base(n) not in out.fields[msg]]
+        if missing:
+            raise Error(f"{path}: message {msg} has no field {missing[0]!r} (named in {mapping}); its fields: "
+                        f"{', '.join(out.fields[msg])}")
+    return out
+
+
+def _base(name: str) -> str:
+    return name.split("[", 1)[0]
+
+
+def _value(msg, name: str) -> float:
+    if "[" in name:
+        base, idx = name[:-1].split("[", 1)
+        return float(getattr(msg, base)[int(idx)])
+    return float(getattr(msg, name))
+
+
+def _read_dataflash(mavutil, path: Path, wanted: dict[str, set[str]]) -> AutopilotLog:
+    r = mavutil.mavlink_connection(str(path), zero_time_base=True)
+    out = AutopilotLog(path, "DataFlash")
+    counts = getattr(r, "counts", None)
+    for type_id, fmt in r.formats.items():
+        if counts is not None and type_id < len(counts) and counts[type_id] == 0 and fmt.name not in wanted:
+            continue
+        out.fields[fmt.name] = list(fmt.columns)
+        if getattr(fmt, "units", None):  # FMTU units: pymavlink 2.4.42 and later
+            out.units[fmt.name] = {c: u for c, u in zip(fmt.columns, fmt.units) if u}
+    types = sorted(set(wanted) | {"ARM", "EV", "MODE", "PARM"})
+    rows: dict[tuple[str, int | None], list] = {}
+    armed, mode = False, None
+    have_arm = "ARM" in out.fields
+    while True:
+        m = r.recv_match(type=types)
+        if m is None:
+            break
+        name = m.get_type()
+        tu = getattr(m, "TimeUS", None)
+        if tu is None:
+            continue
+        t = float(tu) / 1e6
+        out.t_first, out.t_last = min(out.t_first, t), max(out.t_last, t)
+        if name == "PARM":
+            out.params[str(m.Name)] = float(m.Value)
+        elif name == "MODE":
+            mode = int(getattr(m, "ModeNum", getattr(m, "Mode", 0)))
+            out.changes.append((t, armed, mode))
+        elif name == "ARM" or (name == "EV" and not have_arm and int(m.Id) in (_EV_ARMED, _EV_DISARMED)):
+            armed = bool(m.ArmState) if name == "ARM" else int(m.Id) == _EV_ARMED
+            out.arming_logged = True
+            out.changes.append((t, armed, mode))
+        if name in wanted:
+            inst_field = _instance_field(m)
+            inst = None if inst_field is None else int(getattr(m, inst_field))
+            if inst is not None:
+                out.instances.setdefault(name, set()).add(inst)
+            rows.setdefault((name, inst), []).append(
+                (t, [_value(m, n) for n in sorted(wanted[name]) if hasattr(m, _base(n))]))
+    for (name, inst), rr in rows.items():
+        names = [n for n in sorted(wanted[name]) if _base(n) in out.fields[name]]
+        out.tables[(name, inst)] = _columns(rr, names)
+    return out
+
+
+def _instance_field(m) -> str | None:
+    fmt = getattr(m, "fmt", None)
+    f = getattr(fmt, "instance_field", None)
+    if f is None and "I" in getattr(m, "_fieldnames", ()):
+        f = "I"
+    return f
+
+
+def _columns(rr: list, names: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    t = np.array([x[0] for x in rr], dtype=float)
+    data = np.array([x[1] for x in rr], dtype=float).reshape(len(rr), len(names))
+    return t, {n: data[:, i] for i, n in enumerate(names)}
+
+
+def _read_tlog(mavutil, path: Path, wanted: dict[str, set[str]]) -> AutopilotLog:
+    r = mavutil.mavlink_connection(str(path), robust_parsing=True, dialect="ardupilotmega")
+    out = AutopilotLog(path, "MAVLink telemetry")
+    msgs = []
+    vehicles: set[int] = set()
+    while True:
+        m = r.recv_msg()
+        if m is None:
+            break
+        name = m.get_type()
+        if name == "BAD_DATA":
+            continue
+        if name == "HEARTBEAT" and int(m.autopilot) == _AUTOPILOT_ARDUPILOT:
+            vehicles.add(m.get_srcSystem())
+        msgs.append(m)
+    if not vehicles:
+        raise Error(f"{path}: no HEARTBEAT from an ArduPilot autopilot: not an ArduPilot vehicle's telemetry")
+    if len(vehicles) > 1:
+        raise Error(f"{path}: the telemetry of {len(vehicles)} ArduPilot vehicles (system ids "
+                    f"{', '.join(map(str, sorted(vehicles)))}); keep one vehicle's messages per log")
+    sysid = next(iter(vehicles))
+    rows: dict[str, list] = {}
+    last: dict[str, float] = {}
+    wrap: dict[str, float] = {}
+    boot = None
+    armed, mode = None, None
+    for m in msgs:
+        if m.get_srcSystem() != sysid:
+            continue
+        name = m.get_type()
+        if name not in out.fields:
+            out.fields[name] = list(m.get_fieldnames())
+            out.units[name] = dict(getattr(m, "fieldunits_by_name", {}) or {})
+        if name == "HEARTBEAT":
+            if int(m.autopilot) != _AUTOPILOT_ARDUPILOT or boot is None:
+                continue
+            a, md = bool(int(m.base_mode) & _ARMED_FLAG), int(m.custom_mode)
+            if (a, md) != (armed, mode):
+                armed, mode = a, md
+                out.arming_logged = True
+                out.changes.append((boot, a, md))
+            continue
+        if name == "PARAM_VALUE":
+            pid = m.param_id
+            out.params[pid.decode() if isinstance(pid, bytes) else str(pid)] = float(m.param_value)
+        tb = getattr(m, "time_boot_ms", None)
+        if tb is not None:
+            boot = float(tb) / 1e3
+            out.t_first, out.t_last = min(out.t_first, boot), max(out.t_last, boot)
+        if name not in wanted:
+            continue
+        tf = next((f for f in ("time_boot_ms", "time_usec") if hasattr(m, f)), None)
+        if tf is None:
+            raise Error(f"{path}: message {name} carries no boot time (time_boot_ms or time_usec)")
+        t = float(getattr(m, tf)) / BOOT_TIME_FIELDS[tf]
+        if tf == "time_usec" and "uint32_t" in _type_of(m, tf):  # 32 bits of microseconds wrap after 71.6 min
+            t += wrap.get(name, 0.0)
+            if name in last and t < last[name] - 2.0 ** 31 / 1e6:
+                wrap[name] = wrap.get(name, 0.0) + 2.0 ** 32 / 1e6
+                t += 2.0 ** 32 / 1e6
+        if t > _UNIX_TIME_S:
+            raise Error(f"{path}: message {name}: {tf} = {getattr(m, tf)} is a Unix time, not the autopilot's boot "
+                        f"clock")
+        if name == "SERVO_OUTPUT_RAW" and int(getattr(m, "port", 0)) != 0:
+            continue
+        if last.get(name) == t:
+            continue  # the same message again (a repeated transmission)
+        last[name] = t
+        rows.setdefault(name, []).append((t, [_value(m, n) for n in sorted(wanted[name])]))
+    for name, rr in rows.items():
+        out.tables[(name, None)] = _columns(rr, sorted(wanted[name]))
+        out.t_first, out.t_last = min(out.t_first, rr[0][0]), max(out.t_last, rr[-1][0])
+    return out
+
+
+def _type_of(m, name: str) -> str:
+    try:
+        return m.fieldtypes[m.get_fieldnames().index(name)]
+    except (AttributeError, ValueError, IndexError):
+        return ""
+
+
+def table(log: AutopilotLog, message: str, instance: int | None, mapping: str):
+    """(t, {field: values}) of one message (and DataFlash instance); Error if it has none or is ambiguous."""
+    present = sorted(log.instances.get(message, ()))
+    if instance is not None:
+        if log.kind != "DataFlash" or not present:
+            raise Error(f"{log.path}: message {message} has no instances (instance = {instance} in {mapping})")
+        if instance not in present:
+            raise Error(f"{log.path}: message {message} has no instance {instance} (it has "
+                        f"{', '.join(map(str, present))}; instance in {mapping})")
+    elif len(present) > 1:
+        raise Error(f"{log.path}: message {message} has instances {', '.join(map(str, present))}: say which with "
+                    f"`instance` in {mapping}")
+    elif present:
+        instance = present[0]
+    key = (message, instance)
+    if key not in log.tables:
+        raise Error(f"{log.path}: message {message} holds no sample")
+    return log.tables[key]
+
+
+def segments(log: AutopilotLog, which: str, modes: tuple[str, ...] | None) -> list[Segment]:
+    """The stretches of the log (boot clock) that ``which`` selects: ``"all"`` the whole log; ``"armed"`` every
+    stretch armed, and with ``modes`` (names or numbers) only while in one of them."""
+    if which == "all":
+        return [Segment(log.t_first, log.t_last, ("all",))]
+    if not log.arming_logged:
+        raise Error(f"{log.path}: no arming is logged (DataFlash ARM or EV messages, MAVLink HEARTBEAT): "
+                    f"say [log] segment = \"all\"")
+    want = None if modes is None else {m.upper() for m in modes}
+    out = []
+    start, seen = None, []
+    changes = list(log.changes) + [(log.t_last, False, None)]
+    for i, (t, armed, mode) in enumerate(changes):
+        inside = armed and (want is None or mode_name(mode) in want or str(mode) in want)
+        if inside and start is None:
+            start, seen = t, []
+        if inside and mode_name(mode) not in seen:
+            seen.append(mode_name(mode))
+        if not inside and start is not None:
+            if t > start:
+                out.append(Segment(start, t, tuple(seen)))
+            start = None
+    return out
