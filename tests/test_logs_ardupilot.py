@@ -486,3 +486,39 @@ depth = { columns = ["data"], unit = "m" }
     (tmp_path / "r2.log.toml").write_text((tmp_path / "r1.log.toml").read_text().replace('"/depth"', '"/dpth"'))
     with pytest.raises(logs.LogError, match="no topic '/dpth'"):
         logs.load_log(tmp_path / "r2.log.toml", n_joints=0)
+
+
+def test_held_joints_on_the_heavy_with_its_arm(tmp_path):
+    """An autopilot's log of the BlueROV2 Heavy + Alpha 5 with the arm stowed: ``[log] held_joints`` holds the
+    joints where a joint stream would have to say so. The held log simulates as the same commands with every
+    joint logged constant at the stow (the CSV path's joint splines)."""
+    import arvcas
+    from arvcas.ident import plant, validate
+
+    system = arvcas.load_system("bluerov2_heavy_alpha5")
+    stow = [system.params[f"arm.stow.q{k}"] for k in range(1, 5)]
+    t, C = _commands(5, 2.0)
+    boot = 3.0 + t
+    X = _X(boot)
+    write_tlog(tmp_path / "arm.tlog", X, C, boot, t_arm=boot[0], t_disarm=boot[-1] + 1.0)
+    streams = TLOG_STREAMS.replace(PRESSURE, POSITION)
+    held = f"t_end = 2.0\nheld_joints = [{', '.join(map(str, stow))}]"
+    lg = logs.load_log(_mapping(tmp_path, "held", "arm.tlog", held, streams), n_joints=4,
+                       thruster_names=system.structure.thrusters)
+    assert lg.joints.names == ("q1", "q2", "q3", "q4")
+    q, qd, qdd = lg.joints(np.array([0.0, 0.7, 2.0]))
+    assert np.allclose(q, stow, rtol=0, atol=1e-14) and np.abs(qd).max() < 1e-12 and np.abs(qdd).max() < 1e-12
+    np.savetxt(tmp_path / "joints.csv", np.column_stack([boot] + [np.full_like(boot, v) for v in stow]),
+               delimiter=",", header="t,a,b,c,d", comments="")
+    ref = _write(tmp_path, "ref", boot, C, extra='\n[[stream]]\nfile = "joints.csv"\ntime = "t"\n[stream.joints]\n'
+                 + "\n".join(f'q{k} = {{ column = "{c}" }}' for k, c in enumerate("abcd", 1)))
+    lg_ref = logs.load_log(ref, n_joints=4, thruster_names=system.structure.thrusters)
+    x0 = np.zeros(12)
+    x0[2] = 1.0
+    r = validate.validate_log(system, lg, h_max=0.01, x0=x0)
+    assert r.ok and np.ptp(r.simulated["z"]) > 0.01 and set(r.metrics["rmse"]) >= {"x", "z", "roll", "q4"}
+    pl = plant.LogPlant(system, m=2)
+    Xa, Xb = (plant.simulate(pl, g, x0, system.params.vector()) for g in (lg, lg_ref))
+    assert np.max(np.abs(Xa[:, 6:]) > 0.05) and np.max(np.abs(Xa - Xb)) < 1e-9, np.max(np.abs(Xa - Xb))
+    with pytest.raises(logs.LogError, match=r"\[log\] held_joints: 4 angles for a system of 0 joints"):
+        logs.load_log(_mapping(tmp_path, "held", "arm.tlog", held, streams), n_joints=0)

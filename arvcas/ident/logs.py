@@ -195,6 +195,8 @@ class LogInfo:
     t_end: float | None = quantity("time", gt(0), default=None, unit="s")
     passive: bool = setting(default=False)  # no thrust logged: the thrusters were off (zero thrust)
     joint_cutoff: float = quantity("1", gt(0), default=2.0)  # Hz: where the joint splines halve an amplitude
+    # the arm held still at these angles (rad, q1..qn) through the log: no joint stream (an autopilot's log)
+    held_joints: tuple[float, ...] | None = quantity("angle", n=config.ANY_LENGTH, default=None, unit="rad")
 
     def _config_check(self, given):
         if self.t_end is not None and self.t_end <= self.t_start:
@@ -661,6 +663,14 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             if sig in seen:
                 raise LogError(f"{where}: {key}: {sig} is also given by {seen[sig]}; map each signal once")
             seen[sig] = key
+    if info.held_joints is not None:
+        mapped = [k for k in seen if re.fullmatch(r"q\d+", k)]
+        if mapped:
+            raise LogError(f"{where}: [log] held_joints: {seen[mapped[0]]} maps joint {mapped[0]}: map the joints or "
+                           f"hold them, not both")
+        if n_joints is not None and len(info.held_joints) != n_joints:
+            raise LogError(f"{where}: [log] held_joints: {len(info.held_joints)} angles for a system of {n_joints} "
+                           f"joints")
     if n_joints is not None and n_joints > 0:
         missing = [f"q{k}" for k in range(1, n_joints + 1) if f"q{k}" not in seen]
         if missing and len(missing) < n_joints:
@@ -821,6 +831,17 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             if jm.std is not None:
                 jt_std[jn] = jm.std
     joints = None
+    if info.held_joints:  # constant cubic pieces: the angle, zero rate and acceleration at every time
+        from scipy.interpolate import BSpline
+
+        span = np.array([-1.0] * 4 + [grid[-1] - t_lo + 1.0] * 4)
+        n_h = len(info.held_joints)
+        joints = JointTrajectory(tuple(f"q{k + 1}" for k in range(n_h)),
+                                 tuple(BSpline(span, np.full(4, q), 3) for q in info.held_joints), (0.0,) * n_h,
+                                 info.joint_cutoff, tuple(grid - t_lo for _ in range(n_h)),
+                                 tuple(np.full(n, q) for q in info.held_joints))
+        for k, q in enumerate(info.held_joints):
+            signals[f"q{k + 1}"] = np.full(n, float(q))
     if jt_names:
         order = np.argsort([int(nm[1:]) for nm in jt_names])
         splines, lams = [], []
