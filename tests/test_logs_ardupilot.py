@@ -522,3 +522,26 @@ def test_held_joints_on_the_heavy_with_its_arm(tmp_path):
     assert np.max(np.abs(Xa[:, 6:]) > 0.05) and np.max(np.abs(Xa - Xb)) < 1e-9, np.max(np.abs(Xa - Xb))
     with pytest.raises(logs.LogError, match=r"\[log\] held_joints: 4 angles for a system of 0 joints"):
         logs.load_log(_mapping(tmp_path, "held", "arm.tlog", held, streams), n_joints=0)
+
+
+# ArduSub's vectored 6DOF frame (BlueROV2 Heavy) as docs/logs.md states it from ArduPilot's
+# libraries/AP_Motors/AP_Motors6DOF.cpp @0fd5fbf (the signs of each motor's factors, in words): motor n ->
+# (its side forward/aft, starboard/port; the push of a positive output, FRD)
+_S = 1 / math.sqrt(2)
+ARDUSUB_VECTORED_6DOF = {
+    1: ((1, 1), (-_S, _S, 0)), 2: ((1, -1), (-_S, -_S, 0)), 3: ((-1, 1), (_S, _S, 0)), 4: ((-1, -1), (_S, -_S, 0)),
+    5: ((1, 1), (0, 0, 1)), 6: ((1, -1), (0, 0, 1)), 7: ((-1, 1), (0, 0, 1)), 8: ((-1, -1), (0, 0, 1)),
+}
+
+
+def test_heavy_thrusters_in_ardusub_motor_order():
+    """The shipped Heavy's T_n sits where ArduSub's motor n sits (outputs = ["T1", ..., "T8"]), and its
+    direction d_n is the opposite of motor n's push for a positive output (docs/logs.md, Motor order)."""
+    import arvcas
+
+    system = arvcas.load_system("bluerov2_heavy_alpha5")
+    for n, ((sx, sy), push) in ARDUSUB_VECTORED_6DOF.items():
+        pos = [system.params[f"thrusters.T{n}.position.{a}"] for a in "xy"]
+        d = np.array([system.params[f"thrusters.T{n}.direction.{a}"] for a in "xyz"])
+        assert (np.sign(pos[0]), np.sign(pos[1])) == (sx, sy), n
+        assert d @ np.array(push) == pytest.approx(-1.0), n

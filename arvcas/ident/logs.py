@@ -2,7 +2,8 @@
 
 A log is a set of time-stamped streams (motion-capture or navigation pose, IMU attitude and rates, DVL
 velocities, depth, joint positions, thrust or thruster commands, payload). The mapping file (docs/logs.md) says which CSV file
-(or which ROS 2 bag topic) and which columns (or message fields) give which signal, in which unit and
+(or which ROS bag topic, or which ArduPilot log message: :mod:`arvcas.ident.ardupilot`) and which columns (or
+message fields) give which signal, in which unit and
 frame. :func:`load_log` reads it, checks every stream before any work (one line naming the file, the column
 and the reason: time not increasing, a gap longer than allowed, NaN, an unknown unit, a frame that does
 not match) and returns a :class:`Log`:
