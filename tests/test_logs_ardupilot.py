@@ -404,7 +404,7 @@ def test_tlog_refusals(tmp_path):
 from test_commanded_logs import _commands, _write, rov  # noqa: E402,F401  (the Heavy without its arm)
 
 
-def test_tlog_drives_validation(rov, tmp_path):
+def test_tlog_drives_validation(rov, tmp_path, capsys):
     """The state the plant computes from a CSV log of PWM commands, written into a .tlog with the same PWM on
     the outputs, read back through the mapping and validated: the reading adds no error beyond MAVLink's float32;
     the same log with two outputs swapped in the mapping does not reproduce the motion."""
@@ -430,6 +430,22 @@ def test_tlog_drives_validation(rov, tmp_path):
                         thruster_names=rov.structure.thrusters)
     r2 = validate.validate_log(rov, lg2, h_max=0.01, x0=X[0])  # measured: 0.68 m (y), 3.5 rad (yaw)
     assert max(r2.metrics["max_error"].values()) > 100 * max(worst, 1e-6), r2.metrics["max_error"]
+    # the command line: the same trial through `arvcas validate`, and a bad mapping refused in one line
+    import json
+
+    from arvcas.cli import main
+
+    mapping = tmp_path / "trial.log.toml"
+    assert main(["validate", "--system", str(rov.path), str(mapping), "--out", str(tmp_path / "v"), "--h-max",
+                 "0.01"]) == 0
+    doc = json.loads((tmp_path / "v" / "validation.json").read_text())
+    r3 = validate.validate_log(rov, lg, h_max=0.01)  # the initial velocity estimated from the log, as the CLI does
+    assert doc["trials"]["trial"]["rmse"] == pytest.approx(r3.metrics["rmse"], rel=1e-9)
+    capsys.readouterr()
+    bad = _mapping(tmp_path, "bad", "trial.tlog", head, streams.replace('"ATTITUDE"', '"ATTITUDE2"'))
+    assert main(["validate", "--system", str(rov.path), str(bad), "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no message 'ATTITUDE2'" in err[0] and not (tmp_path / "b").exists(), err
 
 
 # ---- ROS 1 bags (rosbags reads them as it reads ROS 2 bags) ----------------------------------------------------

@@ -192,77 +192,84 @@ def _columns(rr: list, names: list[str]) -> tuple[np.ndarray, dict[str, np.ndarr
 
 def _read_tlog(mavutil, path: Path, wanted: dict[str, set[str]]) -> AutopilotLog:
     r = mavutil.mavlink_connection(str(path), robust_parsing=True, dialect="ardupilotmega")
-    out = AutopilotLog(path, "MAVLink telemetry")
-    msgs = []
-    vehicles: set[int] = set()
+    seen: dict[int, _Vehicle] = {}  # system id -> what it sent (one pass; the vehicle is chosen at the end)
     while True:
         m = r.recv_msg()
         if m is None:
             break
-        name = m.get_type()
-        if name == "BAD_DATA":
-            continue
-        if name == "HEARTBEAT" and int(m.autopilot) == _AUTOPILOT_ARDUPILOT:
-            vehicles.add(m.get_srcSystem())
-        msgs.append(m)
+        if m.get_type() != "BAD_DATA":
+            sid = m.get_srcSystem()
+            if sid not in seen:
+                seen[sid] = _Vehicle(AutopilotLog(path, "MAVLink telemetry"))
+            seen[sid].add(m, wanted, path)
+    vehicles = sorted(k for k, v in seen.items() if v.ardupilot)
     if not vehicles:
         raise Error(f"{path}: no HEARTBEAT from an ArduPilot autopilot: not an ArduPilot vehicle's telemetry")
     if len(vehicles) > 1:
         raise Error(f"{path}: the telemetry of {len(vehicles)} ArduPilot vehicles (system ids "
-                    f"{', '.join(map(str, sorted(vehicles)))}); keep one vehicle's messages per log")
-    sysid = next(iter(vehicles))
-    rows: dict[str, list] = {}
-    last: dict[str, float] = {}
-    wrap: dict[str, float] = {}
-    boot = None
-    armed, mode = None, None
-    for m in msgs:
-        if m.get_srcSystem() != sysid:
-            continue
+                    f"{', '.join(map(str, vehicles))}); keep one vehicle's messages per log")
+    v = seen[vehicles[0]]
+    out = v.out
+    for name, rr in v.rows.items():
+        out.tables[(name, None)] = _columns(rr, sorted(wanted[name]))
+        out.t_first, out.t_last = min(out.t_first, rr[0][0]), max(out.t_last, rr[-1][0])
+    return out
+
+
+class _Vehicle:
+    """The messages of one MAVLink system id, on its boot clock."""
+
+    def __init__(self, out: AutopilotLog):
+        self.out = out
+        self.rows: dict[str, list] = {}
+        self.last: dict[str, float] = {}
+        self.wrap: dict[str, float] = {}
+        self.boot: float | None = None  # the boot time of the latest message that carried time_boot_ms
+        self.state: tuple | None = None  # (armed, mode) of the latest autopilot heartbeat
+        self.ardupilot = False
+
+    def add(self, m, wanted: dict[str, set[str]], path: Path) -> None:
+        out = self.out
         name = m.get_type()
         if name not in out.fields:
             out.fields[name] = list(m.get_fieldnames())
             out.units[name] = dict(getattr(m, "fieldunits_by_name", {}) or {})
-        if name == "HEARTBEAT":
-            if int(m.autopilot) != _AUTOPILOT_ARDUPILOT or boot is None:
-                continue
-            a, md = bool(int(m.base_mode) & _ARMED_FLAG), int(m.custom_mode)
-            if (a, md) != (armed, mode):
-                armed, mode = a, md
-                out.arming_logged = True
-                out.changes.append((boot, a, md))
-            continue
+        if name == "HEARTBEAT":  # a companion computer's or a camera's heartbeat names no autopilot
+            if int(m.autopilot) == _AUTOPILOT_ARDUPILOT:
+                self.ardupilot = True
+                state = (bool(int(m.base_mode) & _ARMED_FLAG), int(m.custom_mode))
+                if self.boot is not None and state != self.state:
+                    self.state = state
+                    out.arming_logged = True
+                    out.changes.append((self.boot, *state))
+            return
         if name == "PARAM_VALUE":
             pid = m.param_id
             out.params[pid.decode() if isinstance(pid, bytes) else str(pid)] = float(m.param_value)
         tb = getattr(m, "time_boot_ms", None)
         if tb is not None:
-            boot = float(tb) / 1e3
-            out.t_first, out.t_last = min(out.t_first, boot), max(out.t_last, boot)
+            self.boot = float(tb) / 1e3
+            out.t_first, out.t_last = min(out.t_first, self.boot), max(out.t_last, self.boot)
         if name not in wanted:
-            continue
+            return
         tf = next((f for f in ("time_boot_ms", "time_usec") if hasattr(m, f)), None)
         if tf is None:
             raise Error(f"{path}: message {name} carries no boot time (time_boot_ms or time_usec)")
         t = float(getattr(m, tf)) / BOOT_TIME_FIELDS[tf]
         if tf == "time_usec" and "uint32_t" in _type_of(m, tf):  # 32 bits of microseconds wrap after 71.6 min
-            t += wrap.get(name, 0.0)
-            if name in last and t < last[name] - 2.0 ** 31 / 1e6:
-                wrap[name] = wrap.get(name, 0.0) + 2.0 ** 32 / 1e6
+            t += self.wrap.get(name, 0.0)
+            if name in self.last and t < self.last[name] - 2.0 ** 31 / 1e6:
+                self.wrap[name] = self.wrap.get(name, 0.0) + 2.0 ** 32 / 1e6
                 t += 2.0 ** 32 / 1e6
         if t > _UNIX_TIME_S:
             raise Error(f"{path}: message {name}: {tf} = {getattr(m, tf)} is a Unix time, not the autopilot's boot "
                         f"clock")
         if name == "SERVO_OUTPUT_RAW" and int(getattr(m, "port", 0)) != 0:
-            continue
-        if last.get(name) == t:
-            continue  # the same message again (a repeated transmission)
-        last[name] = t
-        rows.setdefault(name, []).append((t, [_value(m, n) for n in sorted(wanted[name])]))
-    for name, rr in rows.items():
-        out.tables[(name, None)] = _columns(rr, sorted(wanted[name]))
-        out.t_first, out.t_last = min(out.t_first, rr[0][0]), max(out.t_last, rr[-1][0])
-    return out
+            return
+        if self.last.get(name) == t:
+            return  # the same message again (a repeated transmission)
+        self.last[name] = t
+        self.rows.setdefault(name, []).append((t, [_value(m, n) for n in sorted(wanted[name])]))
 
 
 def _type_of(m, name: str) -> str:
