@@ -23,6 +23,7 @@ period). Mode names are pymavlink's for ArduSub (``mavutil.mode_mapping_sub``); 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +42,10 @@ _AUTOPILOT_ARDUPILOT = 3  # MAV_AUTOPILOT_ARDUPILOTMEGA
 LOG_UNITS = {"rad": "rad", "deg": "deg", "degheading": "deg", "rad/s": "rad/s", "deg/s": "deg/s", "mrad/s": "mrad/s",
              "m": "m", "cm": "cm", "mm": "mm", "m/s": "m/s", "cm/s": "cm/s", "mm/s": "mm/s", "m/s/s": "m/s^2",
              "m/s2": "m/s^2", "mG": "mG", "Pa": "Pa", "hPa": "hPa", "us": "us", "PWM": "us"}
+
+
+_NUMPY = {"b": "i1", "B": "u1", "h": "i2", "H": "u2", "i": "i4", "I": "u4", "q": "i8", "Q": "u8", "f": "f4", "d": "f8",
+          "e": "f2"}  # struct codes of DataFlash formats -> NumPy
 
 
 class Error(ValueError):
@@ -131,57 +136,82 @@ def _value(msg, name: str) -> float:
 
 
 def _read_dataflash(mavutil, path: Path, wanted: dict[str, set[str]]) -> AutopilotLog:
-    r = mavutil.mavlink_connection(str(path), zero_time_base=True)
+    """pymavlink's DataFlash reader indexes the file and parses its formats (FMT, FMTU, UNIT); the messages
+    named are then unpacked from its index with each format's own struct and multipliers (a message object
+    per sample costs 0.3 ms, measured: 44 s for a 10-minute log of 117,000 messages)."""
+
+    from pymavlink import DFReader
+
+    class Reader(DFReader.DFReader_binary):
+        def init_clock(self):  # the boot clock (TimeUS) is the time base: no search for a GPS clock
+            self.init_clock_usec()
+
+    r = Reader(str(path))
     out = AutopilotLog(path, "DataFlash")
-    counts = getattr(r, "counts", None)
-    for type_id, fmt in r.formats.items():
-        if counts is not None and type_id < len(counts) and counts[type_id] == 0 and fmt.name not in wanted:
-            continue
-        out.fields[fmt.name] = list(fmt.columns)
-        if getattr(fmt, "units", None):  # FMTU units: pymavlink 2.4.42 and later
-            out.units[fmt.name] = {c: u for c, u in zip(fmt.columns, fmt.units) if u}
-    types = sorted(set(wanted) | {"ARM", "EV", "MODE", "PARM"})
-    rows: dict[tuple[str, int | None], list] = {}
+    counts = {tid: len(offs) for tid, offs in enumerate(r.offsets)}
+    for tid, fmt in r.formats.items():
+        if counts.get(tid, 0) or fmt.name in wanted:
+            out.fields[fmt.name] = list(fmt.columns)
+            if getattr(fmt, "units", None):  # FMTU units: pymavlink 2.4.42 and later
+                out.units[fmt.name] = {c: u for c, u in zip(fmt.columns, fmt.units) if u}
+
+    def rows(name: str, cols: list[str]):
+        """(TimeUS in s, instances or None, [values of each of cols]) of every message ``name``, in file order."""
+        tid = r.name_to_id.get(name)
+        if tid is None or "TimeUS" not in out.fields.get(name, ()):
+            return np.zeros(0), None, [np.zeros(0) for _ in cols]
+        fmt = r.formats[tid]
+        bad = next((c for c in cols if c not in fmt.colhash), None)
+        if bad is not None:
+            raise Error(f"{path}: message {name} field {bad!r}: DataFlash fields are named whole (no [index])")
+        offs = [o for o in r.offsets[tid] if o + fmt.len <= r.data_len]  # not a message cut short at the end
+        codes = re.findall(r"\d*[A-Za-z?]", fmt.msg_struct.lstrip("<"))
+        dt = np.dtype([(f"f{k}", "<" + (f"S{c[:-1]}" if c.endswith("s") else _NUMPY[c])) for k, c in enumerate(codes)])
+        a = np.frombuffer(b"".join(r.data_map[o + 3:o + fmt.len] for o in offs), dtype=dt)
+
+        def col(c):
+            k = fmt.colhash[c]
+            v = a[f"f{k}"]
+            if v.dtype.kind == "S":
+                return [x.split(b"\0", 1)[0].decode("ascii", "replace") for x in v]
+            v = v.astype(float)
+            return v * fmt.msg_mults[k] if fmt.msg_mults[k] is not None else v
+
+        inst = fmt.instance_field or ("I" if "I" in fmt.colhash else None)
+        return col("TimeUS") / 1e6, None if inst is None else col(inst).astype(int), [col(c) for c in cols]
+
+    _, _, (names, values) = rows("PARM", ["Name", "Value"])
+    out.params.update(zip(names, map(float, values)))
+    mode_field = "ModeNum" if "ModeNum" in out.fields.get("MODE", ()) else "Mode"
+    t, _, (v,) = rows("MODE", [mode_field])
+    events = [(tt, 1, None, int(x)) for tt, x in zip(t, v)]
+    t, _, (v,) = rows("ARM", ["ArmState"]) if "ARM" in out.fields else rows("EV", ["Id"])
+    if "ARM" in out.fields:
+        events += [(tt, 0, bool(x), None) for tt, x in zip(t, v)]
+    else:
+        events += [(tt, 0, int(x) == _EV_ARMED, None) for tt, x in zip(t, v) if int(x) in (_EV_ARMED, _EV_DISARMED)]
     armed, mode = False, None
-    have_arm = "ARM" in out.fields
-    while True:
-        m = r.recv_match(type=types)
-        if m is None:
-            break
-        name = m.get_type()
-        tu = getattr(m, "TimeUS", None)
-        if tu is None:
-            continue
-        t = float(tu) / 1e6
-        out.t_first, out.t_last = min(out.t_first, t), max(out.t_last, t)
-        if name == "PARM":
-            out.params[str(m.Name)] = float(m.Value)
-        elif name == "MODE":
-            mode = int(getattr(m, "ModeNum", getattr(m, "Mode", 0)))
-            out.changes.append((t, armed, mode))
-        elif name == "ARM" or (name == "EV" and not have_arm and int(m.Id) in (_EV_ARMED, _EV_DISARMED)):
-            armed = bool(m.ArmState) if name == "ARM" else int(m.Id) == _EV_ARMED
+    for t, kind, a, md in sorted(events, key=lambda e: (e[0], e[1])):
+        if kind == 1:
+            mode = md
+        else:
+            armed = a
             out.arming_logged = True
-            out.changes.append((t, armed, mode))
-        if name in wanted:
-            inst_field = _instance_field(m)
-            inst = None if inst_field is None else int(getattr(m, inst_field))
-            if inst is not None:
-                out.instances.setdefault(name, set()).add(inst)
-            rows.setdefault((name, inst), []).append(
-                (t, [_value(m, n) for n in sorted(wanted[name]) if hasattr(m, _base(n))]))
-    for (name, inst), rr in rows.items():
-        names = [n for n in sorted(wanted[name]) if _base(n) in out.fields[name]]
-        out.tables[(name, inst)] = _columns(rr, names)
+        out.changes.append((float(t), armed, mode))
+    for name in wanted:
+        if name not in out.fields:
+            continue
+        cols = [n for n in sorted(wanted[name]) if _base(n) in out.fields[name]]
+        t, inst, vals = rows(name, cols)
+        for i in ([None] if inst is None else sorted(set(inst.tolist()))):
+            k = slice(None) if i is None else inst == i
+            if i is not None:
+                out.instances.setdefault(name, set()).add(i)
+            out.tables[(name, i)] = (t[k], {c: v[k] for c, v in zip(cols, vals)})
+    for t in [t for t, _ in out.tables.values()] + [np.array([c[0] for c in out.changes])]:
+        if t.size:  # the log's span: its first and last message of those read
+            out.t_first, out.t_last = min(out.t_first, float(t.min())), max(out.t_last, float(t.max()))
     return out
-
-
-def _instance_field(m) -> str | None:
-    fmt = getattr(m, "fmt", None)
-    f = getattr(fmt, "instance_field", None)
-    if f is None and "I" in getattr(m, "_fieldnames", ()):
-        f = "I"
-    return f
 
 
 def _columns(rr: list, names: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
