@@ -229,7 +229,8 @@ def test_dataflash_ev_events_and_no_units(tmp_path):
     ("segment_index = 1", BIN_STREAMS.replace('"T7", "T8"', '"", ""'),
      "stream[4].outputs: the system's thrusters T7, T8 are driven by no output channel"),
     ("segment_index = 1", BIN_STREAMS.replace('"T8"]', '"T8", "T9"]'), "outputs.T9: the system has no thruster 'T9'"),
-    ("segment_index = 1", BIN_STREAMS.replace('"T8"]', '"T8", "T8"]'), "thruster 'T8' is driven by two channels (8, 9)"),
+    ("segment_index = 1", BIN_STREAMS.replace('"T8"]', '"T8", "T8"]'),
+     "thruster 'T8' is driven by two channels (8, 9)"),
     ("segment_index = 1", BIN_STREAMS.replace("density = 1025.0\n", ""),
      "stream[2].density: depth from pressure needs the water's density"),
     ("segment_index = 1", BIN_STREAMS.replace('message = "ATT"', 'message = "ATT"\ntime = "TimeUS"'),
@@ -457,7 +458,8 @@ def test_ros1_bag(tmp_path):
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC)
-    Imu, Header, Time = ts.types["sensor_msgs/msg/Imu"], ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
+    Imu, Header = ts.types["sensor_msgs/msg/Imu"], ts.types["std_msgs/msg/Header"]
+    Time = ts.types["builtin_interfaces/msg/Time"]
     Quat, Vec = ts.types["geometry_msgs/msg/Quaternion"], ts.types["geometry_msgs/msg/Vector3"]
     Float = ts.types["std_msgs/msg/Float64"]
     bag = tmp_path / "trial.bag"

@@ -103,6 +103,31 @@ def read(path: Path, wanted: dict[str, set[str]], mapping: str) -> AutopilotLog:
     if kind is None:
         raise Error(f"{path}: not an ArduPilot log: the file name ends in .bin (DataFlash) or .tlog (MAVLink "
                     f"telemetry), got {path.suffix or 'no suffix'!r}")
+    st = path.stat()
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size,
+           tuple(sorted((k, tuple(sorted(v))) for k, v in wanted.items())))
+    if key in _READ:  # several mappings (a dive's segments) on one log: read once per process
+        out = _READ[key]
+    else:
+        out = _READ[key] = _read(mavutil, path, kind, wanted)
+        while len(_READ) > _READ_KEPT:
+            _READ.pop(next(iter(_READ)))
+    for msg, names in wanted.items():
+        if msg not in out.fields:
+            raise Error(f"{path}: no message {msg!r} (named in {mapping}); the log holds "
+                        f"{', '.join(sorted(out.fields)) or 'none'}")
+        missing = [n for n in sorted(names) if _base(n) not in out.fields[msg]]
+        if missing:
+            raise Error(f"{path}: message {msg} has no field {missing[0]!r} (named in {mapping}); its fields: "
+                        f"{', '.join(out.fields[msg])}")
+    return out
+
+
+_READ: dict = {}  # (file, its mtime and size, the messages and fields read) -> AutopilotLog
+_READ_KEPT = 8
+
+
+def _read(mavutil, path: Path, kind: str, wanted: dict[str, set[str]]) -> AutopilotLog:
     try:
         if kind == "DataFlash":
             out = _read_dataflash(mavutil, path, wanted)
@@ -113,14 +138,6 @@ def read(path: Path, wanted: dict[str, set[str]], mapping: str) -> AutopilotLog:
     except Exception as e:  # pymavlink's own errors on a damaged file
         raise Error(f"{path}: not a readable {kind} log ({type(e).__name__}: {' '.join(str(e).split())[:160]})") \
             from None
-    for msg, names in wanted.items():
-        if msg not in out.fields:
-            raise Error(f"{path}: no message {msg!r} (named in {mapping}); the log holds "
-                        f"{', '.join(sorted(out.fields)) or 'none'}")
-        missing = [n for n in sorted(names) if _base(n) not in out.fields[msg]]
-        if missing:
-            raise Error(f"{path}: message {msg} has no field {missing[0]!r} (named in {mapping}); its fields: "
-                        f"{', '.join(out.fields[msg])}")
     return out
 
 

@@ -463,7 +463,8 @@ def _read_ardupilot(path: Path, m: LogMapping, info: LogInfo, where: str):
                        f"{', '.join(sorted({ardupilot.mode_name(c[2]) for c in alog.changes})) or 'none'})")
     if info.segment_index is None and len(segs) > 1:
         listed = "; ".join(f"{k + 1}: {sg}" for k, sg in enumerate(segs))
-        raise LogError(f"{where}: {len(segs)} segments {what} in {p.name} ({listed}): pick one with [log] segment_index")
+        raise LogError(f"{where}: {len(segs)} segments {what} in {p.name} ({listed}): pick one with "
+                       f"[log] segment_index")
     k = (info.segment_index or 1) - 1
     if k >= len(segs):
         raise LogError(f"{where}: [log] segment_index = {k + 1}, but {p.name} has {len(segs)} segment(s) {what}")
@@ -651,7 +652,8 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
                 raise LogError(f"{where}: {key}.joints.{jn}: the system has joints q1..q{n_joints}")
             if jm.unit not in ("rad", "deg", config.SI):
                 raise LogError(f"{where}: {key}.joints.{jn}.unit: unknown unit {jm.unit!r} (allowed: rad, deg, SI)")
-        for kind, tns in (("thrust", sm.thrust or {}), ("command" if sm.outputs is None else "outputs", _commands_of(sm))):
+        cmd_key = "command" if sm.outputs is None else "outputs"
+        for kind, tns in (("thrust", sm.thrust or {}), (cmd_key, _commands_of(sm))):
             for tn in tns:
                 if thruster_names is not None and tn not in thruster_names:
                     raise LogError(f"{where}: {key}.{kind}.{tn}: the system has no thruster {tn!r} "
