@@ -382,6 +382,16 @@ def test_tlog_values_and_heartbeat_segment(tmp_path):
     lg = _load(_mapping(tmp_path, "tl", "flight.tlog", "", TLOG_STREAMS.replace(PRESSURE, POSITION)))
     for i, s in enumerate(("x", "y", "z")):
         assert np.max(np.abs(lg.signals[s] - _X(lg.t0 + lg.t)[:, i])) < 1e-6, s
+    # a damaged stretch (17 bytes of noise between two records): pymavlink's robust parser reads the file
+    raw = (tmp_path / "flight.tlog").read_bytes()
+    cut = len(raw) // 2
+    cut = raw.index(struct.pack(">Q", int((WALL0 + 8.0 + 0.05) * 1e6))[:5], cut - 20000)
+    (tmp_path / "damaged.tlog").write_bytes(raw[:cut] + bytes(range(3, 20)) + raw[cut:])
+    from arvcas.ident import ardupilot
+
+    assert ardupilot._tlog_frames(raw) is not None and ardupilot._tlog_frames(raw[:cut] + b"\x03" + raw[cut:]) is None
+    lg2 = _load(_mapping(tmp_path, "dmg", "damaged.tlog", "", TLOG_STREAMS))
+    assert lg2.t0 == lg.t0 and np.max(np.abs(lg2.signals["roll"] - X[:, 3])) < 1e-3
 
 
 def test_tlog_refusals(tmp_path):

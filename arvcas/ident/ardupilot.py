@@ -237,18 +237,69 @@ def _columns(rr: list, names: list[str]) -> tuple[np.ndarray, dict[str, np.ndarr
     return t, {n: data[:, i] for i, n in enumerate(names)}
 
 
+# MAVLink messages decoded whatever the mapping names: HEARTBEAT, SYSTEM_TIME, PARAM_VALUE, ATTITUDE (boot times)
+_TLOG_ALWAYS = (0, 2, 22, 30)
+
+
+def _tlog_frames(data: bytes) -> list[tuple[int, int, int, int]] | None:
+    """(start, end, system id, message id) of every frame of a telemetry log (each an 8-byte time, then a
+    MAVLink 1 or 2 frame), or None where the file is not framed throughout (a damaged stretch)."""
+    out = []
+    i, n = 0, len(data)
+    while i + 16 <= n:
+        k = i + 8
+        if data[k] == 0xFD:  # MAVLink 2: header 10, CRC 2, signature 13 when signed
+            size = 12 + data[k + 1] + (13 if data[k + 2] & 1 else 0)
+            sid, mid = data[k + 5], data[k + 7] | data[k + 8] << 8 | data[k + 9] << 16
+        elif data[k] == 0xFE:  # MAVLink 1: header 6, CRC 2
+            size, sid, mid = 8 + data[k + 1], data[k + 3], data[k + 5]
+        else:
+            return None
+        if k + size > n:
+            break  # a frame cut short at the end of the file
+        out.append((k, k + size, sid, mid))
+        i = k + size
+    return out
+
+
 def _read_tlog(mavutil, path: Path, wanted: dict[str, set[str]]) -> AutopilotLog:
-    r = mavutil.mavlink_connection(str(path), robust_parsing=True, dialect="ardupilotmega")
+    """Only the frames of the messages named (and those of :data:`_TLOG_ALWAYS`) are decoded, by pymavlink
+    (which checks each frame's CRC and skips a damaged one); a file not framed throughout is read by
+    pymavlink's robust parser whole."""
     seen: dict[int, _Vehicle] = {}  # system id -> what it sent (one pass; the vehicle is chosen at the end)
-    while True:
-        m = r.recv_msg()
-        if m is None:
-            break
-        if m.get_type() != "BAD_DATA":
-            sid = m.get_srcSystem()
-            if sid not in seen:
-                seen[sid] = _Vehicle(AutopilotLog(path, "MAVLink telemetry"))
-            seen[sid].add(m, wanted, path)
+
+    def vehicle(sid: int) -> _Vehicle:
+        if sid not in seen:
+            seen[sid] = _Vehicle(AutopilotLog(path, "MAVLink telemetry"))
+        return seen[sid]
+
+    data = path.read_bytes()
+    frames = _tlog_frames(data)
+    if frames is not None:
+        mavutil.set_dialect("ardupilotmega")
+        mod = mavutil.mavlink
+        mav = mod.MAVLink(None)
+        ids = {cls.id for cls in mod.mavlink_map.values() if cls.msgname in wanted} | set(_TLOG_ALWAYS)
+        for a, b, sid, mid in frames:
+            cls = mod.mavlink_map.get(mid)
+            if cls is None:
+                continue
+            v = vehicle(sid)
+            v.saw(cls.msgname, cls.fieldnames, getattr(cls, "fieldunits_by_name", {}))
+            if mid in ids:
+                try:
+                    m = mav.decode(bytearray(data[a:b]))
+                except mod.MAVError:
+                    continue  # a damaged frame (its CRC)
+                v.add(m, wanted, path)
+    else:
+        r = mavutil.mavlink_connection(str(path), robust_parsing=True, dialect="ardupilotmega")
+        while True:
+            m = r.recv_msg()
+            if m is None:
+                break
+            if m.get_type() != "BAD_DATA":
+                vehicle(m.get_srcSystem()).add(m, wanted, path)
     vehicles = sorted(k for k, v in seen.items() if v.ardupilot)
     if not vehicles:
         raise Error(f"{path}: no HEARTBEAT from an ArduPilot autopilot: not an ArduPilot vehicle's telemetry")
@@ -275,12 +326,15 @@ class _Vehicle:
         self.state: tuple | None = None  # (armed, mode) of the latest autopilot heartbeat
         self.ardupilot = False
 
+    def saw(self, name: str, fields, units) -> None:
+        if name not in self.out.fields:
+            self.out.fields[name] = list(fields)
+            self.out.units[name] = dict(units or {})
+
     def add(self, m, wanted: dict[str, set[str]], path: Path) -> None:
         out = self.out
         name = m.get_type()
-        if name not in out.fields:
-            out.fields[name] = list(m.get_fieldnames())
-            out.units[name] = dict(getattr(m, "fieldunits_by_name", {}) or {})
+        self.saw(name, m.get_fieldnames(), getattr(m, "fieldunits_by_name", {}))
         if name == "HEARTBEAT":  # a companion computer's or a camera's heartbeat names no autopilot
             if int(m.autopilot) == _AUTOPILOT_ARDUPILOT:
                 self.ardupilot = True
