@@ -408,6 +408,12 @@ def test_tlog_refusals(tmp_path):
             _load(_mapping(tmp_path, "bad", "f.tlog", "", streams))
     with pytest.raises(logs.LogError, match="no segment armed in AUTO"):
         _load(_mapping(tmp_path, "auto", "f.tlog", 'modes = ["AUTO"]', TLOG_STREAMS))
+    # the autopilot rebooted during the ground station's session: its boot clock starts again
+    raw = (tmp_path / "f.tlog").read_bytes()
+    (tmp_path / "twice.tlog").write_bytes(raw + raw)
+    with pytest.raises(logs.LogError, match=r"message ATTITUDE: the boot clock restarts \(0.000 s after 2.000 s\): "
+                                            r"the autopilot rebooted"):
+        _load(_mapping(tmp_path, "twice", "twice.tlog", 'segment = "all"', TLOG_STREAMS))
 
 
 # ---- a .tlog drives the validation on the BlueROV2 Heavy's thrusters ---------------------------------------------

@@ -513,6 +513,11 @@ def _ardupilot_table(alog, sm: StreamMap, names: list[str], where: str) -> _Tabl
     inst = "" if sm.instance is None else f"[{sm.instance}]"
     if len(t) < 2:
         raise LogError(f"{alog.path}: message {sm.message}{inst}: fewer than 2 samples")
+    back = np.flatnonzero(np.diff(t) < -1.0)
+    if back.size:  # a clock that restarts: a second boot in one telemetry log
+        i = int(back[0])
+        raise LogError(f"{alog.path}: message {sm.message}{inst}: the boot clock restarts ({t[i + 1]:.3f} s after "
+                       f"{t[i]:.3f} s): the autopilot rebooted; split the log at the reboot (one boot per log)")
     tf = "TimeUS" if alog.kind == "DataFlash" else "time_boot_ms or time_usec"
     return _Table(f"{alog.path} message {sm.message}{inst}", t, tf, {n: cols[n] for n in names})
 
