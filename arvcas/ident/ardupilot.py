@@ -29,13 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AutopilotLog", "Segment", "read", "segments", "mode_name", "KINDS", "BOOT_TIME_FIELDS"]
+__all__ = ["AutopilotLog", "Segment", "Error", "read", "table", "segments", "mode_name", "KINDS", "BOOT_TIME_FIELDS",
+           "LOG_UNITS"]
 
 KINDS = {".bin": "DataFlash", ".tlog": "MAVLink telemetry"}
 # the boot-clock fields, in the order a stream's default time is chosen, and their counts per second
 BOOT_TIME_FIELDS = {"TimeUS": 1e6, "time_boot_ms": 1e3, "time_usec": 1e6}
 _UNIX_TIME_S = 30 * 365.25 * 86400  # a "boot time" beyond 30 years is a Unix time (the wall clock)
-_EV_ARMED, _EV_DISARMED = 10, 11  # DataFlash EV ids (ArduPilot libraries/AP_Logger/LogStructure.h LogEvent)
+_EV_ARMED, _EV_DISARMED = 10, 11  # DataFlash EV ids (ArduPilot AP_Logger's enum LogEvent: ARMED, DISARMED)
 _ARMED_FLAG = 128  # MAV_MODE_FLAG_SAFETY_ARMED in HEARTBEAT.base_mode
 _AUTOPILOT_ARDUPILOT = 3  # MAV_AUTOPILOT_ARDUPILOTMEGA
 # the log's own unit labels (MAVLink XML units, DataFlash UNIT labels) -> arvcas units (arvcas.system.config)
