@@ -2,7 +2,8 @@
 
 A log is a set of time-stamped streams (motion-capture or navigation pose, IMU attitude and rates, DVL
 velocities, depth, joint positions, thrust or thruster commands, payload). The mapping file (docs/logs.md) says which CSV file
-(or which ROS 2 bag topic) and which columns (or message fields) give which signal, in which unit and
+(or which ROS bag topic, or which ArduPilot log message: :mod:`arvcas.ident.ardupilot`) and which columns (or
+message fields) give which signal, in which unit and
 frame. :func:`load_log` reads it, checks every stream before any work (one line naming the file, the column
 and the reason: time not increasing, a gap longer than allowed, NaN, an unknown unit, a frame that does
 not match) and returns a :class:`Log`:
@@ -63,7 +64,10 @@ _KINDS = {  # mapping key -> (number of columns, dimension of each column)
     "velocity": (3, "velocity"), "angular_velocity": (3, "angular_velocity"),
     "acceleration": (3, "acceleration"),
     "wrench": (6, ("force", "force", "force", "torque", "torque", "torque")), "payload": (1, "1"),
+    "pressure": (1, "pressure"),
 }
+# the autopilot messages whose output channels ``outputs`` names, and each channel's field
+_OUTPUT_FIELDS = {"RCOU": "C{}", "SERVO_OUTPUT_RAW": "servo{}_raw"}
 _ROLL_LIMIT_DEG = 90.0  # a vehicle whose median roll is beyond this is read in the wrong body frame
 
 
@@ -100,11 +104,15 @@ class JointMap:
 
 @dataclass(frozen=True)
 class StreamMap:
-    """One CSV file (``file``) or one bag topic (``topic``) and the signals it gives."""
+    """One CSV file (``file``), one bag topic (``topic``) or one ArduPilot log message (``message``) and the
+    signals it gives."""
 
     file: str | None = setting(default=None)
     topic: str | None = setting(default=None)
-    time: str | None = setting(default=None)  # CSV: the time column; bag: a field ("header.stamp"), else log time
+    message: str | None = setting(default=None)  # an ArduPilot log's message ("ATT", "SERVO_OUTPUT_RAW")
+    instance: int | None = setting(default=None)  # a DataFlash message's instance (IMU, BARO: field I)
+    # CSV: the time column; bag: a field ("header.stamp"), else log time; ArduPilot: the boot clock's field
+    time: str | None = setting(default=None)
     time_unit: str = setting(Choices(tuple(TIME_UNITS), "time unit"), default="s")
     time_offset: float = quantity("time", default=0.0, unit="s")  # added to this stream's times
     world: str = setting(Choices(tuple(WORLD_FRAMES), "world frame"), default="ned")
@@ -120,18 +128,54 @@ class StreamMap:
     acceleration: SignalMap | None = setting(default=None)
     wrench: SignalMap | None = setting(default=None)
     payload: SignalMap | None = setting(default=None)
+    pressure: SignalMap | None = setting(default=None)  # absolute pressure -> depth (density, surface_pressure)
+    density: float | None = quantity("density", gt(0), default=None, unit="kg/m^3")  # of the water
+    surface_pressure: float | None = quantity("pressure", gt(0), default=None, unit="Pa")  # pressure at depth 0
+    gravity: float = quantity("acceleration", gt(0), default=config.STANDARD_GRAVITY, unit="m/s^2")
+    # ArduPilot: output channel k (1-based) drives the system's thruster outputs[k - 1] ("" for none)
+    outputs: tuple[str, ...] | None = setting(Count(1, 32), default=None)
     thrust: dict[str, SignalMap] | None = setting(default=None)  # thruster name -> its thrust column
     command: dict[str, SignalMap] | None = setting(default=None)  # thruster name -> the command sent to it
     joints: dict[str, JointMap] | None = setting(default=None)  # "q1".."qn" -> its column
 
     def _config_check(self, given):
-        if (self.file is None) == (self.topic is None):
-            raise Invalid(None, "a stream gives exactly one of `file` (a CSV file) or `topic` (a bag topic)")
+        if sum(x is not None for x in (self.file, self.topic, self.message)) != 1:
+            raise Invalid(None, "a stream gives exactly one of `file` (a CSV file), `topic` (a bag topic) or "
+                                "`message` (an ArduPilot log's message)")
         if self.file is not None and self.time is None:
             raise Invalid("time", "a CSV stream names its time column")
-        if not any(getattr(self, k) is not None for k in (*_KINDS, "thrust", "command", "joints")):
-            raise Invalid(None, "the stream maps no signal (position, quaternion, euler, depth, velocity, "
-                                "angular_velocity, acceleration, wrench, payload, thrust, command, joints)")
+        if self.message is None:
+            for k in ("instance", "outputs"):
+                if getattr(self, k) is not None:
+                    raise Invalid(k, "belongs to an ArduPilot log's `message` stream")
+        else:
+            for k in ("time", "time_unit"):
+                if k in given:
+                    raise Invalid(k, "an ArduPilot message's time is the autopilot's boot clock (TimeUS, time_boot_ms "
+                                     "or time_usec): drop it")
+        if self.outputs is not None:
+            if self.message not in _OUTPUT_FIELDS:
+                raise Invalid("outputs", f"names the output channels of {' or '.join(_OUTPUT_FIELDS)} (message = "
+                                         f"{self.message!r}: map its fields with `command`)")
+            if self.command is not None:
+                raise Invalid("outputs", "give the thrusters' commands once: `outputs` or `command`")
+            named = [n for n in self.outputs if n]
+            if not named:
+                raise Invalid("outputs", "names no thruster")
+            dup = next((n for n in named if named.count(n) > 1), None)
+            if dup is not None:
+                raise Invalid("outputs", f"thruster {dup!r} is driven by two channels "
+                                         f"({', '.join(str(k + 1) for k, n in enumerate(self.outputs) if n == dup)})")
+        if self.pressure is not None:
+            for k in ("density", "surface_pressure"):
+                if getattr(self, k) is None:
+                    raise Invalid(k, "depth from pressure needs the water's density (kg/m^3) and the surface "
+                                     "pressure (Pa) in the stream: depth = (p - surface_pressure) / (density g)")
+            if self.depth is not None:
+                raise Invalid("pressure", "a stream gives its depth once: `depth` or `pressure`")
+        if not any(getattr(self, k) is not None for k in (*_KINDS, "thrust", "command", "outputs", "joints")):
+            raise Invalid(None, "the stream maps no signal (position, quaternion, euler, depth, pressure, velocity, "
+                                "angular_velocity, acceleration, wrench, payload, thrust, command, outputs, joints)")
         if self.quaternion is not None and self.euler is not None:
             raise Invalid("euler", "a stream gives its attitude once: `quaternion` or `euler`")
 
@@ -141,19 +185,33 @@ class LogInfo:
     name: str | None = setting(default=None)
     system: str | None = setting(default=None)  # the system the vehicle is (a shipped name or a file)
     source: str = setting(default="")
-    bag: str | None = setting(default=None)  # a ROS 2 bag directory (MCAP or sqlite3), relative to this file
+    bag: str | None = setting(default=None)  # a ROS 2 bag directory (MCAP or sqlite3) or ROS 1 .bag, from this file
+    ardupilot: str | None = setting(default=None)  # an ArduPilot log (.bin DataFlash, .tlog MAVLink), from this file
+    segment: str | None = setting(Choices(("armed", "all"), "segment"), default=None)  # ArduPilot: default armed
+    modes: tuple[str, ...] | None = setting(Count(1, 32), default=None)  # armed in one of these flight modes
+    segment_index: int | None = setting(default=None)  # 1-based, of the segments that match
     rate: float = quantity("1", gt(0), le(10_000.0), default=50.0)  # Hz: the common time base
     max_gap: float = quantity("time", gt(0), default=0.5, unit="s")
     t_start: float = quantity("time", ge(0), default=0.0, unit="s")  # after the common start
     t_end: float | None = quantity("time", gt(0), default=None, unit="s")
     passive: bool = setting(default=False)  # no thrust logged: the thrusters were off (zero thrust)
     joint_cutoff: float = quantity("1", gt(0), default=2.0)  # Hz: where the joint splines halve an amplitude
+    # the arm held still at these angles (rad, q1..qn) through the log: no joint stream (an autopilot's log)
+    held_joints: tuple[float, ...] | None = quantity("angle", n=config.ANY_LENGTH, default=None, unit="rad")
 
     def _config_check(self, given):
         if self.t_end is not None and self.t_end <= self.t_start:
             raise Invalid("t_end", f"must be after t_start ({self.t_start:g} s)")
         if self.name is not None and not re.fullmatch(r"[A-Za-z0-9_.+-]{1,64}", self.name):
             raise Invalid("name", "letters, digits and _ . + - only (at most 64)")
+        if self.ardupilot is None:
+            for k in ("segment", "modes", "segment_index"):
+                if getattr(self, k) is not None:
+                    raise Invalid(k, "cuts an ArduPilot log: needs [log] ardupilot = \"<.bin or .tlog file>\"")
+        if self.modes is not None and self.segment == "all":
+            raise Invalid("modes", "picks armed stretches in these modes: not with segment = \"all\"")
+        if self.segment_index is not None and self.segment_index < 1:
+            raise Invalid("segment_index", f"counts from 1, got {self.segment_index}")
 
 
 @dataclass(frozen=True)
@@ -207,6 +265,7 @@ class Log:
     payload: np.ndarray | None  # (N,) fraction of the system's payload
     passive: bool
     files: tuple[str, ...]  # every stream file read
+    segment: str | None = None  # an ArduPilot log's segment: boot-clock start and end (s), flight modes
 
     @property
     def duration(self) -> float:
@@ -348,7 +407,7 @@ def _read_bag(bag: Path, topic: str, names: list[str], time_field: str | None, m
     try:
         from rosbags.highlevel import AnyReader
     except ImportError:
-        raise LogError(f"{mapping}: reading ROS 2 bags needs the rosbags package: pip install 'arvcas[bags]'") \
+        raise LogError(f"{mapping}: reading ROS bags needs the rosbags package: pip install 'arvcas[bags]'") \
             from None
     where = f"{bag} topic {topic}"
     t, rows = [], []
@@ -372,12 +431,95 @@ def _read_bag(bag: Path, topic: str, names: list[str], time_field: str | None, m
     except LogError:
         raise
     except Exception as e:  # rosbags' own errors: unreadable metadata, storage, message types
-        raise LogError(f"{bag}: not a readable ROS 2 bag ({type(e).__name__}: {' '.join(str(e).split())[:160]})") \
+        raise LogError(f"{bag}: not a readable ROS bag ({type(e).__name__}: {' '.join(str(e).split())[:160]})") \
             from None
     if len(t) < 2:
         raise LogError(f"{where}: fewer than 2 messages")
     data = np.array(rows, dtype=float).reshape(len(rows), len(names))
     return _Table(where, np.array(t, dtype=float), time_field or "log time", {n: data[:, i] for i, n in enumerate(names)})
+
+
+_MOTOR_FUNCTIONS = {**{33 + k: k + 1 for k in range(8)}, **{82 + k: k + 9 for k in range(4)}}  # SERVOn_FUNCTION
+
+
+def _read_ardupilot(path: Path, m: LogMapping, info: LogInfo, where: str):
+    """(the autopilot's log with every message the streams name, the segment the mapping picks)."""
+    from arvcas.ident import ardupilot
+    from arvcas.io.files import check_input
+
+    p = check_input(path, "ArduPilot log", LogError)
+    wanted: dict[str, set[str]] = {}
+    for sm in m.stream:
+        if sm.message is not None:
+            wanted.setdefault(sm.message, set()).update(_columns_of(sm))
+    try:
+        alog = ardupilot.read(p, wanted, where)
+        segs = ardupilot.segments(alog, info.segment or "armed", info.modes)
+    except ardupilot.Error as e:
+        raise LogError(str(e)) from None
+    what = "armed" + (f" in {', '.join(info.modes)}" if info.modes else "") if info.segment != "all" else "whole"
+    if not segs:
+        raise LogError(f"{p}: no segment {what} (modes logged: "
+                       f"{', '.join(sorted({ardupilot.mode_name(c[2]) for c in alog.changes})) or 'none'})")
+    if info.segment_index is None and len(segs) > 1:
+        listed = "; ".join(f"{k + 1}: {sg}" for k, sg in enumerate(segs))
+        raise LogError(f"{where}: {len(segs)} segments {what} in {p.name} ({listed}): pick one with "
+                       f"[log] segment_index")
+    k = (info.segment_index or 1) - 1
+    if k >= len(segs):
+        raise LogError(f"{where}: [log] segment_index = {k + 1}, but {p.name} has {len(segs)} segment(s) {what}")
+    for i, sm in enumerate(m.stream):
+        if sm.message is None:
+            continue
+        key = f"stream[{i + 1}]"
+        units = alog.units.get(sm.message, {})
+        maps = [(kd, getattr(sm, kd)) for kd in _KINDS if getattr(sm, kd) is not None]
+        maps += [(f"command.{tn}", s) for tn, s in _commands_of(sm).items()]
+        for kd, s in maps:  # a column's unit against the one the log states for its field
+            us = [u.strip() for u in s.unit.split(",")]
+            for c, u in zip(s.columns, us * len(s.columns) if len(us) == 1 else us):
+                said = ardupilot.LOG_UNITS.get(units.get(c.split("[", 1)[0], ""))
+                if said is None:
+                    continue
+                ok = config.UNITS[said][1] == 1.0 if u == config.SI else (
+                    u in config.UNITS and config.UNITS[u][0] == config.UNITS[said][0]
+                    and math.isclose(config.UNITS[u][1], config.UNITS[said][1]))
+                if not ok:
+                    raise LogError(f"{where}: {key}.{kd}.unit: {sm.message}.{c} is in {said} (the log says so), "
+                                   f"mapped as {u!r}")
+        if sm.outputs is not None:
+            for ch in range(1, 33):
+                fn = alog.params.get(f"SERVO{ch}_FUNCTION")
+                tn = sm.outputs[ch - 1] if ch <= len(sm.outputs) else ""
+                if fn is None:
+                    continue
+                motor = _MOTOR_FUNCTIONS.get(int(fn))
+                if tn and motor is None:
+                    raise LogError(f"{where}: {key}.outputs: channel {ch} drives thruster {tn!r}, but the log's "
+                                   f"SERVO{ch}_FUNCTION = {int(fn)} is not a motor")
+                if motor is not None and not tn:
+                    raise LogError(f"{where}: {key}.outputs: channel {ch} is the autopilot's motor {motor} "
+                                   f"(SERVO{ch}_FUNCTION = {int(fn)}) but drives no thruster in the mapping")
+    return alog, segs[k]
+
+
+def _ardupilot_table(alog, sm: StreamMap, names: list[str], where: str) -> _Table:
+    from arvcas.ident import ardupilot
+
+    try:
+        t, cols = ardupilot.table(alog, sm.message, sm.instance, where)
+    except ardupilot.Error as e:
+        raise LogError(str(e)) from None
+    inst = "" if sm.instance is None else f"[{sm.instance}]"
+    if len(t) < 2:
+        raise LogError(f"{alog.path}: message {sm.message}{inst}: fewer than 2 samples")
+    back = np.flatnonzero(np.diff(t) < -1.0)
+    if back.size:  # a clock that restarts: a second boot in one telemetry log
+        i = int(back[0])
+        raise LogError(f"{alog.path}: message {sm.message}{inst}: the boot clock restarts ({t[i + 1]:.3f} s after "
+                       f"{t[i]:.3f} s): the autopilot rebooted; split the log at the reboot (one boot per log)")
+    tf = "TimeUS" if alog.kind == "DataFlash" else "time_boot_ms or time_usec"
+    return _Table(f"{alog.path} message {sm.message}{inst}", t, tf, {n: cols[n] for n in names})
 
 
 def _unit_factors(sm: SignalMap, n: int, dims, key: str, where: str) -> np.ndarray:
@@ -437,6 +579,14 @@ def _check_finite(tab: _Table, names: list[str]) -> None:
 # ---- the log -----------------------------------------------------------------------------------------
 
 
+def _commands_of(sm: StreamMap) -> dict[str, SignalMap]:
+    """Thruster name -> its command's column: ``command``, or ``outputs`` (channel k -> RCOU's Ck, ...)."""
+    if sm.outputs is None:
+        return dict(sm.command or {})
+    fmt = _OUTPUT_FIELDS[sm.message]
+    return {tn: SignalMap(columns=(fmt.format(k + 1),), unit="us") for k, tn in enumerate(sm.outputs) if tn}
+
+
 def _columns_of(sm: StreamMap) -> list[str]:
     names = []
     for k in _KINDS:
@@ -445,7 +595,7 @@ def _columns_of(sm: StreamMap) -> list[str]:
             if len(s.columns) != _KINDS[k][0]:
                 raise Invalid(f"{k}.columns", f"{_KINDS[k][0]} columns expected, got {len(s.columns)}")
             names += list(s.columns)
-    for s in (*(sm.thrust or {}).values(), *(sm.command or {}).values()):
+    for s in (*(sm.thrust or {}).values(), *_commands_of(sm).values()):
         if len(s.columns) != 1:
             raise Invalid("thrust" if s in (sm.thrust or {}).values() else "command",
                           f"one column per thruster, got {len(s.columns)}")
@@ -479,7 +629,7 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     if info.bag is not None:
         from arvcas.io.files import check_input
 
-        bag = check_input(base / info.bag, "ROS 2 bag", LogError, allow_dir=True)
+        bag = check_input(base / info.bag, "ROS bag", LogError, allow_dir=True)
     # the mapping's own rules, before reading any stream
     seen: dict[str, str] = {}
     for i, sm in enumerate(m.stream):
@@ -490,6 +640,14 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             raise LogError(f"{where}: {key}.{e.key}: {e.message}") from None
         if sm.topic is not None and bag is None:
             raise LogError(f"{where}: {key}.topic: a bag topic needs [log] bag = \"<bag directory>\"")
+        if sm.message is not None and info.ardupilot is None:
+            raise LogError(f"{where}: {key}.message: an ArduPilot message needs [log] ardupilot = \"<.bin or .tlog "
+                           f"file>\"")
+        if sm.outputs is not None and thruster_names is not None:
+            free = [tn for tn in thruster_names if tn not in sm.outputs]
+            if free:
+                raise LogError(f"{where}: {key}.outputs: the system's thrusters {', '.join(free)} are driven by no "
+                               f"output channel (outputs lists, for channel 1, 2, ..., the thruster it drives)")
         for k in _KINDS:
             s = getattr(sm, k)
             if s is not None:
@@ -499,12 +657,13 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
                 raise LogError(f"{where}: {key}.joints.{jn}: the system has joints q1..q{n_joints}")
             if jm.unit not in ("rad", "deg", config.SI):
                 raise LogError(f"{where}: {key}.joints.{jn}.unit: unknown unit {jm.unit!r} (allowed: rad, deg, SI)")
-        for kind in ("thrust", "command"):
-            for tn in (getattr(sm, kind) or {}):
+        cmd_key = "command" if sm.outputs is None else "outputs"
+        for kind, tns in (("thrust", sm.thrust or {}), (cmd_key, _commands_of(sm))):
+            for tn in tns:
                 if thruster_names is not None and tn not in thruster_names:
                     raise LogError(f"{where}: {key}.{kind}.{tn}: the system has no thruster {tn!r} "
                                    f"(it has {', '.join(thruster_names)})")
-        for tn, s in (sm.command or {}).items():
+        for tn, s in _commands_of(sm).items():
             if s.unit not in (*COMMAND_UNITS, config.SI):
                 raise LogError(f"{where}: {key}.command.{tn}.unit: unknown command unit {s.unit!r} "
                                f"(allowed: {', '.join(COMMAND_UNITS)}; SI means rad/s)")
@@ -512,6 +671,14 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             if sig in seen:
                 raise LogError(f"{where}: {key}: {sig} is also given by {seen[sig]}; map each signal once")
             seen[sig] = key
+    if info.held_joints is not None:
+        mapped = [k for k in seen if re.fullmatch(r"q\d+", k)]
+        if mapped:
+            raise LogError(f"{where}: [log] held_joints: {seen[mapped[0]]} maps joint {mapped[0]}: map the joints or "
+                           f"hold them, not both")
+        if n_joints is not None and len(info.held_joints) != n_joints:
+            raise LogError(f"{where}: [log] held_joints: {len(info.held_joints)} angles for a system of {n_joints} "
+                           f"joints")
     if n_joints is not None and n_joints > 0:
         missing = [f"q{k}" for k in range(1, n_joints + 1) if f"q{k}" not in seen]
         if missing and len(missing) < n_joints:
@@ -522,15 +689,20 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     if not any(k in seen for k in ("thrust", "command", "wrench")) and not info.passive:
         raise LogError(f"{where}: no thrust, command or wrench stream: map one, or say [log] passive = true "
                        f"(the thrusters were off)")
+    alog, seg = None, None
+    if info.ardupilot is not None:  # one pass over the autopilot's log: every message the streams name
+        alog, seg = _read_ardupilot(base / info.ardupilot, m, info, where)
     # read every stream, check its time, find the common window
     tabs = []
     for i, sm in enumerate(m.stream):
         names = _columns_of(sm)
         if sm.file is not None:
             tab = _read_csv(base / sm.file, names, sm.time, where)
-        else:
+        elif sm.topic is not None:
             tab = _read_bag(bag, sm.topic, names, sm.time, where)
-        tab.time = tab.time * TIME_UNITS[sm.time_unit] + sm.time_offset
+        else:
+            tab = _ardupilot_table(alog, sm, names, f"{where} stream[{i + 1}]")
+        tab.time = tab.time * (1.0 if sm.message is not None else TIME_UNITS[sm.time_unit]) + sm.time_offset
         _check_time(tab, info.max_gap, 1.0)
         _check_finite(tab, names)
         tabs.append(tab)
@@ -539,6 +711,10 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     if hi <= lo:
         spans = ", ".join(f"{tb.where}: {tb.time[0]:.6g}-{tb.time[-1]:.6g} s" for tb in tabs)
         raise LogError(f"{where}: the streams do not overlap in time ({spans})")
+    if seg is not None:  # the segment of the autopilot's log, on its boot clock
+        if min(hi, seg.end) - max(lo, seg.start) <= 0:
+            raise LogError(f"{where}: the streams ({lo:.3f}-{hi:.3f} s) do not reach into the segment {seg}")
+        lo, hi = max(lo, seg.start), min(hi, seg.end)
     t_lo = lo + info.t_start
     t_hi = hi if info.t_end is None else min(hi, lo + info.t_end)
     if t_hi - t_lo < 2.0 / info.rate:
@@ -614,6 +790,12 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             signals["z"] = _interp(grid, tb.time, Cw[2, 2] * dv[:, 0])
             if s_d is not None:
                 std["z"] = s_d
+        if sm.pressure is not None:  # hydrostatic: p = surface_pressure + density g depth
+            pv, s_pr = cols("pressure")
+            rg = sm.density * sm.gravity
+            signals["z"] = _interp(grid, tb.time, (pv[:, 0] - sm.surface_pressure) / rg)
+            if s_pr is not None:
+                std["z"] = s_pr / rg
         for k_map, nms in (("velocity", ("u", "v", "w")), ("angular_velocity", ("p", "q", "r"))):
             if getattr(sm, k_map) is not None:
                 v, s_v = cols(k_map)
@@ -642,8 +824,9 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
         for tn, s in (sm.thrust or {}).items():
             f = _unit_factors(s, 1, "force", f"{key}.thrust.{tn}", where)
             thrust[tn] = _interp(grid, tb.time, tb.cols[s.columns[0]] * f[0])
-        for tn, s in (sm.command or {}).items():  # an autopilot's command holds until the next one
-            k = np.clip(np.searchsorted(tb.time, grid, side="right") - 1, 0, tb.time.size - 1)
+        for tn, s in _commands_of(sm).items():  # an autopilot's command holds until the next one
+            # (a command logged within 1 ns of a sample, a clock's rounding, counts as at it)
+            k = np.clip(np.searchsorted(tb.time, grid + 1e-9, side="right") - 1, 0, tb.time.size - 1)
             command[tn] = tb.cols[s.columns[0]][k]
             command_unit[tn] = "rad/s" if s.unit == config.SI else s.unit
         for jn, jm in sorted((sm.joints or {}).items(), key=lambda kv: int(kv[0][1:]) if kv[0][1:].isdigit() else 0):
@@ -656,6 +839,17 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             if jm.std is not None:
                 jt_std[jn] = jm.std
     joints = None
+    if info.held_joints:  # constant cubic pieces: the angle, zero rate and acceleration at every time
+        from scipy.interpolate import BSpline
+
+        span = np.array([-1.0] * 4 + [grid[-1] - t_lo + 1.0] * 4)
+        n_h = len(info.held_joints)
+        joints = JointTrajectory(tuple(f"q{k + 1}" for k in range(n_h)),
+                                 tuple(BSpline(span, np.full(4, q), 3) for q in info.held_joints), (0.0,) * n_h,
+                                 info.joint_cutoff, tuple(grid - t_lo for _ in range(n_h)),
+                                 tuple(np.full(n, q) for q in info.held_joints))
+        for k, q in enumerate(info.held_joints):
+            signals[f"q{k + 1}"] = np.full(n, float(q))
     if jt_names:
         order = np.argsort([int(nm[1:]) for nm in jt_names])
         splines, lams = [], []
@@ -680,14 +874,14 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     return Log(name=name, path=where, system=info.system, source=info.source, t=grid - t_lo, t0=t_lo,
                signals=signals, std=std, joints=joints, thrust=thrust, command=command, command_unit=command_unit,
                wrench=wrench, payload=payload, passive=info.passive and not thrust and not command and wrench is None,
-               files=tuple(tb.where for tb in tabs))
+               files=tuple(tb.where for tb in tabs), segment=None if seg is None else str(seg))
 
 
 def _signal_names(sm: StreamMap) -> list[str]:
     out = []
     if sm.position is not None:
         out += ["x", "y", "z"]
-    if sm.depth is not None:
+    if sm.depth is not None or sm.pressure is not None:
         out += ["z"]
     if sm.quaternion is not None or sm.euler is not None:
         out += ["roll", "pitch", "yaw"]
@@ -699,8 +893,8 @@ def _signal_names(sm: StreamMap) -> list[str]:
         out += ["wrench"]
     if sm.thrust:
         out += ["thrust"] + [f"thrust.{n}" for n in sm.thrust]
-    if sm.command:
-        out += ["command"] + [f"command.{n}" for n in sm.command]
+    if _commands_of(sm):
+        out += ["command"] + [f"command.{n}" for n in _commands_of(sm)]
     if sm.payload is not None:
         out += ["payload"]
     out += list(sm.joints or {})

@@ -46,13 +46,15 @@ from typing import Any, Callable, Generic, Mapping, TypeVar
 from arvcas.system import tomlfile
 
 __all__ = [
-    "UNITS", "DIMENSIONS", "SI", "MEMORY_CAP_BYTES", "Invalid", "Bound", "gt", "ge", "lt", "le",
+    "UNITS", "STANDARD_GRAVITY", "DIMENSIONS", "SI", "MEMORY_CAP_BYTES", "Invalid", "Bound", "gt", "ge", "lt", "le",
     "Choices", "Unique", "Count", "Equals", "Spec", "quantity", "setting", "Loaded", "Leaf",
     "load_file", "load_text", "load_doc", "leaves", "flatten", "check_value", "closest", "si_unit",
     "format_bytes", "check_memory",
 ]
 
 T = TypeVar("T")
+
+STANDARD_GRAVITY = 9.80665  # m/s^2, exact by definition (3rd CGPM, 1901): kgf, mG, depth from pressure
 
 # unit string -> (dimension, factor to SI). For each dimension the first unit of factor 1 is its SI name.
 UNITS: dict[str, tuple[str, float]] = {
@@ -80,7 +82,7 @@ UNITS: dict[str, tuple[str, float]] = {
     "(rad/s)^2": ("angular_velocity^2", 1.0),
     "(deg/s)^2": ("angular_velocity^2", (math.pi / 180.0) ** 2),
     # thrusters (docs/system-file.md): an autopilot's command and the thrust it gives
-    "kgf": ("force", 9.80665),  # kilogram-force (Blue Robotics' T200 tables), exact by definition
+    "kgf": ("force", STANDARD_GRAVITY),  # kilogram-force (Blue Robotics' T200 tables), exact by definition
     "us": ("pwm", 1.0),  # an ESC's PWM pulse width in microseconds: a command, kept in its own unit
     "us/s": ("pwm_rate", 1.0),
     "1/s": ("rate", 1.0),  # a normalised command per second
@@ -88,6 +90,16 @@ UNITS: dict[str, tuple[str, float]] = {
     "N*s^2/rad^2": ("rotor_constant", 1.0),  # thrust per squared rotor speed (uuv_simulator's rotorConstant)
     # hydrodynamic derivative per unit density: the model's coefficient is rho * value (paper App. A)
     "per_rho": ("per_rho", 1.0),
+    # an autopilot's logs (docs/logs.md): pressure for depth, MAVLink's milli-units
+    "Pa": ("pressure", 1.0),
+    "hPa": ("pressure", 100.0),
+    "mbar": ("pressure", 100.0),
+    "kPa": ("pressure", 1000.0),
+    "mrad/s": ("angular_velocity", 1e-3),
+    "mG": ("acceleration", 1e-3 * STANDARD_GRAVITY),
+    "cm": ("length", 1e-2),
+    "cm/s": ("velocity", 1e-2),
+    "mm/s": ("velocity", 1e-3),
 }
 DIMENSIONS: tuple[str, ...] = tuple(dict.fromkeys(d for d, _ in UNITS.values()))
 SI = "SI"  # accepted for every dimension, factor 1
