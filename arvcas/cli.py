@@ -664,15 +664,10 @@ def _load_arg(text: str) -> float:
 
 
 def bench_module():
-    """The package ``benchmarks/bench/`` of the source checkout this package runs from (not part of the package)."""
+    """The benchmark package :mod:`arvcas.bench` (imported on demand: it is the top of every layer)."""
     import importlib
 
-    root = Path(__file__).resolve().parents[1]
-    if not (root / "benchmarks" / "bench" / "__init__.py").is_file():
-        raise ValueError(f"bench: needs a source checkout of arvcas ({root / 'benchmarks' / 'bench'} not found)")
-    if str(root) not in sys.path:
-        sys.path.insert(0, str(root))
-    return importlib.import_module("benchmarks.bench")
+    return importlib.import_module("arvcas.bench")
 
 
 def _run_bench(a: argparse.Namespace) -> int:

@@ -90,7 +90,7 @@ def test_lockstep_rewrite_is_bitwise_equal_and_refuses_what_it_cannot_rewrite(tm
 def _cost():
     import importlib
 
-    return importlib.import_module("benchmarks.bench.cost")
+    return importlib.import_module("arvcas.bench.cost")
 
 
 def test_cost_quick_section_is_complete_finite_and_in_sweep_order(tmp_path):

@@ -1,9 +1,9 @@
 """Section 2b: issue 14's targets (the default plant step against the previous one and the VM).
 
 Every batch here is one run at a time per core (``lockstep=False``): issue 14's figures; the lockstep
-runs are section 8 (:mod:`benchmarks.bench.lanes`).
+runs are section 8 (:mod:`arvcas.bench.lanes`).
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ import numpy as np
 from arvcas.build import calls, codegen
 from arvcas.sim import closedloop, scenario, simulation
 from arvcas.controllers import gains as gains_mod
-from benchmarks.bench.closed_loop import _run_args, _step_instructions
-from benchmarks.bench.common import BenchError, CONTROLLER, Settings, _stat, _time
-from benchmarks.bench.startup import _HWM, _child
+from arvcas.bench.closed_loop import _run_args, _step_instructions
+from arvcas.bench.common import BenchError, CONTROLLER, Settings, _stat, _time
+from arvcas.bench.startup import _HWM, _child
 
 PREVIOUS_H_PLANT = 0.01  # the plant step before issue 14 (results/step chose 0.05 s)
 STUDY_RUNS = 40_000  # a gamultiobj-sized study
