@@ -55,6 +55,7 @@ def test_shipped_trials_are_the_data_sets_files():
             assert (DATA / f"metadata_{code}.yml").read_text().startswith("start_time: ")
             assert (DATA / "combo_traj_yaml_files_fullrange2" / f"traj{code[:3]}" / f"traj{code}.yaml").is_file()
     assert len(M.table().splitlines()) == 2 + 3 * len(TRIALS)
+    assert sum(t.startswith("traj") for t in TRIALS) == len(M.IDENTIFY + M.HELD_OUT)  # their metadata was checked
 
 
 def _rest_windows(trial: str):
