@@ -901,7 +901,7 @@ def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
 
 
 def _choose_numpy_mode() -> int | None:
-    """CasADi 3.8's NumPy mode (issue #2959) for this command: -1, the legacy behaviour without its notice.
+    """CasADi 3.8's NumPy mode (CasADi's issue #2959) for this command: -1, the legacy behaviour without its notice.
     arvcas's own code calls no NumPy function on a CasADi value, so its numbers are the same in every mode
     (tests/test_trust_casadi_mode.py); -1 also keeps the libraries the commands use (pymoo, matplotlib)
     on the behaviour they were tested with. The previous mode is returned, to be restored (a caller in the

@@ -1,4 +1,4 @@
-"""Issue 12, "How we will know it is right": systems loaded from files against Pinocchio built from the URDF.
+"""Systems loaded from files against Pinocchio built from the URDF.
 
 The API under test (docs/system-file.md):
 

@@ -1,4 +1,4 @@
-"""Speed benchmark: plant functions (issue 2), the closed loop (issue 3) and compiling (issue 6).
+"""Speed benchmark: plant functions, the closed loop, compiling and the sections listed below.
 
 :func:`run` measures everything in one process and writes ``bench.json`` (every figure, with the
 machine it was measured on) and ``bench.md`` (the tables) to an output directory. ``arvcas bench``
@@ -6,7 +6,7 @@ is its command line; ``benchmarks/run.py`` and ``python -m arvcas.bench`` call t
 
 One module per section: :mod:`~arvcas.bench.common` (settings, the required keys, timing and machine
 state), :mod:`~arvcas.bench.plant` (1), :mod:`~arvcas.bench.closed_loop` (2),
-:mod:`~arvcas.bench.targets` (2b: issue 14's targets), :mod:`~arvcas.bench.compiling` (3),
+:mod:`~arvcas.bench.targets` (2b: the targets of the default plant step), :mod:`~arvcas.bench.compiling` (3),
 :mod:`~arvcas.bench.startup` (4), :mod:`~arvcas.bench.systems` (5),
 :mod:`~arvcas.bench.identification` (6), :mod:`~arvcas.bench.controller` (7: the exported
 controller's time per step), :mod:`~arvcas.bench.lanes` (8: lockstep lanes against one run at a time,

@@ -99,7 +99,7 @@ class Settings:
     single_calls: int  # single calls from Python per repetition
     map_n: int  # f.map(N)
     batch_n: int  # gain sets per simulate_batch call
-    study_pop: int  # gain sets per batch of the issue 14 targets (a generation of the paper study)
+    study_pop: int  # gain sets per batch of section 2b's targets (a generation of the paper study)
     opt_levels: tuple[str, ...]
     compile_level: str | None  # level of the cold/warm measurement; None: codegen.build's default
 

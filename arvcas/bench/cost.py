@@ -1,4 +1,4 @@
-"""Section 9: cost against work (issue 26 item 3): how a run's cost grows with its length, the batch's
+"""Section 9: cost against work: how a run's cost grows with its length, the batch's
 size and the arm's joints, and where it stops being linear.
 
 Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).

@@ -1,4 +1,4 @@
-"""Section 6: validation and identification from logs (issue 21's targets).
+"""Section 6: validation and identification from logs.
 
 Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 

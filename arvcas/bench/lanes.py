@@ -1,4 +1,4 @@
-"""Section 8: lockstep lanes in the runs (issue 26 item 2) against one run at a time, in the same run.
+"""Section 8: lockstep lanes in the runs against one run at a time, in the same run.
 
 Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 

@@ -28,7 +28,7 @@ def _bench_systems(s: Settings, log) -> dict:
             continue
         cfg0 = scenario.load_scenario(sysm.params.default("scenario"))
         variants = [(name, sysm, cfg0)]
-        if sysm.structure.has_thruster_dynamics and s.mode != "quick":  # issue 22: without them; issue 26: plain RK4
+        if sysm.structure.has_thruster_dynamics and s.mode != "quick":  # also without them, by plain RK4
             plain = dataclasses.replace(cfg0, time_thrust_quadrature=None)  # instantaneous thrusters have no quadrature
             variants += [(f"{name}+instantaneous", System(sysm.params.instantaneous()), plain),
                          (f"{name}{PLAIN_RK4_KEY}", sysm, dataclasses.replace(cfg0, **PLAIN_RK4))]
