@@ -664,15 +664,10 @@ def _load_arg(text: str) -> float:
 
 
 def bench_module():
-    """The package ``benchmarks/bench/`` of the source checkout this package runs from (not part of the package)."""
+    """The benchmark package :mod:`arvcas.bench` (imported on demand: it is the top of every layer)."""
     import importlib
 
-    root = Path(__file__).resolve().parents[1]
-    if not (root / "benchmarks" / "bench" / "__init__.py").is_file():
-        raise ValueError(f"bench: needs a source checkout of arvcas ({root / 'benchmarks' / 'bench'} not found)")
-    if str(root) not in sys.path:
-        sys.path.insert(0, str(root))
-    return importlib.import_module("benchmarks.bench")
+    return importlib.import_module("arvcas.bench")
 
 
 def _run_bench(a: argparse.Namespace) -> int:
@@ -906,7 +901,7 @@ def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
 
 
 def _choose_numpy_mode() -> int | None:
-    """CasADi 3.8's NumPy mode (issue #2959) for this command: -1, the legacy behaviour without its notice.
+    """CasADi 3.8's NumPy mode (CasADi's issue #2959) for this command: -1, the legacy behaviour without its notice.
     arvcas's own code calls no NumPy function on a CasADi value, so its numbers are the same in every mode
     (tests/test_trust_casadi_mode.py); -1 also keeps the libraries the commands use (pymoo, matplotlib)
     on the behaviour they were tested with. The previous mode is returned, to be restored (a caller in the

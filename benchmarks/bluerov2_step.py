@@ -1,8 +1,8 @@
-"""Why the BlueROV2 needs its short plant step (issue 26 item 1): measured, not assumed.
+"""Why the BlueROV2 needs its short plant step: measured, not assumed.
 
     python benchmarks/bluerov2_step.py [--quick]     # writes results/bluerov2_step/ (README.md, JSON, figure)
 
-Haidou-1 meets issue 14's accuracy rule (results/step) at h_plant = 0.05 s; the BlueROV2 Heavy + Alpha 5
+Haidou-1 meets the step-accuracy rule (results/step) at h_plant = 0.05 s; the BlueROV2 Heavy + Alpha 5
 needed 0.005 s with instantaneous thrusters and 0.0025 s with its T200 dynamics under plain RK4 (the step shipped
 until 2026-12-05; since then the shipped scenario, arvcas/data/bluerov2_heavy_alpha5.scenario.toml, takes 0.01 s with
 the thrust quadrature that section (4) measured). The runs here are integrated by plain RK4 at 0.0025 s (``BASE_H``). Three measurements separate the candidate causes:
@@ -251,7 +251,7 @@ TRANSFORM_CASES = (((0.05,) * 2, 5, "exact"), ((0.025,) * 4, 3, "exact"), ((0.02
                    ((0.01, 0.015, 0.025, 0.05), 5, "exact"),
                    # graded: short substeps where the rotors' transient is (after each command change), 6 in all
                    ((0.005, 0.01, 0.015, 0.02, 0.025, 0.025), 5, "exact"), ((0.004, 0.008, 0.013, 0.02, 0.025, 0.03), 5, "exact"),
-                   # long substeps with many nodes: is the forcing's quadrature what limits them? (issue 26 item 1)
+                   # long substeps with many nodes: is the forcing's quadrature what limits them?
                    ((0.1,), 80, "exact"), ((0.05,) * 2, 40, "exact"), ((0.025,) * 4, 20, "exact"))
 TRANSFORM_QUICK = (((0.025,) * 4, 5, "exact"), ((0.01, 0.01, 0.02, 0.03, 0.03), 5, "exact"))
 

@@ -74,7 +74,7 @@ SYSTEMS = {
                 "agsta": ROOT / "results/tuning/paper/agsta/front.h5"},
         controllers=None, mc=("proposed", "agsta"), out=ROOT / "results" / "step", label="Haidou-1"),
     "bluerov2_heavy_alpha5": dict(
-        # the fronts tuned on the current plant (T200 dynamics, issue 22; results/bluerov2/<c> are issue 12's)
+        # the fronts tuned on the current plant (T200 dynamics; results/bluerov2/<c> are the instantaneous thrusters')
         fronts={c: ROOT / f"results/bluerov2/t200/{c}/front.h5" for c in ("proposed", "agsta", "pid")},
         controllers=("proposed", "agsta", "pid"), mc=("proposed", "agsta"),
         out=ROOT / "results" / "step" / "bluerov2_heavy_alpha5", label="BlueROV2 Heavy + Reach Alpha 5"),

@@ -1,4 +1,4 @@
-"""The plant step with thruster dynamics (issue 22): issue 14's rule on the BlueROV2 with its T200s.
+"""The plant step with thruster dynamics: the step-accuracy rule (results/step) on the BlueROV2 with its T200s.
 
     python benchmarks/thruster_step.py     # writes results/step/bluerov2_heavy_alpha5/thrusters.md and .json
     python benchmarks/thruster_step.py --quadrature   # adds time.thrust_quadrature = 5 at h_plant = 0.01 s

@@ -1,6 +1,6 @@
 """Reference vehicle + arm built ONLY by Pinocchio from a URDF text and a mount pose (no arvcas code).
 
-The independent side of issue 12's checks ("How we will know it is right") for any arm: Pinocchio reads
+The independent side of the system-file checks for any arm: Pinocchio reads
 the URDF (its own parser: joint origins, axes, fixed-joint merging, inertials), and the arm's joints are
 grafted onto a free-flyer root that is the vehicle body. Conventions are those of
 tests/pinocchio_model.py (the Haidou-1 DH reference), unchanged:

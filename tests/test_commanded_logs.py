@@ -1,4 +1,4 @@
-"""Logs of thruster commands (issue 21 item 2 with issue 22's thruster dynamics): a log that maps the PWM
+"""Logs of thruster commands (with the thruster dynamics): a log that maps the PWM
 each thruster was sent drives the open-loop plant through the system's rotor lag and command map.
 
 The system is the shipped BlueROV2 Heavy without its arm (a vehicle-only system keeps the compiled code

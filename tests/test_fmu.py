@@ -95,7 +95,8 @@ def test_validation_and_description(fmu_path, md, params):
     with zipfile.ZipFile(fmu_path) as zf:
         names = set(zf.namelist())
     assert f"binaries/linux64/{fmu_mod.MODEL_IDENTIFIER}.so" in names
-    assert {"sources/fmi2Functions.h", f"sources/{fmu_mod.MODEL_IDENTIFIER}.c"} <= names
+    assert {"sources/fmi2Functions.h", f"sources/{fmu_mod.MODEL_IDENTIFIER}.c",
+            "documentation/licenses/fmi2-headers.txt"} <= names
     by = {v.name: v for v in md.modelVariables}
     assert [v.name for v in md.modelVariables if v.causality == "input"] == INPUTS
     assert [by[n].causality for n in STATES] == ["output"] * 12

@@ -1,4 +1,4 @@
-"""Issue 21 item 4: the Hinsdale pool trials and the system that describes the vehicle as tested.
+"""The Hinsdale pool trials and the system that describes the vehicle as tested.
 
 The shipped trials (studies/validation/hinsdale2023/) load as the data set wrote them, and the system
 hinsdale_bluerov2_alpha5 reproduces the real vehicle's static attitude at every rest of those trials
@@ -40,7 +40,7 @@ TRIALS = M.IDENTIFY + M.HELD_OUT + M.BASELINES
 def test_shipped_trials_are_the_data_sets_files():
     """Every stream of every shipped trial: the upstream header, finite numbers, increasing time; the
     traj trials' start time and commanded trajectory; the licence notice; identification only on
-    traj003-traj030 and disjoint from the held-out trials (issue 21)."""
+    traj003-traj030 and disjoint from the held-out trials."""
     assert "Copyright (c) 2023 Hannah Kolano" in (DATA / "LICENSE").read_text(encoding="utf-8")
     assert set(M.IDENTIFY).isdisjoint(M.HELD_OUT)
     assert all("003-0" <= t[4:] <= "030-1" for t in M.IDENTIFY + M.HELD_OUT)
@@ -55,6 +55,7 @@ def test_shipped_trials_are_the_data_sets_files():
             assert (DATA / f"metadata_{code}.yml").read_text().startswith("start_time: ")
             assert (DATA / "combo_traj_yaml_files_fullrange2" / f"traj{code[:3]}" / f"traj{code}.yaml").is_file()
     assert len(M.table().splitlines()) == 2 + 3 * len(TRIALS)
+    assert sum(t.startswith("traj") for t in TRIALS) == len(M.IDENTIFY + M.HELD_OUT)  # their metadata was checked
 
 
 def _rest_windows(trial: str):

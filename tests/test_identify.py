@@ -1,4 +1,4 @@
-"""Identification and validation (issue 21 items 2, 3, 5): sensitivities, synthetic truth and coverage,
+"""Identification and validation: sensitivities, synthetic truth and coverage,
 unidentifiable parameters, the identified system file, the command line.
 
 The synthetic truth is the Hinsdale vehicle without its arm (a vehicle-only system keeps the compiled code
@@ -120,7 +120,7 @@ def test_identified_file_round_trip_and_cli(vehicle, tmp_path, capsys):
         assert "identified by arvcas identify" in ident.params.source(n) and "s5, s6" in ident.params.source(n)
     same = [n for n in model.params.names() if n not in FREE]
     assert np.array_equal([ident.params[n] for n in same], [model.params[n] for n in same])
-    # validation with it: validation.json has the issue's shape, in SI
+    # validation with it: validation.json has its documented shape (docs/identification.md), in SI
     vd = tmp_path / "val"
     assert main(["validate", "--system", str(out), str(paths[0]), "--out", str(vd)]) == 0
     doc = json.loads((vd / "validation.json").read_text())

@@ -1,4 +1,4 @@
-"""`arvcas import-system uuv` on uuv_simulator's public RexROV 2 (+ Oberon 7) description (issue 23 item 4).
+"""`arvcas import-system uuv` on uuv_simulator's public RexROV 2 (+ Oberon 7) description.
 
 The description is the excerpt in tests/data/uuv_rexrov2/ (its README: sources, commits, the licence,
 the one change). The references are independent of arvcas's importer:

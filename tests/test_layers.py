@@ -32,6 +32,7 @@ LAYERS = (
     ("logs, validation and identification", ("arvcas.ident",)),
     ("experiments", ("arvcas.experiments",)),
     ("command line and the public facade", ("arvcas.cli", "arvcas")),
+    ("benchmark", ("arvcas.bench",)),  # arvcas bench: measures every layer, runs the command line
 )
 
 # Deliberate imports against the order, each inside a function (checked below), with the reason.

@@ -1,4 +1,4 @@
-"""Lockstep runs (issue 26 item 2): W runs per core, every lane's outputs equal to the scalar run's bits.
+"""Lockstep runs: W runs per core, every lane's outputs equal to the scalar run's bits.
 
 The lane rewrite (arvcas/build/lanes.py) on every operation it handles, at special values (signed zeros,
 subnormals, infinities, NaN, large arguments), against CasADi's scalar code; then whole runs: every

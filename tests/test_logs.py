@@ -1,4 +1,4 @@
-"""Logs in (issue 21 item 1): mapping files, CSV and ROS 2 bags, frames, alignment, joint splines, bad logs.
+"""Logs in: mapping files, CSV and ROS 2 bags, frames, alignment, joint splines, bad logs.
 
 References are independent of arvcas's own rotation code: SciPy's ``Rotation`` for quaternions and Euler
 angles, NumPy's interpolation for alignment, the smoothing spline's known transfer function.

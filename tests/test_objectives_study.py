@@ -84,6 +84,15 @@ def test_resume_is_bit_for_bit(uninterrupted):
     assert np.array_equal(a.history["hv"], b.history["hv"])
 
 
+def _union_volume(P: np.ndarray, ref: np.ndarray) -> float:
+    """Volume of the union of the boxes [p, ref], by inclusion-exclusion over the subsets of P's rows."""
+    total = 0.0
+    for mask in range(1, 2 ** len(P)):
+        rows = [i for i in range(len(P)) if mask >> i & 1]
+        total += (-1) ** (len(rows) + 1) * np.prod(ref - P[rows].max(axis=0))
+    return float(total)
+
+
 def test_front_exports_plots_knees_and_compares(uninterrupted, tmp_path):
     tmp, _, c = uninterrupted
     path = tmp / "a" / "front.h5"
@@ -98,14 +107,25 @@ def test_front_exports_plots_knees_and_compares(uninterrupted, tmp_path):
     span = np.where(F.max(0) > F.min(0), F.max(0) - F.min(0), 1.0)
     w = (F.max(0) - F) / span
     w = w / w.sum(axis=1, keepdims=True)
-    if fr.size > 1 and (F.max(0) > F.min(0)).all():
-        assert knee_index(F) == int(np.argmin(np.linalg.norm(w - 1 / 3, axis=1)))
+    assert fr.size >= 2 and (F.max(0) > F.min(0)).all(), F  # a front on which the rule has a choice to make
+    assert knee_index(F) == int(np.argmin(np.linalg.norm(w - 1 / 3, axis=1)))
     fig = fr.plot()
     assert len([ax for ax in fig.axes if ax.get_visible()]) == 3  # one panel per pair of objectives
     from arvcas.tuning.compare import compare_fronts, format_comparison
 
-    cmp = compare_fronts(path, path)
-    assert cmp.hv[0] == cmp.hv[1] == fr.hv and cmp.regions == ()
+    # against the same front less one member, both inside a reference point that every member dominates:
+    # members of a non-dominated set do not dominate each other, so the smaller front covers (n - 1) / n of
+    # the whole and is covered entirely; the hypervolumes are the volumes of the unions of the members'
+    # boxes, by inclusion-exclusion (each member adds volume of its own: the whole front's is larger)
+    keep = np.flatnonzero(np.arange(fr.size) != knee_index(F))
+    less = dataclasses.replace(fr, F=F[keep], G=fr.G[keep], gains=fr.gains[keep], X=fr.X[keep])
+    ref = F.max(0) + (F.max(0) - F.min(0))
+    cmp = compare_fronts(fr, less, ref=ref)
+    assert cmp.sizes == (fr.size, fr.size - 1) and cmp.regions == ()
+    assert cmp.hv == pytest.approx((_union_volume(F, ref), _union_volume(F[keep], ref)), rel=1e-9)
+    assert cmp.hv[0] > cmp.hv[1] and cmp.better == cmp.labels[0]
+    assert cmp.coverage == (1.0, pytest.approx((fr.size - 1) / fr.size, rel=1e-12))
+    assert compare_fronts(fr, less).hv[0] == fr.hv  # by default, against the studies' reference point
     assert "reference point (f_chat, f_rmse, f_energy)" in format_comparison(cmp)
 
 

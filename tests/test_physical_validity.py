@@ -1,4 +1,4 @@
-"""Physical validity of parameter files (issue 15): each check refuses a packaged ``haidou1.toml``
+"""Physical validity of parameter files: each check refuses a packaged ``haidou1.toml``
 with one edit, written to ``tmp_path``, with a one-line :class:`ParamsError` naming the file and key."""
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ BAD_EDITS = [
     ("reach_end = { value = 20.0,", "reach_end = { value = 30.0,", "arm times must satisfy"),
     ('duration = { value = 100.0, unit = "s", source', 'duration = { value = 100.0, unit = "s", sauce', "expected a table { value, unit, source }"),
     # units, element by element
-    # the example: "degrees" used to be read silently as radians
+    # an example: "degrees" used to be read silently as radians
     ('0.0, 60.0, 0.0], unit = "deg"', '0.0, 60.0, 0.0], unit = "degrees"',
      "arm.qg: unknown unit 'degrees' (allowed for an angle: rad, deg)"),
     ('unit = "m,m,m,deg,deg,deg"', 'unit = "m,m,m,degrees,deg,deg"', "initial.eta0: unknown unit 'degrees' of element 4"),

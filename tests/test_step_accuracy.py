@@ -6,7 +6,7 @@ agrees with CVODES to 1e-9 at h_plant = 0.01 s, and its error falls ~16x per hal
 4 +- 0.5), on a 3 s window of a compressed scenario whose arm reaches, takes the payload and returns
 (every kink on the sample grid, as in the packaged scenario); (2) the compiled closed loop, driven by
 its own controller, matches CVODES on its first 2 s: to 1e-9 at h_plant = 0.01 s, and to 1e-8 at the
-packaged step 0.05 s (results/step: 1.6e-8 m worst over 100 s and 52 runs; the issue's rule 1e-6).
+packaged step 0.05 s (results/step: 1.6e-8 m worst over 100 s and 52 runs; the rule 1e-6).
 (3) the study itself in its quick mode, for each shipped system, on a 3 s horizon: its reference
 machinery (CVODES at two tolerances, the textbook RK4 against the closed loop's own trajectory, with
 thruster dynamics driven by the lag's closed form, the closed loop against CVODES at 0.01 s) agrees and the

@@ -1,4 +1,4 @@
-"""Issue 12, "How we will know it is right": systems loaded from files against Pinocchio built from the URDF.
+"""Systems loaded from files against Pinocchio built from the URDF.
 
 The API under test (docs/system-file.md):
 
@@ -25,13 +25,9 @@ Checks:
    shipped text): ``arm_wrench`` and ``uvms_rhs`` equal to 1e-12 relative, in water (rho as in the
    file). Both also against the Pinocchio reference at rho = 0 (1e-9).
 3. Bad URDF input: a one-line ValueError naming the file and the element, from ``load_system``.
-
-Skipped, with the reason, while ``arvcas.load_system`` / ``arvcas.compiled(system=...)`` are not there.
 """
 
 from __future__ import annotations
-
-import inspect
 
 import numpy as np
 import pytest
@@ -44,22 +40,6 @@ import urdf_arms as ua
 RTOL = 1e-9  # against Pinocchio
 RTOL_TWO_WAYS = 1e-12  # Haidou-1's DH table against its URDF
 N_STATES = 8
-
-
-def _missing_api() -> str | None:
-    if not hasattr(arvcas, "load_system"):
-        return "arvcas.load_system is not in this tree yet (issue 12: the system-file API); un-skip when it lands"
-    try:
-        sig = inspect.signature(arvcas.compiled).parameters
-    except (TypeError, ValueError):
-        return None
-    if "system" not in sig and not any(p.kind is p.VAR_KEYWORD for p in sig.values()):
-        return "arvcas.compiled has no system= argument yet (issue 12)"
-    return None
-
-
-_MISSING = _missing_api()
-pytestmark = pytest.mark.skipif(_MISSING is not None, reason=_MISSING or "")
 
 
 def _values(params) -> dict[str, float]:

@@ -1,4 +1,4 @@
-"""A study on another system end to end (issue 12): a tiny NSGA-II study of the BlueROV2 Heavy + Reach
+"""A study on another system end to end: a tiny NSGA-II study of the BlueROV2 Heavy + Reach
 Alpha 5, its checkpoint naming the system and the normalisation, the knee replayed bit for bit by
 `arvcas knees`, and `arvcas simulate --from-front` taking the front's system."""
 
@@ -95,7 +95,7 @@ def test_montecarlo_on_another_system_reproduces_from_its_file(study_dir):
     assert cli.main(["montecarlo", "--check", str(out)]) == 0
 
 
-# ---- the front explorer (issue 24) and the outputs' labels ---------------------------------------------------
+# ---- the front explorer and the outputs' labels ------------------------------------------------------------------
 
 PAPER_NAMES = re.compile(r"Table \d|Table A\d|the paper's|paper Table|\(Fig\. \d+")
 

@@ -1,4 +1,4 @@
-"""Issue 12: systems described as data. The shipped systems' vehicles, allocation and envelopes, the
+"""Systems described as data. The shipped systems' vehicles, allocation and envelopes, the
 system file's refusals, scenarios as data, and the BlueROV2's closed loop.
 
 The multibody cross-checks against Pinocchio (random URDF arms, Haidou-1 DH vs URDF) are in

@@ -1,4 +1,4 @@
-"""The thrusters' forcing by quadrature (``time.thrust_quadrature``, issue 26 item 1; docs/model.md §9).
+"""The thrusters' forcing by quadrature (``time.thrust_quadrature``, docs/model.md §9).
 
 - the closed loop of the BlueROV2 with its T200s at h_plant = 0.01 s and 5 nodes per half step against
   CVODES (1e-14) with the rotor states as ODE states (benchmarks/step_accuracy.py's reference, as

@@ -1,4 +1,4 @@
-"""Issue 22: thruster dynamics (docs/model.md §9) and the water (§10), against independent references.
+"""Thruster dynamics (docs/model.md §9) and the water (§10), against independent references.
 
 - the command map against its table (Blue Robotics' T200 at 16 V, the CSV shipped in arvcas/data);
 - the lag's closed form against SciPy's solve_ivp of ``ds/dt = clip((y - s) / tau, -r, r)`` with the
@@ -378,7 +378,7 @@ def test_instantaneous_drops_the_dynamics_and_keeps_every_number(blue):
     assert p.structure.has_thruster_dynamics and not i.structure.has_thruster_dynamics
     assert all(i[n] == p[n] for n in i.names())
     assert set(p.names()) - set(i.names()) == {n for n in p.names() if ".map." in n or "time_constant" in n}
-    assert len(i) == 239  # the parameters of the BlueROV2 file before issue 22 (results/bluerov2 knees)
+    assert len(i) == 239  # the parameters of the BlueROV2 file before the thruster dynamics (results/bluerov2 knees)
 
 
 def test_study_says_which_chat_it_optimises():

@@ -1,11 +1,11 @@
-"""Issue 22 in the closed loop: the BlueROV2 with its T200 dynamics, the current and the tether.
+"""Thruster dynamics in the closed loop: the BlueROV2 with its T200 dynamics, the current and the tether.
 
 - a 3 s run of the shipped system and scenario: each sample's delivered thrust, command and rotor state
   recomputed independently from the traced allocation (NumPy's interp of the CSV table, the lag's
   exponential), the delivered wrench is B times the thrust, CHAT on the command and on the delivered
   wrench equal eq. 42 on the traced series, and the plant's trajectory equals CVODES driven by the
   continuous delivered thrust, the current and the tether (docs/model.md §9-10);
-- the committed instantaneous-thruster results (results/bluerov2, before issue 22) reproduce bit for bit
+- the committed instantaneous-thruster results (results/bluerov2, before the thruster dynamics) reproduce bit for bit
   with the thruster dynamics off (``Params.instantaneous()``) and the scenario stored in the result.
 """
 
@@ -104,7 +104,7 @@ def test_plant_equals_cvodes_with_the_rotor_states(short, blue):
 
 
 def test_committed_instantaneous_knee_reproduces_bit_for_bit(blue):
-    """results/bluerov2 (issue 12, instantaneous thrusters, the current as a wrench): the proposed knee's run
+    """results/bluerov2 (instantaneous thrusters, the current as a wrench): the proposed knee's run
     again, with the thruster dynamics off and the scenario its file stores: every series bit for bit."""
     ref = read_result(ROOT / "results/bluerov2/knees/knee_proposed.h5")
     cfg = scenario.loads_scenario(ref.config_text, "knee_proposed.h5")

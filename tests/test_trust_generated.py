@@ -180,7 +180,7 @@ def test_export_c_with_the_probes_attack_compiles_to_nothing_but_main(tmp_path, 
     assert "arvcas_pwned" in h and "<U+005C>" in h  # the text is there, inert
     for lang, tool in (("c", CC), ("c++", shutil.which("c++"))):
         if tool is None:
-            continue
+            pytest.skip(f"no {lang} compiler is installed (the program was built as C only)")
         src = out / f"probe.{'c' if lang == 'c' else 'cpp'}"
         src.write_text(f'#include "{lib}.h"\n#include "{lib}_params.h"\nint main(void) {{ return 0; }}\n')
         obj = out / f"probe-{lang}.o"

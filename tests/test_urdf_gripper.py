@@ -1,4 +1,4 @@
-"""A URDF arm with a gripper (issue 23 item 4): the fingers locked, the chain's end and tool point chosen.
+"""A URDF arm with a gripper: the fingers locked, the chain's end and tool point chosen.
 
 The arm is a random 4-joint arm of tests/urdf_arms.py with, on its last link, a palm (fixed joint),
 two fingers (a revolute one with a fixed tip, a prismatic one) and, on link 2, a camera on a joint whose

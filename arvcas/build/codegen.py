@@ -90,7 +90,7 @@ BASE_FLAGS = ("-shared", "-fPIC")
 # -fPIC library every call to them may be interposed and is never inlined; -fno-semantic-interposition
 # with -finline-small-functions (part of -O2, not of -O1) inlines them: bitwise identical results,
 # the closed loop about 20 % faster (measured 32.1 -> 25.8 ms per run).
-# -O2 since issue 14: with the EKF on its triangle and the peeled first sample, results/bench.md's
+# -O2 since the EKF moved onto its triangle: with it and the peeled first sample, results/bench.md's
 # opt sweep recommends it (the rule there: within 8 % of the fastest, then the fastest to compile);
 # measured alternately in one process on the 100 s run: -O1 4.95 ms, -O2 4.76 ms, -O3 4.73 ms, every
 # output bitwise equal (-ffp-contract=off: no level changes a result); it compiles about 1.4x longer.

@@ -533,6 +533,9 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
                 zf.write(binary, f"binaries/{platform}/{MODEL_IDENTIFIER}{suffix}")
                 for f in sorted(src.iterdir()):
                     zf.write(f, f"sources/{f.name}")
+                # the FMI headers' 2-clause BSD notice, which a binary built from them must carry (the
+                # standard's place for licences)
+                zf.write(_templates() / "fmi2" / "LICENSE.txt", "documentation/licenses/fmi2-headers.txt")
 
         if out.exists() and not force:  # appeared meanwhile
             _refuse_replacing(out)

@@ -1,4 +1,4 @@
-"""CasADi's generated C of an SX Function rewritten to evaluate W lanes at once (issue 26).
+"""CasADi's generated C of an SX Function rewritten to evaluate W lanes at once.
 
 An SX Function's generated body is straight-line scalar code, one operation per statement on locals
 ``aN`` (``a3=(a1*a2);``, ``a4=sqrt(a3);``, ``a5=(a4<a1);``...). :func:`lane_function` rewrites that

@@ -89,7 +89,7 @@ def uvms_xdot(P, x, tau, q, qd, qdd, payload, opts: ModelOptions, trim=None, cur
 
 
 def plant_functions(opts: ModelOptions = ModelOptions(), layout=None) -> dict[str, ca.Function]:
-    """The public plant functions (issue 2), as SX Functions, by their exact names and input orders.
+    """The public plant functions, as SX Functions, by their exact names and input orders.
 
     ``layout``: the system's :class:`arvcas.system.params.Layout` (default Haidou-1's); inputs are sized by it:
     ``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``.

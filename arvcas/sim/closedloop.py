@@ -649,7 +649,7 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
     # 5. allocation and saturation
     u_cmd = thrusters.allocate(P, tau_v)
     u_sat = thrusters.saturate(P, u_cmd)
-    # (issue 22: a thruster command map, thrust -> the unit the thrusters take, belongs here, after the
+    # (a thruster command map, thrust -> the unit the thrusters take, belongs here, after the
     # saturation, so that the run and the exported controller send the same commands)
 
     if ref is None:

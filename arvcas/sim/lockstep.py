@@ -1,4 +1,4 @@
-"""Runs in lockstep: W runs of a batch evaluated together, one vector lane each (issue 26).
+"""Runs in lockstep: W runs of a batch evaluated together, one vector lane each.
 
 The scalar run (:func:`arvcas.sim.closedloop.build_run`) is an MX function calling, per controller
 sample, the SX functions of :func:`arvcas.sim.closedloop.step_parts`: the controller part, ``n_sub``

@@ -293,7 +293,7 @@ class CompiledRun:
         """Refuse (one line naming ``gains``) n gain sets whose runs' outputs (with their copies and the
         accumulators' rows) and the gains as float64 (a copy when given as a list or another dtype) would
         take more than half this machine's memory: before the run is compiled or its outputs allocated
-        (issue 25 item 2; :meth:`many` bounds its noise blocks the same way)."""
+        (:meth:`many` bounds its noise blocks the same way)."""
         n, st = g.shape[0], self.params.structure
         n_events = len(accumulate.event_times(self.cfg)) if self.accumulators else 0
         acc = sum(accumulate.width(a, st.n_thrusters, n_events) for a in self.accumulators)

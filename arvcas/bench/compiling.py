@@ -1,6 +1,6 @@
 """Section 3: compiling (cold and warm builds, the -O0..-O3 sweep, the recommended level).
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from arvcas.build import calls, codegen
 from arvcas.sim import closedloop, scenario
 from arvcas.controllers import gains as gains_mod
 from arvcas.model import uvms
-from benchmarks.bench.closed_loop import _run_args, _step_instructions
-from benchmarks.bench.common import BenchError, CONTROLLER, N_INPUT_SETS, RUN_TIME_TOLERANCE, Settings, _default_opt_level, _fresh_copy, _scaled, _stat, _temp_cache, _time
-from benchmarks.bench.plant import _Driver, _c_time, _input_sets, _write_data
+from arvcas.bench.closed_loop import _run_args, _step_instructions
+from arvcas.bench.common import BenchError, CONTROLLER, N_INPUT_SETS, RUN_TIME_TOLERANCE, Settings, _default_opt_level, _fresh_copy, _scaled, _stat, _temp_cache, _time
+from arvcas.bench.plant import _Driver, _c_time, _input_sets, _write_data
 
 def _cold_builds(fn: ca.Function, level: str, reps: int, after: Callable[[ca.Function, int], None] | None = None):
     """``reps`` builds of ``fn`` each into a fresh empty cache: (build wall s, cc s) samples.

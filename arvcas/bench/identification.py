@@ -1,6 +1,6 @@
-"""Section 6: validation and identification from logs (issue 21's targets).
+"""Section 6: validation and identification from logs.
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 
 * validation of one 20 s trial (a shipped Hinsdale trial, 50 Hz, the log read and the open-loop run), with the
   same simulation through CasADi's virtual machine as a yardstick measured in the same run;
@@ -18,10 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench.common import _stat
+from arvcas.bench.common import _stat
 
-ROOT = Path(__file__).resolve().parents[2]
-TRIAL = ROOT / "studies" / "validation" / "hinsdale2023" / "traj014-2.log.toml"
+# the Hinsdale 2023 trial traj014-2 (studies/validation/hinsdale2023, MIT licence: data/LICENSE-hinsdale2023);
+# data/ links to the checkout's files, which the wheel ships as package data
+TRIAL = Path(__file__).resolve().parent / "data" / "traj014-2.log.toml"
 SYSTEM = "hinsdale_bluerov2_alpha5"
 FREE = ("vehicle.xB", "vehicle.yB", "vehicle.zB", "vehicle.Ixx", "vehicle.Iyy", "vehicle.Izz", "hydro.K_p",
         "hydro.M_q", "hydro.N_r", "hydro.K_p_absp")

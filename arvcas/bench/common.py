@@ -1,6 +1,6 @@
 """Settings, constants and the timing and machine-state helpers every section uses.
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 """
 
 from __future__ import annotations
@@ -99,7 +99,7 @@ class Settings:
     single_calls: int  # single calls from Python per repetition
     map_n: int  # f.map(N)
     batch_n: int  # gain sets per simulate_batch call
-    study_pop: int  # gain sets per batch of the issue 14 targets (a generation of the paper study)
+    study_pop: int  # gain sets per batch of section 2b's targets (a generation of the paper study)
     opt_levels: tuple[str, ...]
     compile_level: str | None  # level of the cold/warm measurement; None: codegen.build's default
 
@@ -274,3 +274,28 @@ def _default_opt_level() -> str:
 def _fresh_copy(f: ca.Function) -> ca.Function:
     """The same graph as a new Function object: codegen.build's per-process memo misses, the key matches."""
     return ca.Function.deserialize(f.serialize())
+
+
+# ---- number formatting for bench.md (report.py and the sections that write their own text)
+
+
+def _spread(st: dict) -> str:
+    return f"{(st['max'] - st['min']) / st['median']:.0%}" if st["median"] > 0 else "-"
+
+
+def _g(x: float, digits: int = 3) -> str:
+    """Number with ``digits`` significant digits, no exponent for 1e-3..1e6."""
+    if x == 0 or not math.isfinite(x):
+        return str(x)
+    if 1e-3 <= abs(x) < 1e6:
+        dec = max(0, digits - 1 - int(math.floor(math.log10(abs(x)))))
+        return f"{x:,.{dec}f}"
+    return f"{x:.{digits - 1}e}"
+
+
+def _verdict(value: float, target: float, higher_is_better: bool) -> str:
+    ok = value >= target if higher_is_better else value <= target
+    if ok:
+        return "met"
+    miss = (target / value - 1) if higher_is_better else (value / target - 1)
+    return f"**missed by {miss:.0%}**"

@@ -1,4 +1,4 @@
-"""``python -m benchmarks.bench [--quick] [--out DIR] [--wait-load X]``: the same as ``arvcas bench``."""
+"""``python -m arvcas.bench [--quick] [--out DIR] [--wait-load X]``: the same as ``arvcas bench``."""
 
 import sys
 

@@ -1,6 +1,6 @@
 """Section 5: every shipped system's run at its own default scenario and gains.
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import time
 from arvcas.build import calls
 from arvcas.sim import closedloop, scenario
 from arvcas.sim.run import Run
-from benchmarks.bench.closed_loop import _run_args, _step_instructions
-from benchmarks.bench.common import CONTROLLER, PLAIN_RK4, PLAIN_RK4_KEY, Settings, _stat
+from arvcas.bench.closed_loop import _run_args, _step_instructions
+from arvcas.bench.common import CONTROLLER, PLAIN_RK4, PLAIN_RK4_KEY, Settings, _stat
 
 def _bench_systems(s: Settings, log) -> dict:
     """Each shipped system with a default scenario: its run at that scenario and gains, side by side in one
@@ -28,7 +28,7 @@ def _bench_systems(s: Settings, log) -> dict:
             continue
         cfg0 = scenario.load_scenario(sysm.params.default("scenario"))
         variants = [(name, sysm, cfg0)]
-        if sysm.structure.has_thruster_dynamics and s.mode != "quick":  # issue 22: without them; issue 26: plain RK4
+        if sysm.structure.has_thruster_dynamics and s.mode != "quick":  # also without them, by plain RK4
             plain = dataclasses.replace(cfg0, time_thrust_quadrature=None)  # instantaneous thrusters have no quadrature
             variants += [(f"{name}+instantaneous", System(sysm.params.instantaneous()), plain),
                          (f"{name}{PLAIN_RK4_KEY}", sysm, dataclasses.replace(cfg0, **PLAIN_RK4))]

@@ -1,7 +1,7 @@
 """Section 7: the exported controller's time per step (``arvcas export-controller``): the budget on a
 vehicle's computer.
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 
 For each shipped system with a scenario and gains of its own and each of the proposed law, AGSTA and PID
 (``--quick``: Haidou-1's proposed law only), the controller is exported, its library built by its own
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench.common import Settings, _stat
+from arvcas.bench.common import Settings, _stat
 
 LAWS = ("proposed", "agsta", "pid")
 

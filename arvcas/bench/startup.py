@@ -1,6 +1,6 @@
 """Section 4: a fresh process's warm `arvcas simulate` and the cold graph build.
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import subprocess
 import sys
 import time
 
-from benchmarks.bench.common import BenchError, CONTROLLER, Settings, _stat
+from arvcas.bench.common import BenchError, CONTROLLER, Settings, _stat
 
 _HWM = "int(open('/proc/self/status').read().split('VmHWM:')[1].split()[0]) / 1024"  # MB, this process only
 

@@ -1,6 +1,6 @@
 """The whole benchmark: every section in one process, then bench.json and bench.md.
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 """
 
 from __future__ import annotations
@@ -17,18 +17,18 @@ from typing import Callable
 from arvcas.build import codegen
 from arvcas.sim import scenario
 from arvcas.system.params import load as load_params
-from benchmarks.bench.closed_loop import _bench_closed_loop
-from benchmarks.bench.common import Settings, _CpuMeter, _default_opt_level, _machine, _wait_for_load
-from benchmarks.bench.compiling import _bench_compile, _recommend
-from benchmarks.bench.cost import _bench_cost, write_files as _write_cost_files
-from benchmarks.bench.controller import _bench_controller
-from benchmarks.bench.identification import _bench_identification
-from benchmarks.bench.lanes import _bench_lanes
-from benchmarks.bench.plant import _Driver, _bench_plant
-from benchmarks.bench.report import render_markdown
-from benchmarks.bench.startup import _bench_startup
-from benchmarks.bench.systems import _bench_systems
-from benchmarks.bench.targets import _bench_targets
+from arvcas.bench.closed_loop import _bench_closed_loop
+from arvcas.bench.common import Settings, _CpuMeter, _default_opt_level, _machine, _wait_for_load
+from arvcas.bench.compiling import _bench_compile, _recommend
+from arvcas.bench.cost import _bench_cost, write_files as _write_cost_files
+from arvcas.bench.controller import _bench_controller
+from arvcas.bench.identification import _bench_identification
+from arvcas.bench.lanes import _bench_lanes
+from arvcas.bench.plant import _Driver, _bench_plant
+from arvcas.bench.report import render_markdown
+from arvcas.bench.startup import _bench_startup
+from arvcas.bench.systems import _bench_systems
+from arvcas.bench.targets import _bench_targets
 
 SECTIONS = ("plant", "closed_loop", "targets", "compile", "startup", "systems", "identification", "controller", "lanes",
             "cost")
@@ -129,7 +129,7 @@ def _run_only(out, quick: bool, only: tuple[str, ...], log, wait: Callable[[], f
 def write(res: dict, out: str | Path) -> tuple[Path, Path]:
     """Write ``bench.json`` and ``bench.md`` into the directory ``out`` (created if its parent exists),
     atomically and only over files arvcas wrote (:mod:`arvcas.io.files`); with a ``cost`` section, its
-    figures and README into ``out/cost/`` (:func:`benchmarks.bench.cost.write_files`)."""
+    figures and README into ``out/cost/`` (:func:`arvcas.bench.cost.write_files`)."""
     from arvcas.io import files
 
     d = files.prepare_dir(Path(out), f"bench: --out {out}")

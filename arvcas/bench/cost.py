@@ -1,7 +1,7 @@
-"""Section 9: cost against work (issue 26 item 3): how a run's cost grows with its length, the batch's
+"""Section 9: cost against work: how a run's cost grows with its length, the batch's
 size and the arm's joints, and where it stops being linear.
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 
 (a) **Run length.** Haidou-1's shipped scenario and the ``proposed`` law at its default gains, with
 ``time.duration`` 10, 30, 100, 300 and 1000 s (``--quick``: 10 and 30 s); each length is its own
@@ -56,9 +56,9 @@ import numpy as np
 from arvcas.build import calls, codegen
 from arvcas.sim import closedloop, lockstep, scenario, schedule
 from arvcas.sim.run import Run
-from benchmarks.bench.closed_loop import _run_args, _step_instructions
-from benchmarks.bench.common import BenchError, CONTROLLER, Settings, _stat, _temp_cache
-from benchmarks.bench.lanes import _batches
+from arvcas.bench.closed_loop import _run_args, _step_instructions
+from arvcas.bench.common import BenchError, CONTROLLER, Settings, _stat, _temp_cache
+from arvcas.bench.lanes import _batches
 
 SYSTEM = "haidou1"
 LENGTHS = {"full": (10.0, 30.0, 100.0, 300.0, 1000.0), "quick": (10.0, 30.0)}
@@ -306,7 +306,7 @@ def arm_scenario_text(n: int) -> str:
     a = text.index("\n[arm]\n")
     b = text.index("\n[", a + 1)
     qg = [math.degrees(q) for q in cfg.arm_qg] + [QG7_DEG]
-    src = 'source = "benchmarks/bench/cost.py: the paper\'s arm motion (scenario.toml [arm]) as waypoints"'
+    src = 'source = "arvcas/bench/cost.py: the paper\'s arm motion (scenario.toml [arm]) as waypoints"'
 
     def wp(t: float, q: str) -> str:
         return f"[[arm.waypoint]]\nt = {{ value = {t!r}, unit = \"s\", {src} }}\nq = {q}\n"
@@ -411,7 +411,7 @@ JOINT_SERIES = ("call_us_per_sample", "lanes_us_per_sample", "instructions_per_s
 
 
 def _bench_cost(s: Settings, log) -> dict:
-    from benchmarks.bench.common import _CpuMeter, _machine
+    from arvcas.bench.common import _CpuMeter, _machine
 
     m, la0 = _CpuMeter(), [round(x, 2) for x in os.getloadavg()]
     with tempfile.TemporaryDirectory(prefix="arvcas-bench-cost-") as td:
@@ -429,7 +429,7 @@ def _bench_cost(s: Settings, log) -> dict:
 
 def _fmt_s(x: float) -> str:
     """A time with its unit (s, ms, µs)."""
-    from benchmarks.bench.report import _g
+    from arvcas.bench.common import _g
 
     if abs(x) >= 1:
         return f"{_g(x)} s"
@@ -497,7 +497,7 @@ def _fm(st: dict, scale: float = 1.0) -> str:
 
 def _body(r: dict, fig_prefix: str | None) -> list[str]:
     """The section's text (bench.md and results/cost/README.md), figures linked under ``fig_prefix``."""
-    from benchmarks.bench.report import _g
+    from arvcas.bench.common import _g
 
     ln, bt, jt = r["length"], r["batch"], r["joints"]
     tol = r["tolerance"]
@@ -548,7 +548,7 @@ def _body(r: dict, fig_prefix: str | None) -> list[str]:
                     lambda v: f"{v:,.0f}")
     L += ["", f"### (c) Arm joints: {jt['base']}'s vehicle with a generated arm of 0..{jt['rows'][-1]['joints']} joints "
               f"(100 s, `{jt['controller']}`, {jt['opt_level']})", "",
-          f"The system files are written by `benchmarks/bench/cost.py` (`arm_system_text`: joint and link i are "
+          f"The system files are written by `arvcas/bench/cost.py` (`arm_system_text`: joint and link i are "
           f"{jt['base']}'s i, joint 7 a copy of joint 6; the paper's arm motion as waypoints, joint 7 to "
           f"{jt['qg7_deg']:g} deg). Builds: cold, into a fresh empty cache (graph, C, compiler, load); cc: the "
           f"compiler's share; the fastest of {jt['rows'][0]['builds']['run']['n']} cold builds each (the time table's two "
@@ -586,7 +586,7 @@ def cost_markdown(r: dict | None) -> list[str]:
 
 def readme(r: dict) -> str:
     L = ["# Cost against work (issue 26 item 3)", "",
-         "Written by `arvcas bench` (section 9, `benchmarks/bench/cost.py`) from the `cost` key of `../bench.json`; "
+         "Written by `arvcas bench` (section 9, `arvcas/bench/cost.py`) from the `cost` key of `../bench.json`; "
          "`arvcas bench --only cost` measures it again.", "", _measured_line(r["measured"]), ""]
     return "\n".join(L + _body(r, "") + [""])
 

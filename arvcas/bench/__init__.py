@@ -1,18 +1,18 @@
-"""Speed benchmark: plant functions (issue 2), the closed loop (issue 3) and compiling (issue 6).
+"""Speed benchmark: plant functions, the closed loop, compiling and the sections listed below.
 
 :func:`run` measures everything in one process and writes ``bench.json`` (every figure, with the
 machine it was measured on) and ``bench.md`` (the tables) to an output directory. ``arvcas bench``
-is its command line; ``benchmarks/run.py`` and ``python -m benchmarks.bench`` call the same.
+is its command line; ``benchmarks/run.py`` and ``python -m arvcas.bench`` call the same.
 
-One module per section: :mod:`~benchmarks.bench.common` (settings, the required keys, timing and machine
-state), :mod:`~benchmarks.bench.plant` (1), :mod:`~benchmarks.bench.closed_loop` (2),
-:mod:`~benchmarks.bench.targets` (2b: issue 14's targets), :mod:`~benchmarks.bench.compiling` (3),
-:mod:`~benchmarks.bench.startup` (4), :mod:`~benchmarks.bench.systems` (5),
-:mod:`~benchmarks.bench.identification` (6), :mod:`~benchmarks.bench.controller` (7: the exported
-controller's time per step), :mod:`~benchmarks.bench.lanes` (8: lockstep lanes against one run at a time,
-the 40,000-run study), :mod:`~benchmarks.bench.cost` (9: cost against run length, batch size and arm joints),
-:mod:`~benchmarks.bench.runner` (:func:`run`: every section in one process, and :func:`write`) and
-:mod:`~benchmarks.bench.report` (``bench.md``).
+One module per section: :mod:`~arvcas.bench.common` (settings, the required keys, timing and machine
+state), :mod:`~arvcas.bench.plant` (1), :mod:`~arvcas.bench.closed_loop` (2),
+:mod:`~arvcas.bench.targets` (2b: the targets of the default plant step), :mod:`~arvcas.bench.compiling` (3),
+:mod:`~arvcas.bench.startup` (4), :mod:`~arvcas.bench.systems` (5),
+:mod:`~arvcas.bench.identification` (6), :mod:`~arvcas.bench.controller` (7: the exported
+controller's time per step), :mod:`~arvcas.bench.lanes` (8: lockstep lanes against one run at a time,
+the 40,000-run study), :mod:`~arvcas.bench.cost` (9: cost against run length, batch size and arm joints),
+:mod:`~arvcas.bench.runner` (:func:`run`: every section in one process, and :func:`write`) and
+:mod:`~arvcas.bench.report` (``bench.md``).
 
 Rules (STYLE, the guide): speed is measured here, never asserted in a test. Every time is the median
 of repeated measurements (``median``, ``min``, ``max``, ``n`` in the JSON; full mode: n >= 5). Every
@@ -43,7 +43,7 @@ What is measured:
 8. Lockstep lanes (:mod:`arvcas.sim.lockstep`): batches on one thread W runs at a time against one at
    a time, alternated, outputs compared to the bit, with running, mixed and diverging members; a
    40,000-run study on 2 threads: its runs alone, and ``run_study`` end to end.
-9. Cost against work (:mod:`~benchmarks.bench.cost`): Haidou-1's run time against its length (10-1000 s) and
+9. Cost against work (:mod:`~arvcas.bench.cost`): Haidou-1's run time against its length (10-1000 s) and
    against the batch size (1-100,000 runs, one at a time and in lockstep), and per controller sample, CasADi
    instructions and cold compile time against the arm's joints (0-7, generated system files); a line with
    intercept fitted to each series and where it holds; the figures and a README in ``<out>/cost/``.
@@ -58,9 +58,9 @@ simulated time over wall time; ``ratio_*`` and ``*_speedup`` are dimensionless.
 
 from __future__ import annotations
 
-from benchmarks.bench.common import CONTROLLER, REQUIRED_KEYS, RUN_TIME_TOLERANCE, BenchError, Settings
-from benchmarks.bench.compiling import _recommend
-from benchmarks.bench.report import render_markdown
-from benchmarks.bench.runner import run, write
+from arvcas.bench.common import CONTROLLER, REQUIRED_KEYS, RUN_TIME_TOLERANCE, BenchError, Settings
+from arvcas.bench.compiling import _recommend
+from arvcas.bench.report import render_markdown
+from arvcas.bench.runner import run, write
 
 __all__ = ["BenchError", "Settings", "run", "write", "render_markdown", "REQUIRED_KEYS"]

@@ -1,9 +1,9 @@
-"""Section 2b: issue 14's targets (the default plant step against the previous one and the VM).
+"""Section 2b: the speed targets (the default plant step against the previous one and the VM).
 
-Every batch here is one run at a time per core (``lockstep=False``): issue 14's figures; the lockstep
-runs are section 8 (:mod:`benchmarks.bench.lanes`).
+Every batch here is one run at a time per core (``lockstep=False``), as the targets were set; the lockstep
+runs are section 8 (:mod:`arvcas.bench.lanes`).
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 """
 
 from __future__ import annotations
@@ -23,11 +23,11 @@ import numpy as np
 from arvcas.build import calls, codegen
 from arvcas.sim import closedloop, scenario, simulation
 from arvcas.controllers import gains as gains_mod
-from benchmarks.bench.closed_loop import _run_args, _step_instructions
-from benchmarks.bench.common import BenchError, CONTROLLER, Settings, _stat, _time
-from benchmarks.bench.startup import _HWM, _child
+from arvcas.bench.closed_loop import _run_args, _step_instructions
+from arvcas.bench.common import BenchError, CONTROLLER, Settings, _stat, _time
+from arvcas.bench.startup import _HWM, _child
 
-PREVIOUS_H_PLANT = 0.01  # the plant step before issue 14 (results/step chose 0.05 s)
+PREVIOUS_H_PLANT = 0.01  # the plant step before results/step chose 0.05 s
 STUDY_RUNS = 40_000  # a gamultiobj-sized study
 TARGETS = {"rtf": 20_000.0, "study_min": 2.0, "ratio_2_over_1": 1.95}
 
@@ -124,7 +124,7 @@ def _batch_memory(hp: float, n: int, nt: int) -> dict:
 
 
 def _bench_targets(s: Settings, cfg, P, log) -> dict:
-    """Issue 14: one run, a batch on 1 and 2 threads, the 40,000-run projection and the memory per
+    """The targets: one run, a batch on 1 and 2 threads, the 40,000-run projection and the memory per
     thread, at the default plant step and at the previous one (0.01 s), with the VM, in one run."""
     g = gains_mod.default_gains(CONTROLLER)
     p = P.vector()

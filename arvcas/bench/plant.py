@@ -1,6 +1,6 @@
 """Section 1: the plant functions (C driver, map, VM, arvcas.dynamics, export-c, a NumPy yardstick).
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 
 from arvcas.build import codegen, export, dynamics as dynamics_mod
 from arvcas.model import uvms
-from benchmarks.bench.common import BenchError, N_INPUT_SETS, Settings, _scaled, _stat, _time
+from arvcas.bench.common import BenchError, N_INPUT_SETS, Settings, _scaled, _stat, _time
 
 _DRIVER_C = r"""
 /* arvcas bench driver: dlopen a CasADi-generated library, evaluate one function in a loop. */

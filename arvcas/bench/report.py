@@ -1,42 +1,19 @@
 """bench.md: the tables of bench.json.
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 """
 
 from __future__ import annotations
 
-import math
 
-from benchmarks.bench.common import CONTROLLER, N_INPUT_SETS, PLAIN_RK4, PLAIN_RK4_KEY
-from benchmarks.bench.controller import _controller_markdown
-from benchmarks.bench.cost import cost_markdown
-from benchmarks.bench.lanes import _lanes_markdown
-from benchmarks.bench.targets import STUDY_RUNS
+from arvcas.bench.common import CONTROLLER, N_INPUT_SETS, PLAIN_RK4, PLAIN_RK4_KEY, _g, _spread, _verdict
+from arvcas.bench.controller import _controller_markdown
+from arvcas.bench.cost import cost_markdown
+from arvcas.bench.lanes import _lanes_markdown
+from arvcas.bench.targets import STUDY_RUNS
 
 def _m(st) -> float:
     return st["median"] if isinstance(st, dict) else float(st)
-
-
-def _spread(st: dict) -> str:
-    return f"{(st['max'] - st['min']) / st['median']:.0%}" if st["median"] > 0 else "-"
-
-
-def _g(x: float, digits: int = 3) -> str:
-    """Number with ``digits`` significant digits, no exponent for 1e-3..1e6."""
-    if x == 0 or not math.isfinite(x):
-        return str(x)
-    if 1e-3 <= abs(x) < 1e6:
-        dec = max(0, digits - 1 - int(math.floor(math.log10(abs(x)))))
-        return f"{x:,.{dec}f}"
-    return f"{x:.{digits - 1}e}"
-
-
-def _verdict(value: float, target: float, higher_is_better: bool) -> str:
-    ok = value >= target if higher_is_better else value <= target
-    if ok:
-        return "met"
-    miss = (target / value - 1) if higher_is_better else (value / target - 1)
-    return f"**missed by {miss:.0%}**"
 
 
 def _targets_markdown(tg: dict) -> list[str]:
@@ -184,7 +161,7 @@ def render_markdown(res: dict) -> str:
     v = pl["vehicle_rhs"]
     L += [
         "",
-        f"Yardstick, vehicle_rhs written by hand in NumPy (benchmarks/bench/plant.py): "
+        f"Yardstick, vehicle_rhs written by hand in NumPy (arvcas/bench/plant.py): "
         f"{_g(_m(v['numpy_single_us']))} µs per single call, {_g(_m(v['numpy_batch_ns_per_eval']))} ns per "
         f"evaluation vectorised over {s['map_n']:,} rows; arvcas.dynamics: {_g(_m(v['dyn_single_us']))} µs "
         f"and {_g(_m(v['dyn_batch_ns_per_eval']))} ns (NumPy time / dynamics time: "

@@ -1,6 +1,6 @@
-"""Section 8: lockstep lanes in the runs (issue 26 item 2) against one run at a time, in the same run.
+"""Section 8: lockstep lanes in the runs against one run at a time, in the same run.
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 
 (a) Per system with a scenario of its own (its default gains, controller ``proposed``): a batch of
 ``study_pop`` gain sets (the defaults times U(0.95, 1.05): every run goes on to the end) on one thread,
@@ -30,10 +30,10 @@ import numpy as np
 
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim.run import Run
-from benchmarks.bench.common import CONTROLLER, PLAIN_RK4, PLAIN_RK4_KEY, Settings, _stat
-from benchmarks.bench.targets import _env
+from arvcas.bench.common import CONTROLLER, PLAIN_RK4, PLAIN_RK4_KEY, Settings, _stat
+from arvcas.bench.targets import _env
 
-PAPER_STUDY = Path(__file__).resolve().parents[2] / "studies" / "paper.toml"
+PAPER_STUDY = Path(__file__).resolve().parent / "data" / "paper.toml"  # studies/paper.toml (linked, shipped)
 
 
 def _study_text(controller: str, population: int, generations: int) -> str:
@@ -81,7 +81,7 @@ def _bench_batches(s: Settings, log) -> dict:
 
 def _lane_runs(s: Settings, name: str, sysm):
     """The system's run at its default scenario and, with thruster dynamics (not --quick), by plain RK4 at the
-    step shipped before the quadrature (:data:`benchmarks.bench.common.PLAIN_RK4`)."""
+    step shipped before the quadrature (:data:`arvcas.bench.common.PLAIN_RK4`)."""
     run = Run(CONTROLLER, params=sysm).compile()
     yield name, run
     if sysm.structure.has_thruster_dynamics and s.mode != "quick":
@@ -198,7 +198,7 @@ def _bench_study(s: Settings, log) -> dict:
 
 
 def _bench_lanes(s: Settings, log) -> dict:
-    from benchmarks.bench.common import _CpuMeter, _machine
+    from arvcas.bench.common import _CpuMeter, _machine
 
     m, la0 = _CpuMeter(), [round(x, 2) for x in os.getloadavg()]
     res = {"batches": _bench_batches(s, log), "study": _bench_study(s, log), "targets": TARGETS,
@@ -213,7 +213,7 @@ def _lanes_markdown(r: dict | None) -> list[str]:
     """Section 8 of bench.md."""
     if not r:
         return []
-    from benchmarks.bench.report import _g, _spread, _verdict
+    from arvcas.bench.common import _g, _spread, _verdict
 
     T = r["targets"]
     ms = r.get("measured")

@@ -1,6 +1,6 @@
 """Section 2: the closed loop (the compiled 100 s run, the VM, batches with 1 and 2 threads).
 
-Part of the benchmark package (:mod:`benchmarks.bench`, whose docstring says what is measured and how).
+Part of the benchmark package (:mod:`arvcas.bench`, whose docstring says what is measured and how).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 from arvcas.build import calls
 from arvcas.sim import closedloop, scenario, schedule, simulation
 from arvcas.controllers import gains as gains_mod
-from benchmarks.bench.common import BenchError, CONTROLLER, Settings, _stat, _time
+from arvcas.bench.common import BenchError, CONTROLLER, Settings, _stat, _time
 
 def _run_args(fn: ca.Function, g, noise, cfg, p, layout=None) -> list:
     """Arguments of a run function by input name (robust to the order of the inputs)."""
