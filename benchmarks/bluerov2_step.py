@@ -457,7 +457,7 @@ def _g(v) -> str:
 
 
 def markdown(res: dict) -> str:
-    L = ["# Why the BlueROV2 needs a short plant step (issue 26 item 1)", "",
+    L = ["# Why the BlueROV2 needs a short plant step", "",
          f"Written by `python benchmarks/bluerov2_step.py{' --quick' if res['quick'] else ''}` on {res['date']} "
          f"(see its docstring for the method); every figure is in `bluerov2_step.json`. Load average (1, 5, 15 min) "
          f"{' '.join(f'{x:.2f}' for x in res['load_avg_start'])} at the start, "

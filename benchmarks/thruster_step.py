@@ -87,7 +87,7 @@ def main(quadrature: bool = False, res: dict | None = None) -> dict:
 
 
 def markdown(res: dict) -> str:
-    L = ["# The plant step with the T200 dynamics (issue 22)", "",
+    L = ["# The plant step with the T200 dynamics", "",
          "Written by `python benchmarks/thruster_step.py` (see its docstring). The BlueROV2 Heavy + Alpha 5 with its "
          "T200 dynamics, the current and the tether (the shipped scenario), 60 s runs, the plant integrated by plain "
          "RK4 at the steps of the first table (the shipped step, 0.01 s with the thrust quadrature, is the second "

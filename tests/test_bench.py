@@ -135,7 +135,7 @@ def test_cost_quick_section_is_complete_finite_and_in_sweep_order(tmp_path):
         if ".rows[" in where and (last in time_keys or last.endswith(("_s", "_s_per_run", "_per_sample"))):
             assert v > 0, f"{where} = {v}"
     md = (tmp_path / "bench.md").read_text()
-    assert "## 9. Cost against work (issue 26 item 3)" in md
+    assert "## 9. Cost against work" in md
     assert md.index("## 9. Cost against work") < md.index("## Recommendation")
     assert md.index("## 8. Lockstep lanes") < md.index("## 9. Cost against work")
     for name in cost.FIGURES:

@@ -137,7 +137,7 @@ def _controller_markdown(res: dict | None) -> list[str]:
     """The bench.md lines of the section (none for a bench.json written before it existed)."""
     if not res:
         return []
-    L = ["", "## 7. The exported controller: time per step (issue 24)", "",
+    L = ["", "## 7. The exported controller: time per step", "",
          "`arvcas export-controller` with each system's defaults, built by the export's Makefile (arvcas's flags, "
          "without `-mavx`), timed by a C driver over one run's measurements (the initial state plus the scenario's "
          "sensor noise; reset after each run: the first-sample branch included). One step = EKF, reference, law, "

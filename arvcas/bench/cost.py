@@ -579,13 +579,13 @@ def cost_markdown(r: dict | None) -> list[str]:
     """Section 9 of bench.md."""
     if not r:
         return []
-    L = ["", "## 9. Cost against work (issue 26 item 3)", "", _measured_line(r["measured"]), "",
+    L = ["", "## 9. Cost against work", "", _measured_line(r["measured"]), "",
          "The figures and this section's text with them: `cost/README.md` beside this file.", ""]
     return L + _body(r, None)
 
 
 def readme(r: dict) -> str:
-    L = ["# Cost against work (issue 26 item 3)", "",
+    L = ["# Cost against work", "",
          "Written by `arvcas bench` (section 9, `arvcas/bench/cost.py`) from the `cost` key of `../bench.json`; "
          "`arvcas bench --only cost` measures it again.", "", _measured_line(r["measured"]), ""]
     return "\n".join(L + _body(r, "") + [""])

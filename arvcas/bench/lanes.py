@@ -217,7 +217,7 @@ def _lanes_markdown(r: dict | None) -> list[str]:
 
     T = r["targets"]
     ms = r.get("measured")
-    L = ["", "## 8. Lockstep lanes in the runs (issue 26)", ""]
+    L = ["", "## 8. Lockstep lanes in the runs", ""]
     if ms:
         L += [f"Measured on {ms['date']} (commit {ms['git_commit']}; `arvcas bench --only lanes` puts this section "
               f"into the file); load average (1, 5, 15 min) {' '.join(f'{x:.2f}' for x in ms['load_avg_start'])} "

@@ -29,7 +29,7 @@ def _targets_markdown(tg: dict) -> list[str]:
     m1, m2 = d["memory_1"], d["memory_2"]
     isa, cr = tg.get("isa", {"flags": []}), tg.get("corun")  # absent from a bench.json before them
     L = [
-        f"## 2b. Issue 14: the default plant step ({d['h_plant']:g} s) against the previous one "
+        f"## 2b. The default plant step ({d['h_plant']:g} s) against the previous one "
         f"({pv['h_plant']:g} s) and CasADi's VM",
         "",
         f"Same process, same controller (`{CONTROLLER}`, Table 2 gains, seed 0). Compiled runs: the two steps "
@@ -109,7 +109,7 @@ def render_markdown(res: dict) -> str:
         f"- every time is the median of n repetitions (n = {s['reps']} for fast, {s['reps_slow']} for slow "
         f"measurements); spread = (max - min) / median; ratios are against baselines of this same run",
         "",
-        "## 1. Plant functions (issue 2)",
+        "## 1. Plant functions",
         "",
         f"Per evaluation. C: a driver calling the compiled library in a loop over {N_INPUT_SETS} varying "
         f"input sets ({pl['uvms_rhs']['c_ns_per_eval']['evals_per_rep']:,} evaluations per repetition for "
@@ -168,7 +168,7 @@ def render_markdown(res: dict) -> str:
         f"{_m(v['numpy_single_us']) / _m(v['dyn_single_us']):.0f}x single, "
         f"{_m(v['numpy_batch_ns_per_eval']) / _m(v['dyn_batch_ns_per_eval']):.1f}x batched).",
         "",
-        "## 2. Closed loop (issue 3)",
+        "## 2. Closed loop",
         "",
         f"One {cl['duration_s']:g} s run of the `{cl['controller']}` controller ({cl['n_samples']} controller "
         f"samples, {cl['substeps']} RK4 plant substeps each), one core.",
@@ -207,7 +207,7 @@ def render_markdown(res: dict) -> str:
         f"2 threads / 1 thread: **{b['ratio_2_over_1']:.2f}x**.",
         "",
         *(_targets_markdown(res["targets"]) if "targets" in res else []),
-        "## 3. Compiling (issue 6)",
+        "## 3. Compiling",
         "",
         f"Cold: a build into a fresh, empty `ARVCAS_CACHE` (generate C, hash, compile, load). Warm: the "
         f"same graph as a new Function object, found on disk (generate C, hash, verify, load). Memo: the "
@@ -250,7 +250,7 @@ def render_markdown(res: dict) -> str:
                  f"{_g(_m(r['c_ns_per_eval']))} ({_spread(r['c_ns_per_eval'])}) | {r['speedup_vs_base']:.2f}x | "
                  f"{r['cc_ratio_vs_base']:.2f}x |")
     st = res["startup"]
-    L += ["", "## 4. Starting up (issue 11)", "",
+    L += ["", "## 4. Starting up", "",
           "| what | measured | target |", "|---|---|---|",
           f"| warm `arvcas simulate` in a fresh process (wall, median) | {_g(_m(st['warm_simulate_wall_s']))} s | <= 1.0 s |",
           f"| its peak resident memory | {_g(st['warm_simulate_peak_rss_mb'])} MB | <= 300 MB |",
@@ -260,10 +260,10 @@ def render_markdown(res: dict) -> str:
           "", st["note"] + "."]
     sy = res.get("systems")
     if sy:
-        L += ["", "## 5. Systems (issue 12)", "",
+        L += ["", "## 5. Systems", "",
               f"Each shipped system's run at its own default scenario and gains, controller {CONTROLLER}, metrics "
               f"only; the systems timed in interleaved rounds in this run (median). A system with thruster "
-              f"dynamics (issue 22) is also timed without them (`+instantaneous`, the same scenario and step, plain "
+              f"dynamics is also timed without them (`+instantaneous`, the same scenario and step, plain "
               f"RK4) and by plain RK4, the thrust at the stage times (`{PLAIN_RK4_KEY}`: h_plant = "
               f"{PLAIN_RK4['time_h_plant']:g} s, the BlueROV2's shipped step until 2026-12-05, which misses the "
               f"accuracy rule that its shipped thrust quadrature at 0.01 s meets: docs/model.md §9, "
@@ -288,7 +288,7 @@ def _identification_markdown(r: dict | None) -> list[str]:
         return []
     v, i = r["validation"], r["identify"]
     return [
-        "", "## 6. Validation and identification from logs (issue 21)", "",
+        "", "## 6. Validation and identification from logs", "",
         f"Validation of the shipped Hinsdale trial {v['trial']} ({v['duration_s']:.1f} s, {v['samples']} samples at "
         f"50 Hz): reading the log {_g(_m(v['read_s']))} s, the open-loop run and its metrics {_g(_m(v['validate_s']))} s, "
         f"**{_g(v['total_s'])} s** together (target 1 s: {_verdict(v['total_s'], 1.0, False)}). The simulation alone "

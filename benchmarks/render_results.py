@@ -1,0 +1,93 @@
+"""Re-render the results' generated text from their committed data: nothing measured is touched.
+
+Each generated page of ``results/`` is written by the script that measured it, from the JSON it saved beside
+it; this script renders every such page again from that JSON alone, so that editing a page's wording (in the
+script) and checking that the committed page is the script's rendering of the committed data need no
+re-measurement:
+
+    python benchmarks/render_results.py           # rewrite the pages below
+    python benchmarks/render_results.py --check   # exit 1 naming each page that differs (tests/test_readme.py)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # run as a script from anywhere: the benchmarks package is the checkout's
+    sys.path.insert(0, str(ROOT))
+
+
+def _bench_md(doc: dict) -> str:
+    from arvcas.bench.report import render_markdown
+    return render_markdown(doc)
+
+
+def _cost_readme(doc: dict) -> str:
+    from arvcas.bench import cost
+    return cost.readme(doc["cost"])
+
+
+def _bluerov2_step(doc: dict) -> str:
+    from benchmarks import bluerov2_step
+    return bluerov2_step.markdown(doc)
+
+
+def _thrusters(doc: dict) -> str:
+    from benchmarks import thruster_step
+    return thruster_step.markdown(doc)
+
+
+def _lockstep(doc: dict) -> str:
+    from benchmarks import lockstep
+    return lockstep.markdown(doc)
+
+
+# (the page, the JSON it is rendered from, the renderer), paths relative to the checkout
+PAGES = [
+    ("results/bench.md", "results/bench.json", _bench_md),
+    ("results/cost/README.md", "results/bench.json", _cost_readme),
+    ("results/bluerov2_step/README.md", "results/bluerov2_step/bluerov2_step.json", _bluerov2_step),
+    ("results/step/bluerov2_heavy_alpha5/thrusters.md", "results/step/bluerov2_heavy_alpha5/thrusters.json", _thrusters),
+    ("results/lockstep/README.md", "results/lockstep/lockstep.json", _lockstep),
+]
+
+
+def rendered(root: Path = ROOT) -> dict[str, str]:
+    """Every page's text as its script renders it from the committed JSON."""
+    return {page: fn(json.loads((root / src).read_text())) for page, src, fn in PAGES}
+
+
+def _write(path: Path, text: str) -> None:
+    """A page arvcas's writer recorded in its folder's manifest is replaced through that writer (the manifest
+    stays true); the others were written plainly by their scripts and are so again."""
+    from arvcas.io import files
+    if files.written_by_arvcas(path):
+        files.write_text(path, text, kind="md")
+    else:
+        path.write_text(text)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description="re-render the results' generated pages from their committed JSON")
+    ap.add_argument("--check", action="store_true", help="exit 1 if a committed page differs from its rendering")
+    a = ap.parse_args(argv)
+    stale = []
+    for page, text in rendered().items():
+        if a.check:
+            if (ROOT / page).read_text() != text:
+                stale.append(page)
+        else:
+            _write(ROOT / page, text)
+    if stale:
+        print("render_results: differ from their rendering (run python benchmarks/render_results.py): "
+              + ", ".join(stale), file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
