@@ -122,13 +122,14 @@ def test_identified_file_round_trip_and_cli(vehicle, tmp_path, capsys):
     assert np.array_equal([ident.params[n] for n in same], [model.params[n] for n in same])
     # validation with it: validation.json has the shape, in SI
     vd = tmp_path / "val"
-    assert main(["validate", "--system", str(out), str(paths[0]), "--out", str(vd)]) == 0
+    assert main(["validate", "--system", str(out), str(paths[0]), "--out", str(vd), "--figures"]) == 0
     doc = json.loads((vd / "validation.json").read_text())
     assert doc["system"] == "hinsdale_vehicle_identified"
     m = doc["trials"]["s5"]
     for key in ("rmse", "nrmse", "r2", "max_error"):
         assert set(m[key]) == {"x", "y", "z", "roll", "pitch", "yaw", "p", "q", "r"}
     assert m["rmse"]["roll"] < 3 * synthetic.NOISE["attitude"] and m["r2"]["pitch"] > 0.9
+    assert m["role"] == "fit" and set(doc["summary"]) == {"fit"}  # its sources name the trials it was fitted on
     assert (vd / "s5.png").stat().st_size > 0 and "s5" in (vd / "README.md").read_text()
 
 
