@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 import pytest
-import tomlkit
+from ident_helpers import vehicle_only
 
 import arvcas
 from arvcas.cli import main
@@ -30,15 +30,7 @@ START = {"vehicle.zB": -0.02, "vehicle.Ixx": 0.30, "hydro.K_p": -0.2, "hydro.M_q
 @pytest.fixture(scope="module")
 def vehicle(tmp_path_factory):
     """The Hinsdale vehicle without its arm, as a system file; and that system with the 'true' parameters."""
-    src = arvcas.load_system("hinsdale_bluerov2_alpha5").path
-    doc = tomlkit.parse(open(src, encoding="utf-8").read())
-    for k in ("arm", "payload", "defaults"):
-        doc.pop(k, None)
-    doc["system"]["name"] = "hinsdale_vehicle"
-    d = tmp_path_factory.mktemp("vehicle")
-    path = d / "hinsdale_vehicle.toml"
-    path.write_text(tomlkit.dumps(doc))
-    sys_ = arvcas.load_system(path)
+    sys_ = vehicle_only("hinsdale_bluerov2_alpha5", "hinsdale_vehicle", tmp_path_factory.mktemp("vehicle"))
     return sys_, System(sys_.params.replace(TRUTH_CHANGE))
 
 

@@ -15,9 +15,8 @@ import math
 
 import numpy as np
 import pytest
-import tomlkit
+from ident_helpers import vehicle_only
 
-import arvcas
 from arvcas.cli import main
 from arvcas.ident import logs, plant, synthetic, validate
 from arvcas.model.spatial import J
@@ -114,15 +113,9 @@ def test_ar1_residual_does_not_pass():
 @pytest.fixture(scope="module")
 def vehicle(tmp_path_factory):
     """The Hinsdale vehicle without its arm (small compiled code), and a noise-free synthetic trial of it."""
-    src = arvcas.load_system("hinsdale_bluerov2_alpha5").path
-    doc = tomlkit.parse(open(src, encoding="utf-8").read())
-    for k in ("arm", "payload", "defaults"):
-        doc.pop(k, None)
-    doc["system"]["name"] = "hinsdale_vehicle"
     d = tmp_path_factory.mktemp("vm")
-    path = d / "hinsdale_vehicle.toml"
-    path.write_text(tomlkit.dumps(doc))
-    system = arvcas.load_system(path)
+    system = vehicle_only("hinsdale_bluerov2_alpha5", "hinsdale_vehicle", d)
+    path = system.path
     quiet = {"position": 1e-9, "attitude": 1e-9, "rate": 1e-9}  # noise-free (a std must be > 0)
     seed, duration = 3, 6.0
     lp = synthetic.write_trial(d, "quiet", system, duration=duration, seed=seed, noise=quiet)
