@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from ident_helpers import vehicle_only
 
+import arvcas
 from arvcas.cli import main
 from arvcas.ident import logs, plant, synthetic, validate
 from arvcas.model.spatial import J
@@ -230,3 +231,57 @@ def test_validate_command_summary_roles_and_refusals(vehicle, tmp_path, capsys):
         err = capsys.readouterr().err
         assert rc == 2 and match in err and err.count("\n") == 1, err
         assert not (tmp_path / "w").exists()
+
+
+# ---- the parsed-log cache -------------------------------------------------------------------------------
+
+
+def _same_log(a, b):
+    for f in dataclasses.fields(a):
+        va, vb = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(va, np.ndarray):
+            assert np.array_equal(va, vb), f.name
+        elif isinstance(va, dict):
+            assert va.keys() == vb.keys() and all(np.array_equal(va[k], vb[k]) for k in va), f.name
+        elif f.name != "joints":
+            assert va == vb, f.name
+    if a.joints is not None:
+        tt = np.linspace(-1.0, a.t[-1] + 1.0, 777)
+        assert all(np.array_equal(u, v) for u, v in zip(a.joints(tt), b.joints(tt)))
+
+
+def test_parsed_log_cache(vehicle, tmp_path, monkeypatch):
+    from arvcas.ident import logcache
+
+    system, _, _, _, _ = vehicle
+    monkeypatch.setenv("ARVCAS_CACHE", str(tmp_path / "cache"))
+    full = arvcas.load_system("hinsdale_bluerov2_alpha5")  # with its arm: joint splines in the log
+    path = synthetic.write_trial(tmp_path / "logs", "armed", full, duration=3.0, seed=1)
+    fresh = logs.load_log(path, 4)
+    _same_log(fresh, logcache.load_log(path, 4))
+    assert len(list((tmp_path / "cache" / "logs").glob("*.npz"))) == 1
+
+    def no_reading(*a, **k):
+        raise AssertionError("read again")
+
+    with monkeypatch.context() as mp:  # unchanged: from the cache, equal bit for bit
+        mp.setattr(logs, "load_log", no_reading)
+        _same_log(fresh, logcache.load_log(path, 4))
+    # a changed stream file, another joint count, a bad mapping: read again (and refused as load_log refuses)
+    imu = path.parent / "armed_imu.csv"
+    rows = imu.read_text().splitlines()
+    cols = rows[1].split(",")
+    cols[1] = repr(float(cols[1]) + 0.5)
+    imu.write_text("\n".join([rows[0], ",".join(cols), *rows[2:]]) + "\n")
+    changed = logcache.load_log(path, 4)
+    assert changed.signals["p"][0] != fresh.signals["p"][0]
+    _same_log(logs.load_log(path, 4), changed)
+    with pytest.raises(logs.LogError, match="joint"):
+        logcache.load_log(path, 2)
+    twin = path.parent / "twin.log.toml"  # the same [log] name in another mapping file
+    twin.write_text(path.read_text())
+    with pytest.raises(logs.LogError, match="trial name 'armed' is also the name of"):
+        logcache.load_logs([path, twin], 4)
+    path.write_text(path.read_text().replace("[log]", "[log]\nbogus = 1", 1))
+    with pytest.raises(logs.LogError, match="bogus"):
+        logcache.load_log(path, 4)

@@ -56,7 +56,7 @@ def _system(a):
 
 
 def _logs(a, system):
-    from arvcas.ident.logs import load_logs
+    from arvcas.ident.logcache import load_logs  # parsed once, then from the cache (arvcas.ident.logcache)
     from arvcas.ident.plant import check_commands
 
     logs = load_logs(a.logs, system.n_joints, tuple(system.structure.thrusters or ()))
