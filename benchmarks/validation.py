@@ -256,6 +256,7 @@ def summary(out: Path) -> None:
               *_engineers(out, a, b, role),
               "## The identification", "", "```", "identification of" + head.rstrip(), "```", "",
               *_where(out, a, b),
+              *_speed(out),
               "## Synthetic truth", "",
               f"`synthetic/`: {syn['seeds']} noise seeds of two simulated {syn['duration_s']:g} s trials each, the "
               f"Hinsdale vehicle and arm with known parameters: {syn['coverage_all']:.1%} of {syn['n_intervals']} "
@@ -263,6 +264,22 @@ def summary(out: Path) -> None:
               f"(synthetic/README.md)."]
     files.write_text(out / "README.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+def _speed(out: Path) -> list[str]:
+    """The speed section from ``speed.json``."""
+    d = json.loads((out / "speed.json").read_text())
+    lines = ["## Speed", "", f"`speed.json` ({d['machine']}): {d['what']}. Wall time on a shared machine swings "
+             "with its load; the CPU time of the process is the steadier measure.", "",
+             "| step | CSV: wall best (s) | CSV: CPU (s) | ROS 2 bag: wall best (s) | ROS 2 bag: CPU (s) |",
+             "|---|---|---|---|---|"]
+    csv, bag = d["rows"]["csv"], d["rows"]["ros2 bag (mcap)"]
+    for n, v in csv.items():
+        w = bag.get(n)
+        lines.append(f"| {n} | {v['best_s']:.3f} | {v['cpu_best_s']:.3f} | "
+                     f"{'-' if w is None else format(w['best_s'], '.3f')} | "
+                     f"{'-' if w is None else format(w['cpu_best_s'], '.3f')} |")
+    return lines + [""]
 
 
 def _engineers(out: Path, a: dict, b: dict, role: dict) -> list[str]:
