@@ -225,7 +225,8 @@ def test_validate_command_summary_roles_and_refusals(vehicle, tmp_path, capsys):
     doc = json.loads((out / "validation.json").read_text())
     assert doc["trials"]["noisy"]["role"] == "fit" and (out / "noisy.svg").stat().st_size > 0
     for args, match in ((["--k", "0"], "--k: the prediction horizon must be in"),
-                        (["--format", "pdf"], "--format pdf: figures are drawn only with --figures")):
+                        (["--format", "pdf"], "--format pdf: figures are drawn only with --figures"),
+                        (["--fitted", "noisy,nosy"], "--fitted: no trial named 'nosy' among the logs given (noisy)")):
         capsys.readouterr()
         rc = main(["validate", "--system", str(path), str(noisy), "--out", str(tmp_path / "w"), *args])
         err = capsys.readouterr().err

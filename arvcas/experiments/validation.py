@@ -333,6 +333,10 @@ def run_validate(a) -> int:
         if lg.name != _trial_name(p):
             raise ValueError(f"{p}: [log] name {lg.name!r} differs from the file's name {_trial_name(p)!r}: "
                              f"the output figure is named by the file")
+    unknown = sorted(set(a.fitted or ()) - {lg.name for lg in logs})
+    if unknown:
+        raise ValueError(f"--fitted: no trial named {unknown[0]!r} among the logs given "
+                         f"({', '.join(lg.name for lg in logs)})")
     files.prepare_dir(a.out, "--out")
     t0 = time.perf_counter()
     results = []
