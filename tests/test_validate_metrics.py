@@ -286,3 +286,11 @@ def test_parsed_log_cache(vehicle, tmp_path, monkeypatch):
     path.write_text(path.read_text().replace("[log]", "[log]\nbogus = 1", 1))
     with pytest.raises(logs.LogError, match="bogus"):
         logcache.load_log(path, 4)
+
+
+def test_help_is_printed(capsys):
+    """argparse formats help strings with %: the command list and the command's options must print."""
+    for args in (["--help"], ["validate", "--help"]):
+        assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "FIT percent" in out and "--k N" in out and "--figures" in out
