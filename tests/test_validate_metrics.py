@@ -279,6 +279,17 @@ def test_parsed_log_cache(vehicle, tmp_path, monkeypatch):
     _same_log(logs.load_log(path, 4), changed)
     with pytest.raises(logs.LogError, match="joint"):
         logcache.load_log(path, 2)
+    # a mapping whose strings name its own directory or one above, or too many files, is read, never cached
+    odd = tmp_path / "logs" / "odd.log.toml"
+    for value, cached in (("armed_imu.csv", True), (".", False), ("..", False), ("nothing.csv", True)):
+        odd.write_text(f'[log]\nname = "odd"\nsource = "{value}"\n')
+        assert (logcache._key(odd, 4, None) is not None) == cached, value
+    many = tmp_path / "logs" / "many"
+    many.mkdir()
+    for i in range(logcache.MAX_FILES + 1):
+        (many / f"{i}.csv").write_text("t\n")
+    odd.write_text('[log]\nname = "odd"\nbag = "many"\n')
+    assert logcache._key(odd, 4, None) is None
     twin = path.parent / "twin.log.toml"  # the same [log] name in another mapping file
     twin.write_text(path.read_text())
     with pytest.raises(logs.LogError, match="trial name 'armed' is also the name of"):

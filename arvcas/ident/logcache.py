@@ -9,7 +9,8 @@ read by :func:`arvcas.ident.logs.load_log` is stored as an ``.npz`` file (no pic
 * the mapping file's path as given, its bytes, and the system's joint count and thruster names it was checked
   against,
 * the bytes of every file the mapping names: each string value of the mapping that is the name of a file or a
-  directory next to it (a directory: every file below it).
+  directory next to it (a directory: every file below it; a mapping that names its own directory or one above
+  it, or more than :data:`MAX_FILES` files, is not cached).
 
 Any change to any of them reads the log again. A mapping that does not load raises as
 :func:`arvcas.ident.logs.load_log` does (it is never cached); a cache that cannot be written or read is
@@ -46,12 +47,21 @@ def _code_digest() -> str:
 _CODE: list[str] = []
 
 
+MAX_FILES = 1000  # a mapping naming more files than this (a directory of many) is not cached
+
+
+class _NotCached(Exception):
+    pass
+
+
 def _named_files(mapping: Path, text: str) -> list[Path]:
-    """Every file the mapping's string values name, relative to its directory (directories: their files)."""
+    """Every file the mapping's string values name, relative to its directory (directories: their files).
+    :class:`_NotCached` for a value naming the mapping's own directory or one above it, or too many files."""
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError:
         return []
+    home = mapping.parent.resolve()
     out: set[Path] = set()
 
     def walk(v):
@@ -67,7 +77,13 @@ def _named_files(mapping: Path, text: str) -> list[Path]:
                 if p.is_file():
                     out.add(p)
                 elif p.is_dir():
-                    out.update(q for q in p.rglob("*") if q.is_file())
+                    if home.is_relative_to(p.resolve()):
+                        raise _NotCached
+                    for q in p.rglob("*"):
+                        if q.is_file():
+                            out.add(q)
+                            if len(out) > MAX_FILES:
+                                raise _NotCached
             except (OSError, ValueError):
                 pass
 
@@ -86,7 +102,11 @@ def _key(path: Path, n_joints, thruster_names) -> str | None:
     h = hashlib.sha256(_CODE[0].encode())
     h.update(json.dumps([str(path), n_joints, list(thruster_names) if thruster_names is not None else None]).encode())
     h.update(hashlib.sha256(raw).digest())
-    for f in _named_files(path, text):
+    try:
+        named = _named_files(path, text)
+    except _NotCached:
+        return None
+    for f in named:
         try:
             h.update(f"{f.relative_to(path.parent).as_posix()}\0".encode())
             h.update(hashlib.sha256(f.read_bytes()).digest())
