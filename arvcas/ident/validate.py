@@ -31,8 +31,7 @@ The initial velocity is not measured by pose alone: ``nu_0 = J(eta_0)^-1 eta_dot
 the slope at t = 0 of a quadratic fitted by least squares to the first :data:`FIT_WINDOW_S` of the pose
 (and the logged body velocities or rates where a stream gives them, fitted the same way).
 
-The k-step predictor restarts at later samples the same way, centred (:func:`logged_states`): a pose
-component the log measures is its logged value, one it does not is the open-loop simulation's; a body
+The k-step predictor restarts at later samples from :func:`logged_states`: a pose component the log measures is its logged value, one it does not is the open-loop simulation's; a body
 velocity a stream measures is its logged value; the others are the simulation's, corrected by least
 squares (the smallest change) so that ``J(eta) nu`` matches the rate of change of the measured pose
 components, taken as the slope of a quadratic fitted over :data:`FIT_WINDOW_S` centred on the sample
