@@ -772,9 +772,9 @@ def _table() -> tuple[Command, ...]:
                 "(table, plot)", x.add_sweep, x.run_sweep,
                 inputs=(("config", "file"), ("params", "system"), ("check", "file")),
                 outputs=x.sweep_outputs, check=x.check_sweep, plugins=True),
-        Command("validate", "simulate a system open loop over logged trials (*.log.toml) and compare: RMSE, NRMSE, "
-                "R^2 per signal, figures", v.add_validate, v.run_validate,
-                inputs=(("system", "system"),), outputs=v.validate_outputs),
+        Command("validate", "simulate a system open loop and k steps ahead over logged trials (*.log.toml) and "
+                "compare: RMSE, NRMSE, R^2, FIT percent, residual tests per signal", v.add_validate, v.run_validate,
+                inputs=(("system", "system"),), outputs=v.validate_outputs, check=v.check_validate),
         Command("identify", "estimate named parameters of a system from logged trials (IPOPT, 95 percent "
                 "intervals): writes the identified system file", v.add_identify, v.run_identify,
                 inputs=(("system", "system"),), outputs=v.identify_outputs, check=v.check_identify),

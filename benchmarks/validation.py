@@ -16,6 +16,9 @@ Parts (each writes under ``--out``, default ``results/validation``):
 * ``synthetic``: identification of :data:`SYN_FREE` of the Hinsdale system (arm included) from trials
   simulated with known parameters and stated sensor noise, :data:`SYN_SEEDS` noise seeds: estimates, 95 %
   intervals, their coverage of the truth -> ``synthetic/synthetic.json`` and ``synthetic/README.md``;
+* ``speed``: where the time of ``arvcas validate`` goes on the 20 s trial :data:`SPEED_TRIAL` (its CSV logs, and
+  the same trial written as a ROS 2 bag): reading the log, the open-loop simulation, the k-step prediction,
+  the residual tests, one figure; best of :data:`SPEED_REPEATS` after a first (compiling) run -> ``speed.json``;
 * ``summary``: ``README.md`` from the files above, beside the figures the trials' authors report.
 """
 
@@ -24,6 +27,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -49,6 +54,9 @@ SYN_TRUTH = {"vehicle.zB": -0.011, "vehicle.Ixx": 0.50, "vehicle.Iyy": 0.55, "hy
              "hydro.K_p_absp": -2.0}
 SYN_SEEDS = 20
 SYN_DURATION = 20.0
+K = 25  # samples (0.5 s at the trials' 50 Hz): the k-step-ahead prediction's horizon
+SPEED_TRIAL = "traj014-2"  # 20.0 s
+SPEED_REPEATS = 7
 
 
 def _all():
@@ -64,8 +72,16 @@ def _cli(args: list[str]) -> None:
         sys.exit(f"arvcas {args[0]} failed with exit code {rc}")
 
 
+def _rel(p: Path) -> str:
+    """A path below the repository as the command is given it, relative to it (main() works there): no
+    machine's path in any output; a path elsewhere as it is."""
+    p = Path(p).resolve()
+    return p.relative_to(ROOT).as_posix() if p.is_relative_to(ROOT) else str(p)
+
+
 def sourced(out: Path) -> None:
-    _cli(["validate", "--system", SYSTEM, *map(str, _all()), "--out", str(out / "sourced"), "--force"])
+    _cli(["validate", "--system", SYSTEM, *map(_rel, _all()), "--out", _rel(out / "sourced"), "--force",
+          "--k", str(K), "--figures"])
 
 
 def identify(out: Path) -> None:
@@ -76,7 +92,7 @@ def identify(out: Path) -> None:
     t0 = time.perf_counter()
     with contextlib.redirect_stdout(buf):
         _cli(["identify", "--system", SYSTEM, "--free", ",".join(FREE), "--signals", ",".join(SIGNALS),
-              *[str(TRIALS / f"{t}.log.toml") for t in FIT], "--out", str(out / f"{SYSTEM}_identified.toml"),
+              *[_rel(TRIALS / f"{t}.log.toml") for t in FIT], "--out", _rel(out / f"{SYSTEM}_identified.toml"),
               "--force"])
     text = buf.getvalue() + f"wall time {time.perf_counter() - t0:.1f} s\n"
     print(text)
@@ -86,8 +102,8 @@ def identify(out: Path) -> None:
 
 
 def identified(out: Path) -> None:
-    _cli(["validate", "--system", str(out / f"{SYSTEM}_identified.toml"), *map(str, _all()), "--out",
-          str(out / "identified"), "--force"])
+    _cli(["validate", "--system", _rel(out / f"{SYSTEM}_identified.toml"), *map(_rel, _all()), "--out",
+          _rel(out / "identified"), "--force", "--k", str(K), "--figures"])
 
 
 def step(out: Path) -> None:
@@ -203,6 +219,7 @@ def summary(out: Path) -> None:
     st = json.loads((out / "step.json").read_text())
     syn = json.loads((out / "synthetic" / "synthetic.json").read_text())
     head = (out / "identify.log").read_text().split("identification of", 1)[1]
+    head = re.sub(r"wrote \S*?(results/validation/)", r"wrote \1", head)  # the path relative to the repository
     deg = lambda v: f"{math.degrees(v):.2f}"  # noqa: E731
     role = {**{t: "fit" for t in FIT}, **{t: "held out" for t in HELD_OUT}, **{t: "baseline" for t in BASELINES}}
     lines = ["# The Hinsdale pool trials against arvcas", "",
@@ -236,8 +253,10 @@ def summary(out: Path) -> None:
                   f"2024, Table II); no per-trial figure is published. The plant step: 0.02 s (the logs' sample "
                   f"time) differs from 0.005 s by at most {math.degrees(st['worst']['roll']):.1e} deg in roll and "
                   f"{math.degrees(st['worst']['pitch']):.1e} deg in pitch on any trial (`step.json`).", "",
+              *_engineers(out, a, b, role),
               "## The identification", "", "```", "identification of" + head.rstrip(), "```", "",
               *_where(out, a, b),
+              *_speed(out),
               "## Synthetic truth", "",
               f"`synthetic/`: {syn['seeds']} noise seeds of two simulated {syn['duration_s']:g} s trials each, the "
               f"Hinsdale vehicle and arm with known parameters: {syn['coverage_all']:.1%} of {syn['n_intervals']} "
@@ -245,6 +264,84 @@ def summary(out: Path) -> None:
               f"(synthetic/README.md)."]
     files.write_text(out / "README.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+def _speed(out: Path) -> list[str]:
+    """The speed section from ``speed.json``."""
+    d = json.loads((out / "speed.json").read_text())
+    lines = ["## Speed", "", f"`speed.json` ({d['machine']}): {d['what']}. Wall time on a shared machine swings "
+             "with its load; the CPU time of the process is the steadier measure.", "",
+             "| step | CSV: wall best (s) | CSV: CPU (s) | ROS 2 bag: wall best (s) | ROS 2 bag: CPU (s) |",
+             "|---|---|---|---|---|"]
+    csv, bag = d["rows"]["csv"], d["rows"]["ros2 bag (mcap)"]
+    for n, v in csv.items():
+        w = bag.get(n)
+        lines.append(f"| {n} | {v['best_s']:.3f} | {v['cpu_best_s']:.3f} | "
+                     f"{'-' if w is None else format(w['best_s'], '.3f')} | "
+                     f"{'-' if w is None else format(w['cpu_best_s'], '.3f')} |")
+    return lines + [""]
+
+
+def _engineers(out: Path, a: dict, b: dict, role: dict) -> list[str]:
+    """FIT %, the k-step-ahead prediction and the residual tests per role and signal, sourced and identified."""
+    import statistics
+
+    doc = json.loads((out / "identified" / "validation.json").read_text())
+    k = next(t["kstep"]["k"] for t in b.values())
+    band = doc["definitions"]["resid"]
+    med = lambda v: statistics.median(v) if v else float("nan")  # noqa: E731
+    lines = ["## FIT %, k-step-ahead prediction and residual tests", "",
+             f"The same trials as MATLAB's System Identification Toolbox would show them: FIT % = 100 (1 - ||y - y_hat|| "
+             f"/ ||y - mean y||) of the open-loop simulation and of the {k}-step-ahead prediction ({k} samples, "
+             f"{k / 50:g} s: the state restarted from the log every {k} samples as `compare(data, sys, {k})`; the "
+             "unmeasured x, y are the simulation's, the body velocities u, v, w the simulation's corrected to the "
+             "measured depth's rate of change), and the residual tests of `resid` on the open-loop residual "
+             f"({band}). Medians over the trials of each role; `identified/validation.json` and "
+             "`sourced/validation.json` hold every trial.", "",
+             f"| role | signal | FIT % sim, sourced | FIT % sim, identified | FIT % {k}-step, sourced | "
+             f"FIT % {k}-step, identified | autocorr. lags out, identified | cross-corr. lags out (worst input), "
+             "identified |", "|---|---|---|---|---|---|---|---|"]
+    for r in ("fit", "held out", "baseline"):
+        ts = [t for t in FIT + HELD_OUT + BASELINES if role[t] == r]
+        for s in ("roll", "pitch", "p", "q", "z"):
+            fa = med([a[t]["fit"][s] for t in ts])
+            fb = med([b[t]["fit"][s] for t in ts])
+            ka = med([a[t]["kstep"]["fit"][s] for t in ts])
+            kb = med([b[t]["kstep"]["fit"][s] for t in ts])
+            au = med([b[t]["resid"][s]["auto_outside"] for t in ts])
+            cr = med([max(b[t]["resid"][s]["cross_outside"].values()) for t in ts])
+            lines.append(f"| {r} | {s} | {fa:.1f} | {fb:.1f} | {ka:.1f} | {kb:.1f} | {au:.0%} | {cr:.0%} |")
+    # the prediction error against its horizon, on one held-out trial: what a restart from the log costs
+    import arvcas
+    from arvcas.ident import logs, plant, validate
+
+    system = arvcas.load_system(out / f"{SYSTEM}_identified.toml")
+    t = HELD_OUT[1]
+    lg = logs.load_log(TRIALS / f"{t}.log.toml", system.n_joints)
+    r = validate.validate_log(system, lg, k=k)
+    hz = (np.arange(1, len(lg.t)) - 1) % k + 1
+    grow = {}
+    for s in ("roll", "p"):
+        e = r.predicted[s][1:] - r.measured[s][1:]
+        grow[s] = [math.degrees(math.sqrt(float(np.mean(e[hz == h] ** 2)))) for h in (1, 5, k)]
+    worse = [(r, s) for r in ("fit", "held out", "baseline") for s in ("p", "q")
+             if med([b[t]["kstep"]["fit"][s] for t in FIT + HELD_OUT + BASELINES if role[t] == r]) <
+             med([b[t]["fit"][s] for t in FIT + HELD_OUT + BASELINES if role[t] == r])]
+    auto_min = min(b[t]["resid"][s]["auto_outside"] for t in b for s in ("roll", "pitch", "p", "q", "z"))
+    lines += ["", f"Restarting from the log removes the depth's drift (its k-step FIT % near 100) and improves roll "
+                  f"and pitch, but the body rates are not always predicted better {k} samples ahead than by the "
+                  f"open-loop simulation (identified: worse in {len(worse)} of the 6 role medians of p and q): each "
+                  "restart places the model at the vehicle's measured attitude and rates, where its restoring and "
+                  "damping moments differ from the vehicle's, and the rates' error grows with the horizon (held-out "
+                  f"{t}, identified: p RMS error {grow['p'][0]:.2f}, {grow['p'][1]:.2f}, {grow['p'][2]:.2f} deg/s at "
+                  f"1, 5, {k} samples ahead; roll {grow['roll'][0]:.3f}, {grow['roll'][1]:.3f}, {grow['roll'][2]:.3f} "
+                  "deg). The open-loop simulation instead settles about the model's own equilibrium and its rates "
+                  "stay small. The residual tests fail on every trial: "
+                  + ("every" if auto_min == 1.0 else f"at least {auto_min:.0%} of the") + " autocorrelation lag "
+                  "of roll, pitch, p, q and depth is outside the 99 % band (a white residual leaves about 1 %): "
+                  f"the residuals persist over the {validate.RESID_LAGS} lags ({validate.RESID_LAGS / 50:g} s), model "
+                  "error rather than sensor noise, as the intervals below say.", ""]
+    return lines
 
 
 def _where(out: Path, a: dict, b: dict) -> list[str]:
@@ -294,8 +391,173 @@ def _where(out: Path, a: dict, b: dict) -> list[str]:
     ]
 
 
+def _bag(d: Path, trial: str) -> Path:
+    """The trial's three CSV streams written as one ROS 2 bag (MCAP; sensor_msgs/Imu, PoseStamped, JointState
+    stamped with the CSV times) and its mapping file: the same signals as the trial's own mapping."""
+    import gzip
+
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    Imu, Pose, JS = T["sensor_msgs/msg/Imu"], T["geometry_msgs/msg/PoseStamped"], T["sensor_msgs/msg/JointState"]
+    Hd, Tm, Q, V, P, Pt = (T[n] for n in ("std_msgs/msg/Header", "builtin_interfaces/msg/Time",
+                                          "geometry_msgs/msg/Quaternion", "geometry_msgs/msg/Vector3",
+                                          "geometry_msgs/msg/Pose", "geometry_msgs/msg/Point"))
+
+    def rows(kind):
+        with gzip.open(TRIALS / f"{trial}_{kind}.csv.gz", "rt") as f:
+            head = f.readline().strip().split(",")
+            a = np.loadtxt(f, delimiter=",", ndmin=2)
+        return {h: a[:, i] for i, h in enumerate(head)}
+
+    def header(t):
+        sec = int(t)
+        return Hd(stamp=Tm(sec=sec, nanosec=int(round((t - sec) * 1e9))), frame_id="")
+
+    bag = d / f"{trial}_bag"
+    cov = np.zeros(9)
+    with Writer(bag, version=8, storage_plugin=StoragePlugin.MCAP) as w:
+        ci = w.add_connection("/imu", Imu.__msgtype__, typestore=ts)
+        cm = w.add_connection("/mocap", Pose.__msgtype__, typestore=ts)
+        cj = w.add_connection("/joints", JS.__msgtype__, typestore=ts)
+        r = rows("imu")
+        for i, t in enumerate(r["time_secs"]):
+            m = Imu(header=header(t), orientation=Q(x=r["x_ori"][i], y=r["y_ori"][i], z=r["z_ori"][i], w=r["w_ori"][i]),
+                    orientation_covariance=cov, angular_velocity=V(x=r["x_angvel"][i], y=r["y_angvel"][i],
+                                                                   z=r["z_angvel"][i]),
+                    angular_velocity_covariance=cov, linear_acceleration=V(x=0.0, y=0.0, z=0.0),
+                    linear_acceleration_covariance=cov)
+            w.write(ci, int(t * 1e9), ts.serialize_cdr(m, Imu.__msgtype__))
+        r = rows("mocap")
+        for i, t in enumerate(r["time_secs"]):
+            m = Pose(header=header(t), pose=P(position=Pt(x=r["x_pose"][i], y=r["y_pose"][i], z=r["z_pose"][i]),
+                                              orientation=Q(x=r["x_ori"][i], y=r["y_ori"][i], z=r["z_ori"][i],
+                                                            w=r["w_ori"][i])))
+            w.write(cm, int(t * 1e9), ts.serialize_cdr(m, Pose.__msgtype__))
+        r = rows("joint_states")
+        ax = ("axis_e_pos", "axis_d_pos", "axis_c_pos", "axis_b_pos")
+        for i, t in enumerate(r["time_secs"]):
+            m = JS(header=header(t), name=list(ax), position=np.array([r[a][i] for a in ax]), velocity=np.zeros(4),
+                   effort=np.zeros(4))
+            w.write(cj, int(t * 1e9), ts.serialize_cdr(m, JS.__msgtype__))
+    text = (TRIALS / f"{trial}.log.toml").read_text()
+    head = text[text.index("[log]"):text.index("[[stream]]")]
+    mapping = d / f"{trial}.log.toml"
+    mapping.write_text(head + f'''bag = "{bag.name}"
+
+[[stream]]
+topic = "/imu"
+time = "header.stamp"
+world = "nwu"
+body = "flu"
+quaternion = {{ columns = ["orientation.x", "orientation.y", "orientation.z", "orientation.w"] }}
+angular_velocity = {{ columns = ["angular_velocity.x", "angular_velocity.y", "angular_velocity.z"], unit = "rad/s" }}
+
+[[stream]]
+topic = "/mocap"
+time = "header.stamp"
+world = "nwu"
+depth = {{ columns = ["pose.position.z"], unit = "m" }}
+
+[[stream]]
+topic = "/joints"
+time = "header.stamp"
+[stream.joints]
+q1 = {{ column = "position[0]" }}
+q2 = {{ column = "position[1]" }}
+q3 = {{ column = "position[2]" }}
+q4 = {{ column = "position[3]" }}
+''')
+    return mapping
+
+
+def _quiet(args: list[str]) -> None:
+    import contextlib
+    import io
+
+    from arvcas.cli import main
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        if main(args) != 0:
+            sys.exit(f"arvcas {' '.join(args)} failed")
+
+
+def speed(out: Path) -> None:
+    """Where the time of validating one 20 s trial goes, from its CSV logs and from a ROS 2 bag of them."""
+    import platform
+    import tempfile
+
+    import arvcas
+    from arvcas.experiments import validation as V
+    from arvcas.ident import logcache, logs, plant, validate
+    from arvcas.io import files, style
+
+    system = arvcas.load_system(SYSTEM)
+    work = Path(tempfile.mkdtemp(prefix="arvcas-speed-"))
+    sources = {"csv": TRIALS / f"{SPEED_TRIAL}.log.toml", "ros2 bag (mcap)": _bag(work, SPEED_TRIAL)}
+
+    def best(fn):
+        """best wall time, median wall time, best CPU time of this process (s): the machine may be shared"""
+        fn()  # the first run compiles (or loads the compiled library) and warms the caches
+        ts, cs = [], []
+        for _ in range(SPEED_REPEATS):
+            t0, c0 = time.perf_counter(), time.process_time()
+            fn()
+            ts.append(time.perf_counter() - t0)
+            cs.append(time.process_time() - c0)
+        return {"best_s": min(ts), "median_s": float(np.median(ts)), "cpu_best_s": min(cs)}
+
+    rows = {}
+    for kind, path in sources.items():
+        lg = logs.load_log(path, system.n_joints)
+        x0 = validate.initial_state(lg)
+        pl = plant.LogPlant(system, m=1)
+        p = system.params.vector()
+        data = plant.sample_inputs(lg, system, 1)
+        X = plant.simulate(pl, lg, x0, p, data=data)
+        meas = {s: lg.signals[s] - X[:, i] for i, s in enumerate(logs.SIGNALS) if s in lg.signals}
+        r = validate.validate_log(system, lg, k=K)
+        phases = {
+            "read the log": lambda: logs.load_log(path, system.n_joints),
+            "open-loop simulation (inputs included)": lambda: plant.simulate(pl, lg, x0, p,
+                                                                              data=plant.sample_inputs(lg, system, 1)),
+            f"{K}-step prediction (restart states included)": lambda: validate.predict(
+                pl, lg, p, K, validate.logged_states(lg, X), data),
+            "residual tests": lambda: validate.residual_tests(meas, validate.drive_inputs(lg)),
+            "validate_log, everything": lambda: validate.validate_log(system, lg, k=K),
+            "read the log + validate_log": lambda: validate.validate_log(system, logs.load_log(path, system.n_joints),
+                                                                         k=K),
+            "read the log from the parsed-log cache": lambda: logcache.load_log(path, system.n_joints),
+            "cached read + validate_log": lambda: validate.validate_log(
+                system, logcache.load_log(path, system.n_joints), k=K),
+            "arvcas validate, no figures (in process)": lambda: _quiet(
+                ["validate", "--system", SYSTEM, str(path), "--out", str(work / "cli"), "--force", "--k", str(K)]),
+        }
+        rows[kind] = {n: best(f) for n, f in phases.items()}
+        if kind == "csv":
+            import matplotlib.pyplot as plt
+
+            def fig():
+                f = V.plot_trial(r, "speed")
+                style.write_figure(work / "fig.png", f)
+                plt.close(f)
+
+            rows[kind]["one figure (png)"] = best(fig)
+        print(kind, json.dumps(rows[kind], indent=1), flush=True)
+    import shutil
+
+    shutil.rmtree(work, ignore_errors=True)
+    doc = {"what": f"seconds to validate trial {SPEED_TRIAL} ({SYSTEM}, 20.0 s at 50 Hz, k = {K}) once compiled: "
+                   f"best and median of {SPEED_REPEATS} runs in one process",
+           "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared), Python {platform.python_version()}",
+           "trial": SPEED_TRIAL, "k": K, "rows": rows}
+    files.write_text(out / "speed.json", json.dumps(doc, indent=1) + "\n")
+
+
 PARTS = {"sourced": sourced, "identify": identify, "identified": identified, "step": step, "synthetic": synthetic,
-         "summary": summary}
+         "speed": speed, "summary": summary}
 
 
 def main(argv=None) -> int:
@@ -303,6 +565,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "validation")
     ap.add_argument("--only", choices=tuple(PARTS), action="append")
     a = ap.parse_args(argv)
+    a.out = a.out.resolve()
+    os.chdir(ROOT)  # the commands are given paths relative to the repository (_rel)
     from arvcas.io import files
 
     files.prepare_dir(a.out, "--out")

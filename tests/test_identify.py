@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 import pytest
-import tomlkit
+from ident_helpers import vehicle_only
 
 import arvcas
 from arvcas.cli import main
@@ -30,15 +30,7 @@ START = {"vehicle.zB": -0.02, "vehicle.Ixx": 0.30, "hydro.K_p": -0.2, "hydro.M_q
 @pytest.fixture(scope="module")
 def vehicle(tmp_path_factory):
     """The Hinsdale vehicle without its arm, as a system file; and that system with the 'true' parameters."""
-    src = arvcas.load_system("hinsdale_bluerov2_alpha5").path
-    doc = tomlkit.parse(open(src, encoding="utf-8").read())
-    for k in ("arm", "payload", "defaults"):
-        doc.pop(k, None)
-    doc["system"]["name"] = "hinsdale_vehicle"
-    d = tmp_path_factory.mktemp("vehicle")
-    path = d / "hinsdale_vehicle.toml"
-    path.write_text(tomlkit.dumps(doc))
-    sys_ = arvcas.load_system(path)
+    sys_ = vehicle_only("hinsdale_bluerov2_alpha5", "hinsdale_vehicle", tmp_path_factory.mktemp("vehicle"))
     return sys_, System(sys_.params.replace(TRUTH_CHANGE))
 
 
@@ -122,13 +114,14 @@ def test_identified_file_round_trip_and_cli(vehicle, tmp_path, capsys):
     assert np.array_equal([ident.params[n] for n in same], [model.params[n] for n in same])
     # validation with it: validation.json has its documented shape (docs/identification.md), in SI
     vd = tmp_path / "val"
-    assert main(["validate", "--system", str(out), str(paths[0]), "--out", str(vd)]) == 0
+    assert main(["validate", "--system", str(out), str(paths[0]), "--out", str(vd), "--figures"]) == 0
     doc = json.loads((vd / "validation.json").read_text())
     assert doc["system"] == "hinsdale_vehicle_identified"
     m = doc["trials"]["s5"]
     for key in ("rmse", "nrmse", "r2", "max_error"):
         assert set(m[key]) == {"x", "y", "z", "roll", "pitch", "yaw", "p", "q", "r"}
     assert m["rmse"]["roll"] < 3 * synthetic.NOISE["attitude"] and m["r2"]["pitch"] > 0.9
+    assert m["role"] == "fit" and set(doc["summary"]) == {"fit"}  # its sources name the trials it was fitted on
     assert (vd / "s5.png").stat().st_size > 0 and "s5" in (vd / "README.md").read_text()
 
 

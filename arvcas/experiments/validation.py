@@ -1,9 +1,11 @@
 """``arvcas validate`` and ``arvcas identify``: a system against real trials, and its parameters from them.
 
-``validate`` writes, for every trial, the open-loop simulation against what the vehicle did
-(:mod:`arvcas.ident.validate`): ``DIR/validation.json`` (metrics per trial and signal, SI units: m, rad,
-m/s, rad/s), ``DIR/<trial>.png`` (measured and simulated signals) and ``DIR/README.md`` (the table, roll
-and pitch in degrees, the figures). ``identify`` writes the identified system file
+``validate`` writes, for every trial, the open-loop simulation and the k-step-ahead prediction against
+what the vehicle did (:mod:`arvcas.ident.validate`): ``DIR/validation.json`` (metrics, FIT % and residual
+tests per trial and signal, SI units: m, rad, m/s, rad/s; a summary per role), ``DIR/README.md`` (the
+tables, angles in degrees) and, with ``--figures``, ``DIR/<trial>.png`` (measured, simulated and predicted
+signals). A trial's role is ``fit`` when the system's parameters were identified on it (their sources name
+the trials ``arvcas identify`` used, or ``--fitted``), else ``held out``. ``identify`` writes the identified system file
 (:mod:`arvcas.ident.identify`), its report as the file's header comment, and prints progress per IPOPT
 iteration; Ctrl-C keeps the best iterate.
 """
@@ -13,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -22,7 +25,8 @@ import numpy as np
 from arvcas.io import style
 from arvcas.io.cliargs import add_figure_format
 
-__all__ = ["add_validate", "run_validate", "validate_outputs", "add_identify", "run_identify", "identify_outputs",
+__all__ = ["add_validate", "run_validate", "validate_outputs", "check_validate", "fitted_trials", "summary",
+           "summary_lines", "add_identify", "run_identify", "identify_outputs",
            "validation_doc", "plot_trial", "UNITS"]
 
 UNITS = {"x": "m", "y": "m", "z": "m", "roll": "rad", "pitch": "rad", "yaw": "rad", "u": "m/s", "v": "m/s",
@@ -52,7 +56,7 @@ def _system(a):
 
 
 def _logs(a, system):
-    from arvcas.ident.logs import load_logs
+    from arvcas.ident.logcache import load_logs  # parsed once, then from the cache (arvcas.ident.logcache)
     from arvcas.ident.plant import check_commands
 
     logs = load_logs(a.logs, system.n_joints, tuple(system.structure.thrusters or ()))
@@ -83,15 +87,41 @@ def _add_common(p: argparse.ArgumentParser, system_help: str, out_meta: str, out
                    help="largest plant RK4 step, s (default: the logs' sample time)")
 
 
+DEFAULT_K = 25  # samples: the k-step-ahead predictor's default horizon (0.5 s at 50 Hz)
+
+
+def _k_arg(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of samples, got {text!r}") from None
+    if not 1 <= v <= 1_000_000:
+        raise argparse.ArgumentTypeError(f"the prediction horizon must be in [1, 1000000] samples, got {text}")
+    return v
+
+
 def add_validate(p: argparse.ArgumentParser) -> None:
     _add_common(p, "", "DIR", "output directory")
-    add_figure_format(p, "the trials' figures")
+    p.add_argument("--k", type=_k_arg, default=DEFAULT_K, metavar="N",
+                   help=f"horizon of the k-step-ahead prediction, in log samples (default {DEFAULT_K}; the state is "
+                        "restarted from the log every N samples, as MATLAB's compare(data, sys, N))")
+    p.add_argument("--fitted", type=_names, default=None, metavar="TRIAL,...",
+                   help="the trials the system was fitted on (default: those its parameters' sources name)")
+    p.add_argument("--figures", action="store_true", help="also draw a figure per trial (slow: about 1-3 s each)")
+    add_figure_format(p, "the trials' figures (with --figures)")
 
 
 def validate_outputs(a) -> list:
     names = [_trial_name(p) for p in a.logs]
     out = [("--out", a.out / "validation.json"), ("--out", a.out / "README.md")]
+    if not getattr(a, "figures", False):
+        return out
     return out + [("--out", a.out / f"{n}.{a.format or 'png'}") for n in names]
+
+
+def check_validate(a) -> None:
+    if a.format is not None and not a.figures:
+        raise ValueError(f"--format {a.format}: figures are drawn only with --figures")
 
 
 def _trial_name(p: Path) -> str:
@@ -101,28 +131,126 @@ def _trial_name(p: Path) -> str:
     return p.name[: -len(MAPPING_SUFFIX)] if p.name.endswith(MAPPING_SUFFIX) else p.stem
 
 
-def validation_doc(system, results, logs, h_max) -> dict:
-    """The ``validation.json`` document: ``{"system", "trials": {name: {"rmse", "nrmse", "r2", "max_error", ...}}}``."""
+_FITTED = re.compile(r"identified by arvcas identify on \S+ from trials (.+?) \(")
+
+
+def fitted_trials(system) -> set[str]:
+    """The trials a system file's parameters were identified on: those their sources name (``arvcas identify``
+    writes ``identified by arvcas identify on DATE from trials A, B (...)``); empty for a sourced system."""
+    out: set[str] = set()
+    for n in system.params.names():
+        m = _FITTED.search(system.params.source(n) or "")
+        if m:
+            out.update(t.strip() for t in m.group(1).split(","))
+    return out
+
+
+def _roles(results, fitted) -> dict[str, str]:
+    return {r.name: ("fit" if r.name in fitted else "held out") for r in results}
+
+
+ROLES = ("fit", "held out")
+_SUMMARY_KEYS = ("rmse", "fit", "kstep_rmse", "kstep_fit", "auto_outside", "cross_outside")
+
+
+def summary(results, roles: dict[str, str]) -> dict:
+    """Per role and vehicle signal, over the trials of that role: the median RMSE and FIT % of the open-loop
+    simulation and of the k-step-ahead prediction, and the median fractions of lags outside the residual
+    tests' 99 % band (the cross-correlation's: the largest over the inputs)."""
+    out: dict = {}
+    for role in ROLES:
+        rs = [r for r in results if roles[r.name] == role]
+        if not rs:
+            continue
+        sigs = [s for s in UNITS if any(s in r.resid for r in rs)]
+        ent = {"trials": [r.name for r in rs], "signals": {}}
+        for s in sigs:
+            vals: dict[str, list[float]] = {k: [] for k in _SUMMARY_KEYS}
+            for r in rs:
+                if s not in r.metrics["rmse"]:
+                    continue
+                vals["rmse"].append(r.metrics["rmse"][s])
+                vals["fit"].append(r.metrics["fit"][s])
+                if r.kstep:
+                    vals["kstep_rmse"].append(r.kstep["rmse"][s])
+                    vals["kstep_fit"].append(r.kstep["fit"][s])
+                t = r.resid.get(s)
+                if t:
+                    vals["auto_outside"].append(t["auto_outside"])
+                    vals["cross_outside"].append(max(t["cross_outside"].values(), default=0.0))
+            ent["signals"][s] = {k: (float(np.median(v)) if v else None) for k, v in vals.items()}
+        out[role] = ent
+    return out
+
+
+def validation_doc(system, results, logs, h_max, roles: dict[str, str] | None = None) -> dict:
+    """The ``validation.json`` document: ``{"system", "trials": {name: {"rmse", "nrmse", "r2", "max_error", "fit",
+    "kstep", "resid", "role", ...}}, "summary": {role: ...}}``."""
+    from arvcas.ident import validate as V
+
+    roles = roles or {r.name: "held out" for r in results}
     trials = {}
     for r, lg in zip(results, logs):
         trials[r.name] = {
+            "role": roles[r.name],
             "rmse": r.metrics["rmse"], "nrmse": r.metrics["nrmse"], "r2": r.metrics["r2"],
-            "max_error": r.metrics["max_error"],
+            "max_error": r.metrics["max_error"], "fit": r.metrics["fit"],
+            "kstep": None if r.k is None else {"k": r.k, **r.kstep},
+            "resid": r.resid,
             "log": _shown(lg.path), "duration_s": lg.duration, "samples": len(lg.t), "plant_step_s": r.h,
             "simulation_finite": r.ok, "x0": [float(v) for v in r.x0],
             "joint_cutoff_hz": None if lg.joints is None else lg.joints.cutoff,
         }
-    return {"format": "arvcas-validation-1", "system": system.name, "system_file": _shown(system.path),
+    return {"format": "arvcas-validation-2", "system": system.name, "system_file": _shown(system.path),
             "units": {s: _unit(s) for r in results for s in r.metrics["rmse"]},
             "definitions": {"rmse": "root mean square of simulated - measured on the log's time base",
                             "nrmse": "rmse / (max - min of the measured signal)",
-                            "r2": "1 - sum(e^2) / sum((y - mean(y))^2)", "max_error": "max |simulated - measured|"},
-            "h_max_s": h_max, "trials": trials}
+                            "r2": "1 - sum(e^2) / sum((y - mean(y))^2)", "max_error": "max |simulated - measured|",
+                            "fit": "100 (1 - ||y - y_hat|| / ||y - mean(y)||), 2-norms (MATLAB compare's FIT %)",
+                            "kstep": "the same metrics of the k-step-ahead prediction: the state restarted from the "
+                                     "log every k samples (k in samples; sample j predicted (j - 1) mod k + 1 ahead)",
+                            "resid": f"residual e = measured - simulated (open loop), means removed: normalised "
+                                     f"autocorrelation at lags 1..{V.RESID_LAGS} and cross-correlation with each "
+                                     f"logged input at lags -{V.RESID_LAGS}..{V.RESID_LAGS}; band = {V.RESID_Z} / "
+                                     f"sqrt(N) (99 %, MATLAB resid); *_outside: fraction of those lags outside it",
+                            "role": "fit: the system's parameters were identified on this trial; held out: not"},
+            "h_max_s": h_max, "summary": summary(results, roles), "trials": trials}
+
+
+def _deg(s: str) -> float:
+    return 180.0 / math.pi if _unit(s) in ("rad", "rad/s") else 1.0
+
+
+def _shown_unit(s: str) -> str:
+    return {"rad": "deg", "rad/s": "deg/s"}.get(_unit(s), _unit(s))
+
+
+def summary_lines(doc: dict, markdown: bool) -> list[str]:
+    """The per-role summary of a ``validation.json`` document as text: a Markdown table or console lines."""
+    k = next((t["kstep"]["k"] for t in doc["trials"].values() if t.get("kstep")), None)
+    head = ["role", "signal", "trials", "RMSE (sim)", f"RMSE ({k}-step)", "FIT % (sim)", f"FIT % ({k}-step)",
+            "resid auto out", "resid cross out"]
+    rows = []
+    for role, ent in doc["summary"].items():
+        for s, v in ent["signals"].items():
+            f = _deg(s)
+
+            def num(x, fmt, scale=1.0):
+                return "-" if x is None else format(scale * x, fmt)
+
+            rows.append([role, s, str(len(ent["trials"])), f"{num(v['rmse'], '.3g', f)} {_shown_unit(s)}",
+                         f"{num(v['kstep_rmse'], '.3g', f)} {_shown_unit(s)}", num(v["fit"], ".1f"),
+                         num(v["kstep_fit"], ".1f"), num(v["auto_outside"], ".0%"), num(v["cross_outside"], ".0%")])
+    if markdown:
+        return ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + ["| " + " | ".join(r) + " |" for r in rows]
+    w = [max(len(x) for x in col) for col in zip(head, *rows)]
+    return ["  ".join(x.ljust(n) for x, n in zip(r, w)).rstrip() for r in [head, *rows]]
 
 
 @style.styled
 def plot_trial(r, title: str):
-    """Measured (solid) and simulated (dashed) signals of one trial; angles in degrees (the house style)."""
+    """Measured (solid), simulated (dashed) and k-step-ahead predicted (dotted) signals of one trial; angles
+    in degrees (the house style)."""
     sigs = [s for s in ("roll", "pitch", "yaw", "z", "p", "q", "r", "x", "y", "u", "v", "w") if s in r.measured]
     joints = [s for s in r.measured if s not in UNITS]
     n = len(sigs) + (1 if joints else 0)
@@ -131,13 +259,15 @@ def plot_trial(r, title: str):
     fig = style.figure("page", 1.5 * rows + 0.4)
     axs = fig.subplots(rows, cols, sharex=True, squeeze=False).reshape(-1)
     for ax, s in zip(axs, sigs):
-        k = 180.0 / math.pi if s in _ANGLES or s in ("p", "q", "r") else 1.0
-        u = {"rad": "deg", "rad/s": "deg/s"}.get(_unit(s), _unit(s))
+        k = _deg(s)
+        u = _shown_unit(s)
         ax.plot(r.t, k * r.measured[s], color=style.color("blue"), label="measured")
         ax.plot(r.t, k * r.simulated[s], ls="--", color=style.color("vermillion"), label="simulated")
+        if s in r.predicted:
+            ax.plot(r.t, k * r.predicted[s], ls=":", color=style.color("green"), label=f"{r.k}-step ahead")
         ax.set_ylabel(f"{s} ({u})")
         rm = r.metrics["rmse"][s] * k
-        ax.set_title(f"{s}: RMSE {rm:.3g} {u}, R$^2$ {r.metrics['r2'][s]:.2f}")
+        ax.set_title(f"{s}: RMSE {rm:.3g} {u}, FIT {r.metrics['fit'][s]:.0f} %")
     if joints:
         ax = axs[len(sigs)]
         for j in joints:
@@ -153,14 +283,23 @@ def plot_trial(r, title: str):
     return fig
 
 
-def _readme(doc: dict, results, logs, system, seconds: float, fmt: str = "png") -> str:
+def _readme(doc: dict, results, logs, system, seconds: float, fmt: str | None) -> str:
+    k = next((r.k for r in results if r.k is not None), None)
     lines = [f"# Validation of `{system.name}` on {len(results)} trials",
-             "", f"Written by `arvcas validate` ({time.strftime('%Y-%m-%d')}): each trial simulated open loop from its "
-             f"logged initial state, driven by the logged inputs, over the whole trial (simulation error, not "
-             f"one-step prediction). System file: `{_shown(system.path)}`. Metrics in `validation.json` (SI); here angles "
-             f"and rates in degrees. {seconds:.1f} s for all trials.", "",
-             "| trial | s | roll RMSE (deg) | pitch RMSE (deg) | yaw RMSE (deg) | z RMSE (m) | p, q, r RMSE (deg/s) | "
-             "roll / pitch R^2 |", "|---|---|---|---|---|---|---|---|"]
+             "", f"Written by `arvcas validate`: each trial simulated open loop from its logged initial state, "
+             f"driven by the logged inputs, over the whole trial (simulation error), and predicted {k} samples ahead "
+             f"(the state restarted from the log every {k} samples, as MATLAB's `compare(data, sys, {k})`). System "
+             f"file: `{_shown(system.path)}`. Metrics in `validation.json` (SI); here angles and rates in degrees. "
+             f"{seconds:.2f} s for all trials (without figures).", "",
+             "## Summary per role and signal (medians over the trials)", "",
+             "FIT % as the MATLAB System Identification Toolbox: 100 (1 - ||y - y_hat|| / ||y - mean y||). The "
+             "residual tests (MATLAB `resid`) are of the open-loop residual: the fraction of lags whose normalised "
+             "autocorrelation (lags 1-25) or cross-correlation with a logged input (lags -25-25, the worst input) is "
+             "outside the 99 % band +-2.58/sqrt(N); about 1 % for a residual the model explains. A trial is `fit` "
+             "when the system's parameters were identified on it.", "", *summary_lines(doc, True), "",
+             "## Per trial", "",
+             "| trial | role | s | roll RMSE (deg) | pitch RMSE (deg) | yaw RMSE (deg) | z RMSE (m) | "
+             "p, q, r RMSE (deg/s) | roll / pitch FIT % | roll / pitch FIT %, k-step |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r, lg in zip(results, logs):
         m = r.metrics["rmse"]
 
@@ -168,11 +307,14 @@ def _readme(doc: dict, results, logs, system, seconds: float, fmt: str = "png") 
             return f"{math.degrees(m[s]):.2f}" if s in m else "-"
 
         rates = ", ".join(f"{math.degrees(m[s]):.2f}" for s in ("p", "q", "r") if s in m) or "-"
-        r2 = " / ".join(f"{r.metrics['r2'][s]:.2f}" for s in ("roll", "pitch") if s in m) or "-"
+        fit = " / ".join(f"{r.metrics['fit'][s]:.1f}" for s in ("roll", "pitch") if s in m) or "-"
+        kfit = " / ".join(f"{r.kstep['fit'][s]:.1f}" for s in ("roll", "pitch") if r.kstep and s in m) or "-"
         z = f"{m['z']:.3f}" if "z" in m else "-"
-        lines.append(f"| {r.name} | {lg.duration:.1f} | {deg('roll')} | {deg('pitch')} | {deg('yaw')} | {z} | "
-                     f"{rates} | {r2} |")
-    lines += ["", "Figures: " + ", ".join(f"[{r.name}]({r.name}.{fmt})" for r in results), ""]
+        lines.append(f"| {r.name} | {doc['trials'][r.name]['role']} | {lg.duration:.1f} | {deg('roll')} | "
+                     f"{deg('pitch')} | {deg('yaw')} | {z} | {rates} | {fit} | {kfit} |")
+    lines.append("")
+    if fmt:
+        lines += ["Figures: " + ", ".join(f"[{r.name}]({r.name}.{fmt})" for r in results), ""]
     joints = [lg for lg in logs if lg.joints is not None]
     if joints:
         lines.append(f"The joints follow the logged trajectory (smoothing splines that halve amplitudes at "
@@ -191,23 +333,32 @@ def run_validate(a) -> int:
         if lg.name != _trial_name(p):
             raise ValueError(f"{p}: [log] name {lg.name!r} differs from the file's name {_trial_name(p)!r}: "
                              f"the output figure is named by the file")
+    unknown = sorted(set(a.fitted or ()) - {lg.name for lg in logs})
+    if unknown:
+        raise ValueError(f"--fitted: no trial named {unknown[0]!r} among the logs given "
+                         f"({', '.join(lg.name for lg in logs)})")
     files.prepare_dir(a.out, "--out")
     t0 = time.perf_counter()
     results = []
     for lg in logs:
         h = lg.dt if a.h_max is None else a.h_max
-        r = validate_log(system, lg, h_max=h)
+        r = validate_log(system, lg, h_max=h, k=a.k)
         results.append(r)
         m = r.metrics["rmse"]
-        rp = ", ".join(f"{s} {math.degrees(m[s]):.2f} deg" for s in ("roll", "pitch") if s in m)
+        rp = ", ".join(f"{s} {math.degrees(m[s]):.2f} deg (FIT {r.metrics['fit'][s]:.0f} %)"
+                       for s in ("roll", "pitch") if s in m)
         print(f"{lg.name}: {lg.duration:.1f} s, RMSE {rp}{'' if r.ok else ' (simulation not finite)'}")
     seconds = time.perf_counter() - t0
-    doc = validation_doc(system, results, logs, a.h_max)
+    fitted = set(a.fitted) if a.fitted is not None else fitted_trials(system)
+    doc = validation_doc(system, results, logs, a.h_max, _roles(results, fitted))
+    print("\n".join(summary_lines(doc, False)))
     files.write_text(a.out / "validation.json", json.dumps(doc, indent=1, allow_nan=True) + "\n")
-    for r in results:
-        style.write_figure(a.out / f"{r.name}.{a.format or 'png'}", plot_trial(r, f"{system.name}: trial {r.name}"))
-    files.write_text(a.out / "README.md", _readme(doc, results, logs, system, seconds, a.format or "png"))
-    print(f"wrote {a.out / 'validation.json'}, README.md and {len(results)} figures")
+    fmt = (a.format or "png") if a.figures else None
+    if fmt:
+        for r in results:
+            style.write_figure(a.out / f"{r.name}.{fmt}", plot_trial(r, f"{system.name}: trial {r.name}"))
+    files.write_text(a.out / "README.md", _readme(doc, results, logs, system, seconds, fmt))
+    print(f"wrote {_shown(a.out / 'validation.json')}, README.md" + (f" and {len(results)} figures" if fmt else ""))
     return 0
 
 
