@@ -53,11 +53,11 @@ def _system(a):
 
 def _logs(a, system):
     from arvcas.ident.logs import load_logs
-    from arvcas.ident.plant import check_commands
+    from arvcas.ident.plant import check_log
 
     logs = load_logs(a.logs, system.n_joints, tuple(system.structure.thrusters or ()))
-    for lg in logs:  # thruster commands against the system's maps, before any work
-        check_commands(lg, system)
+    for lg in logs:  # joints, thrusters and commands against the system, before any work
+        check_log(lg, system)
     return logs
 
 
