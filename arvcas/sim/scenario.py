@@ -553,7 +553,7 @@ def _check_within_run(cfg: ScenarioConfig, where: str) -> None:
     late = [(f"arm.waypoint[{j}].t", w.t) for j, w in enumerate(cfg.arm_waypoint or (), start=1)
             if j > 1 and cfg.arm_waypoint[j - 2].t >= T]
     late += [(f"payload.event[{j}].t", e.t) for j, e in enumerate(cfg.payload_event or (), start=1) if e.t >= T]
-    if cfg.arm_waypoint is None:
+    if cfg.arm_waypoint is None and cfg.arm_qg is not None:
         late += [(f"arm.{k}", getattr(cfg, "arm_" + k)) for k in ("hold_until", "payload_on", "return_start")
                  if getattr(cfg, "arm_" + k) >= T]
     if late:
