@@ -180,6 +180,23 @@ def test_scenario_without_arm():
         assert float(scenario.payload_profile(cfg, t)) == 0.0
 
 
+def test_task_without_arm():
+    """A vehicle task (docs/tasks.md) in a scenario without [arm]: loaded, and checked against the thrusters
+    of the six-thruster BlueROV2 (its allocation without pitch) before any compile."""
+    s = arvcas.load_system("bluerov2")
+    base = s.params.default("scenario").read_text()
+    approach = ('\n[trajectory]\npattern = "approach"\n'
+                'target = { value = [0.5, 0.2, 0.1, 0, 0, 0.3], unit = "m,m,m,rad,rad,rad", source = "test" }\n'
+                'start = { value = 2.0, unit = "s", source = "test" }\n'
+                'duration = { value = 20.0, unit = "s", source = "test" }\n')
+    cfg = scenario.loads_scenario(base + approach, "task.toml")
+    assert cfg.trajectory_pattern == "approach" and not scenario.has_arm_motion(cfg)
+    scenario.check_trajectory_limits(cfg, s.params)
+    fast = scenario.loads_scenario(base + approach.replace("value = 20.0", "value = 0.5"), "task.toml")
+    with pytest.raises(scenario.ScenarioError, match=r"thruster T\d .* of its limit"):
+        scenario.check_trajectory_limits(fast, s.params)
+
+
 def test_scenario_payload_without_arm_motion_refused():
     text = arvcas.load_system("bluerov2").params.default("scenario").read_text()
     text += '\n[[payload.event]]\nt = { value = 1.0, unit = "s", source = "x" }\nramp = { value = 0.5, unit = "s", ' \
