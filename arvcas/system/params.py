@@ -322,7 +322,8 @@ def check_physical(values: Mapping[str, float], where: str, layout: Layout | Non
         keys = ([f"thrusters.{n}.position" for n in st.thrusters] if st.thrusters else
                 [k for k in lay.names if k.startswith("thrusters.") and not k.endswith(("u_min", "u_max"))])
         what = "every wrench" if len(rows) == 6 else "a wrench in every actuated degree of freedom"
-        hint = "" if st.unactuated or not st.thrusters else " (a vehicle that cannot pitch or roll on its own says so: [thrusters] unactuated = [\"pitch\"])"
+        hint = ("" if st.unactuated or not st.thrusters else
+                " (a vehicle its thrusters cannot pitch says so: [thrusters] unactuated = [\"pitch\"])")
         raise _fail(where, keys, f"the thruster allocation matrix B has rank {rank}, not {len(rows)} (singular "
                                  f"values {', '.join(f'{x:.3g}' for x in sv)}): the thrusters cannot produce "
                                  f"{what}{hint}")
