@@ -364,6 +364,34 @@ def _run_systems(a: argparse.Namespace) -> int:
     return 0
 
 
+def _add_params(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--system", "--params", dest="params", default=None, metavar="NAME|FILE",
+                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
+    p.add_argument("--match", default=None, metavar="TEXT",
+                   help="only the parameters whose name contains TEXT (e.g. hydro. or thrusters.T1.)")
+
+
+def _run_params(a: argparse.Namespace) -> int:
+    """Every parameter of a system: the name (what identify --free, Params.replace and the compiled ``p``
+    take), its value in SI, the SI unit and the file's source of the number."""
+    from arvcas.build.units import si_unit
+    from arvcas.system import load_system
+
+    s = load_system(a.params)
+    P = s.params
+    names = [n for n in P.names() if a.match is None or a.match in n]
+    if not names:
+        from arvcas.system.config import closest
+
+        raise ValueError(f"--match: no parameter of {s.name} contains {a.match!r}{closest(a.match, P.names())}")
+    print(f"# {len(names)} of {len(P)} parameters of {s.name} ({s.path}): the names identify --free takes; "
+          f"values in SI")
+    w = max(len(n) for n in names)
+    for n in names:
+        print(f"{n:{w}}  {P[n]:>14.8g}  {si_unit(P, n):12}  {P.source(n)}")
+    return 0
+
+
 # ---- import-system -------------------------------------------------------------------------------
 
 
@@ -729,6 +757,8 @@ def _table() -> tuple[Command, ...]:
         Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
                 _add_export_fmu, _run_export_fmu, inputs=(("params", "system"),), outputs=_out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
+        Command("params", "list every parameter of a system: name (what identify --free takes), SI value, unit, "
+                          "source", _add_params, _run_params),
         Command("systems", "list the shipped systems (vehicle, thrusters, arm) and their files", _add_systems,
                 _run_systems),
         Command("import-system uuv", "a uuv_simulator / Gazebo vehicle (URDF or xacro, the Fossen plugin, thrusters, "

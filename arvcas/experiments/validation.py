@@ -57,11 +57,11 @@ def _system(a):
 
 def _logs(a, system):
     from arvcas.ident.logcache import load_logs  # parsed once, then from the cache (arvcas.ident.logcache)
-    from arvcas.ident.plant import check_commands
+    from arvcas.ident.plant import check_log
 
     logs = load_logs(a.logs, system.n_joints, tuple(system.structure.thrusters or ()))
-    for lg in logs:  # thruster commands against the system's maps, before any work
-        check_commands(lg, system)
+    for lg in logs:  # joints, thrusters and commands against the system, before any work
+        check_log(lg, system)
     return logs
 
 
@@ -404,7 +404,15 @@ def run_identify(a) -> int:
         if n not in system.layout.index:
             from arvcas.system.config import closest
 
-            raise ValueError(f"--free: {system.name} has no parameter {n!r}{closest(n, system.layout.names)}")
+            head, _, last = n.rpartition(".")  # thrusters.T1.z: thrusters.T1.position.z
+            near = [x for x in system.layout.names if x.startswith(head + ".") and x.endswith("." + last)]
+            hint = (f" (did you mean {' or '.join(repr(x) for x in near[:3])}?)" if near
+                    else closest(n, system.layout.names))
+            from arvcas.system import shipped
+
+            which = system.name if shipped().get(system.name) == Path(system.path) else system.path
+            raise ValueError(f"--free: {system.name} has no parameter {n!r}{hint}; `arvcas params --system "
+                             f"{which}` lists them")
     writable(system, a.free)
     logs = _logs(a, system)
     h = a.h_max if a.h_max is not None else logs[0].dt

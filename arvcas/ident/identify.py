@@ -472,6 +472,8 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
         raise IdentifyError(f"free: {dup[0]} is named twice")
     if not logs:
         raise IdentifyError("logs: give at least one trial")
+    for lg in logs:  # joints, thrusters and commands against the system, before any compile
+        plant_mod.check_log(lg, system)
     measured = [s for s in SIGNALS if any(s in lg.signals for lg in logs)]
     signals = tuple(measured if signals is None else signals)
     for s in signals:

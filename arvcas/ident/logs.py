@@ -653,6 +653,9 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             if s is not None:
                 _unit_factors(s, _KINDS[k][0], _KINDS[k][1], f"{key}.{k}", where)
         for jn, jm in (sm.joints or {}).items():
+            if n_joints == 0:
+                raise LogError(f"{where}: {key}.joints.{jn}: the system has no arm: remove the joints from the "
+                               f"mapping, or use a system with an arm")
             if n_joints is not None and jn not in [f"q{k}" for k in range(1, n_joints + 1)]:
                 raise LogError(f"{where}: {key}.joints.{jn}: the system has joints q1..q{n_joints}")
             if jm.unit not in ("rad", "deg", config.SI):

@@ -39,7 +39,7 @@ from arvcas.model.spatial import J
 from arvcas.model.uvms import ModelOptions, coupled_terms
 from arvcas.system.params import system_tag, view
 
-__all__ = ["LogPlant", "sample_inputs", "check_commands", "rotor_thrust", "rotor_thrust_sens", "DEFAULT_BLOCK"]
+__all__ = ["LogPlant", "sample_inputs", "check_log", "check_commands", "rotor_thrust", "rotor_thrust_sens", "DEFAULT_BLOCK"]
 
 DEFAULT_BLOCK = 50  # samples per compiled block (1 s at 50 Hz)
 _SOURCE_DIGEST = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
@@ -186,6 +186,35 @@ _BLOCK_IN = ["U", "W", "Q", "QD", "QDD", "payload", "h", "theta", "p"]
 def _check_K(K) -> None:
     if not isinstance(K, int) or isinstance(K, bool) or not 1 <= K <= 10_000:
         raise ValueError(f"block length must be an integer in [1, 10000], got {K!r}")
+
+
+def check_log(log, system) -> None:
+    """Every mismatch between ``system`` and ``log``, refused in one line before any compile
+    (:class:`arvcas.ident.logs.LogError`): the joints the log maps (every joint of the system's arm, or none
+    for a system without an arm), the thrusters it names, and its commands (:func:`check_commands`)."""
+    from arvcas.ident.logs import LogError
+
+    st = system.layout.structure
+    nj = st.n_joints
+    mapped = tuple(log.joints.names) if log.joints is not None else ()
+    want = tuple(f"q{k}" for k in range(1, nj + 1))
+    if nj and not mapped:
+        raise LogError(f"{log.path}: {system.name} has an arm of {nj} joints but the log maps none: map "
+                       f"{', '.join(want)} (a [[stream]]'s joints), or validate against a system without an arm")
+    if mapped and not nj:
+        raise LogError(f"{log.path}: joints.{mapped[0]}: {system.name} has no arm, but the log maps joints "
+                       f"{', '.join(mapped)}: remove them from the mapping, or use a system with an arm")
+    if mapped and sorted(mapped) != sorted(want):
+        other = sorted(set(mapped) ^ set(want))
+        raise LogError(f"{log.path}: joints.{other[0]}: {system.name} has joints {', '.join(want)}, the log maps "
+                       f"{', '.join(mapped)} (map every joint or none)")
+    names = tuple(st.thrusters or ())
+    for kind in ("thrust", "command"):
+        for tn in (getattr(log, kind, None) or {}):
+            if tn not in names:
+                raise LogError(f"{log.path}: {kind}.{tn}: {system.name} has no thruster {tn!r} (it has "
+                               f"{', '.join(names) or 'a fixed layout, whose thrust is not logged by name'})")
+    check_commands(log, system)
 
 
 def check_commands(log, system) -> None:

@@ -320,6 +320,7 @@ def validate_log(system, log: Log, *, h_max: float | None = None, p: np.ndarray 
     slow next to it; results/validation measures the difference to a four times finer step). ``k``: also
     the k-step-ahead prediction (:func:`predict`, from :func:`logged_states`) and its metrics. The residual
     tests (:func:`residual_tests`) are of the open-loop simulation's residual."""
+    plant_mod.check_log(log, system)  # every mismatch in one line, before the plant is compiled
     m = substeps(log.dt, log.dt if h_max is None else float(h_max))
     pl = plant_mod.LogPlant(system, m=m)
     x0 = initial_state(log) if x0 is None else np.asarray(x0, dtype=float)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-__all__ = ["B_T", "allocate", "saturate", "thrust", "limit_prefixes", "limits", "envelope"]
+__all__ = ["B_T", "actuated", "allocate", "saturate", "thrust", "limit_prefixes", "limits", "envelope"]
 
 
 def B_T(P):
@@ -46,10 +46,21 @@ def _B_haidou1(P):
     )
 
 
+def actuated(structure) -> list[int]:
+    """The degrees of freedom (0..5) the allocation serves: all six, less ``[thrusters] unactuated``."""
+    return [k for k in range(6) if k not in structure.unactuated]
+
+
 def allocate(P, tau):
     """u_T = B_T^-1 tau_v (eq. 2), or the minimum-norm B' (B B')^-1 tau for more than six thrusters: N,
-    before saturation."""
+    before saturation. A system with unactuated degrees of freedom (``[thrusters] unactuated``, e.g. a
+    six-thruster BlueROV2's pitch) allocates the actuated rows only, by the minimum-norm solution of
+    ``B_a u = tau_a``: the commanded wrench's other components are not asked of the thrusters."""
     B = B_T(P)
+    if P.s.unactuated:
+        rows = actuated(P.s)
+        Ba = B[rows, :]
+        return ca.mtimes(Ba.T, ca.solve(ca.mtimes(Ba, Ba.T), tau[rows]))
     if B.shape[1] == 6:
         return ca.solve(B, tau)
     return ca.mtimes(B.T, ca.solve(ca.mtimes(B, B.T), tau))
@@ -87,7 +98,12 @@ def envelope(P):
     them a thruster saturates). Numbers (NumPy), from a view of numeric parameters: ``(lo (6,), hi (6,))``.
     """
     B = np.array(ca.evalf(B_T(P)), dtype=float)
-    A = np.linalg.inv(B) if B.shape[1] == 6 else np.linalg.pinv(B)
+    if P.s.unactuated:  # the allocation's own inverse: the actuated rows' pseudo-inverse, zero elsewhere
+        rows = actuated(P.s)
+        A = np.zeros((B.shape[1], 6))
+        A[:, rows] = np.linalg.pinv(B[rows, :])
+    else:
+        A = np.linalg.inv(B) if B.shape[1] == 6 else np.linalg.pinv(B)
     umin, umax = (np.broadcast_to(np.array(ca.evalf(ca.DM(x) if not isinstance(x, ca.SX) else x), dtype=float).ravel(),
                                   (B.shape[1],)) for x in limits(P))
 
@@ -99,6 +115,8 @@ def envelope(P):
 
     hi = np.array([reach(A[:, k]) for k in range(6)])
     lo = np.array([reach(-A[:, k]) for k in range(6)])
+    for k in P.s.unactuated:  # the allocation asks nothing of the thrusters there
+        lo[k] = hi[k] = 0.0
     return lo, hi
 
 

@@ -23,7 +23,7 @@ from arvcas.system.config import ge, gt, le, quantity
 
 __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
-    "quintic", "joint_trajectory", "payload_profile", "disturbance", "disturbance_tabulated", "noise_sequence",
+    "quintic", "has_arm_motion", "joint_trajectory", "payload_profile", "disturbance", "disturbance_tabulated", "noise_sequence",
     "check_joint_limits", "check_trajectory_limits", "n_samples", "table_bytes", "ScenarioFile", "MAX_SUBSTEPS",
 ]
 
@@ -255,7 +255,7 @@ class ScenarioFile:
 
     time: _Time = config.setting()
     initial: _Initial = config.setting()
-    arm: _Arm = config.setting()
+    arm: _Arm = config.setting()  # no [arm] section (or an empty one): the arm, if any, holds its stow pose
     disturbance: _Disturbance = config.setting()
     sensors: _Sensors = config.setting()
     ekf: _Ekf = config.setting()
@@ -553,7 +553,7 @@ def _check_within_run(cfg: ScenarioConfig, where: str) -> None:
     late = [(f"arm.waypoint[{j}].t", w.t) for j, w in enumerate(cfg.arm_waypoint or (), start=1)
             if j > 1 and cfg.arm_waypoint[j - 2].t >= T]
     late += [(f"payload.event[{j}].t", e.t) for j, e in enumerate(cfg.payload_event or (), start=1) if e.t >= T]
-    if cfg.arm_waypoint is None:
+    if cfg.arm_waypoint is None and cfg.arm_qg is not None:
         late += [(f"arm.{k}", getattr(cfg, "arm_" + k)) for k in ("hold_until", "payload_on", "return_start")
                  if getattr(cfg, "arm_" + k) >= T]
     if late:
@@ -578,6 +578,7 @@ _WARNED: set[str] = set()
 def loads_scenario(text: str, where: str = "<scenario text>") -> ScenarioConfig:
     """Validate scenario TOML text (e.g. stored in a result file); ``where`` names it in errors."""
     doc = tomlfile.parse(text, where, ScenarioError)
+    doc.setdefault("arm", {})  # no [arm]: no arm motion (a system without an arm needs none)
     arm = doc.get("arm")
     if isinstance(arm, dict) and isinstance(arm.get("waypoint"), list):  # q = "stow": the system's stow pose
         stow = {"value": [], "unit": "rad", "source": "q = \"stow\": the system's stow pose"}
@@ -695,8 +696,14 @@ _PAPER_ARM = ("qg", "hold_until", "reach_end", "payload_on", "payload_ramp", "re
 
 
 def _check_motion(cfg: ScenarioConfig, where: str) -> None:
-    """Exactly one form of arm motion, with its times in order."""
+    """Exactly one form of arm motion, with its times in order; or none (no ``[arm]`` section, or an empty one:
+    the arm, if the system has one, holds its stow pose, and a system without an arm needs nothing)."""
     given = [k for k in _PAPER_ARM if getattr(cfg, "arm_" + k) is not None]
+    if cfg.arm_waypoint is None and not given:
+        if cfg.payload_event is not None:
+            raise ScenarioError(f"{where}: payload.event: a payload is carried by the arm: give [[arm.waypoint]] "
+                                f"tables with it")
+        return
     if cfg.arm_waypoint is None:
         missing = [k for k in _PAPER_ARM if k not in given]
         if missing:
@@ -746,6 +753,12 @@ def quintic(t, t0: float, t1: float):
     return s, sd, sdd
 
 
+def has_arm_motion(cfg: ScenarioConfig) -> bool:
+    """Whether the scenario moves the arm (the paper's keys or waypoints); without, the arm holds its stow
+    pose and no payload is carried (a scenario for a system without an arm has no ``[arm]`` section)."""
+    return cfg.arm_waypoint is not None or cfg.arm_qg is not None
+
+
 def joint_trajectory(cfg: ScenarioConfig, q0, t):
     """q, qd, qdd of the scenario's arm motion from the stow pose ``q0``.
 
@@ -753,6 +766,8 @@ def joint_trajectory(cfg: ScenarioConfig, q0, t):
     Waypoints: hold q0 until the first waypoint, then a rest-to-rest quintic between consecutive
     waypoints (``q = w_1 + sum_k (w_{k+1} - w_k) s_k(t)``), hold after the last.
     """
+    if not has_arm_motion(cfg):  # no [arm]: hold the stow pose
+        return q0, 0 * q0, 0 * q0
     if cfg.arm_waypoint is not None:
         ws = [q0 if w.stow else ca.DM(w.q) for w in cfg.arm_waypoint]
         q, qd, qdd = ws[0], 0 * q0, 0 * q0
@@ -774,6 +789,8 @@ def joint_trajectory(cfg: ScenarioConfig, q0, t):
 def payload_profile(cfg: ScenarioConfig, t):
     """Payload fraction in [0, 1]: the paper's linear ramp over [payload_on, payload_on + payload_ramp]
     (section 4.2), or the scenario's events, each ramping linearly to its ``to`` over [t, t + ramp]."""
+    if not has_arm_motion(cfg):
+        return 0 * t
     if cfg.arm_waypoint is not None:
         frac, prev = 0, 0.0
         for e in cfg.payload_event or ():
@@ -868,7 +885,7 @@ def check_joint_limits(cfg: ScenarioConfig, params) -> None:
     poses = [("arm.stow (q0)", [params[f"arm.stow.q{i}"] for i in range(1, n + 1)])]
     if cfg.arm_waypoint is not None:
         poses += [(f"arm.waypoint[{j}].q", list(w.q)) for j, w in enumerate(cfg.arm_waypoint, start=1) if not w.stow]
-    else:
+    elif cfg.arm_qg is not None:
         poses.append(("arm.qg", list(cfg.arm_qg)))
     for label, q in poses:
         if len(q) != n:

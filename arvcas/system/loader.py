@@ -16,7 +16,7 @@ from arvcas.system.params import Params, ParamsError
 
 __all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT"]
 
-SHIPPED = ("haidou1", "bluerov2_heavy_alpha5", "hinsdale_bluerov2_alpha5")
+SHIPPED = ("haidou1", "bluerov2_heavy_alpha5", "hinsdale_bluerov2_alpha5", "bluerov2", "bluerov2_heavy")
 DEFAULT = "haidou1"
 
 

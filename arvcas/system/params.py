@@ -276,7 +276,7 @@ def check_physical(values: Mapping[str, float], where: str, layout: Layout | Non
     * a total inertia M = M_RB + M_A whose symmetric part is not positive definite: then
       ``M + M_arm`` may be singular, and the run factors it without pivoting;
     * thrust limits u_min >= u_max, a thruster direction that is not a unit vector, a thruster layout
-      whose allocation matrix B has rank < 6;
+      whose allocation matrix B has rank < 6 (less the DOFs of ``[thrusters] unactuated``);
     * joint limits qmin >= qmax, a stowed pose outside its joint limits, a joint axis that is not a unit
       vector, a link inertia that is not positive definite or not physical (triangle inequality);
     * an arm link of zero length with drag (a DH link's cylinder, a chain link's drag segment).
@@ -314,14 +314,19 @@ def check_physical(values: Mapping[str, float], where: str, layout: Layout | Non
         _check_unit(values, f"thrusters.{name}.direction", where, "thrust direction")
     if st.has_thruster_dynamics:
         _check_maps(P, values, where)
-    B = np.array(thrusters.B_T(P), dtype=float)
+    rows = thrusters.actuated(st)  # every DOF, less [thrusters] unactuated
+    B = np.array(thrusters.B_T(P), dtype=float)[rows, :]
     sv = np.linalg.svd(B, compute_uv=False)
     rank = int(np.sum(sv > 1e-9 * sv[0]))
-    if rank < 6:
+    if rank < len(rows):
         keys = ([f"thrusters.{n}.position" for n in st.thrusters] if st.thrusters else
                 [k for k in lay.names if k.startswith("thrusters.") and not k.endswith(("u_min", "u_max"))])
-        raise _fail(where, keys, f"the thruster allocation matrix B has rank {rank}, not 6 (singular values "
-                                 f"{', '.join(f'{x:.3g}' for x in sv)}): the thrusters cannot produce every wrench")
+        what = "every wrench" if len(rows) == 6 else "a wrench in every actuated degree of freedom"
+        hint = ("" if st.unactuated or not st.thrusters else
+                " (a vehicle its thrusters cannot pitch says so: [thrusters] unactuated = [\"pitch\"])")
+        raise _fail(where, keys, f"the thruster allocation matrix B has rank {rank}, not {len(rows)} (singular "
+                                 f"values {', '.join(f'{x:.3g}' for x in sv)}): the thrusters cannot produce "
+                                 f"{what}{hint}")
     n = st.n_joints
     for i in range(1, n + 1):
         lo, hi = values[f"arm.joint{i}.qmin"], values[f"arm.joint{i}.qmax"]
@@ -377,13 +382,33 @@ def _check_maps(P, values: Mapping[str, float], where: str) -> None:
         ends = ca.DM(ca.vertcat(s_lo, s_hi))
         f_lo, f_hi = (float(x) for x in np.array(ca.DM(thrusters.map_thrust(P, m, ends))).ravel())
         c_lo, c_hi = (float(x) for x in np.array(ca.DM(thrusters.command_of(P, m, ends))).ravel())
+        flat_lo, flat_hi = _plateaus(values, m)
         for key, u, ok, end in (("u_min", values[f"thrusters.{name}.u_min"], lambda u: u >= f_lo - 1e-12, (c_lo, f_lo)),
                                 ("u_max", values[f"thrusters.{name}.u_max"], lambda u: u <= f_hi + 1e-12, (c_hi, f_hi))):
+            flat = flat_lo if key == "u_min" else flat_hi
+            if flat is not None and ok(u) and (u <= flat[1] if key == "u_min" else u >= flat[1]):
+                raise _fail(where, [f"thrusters.{name}.{key}"],
+                            f"{u:g} N lies on the saturation plateau of its map {m.name} ({flat[1]:.6g} N from "
+                            f"command {flat[0]:.6g} {m.unit} on): the allocation cannot invert a flat stretch; "
+                            f"give a limit {'above' if key == 'u_min' else 'below'} {flat[1]:.6g} N")
             if not ok(u):
                 raise _fail(where, [f"thrusters.{name}.{key}"],
                             f"{u:g} N needs a command outside the range of its map {m.name} "
                             f"({end[1]:.6g} N at command {end[0]:.6g} {m.unit}); the map gives "
                             f"[{f_lo:.6g}, {f_hi:.6g}] N")
+
+
+def _plateaus(values: Mapping[str, float], m) -> tuple:
+    """A table map's saturation plateaus, its flat runs of thrust at either end: ((command where the reverse
+    plateau ends, its thrust) or None, (command where the forward plateau starts, its thrust) or None)."""
+    if m.kind != "table":
+        return None, None
+    k = f"thrusters.map.{m.name}"
+    c = [values[f"{k}.command.{i}"] for i in range(m.n)]
+    t = [values[f"{k}.thrust.{i}"] for i in range(m.n)]
+    lo = (c[max(i for i in range(m.n) if t[i] == t[0])], t[0]) if t[1] == t[0] else None
+    hi = (c[min(i for i in range(m.n) if t[i] == t[-1])], t[-1]) if t[-2] == t[-1] else None
+    return lo, hi
 
 
 def _check_tensor(I: np.ndarray, where: str, keys: list[str], what: str) -> None:

@@ -21,10 +21,11 @@ from arvcas.system.config import ge, gt, lt, quantity
 
 __all__ = [
     "HydroTerm", "Structure", "ThrusterMap", "ThrusterDynamics", "parse_term", "structure_of", "schema_for",
-    "MAX_JOINTS", "VECTOR_ELEMENTS", "HYDRO_ALIASES", "FORMS", "COMMAND_UNITS", "element_labels", "read_tables",
+    "MAX_JOINTS", "DOF_NAMES", "VECTOR_ELEMENTS", "HYDRO_ALIASES", "FORMS", "COMMAND_UNITS", "element_labels", "read_tables",
 ]
 
 MAX_JOINTS = 7
+DOF_NAMES = ("surge", "sway", "heave", "roll", "pitch", "yaw")  # [thrusters] unactuated = [...] names them
 FORCES = "XYZKMN"
 VELOCITIES = "uvwpqr"
 FORMS = ("dh", "chain", "urdf")
@@ -146,6 +147,10 @@ class Structure:
     arm_trim: bool = True  # docs/model.md §3's trim buoyancy for the stowed arm (``[arm] trim = false``: none)
     thruster_maps: tuple["ThrusterMap", ...] = ()  # command maps, [thrusters.map.<name>]
     thruster_dynamics: tuple["ThrusterDynamics", ...] | None = None  # per listed thruster, or None: instantaneous
+    # DOFs (0..5: surge .. yaw) the thrusters leave to the vehicle's own statics; out of the repr so that every
+    # fully actuated system keeps its key (and its compiled code's name)
+    unactuated: tuple[int, ...] = dataclasses.field(default=(), repr=False)
+    env_cd: bool = dataclasses.field(default=True, repr=False)  # [env] Cd given (optional without an arm)
 
     @property
     def n_thrusters(self) -> int:
@@ -168,7 +173,8 @@ class Structure:
 
     def key(self) -> str:
         """A stable text of the structure, for compile-cache keys."""
-        return repr(self)
+        return (repr(self) + (f" unactuated={self.unactuated}" if self.unactuated else "")
+                + ("" if self.env_cd else " env_cd=False"))
 
 
 @dataclass(frozen=True)
@@ -300,10 +306,11 @@ def _structure(doc: dict, default_name: str) -> Structure:
     thr = _table(doc, "thrusters", "")
     if "unit" in thr:
         units_list = thr["unit"]
-        extra = [k for k in thr if k not in ("unit", "map")]
+        extra = [k for k in thr if k not in ("unit", "map", "unactuated")]
         if extra:
             raise _Bad(f"thrusters.{extra[0]}: a thruster list ([[thrusters.unit]]) takes no other keys than "
-                       f"[thrusters.map.<name>] command maps")
+                       f"[thrusters.map.<name>] command maps and unactuated")
+        unact = _unactuated(thr.get("unactuated", []))
         if not isinstance(units_list, list) or not all(isinstance(u, dict) for u in units_list):
             raise _Bad("thrusters.unit: expected an array of tables [[thrusters.unit]]")
         names = []
@@ -314,8 +321,9 @@ def _structure(doc: dict, default_name: str) -> Structure:
             if n == "map":
                 raise _Bad(f"thrusters.unit[{i}].name: 'map' names the command maps ([thrusters.map.<name>])")
             names.append(n)
-        if len(names) < 6:
-            raise _Bad(f"thrusters.unit: {len(names)} thrusters cannot produce every wrench (at least 6)")
+        if len(names) < 6 - len(unact):
+            raise _Bad(f"thrusters.unit: {len(names)} thrusters cannot produce a wrench in {6 - len(unact)} degrees "
+                       f"of freedom (at least {6 - len(unact)})")
         maps = _maps(thr.get("map", {}))
         dyn = _dynamics(units_list, names, maps)
         thrusters: tuple[str, ...] | None = tuple(names)
@@ -324,10 +332,32 @@ def _structure(doc: dict, default_name: str) -> Structure:
             raise _Bad(f"hydro.{bad}: the stern-angle factor ds needs Haidou-1's thruster layout "
                        f"(thrusters.delta_sL, delta_sR)")
     else:
-        thrusters, maps, dyn = None, (), None
+        thrusters, maps, dyn, unact = None, (), None, ()
     vehicle_only = (name, "excess" if has_ex else "volume", tuple(terms), per_rho, cam, thrusters)
-    extra = {"thruster_maps": maps, "thruster_dynamics": dyn}
-    return dataclasses.replace(_with_arm(doc, vehicle_only), **extra)
+    extra = {"thruster_maps": maps, "thruster_dynamics": dyn, "unactuated": unact}
+    st = _with_arm(doc, vehicle_only)
+    env = doc.get("env")
+    # the arm links' drag coefficient: a system without an arm may leave it out
+    cd = st.n_joints > 0 or not isinstance(env, dict) or "Cd" in env
+    return dataclasses.replace(st, env_cd=cd, **extra)
+
+
+def _unactuated(v: Any) -> tuple[int, ...]:
+    """``[thrusters] unactuated = ["pitch"]``: the degrees of freedom the thrusters cannot move on their own
+    (a six-thruster BlueROV2 has no pitch: its allocation matrix has rank 5), in DOF order."""
+    if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+        raise _Bad(f"thrusters.unactuated: expected a list of degree-of-freedom names ({', '.join(DOF_NAMES)}), "
+                   f"got {v!r}")
+    for x in v:
+        if x not in DOF_NAMES:
+            raise _Bad(f"thrusters.unactuated: {x!r} is not a degree of freedom (allowed: {', '.join(DOF_NAMES)})"
+                       f"{config.closest(x, DOF_NAMES)}")
+    if len(set(v)) != len(v):
+        raise _Bad(f"thrusters.unactuated: a degree of freedom is named twice: {v!r}")
+    if len(v) > 2:
+        raise _Bad(f"thrusters.unactuated: {len(v)} degrees of freedom left unactuated; at most 2 (a vehicle the "
+                   f"thrusters hold in at least four)")
+    return tuple(sorted(DOF_NAMES.index(x) for x in v))
 
 
 def _with_arm(doc: dict, vehicle_only: tuple) -> Structure:
@@ -426,9 +456,10 @@ def _table_shape(m: dict, key: str) -> tuple[int, tuple[int, int], bool]:
         if t[i] < t[i - 1]:
             raise _Bad(f"{key}.thrust: a non-monotonic thrust table: thrust falls from {t[i - 1]:g} to {t[i]:g} at "
                        f"point {i} (command {c[i]:g}); more command must give at least as much thrust")
-        if t[i] == t[i - 1] and t[i] != 0:
+        if t[i] == t[i - 1] and t[i] != 0 and not (t[i] == t[0] or t[i] == t[-1]):
             raise _Bad(f"{key}.thrust: thrust {t[i]:g} at points {i - 1} and {i}: flat only at zero thrust "
-                       f"(the dead band); the map must be invertible elsewhere")
+                       f"(the dead band) and at the table's ends (the saturation plateaus); the map must be "
+                       f"invertible elsewhere")
     zeros = [i for i, x in enumerate(t) if x == 0]
     if not zeros or t[0] >= 0 or t[-1] <= 0:
         raise _Bad(f"{key}.thrust: the table must run from reverse (< 0) through zero thrust (the dead band, "
@@ -557,6 +588,14 @@ class Env:
     rho: float = quantity("density", ge(0))  # rho = 0 is the no-fluid reference case
     g: float = quantity("acceleration", gt(0))
     Cd: float = quantity("1", ge(0))
+
+
+@dataclass(frozen=True)
+class EnvNoArm:
+    """``[env]`` of a system without an arm that gives no ``Cd`` (the drag coefficient of arm links)."""
+
+    rho: float = quantity("density", ge(0))
+    g: float = quantity("acceleration", gt(0))
 
 
 _CG_CB = ("xG", "yG", "zG", "xB", "yB", "zB")
@@ -733,7 +772,7 @@ def schema_for(s: Structure) -> type:
                                               frozen=True)
             tf.append(("map", maps, config.setting()))
         thr = dataclasses.make_dataclass("Thrusters", tf, frozen=True)
-    fields: list = [("env", Env, config.setting()), ("vehicle", _vehicle_cls(s.buoyancy), config.setting()),
+    fields: list = [("env", Env if s.env_cd else EnvNoArm, config.setting()), ("vehicle", _vehicle_cls(s.buoyancy), config.setting()),
                     ("hydro", hydro, config.setting()), ("thrusters", thr, config.setting())]
     if s.n_joints:
         n = s.n_joints
