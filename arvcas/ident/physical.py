@@ -1,0 +1,244 @@
+"""Identification that cannot leave physics: the optimiser's variables and the physical parameters they map to.
+
+The free parameters keep the names the user gave (``--free``); inside the optimiser each free parameter is a
+variable ``v`` (zero at the starting value) mapped to its physical value (docs/identification.md,
+"Physical parameterisations"):
+
+* a free parameter outside a group: ``theta = theta_0 + scale v`` within bounds that keep its sign
+  (:func:`bounds`: masses, inertias, diameters > 0, volumes >= 0; Fossen's signs for diagonal added mass and
+  damping, so that the added mass is positive and the damping dissipates);
+* the vehicle's rigid body, when its three principal moments ``vehicle.Ixx, Iyy, Izz`` are free (with any of
+  ``vehicle.m``, the products ``Ixy, Iyz, Ixz`` and the centre of gravity ``xG, yG, zG``): through the
+  Cholesky factor of the second moment of mass about the centre of gravity,
+  ``Sigma_c = L L'`` with ``L_ii = L0_ii exp(v)``, the mass ``m = m0 exp(v)``. This is the pseudo-inertia
+  matrix ``[[Sigma, h], [h', m]]`` (Wensing, Kim and Slotine 2017, "Linear matrix inequalities for physically
+  consistent inertial parameter identification") factored as in Rucker and Wensing 2022 (log-Cholesky):
+  every ``v`` gives a positive definite pseudo-inertia, i.e. a positive mass and an inertia about the
+  centre of gravity whose principal moments keep the strict triangle inequalities, and every such body has
+  exactly one ``v``. An off-diagonal entry of ``L`` is free where its product of inertia is free, and
+  otherwise solved so that the product keeps its file value; the inertia about the body origin is then
+  ``Sigma_b = Sigma_c + m r_G r_G'``, ``I = tr(Sigma_b) 1 - Sigma_b``.
+
+Anything else with a physical set (a principal moment freed alone, a centre of gravity with the inertia
+held, off-diagonal added mass or damping, command-map points) is bounded per parameter, and the estimate
+is held inside the set the loader checks (:func:`loads`) by :func:`pull_back`: if the optimiser's last
+point breaks a rule of ``arvcas.system.params.check_physical`` or ``check_plausible``, or makes the added
+mass or the linear damping matrix indefinite, the estimate is moved back along the way from the start to
+the last point onto the last point that keeps them, and the report says so.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+
+import casadi as ca
+import numpy as np
+
+from arvcas.system.systemfile import parse_term
+
+__all__ = ["Mapping", "bounds", "loads", "pull_back", "RIGID_BODY", "EDGE_RATIO"]
+
+RIGID_BODY = ("vehicle.m", "vehicle.Ixx", "vehicle.Iyy", "vehicle.Izz", "vehicle.Ixy", "vehicle.Iyz", "vehicle.Ixz",
+              "vehicle.xG", "vehicle.yG", "vehicle.zG")
+_PRINCIPAL = ("vehicle.Ixx", "vehicle.Iyy", "vehicle.Izz")
+_PRODUCT = {(1, 0): "vehicle.Ixy", (2, 1): "vehicle.Iyz", (2, 0): "vehicle.Ixz"}
+_LOG_BOUND = 40.0  # |v| of a factor's logarithm: exp(40) = 2e17 times the start, far outside any vehicle
+EDGE_RATIO = 0.01  # smallest / largest eigenvalue of Sigma_c below which an estimate is "at the edge"
+
+
+def bounds(layout, name: str) -> tuple[float, float]:
+    """(lower, upper) SI bounds that keep ``name`` physical: the layout's sign rule (``pos``: > 0, ``nonneg``:
+    >= 0), and for hydrodynamic derivatives Fossen's signs: a diagonal added-mass term (``X_udot``) and a
+    diagonal damping term (``X_u``, ``X_u_absu``: force along the velocity it multiplies) are <= 0, so that
+    the added mass is positive and the damping dissipates."""
+    i = layout.index[name]
+    rule = layout.rules[i]
+    lo, hi = -math.inf, math.inf
+    if rule == "pos":
+        lo = 1e-12
+    elif rule == "nonneg":
+        lo = 0.0
+    if name.startswith("hydro."):
+        t = parse_term(name[len("hydro."):])
+        if (t.dot is not None and t.dot == t.row) or (t.col is not None and t.col == t.row and
+                                                       all(f in (f"abs{'uvwpqr'[t.row]}",) for f in t.factors)):
+            hi = 0.0
+    return lo, hi
+
+
+def _sigma_b(p: dict) -> np.ndarray:
+    """The second moment of mass about the body origin from the inertia entries (Fossen's sign convention:
+    the tensor's off-diagonal entries are -Ixy, -Iyz, -Ixz): Sigma = tr(I)/2 1 - I."""
+    T = np.array([[p["vehicle.Ixx"], -p["vehicle.Ixy"], -p["vehicle.Ixz"]],
+                  [-p["vehicle.Ixy"], p["vehicle.Iyy"], -p["vehicle.Iyz"]],
+                  [-p["vehicle.Ixz"], -p["vehicle.Iyz"], p["vehicle.Izz"]]])
+    return 0.5 * np.trace(T) * np.eye(3) - T
+
+
+class Mapping:
+    """``v`` (one per free parameter, zero at the start) -> the free parameters' physical values, with its
+    Jacobian; ``lo, hi``: bounds on ``v``; ``groups``: one line per group mapped through a factor (none
+    without ``factors``: each parameter by its bounds alone)."""
+
+    def __init__(self, layout, free: tuple[str, ...], p0: np.ndarray, factors: bool = True):
+        self.free = tuple(free)
+        n = len(self.free)
+        self.theta0 = np.array([p0[layout.index[k]] for k in self.free])
+        self.scale = np.where(np.abs(self.theta0) > 0, np.abs(self.theta0), 0.1)
+        self.lo, self.hi = np.full(n, -np.inf), np.full(n, np.inf)
+        v = ca.SX.sym("v", n)
+        out = [self.theta0[k] + self.scale[k] * v[k] for k in range(n)]
+        self.groups: list[str] = []
+        self.mapped: set[str] = set()
+        self.notes: list[str] = []
+        values = {k: float(p0[layout.index[k]]) for k in layout.names}
+        if factors and set(_PRINCIPAL) <= set(self.free) and all(k in layout.index for k in RIGID_BODY):
+            self._rigid_body(v, out, values)
+        for k, name in enumerate(self.free):
+            if name in self.mapped:
+                continue
+            a, b = bounds(layout, name)
+            self.lo[k] = (a - self.theta0[k]) / self.scale[k]
+            self.hi[k] = (b - self.theta0[k]) / self.scale[k]
+        th = ca.vertcat(*out)
+        self._f = ca.Function("ident_map", [v], [th, ca.jacobian(th, v)])
+
+    def _rigid_body(self, v, out: list, p: dict) -> None:
+        ix = {name: k for k, name in enumerate(self.free)}
+        m0 = p["vehicle.m"]
+        r0 = np.array([p["vehicle.xG"], p["vehicle.yG"], p["vehicle.zG"]])
+        Sc0 = _sigma_b(p) - m0 * np.outer(r0, r0)
+        try:
+            L0 = np.linalg.cholesky(Sc0)
+        except np.linalg.LinAlgError:
+            self.notes.append("vehicle rigid body: the starting inertia about the centre of gravity breaks the "
+                              "triangle inequality: its parameters are bounded one by one")
+            return
+        m = m0 * ca.exp(v[ix["vehicle.m"]]) if "vehicle.m" in ix else m0
+        r = [r0[i] + self.scale[ix[k]] * v[ix[k]] if k in ix else r0[i]
+             for i, k in enumerate(("vehicle.xG", "vehicle.yG", "vehicle.zG"))]
+        L = [[ca.SX(0)] * 3 for _ in range(3)]
+        for i in range(3):
+            for j in range(i):
+                name = _PRODUCT[(i, j)]
+                if name in ix:
+                    L[i][j] = L0[i, j] + max(abs(L0[i, j]), 0.1 * L0[j, j]) * v[ix[name]]
+                else:  # the product keeps its file value: Sigma_c[i, j] = Ixy - m r_i r_j
+                    s = p[name] - m * r[i] * r[j] - sum(L[i][k] * L[j][k] for k in range(j))
+                    L[i][j] = s / L[j][j]
+            L[i][i] = L0[i, i] * ca.exp(v[ix[_PRINCIPAL[i]]])
+        Lm = ca.vertcat(*[ca.horzcat(*row) for row in L])
+        rv = ca.vertcat(*r)
+        Sb = ca.mtimes(Lm, Lm.T) + m * ca.mtimes(rv, rv.T)
+        T = ca.trace(Sb) * ca.DM.eye(3) - Sb
+        phys = {"vehicle.m": m, "vehicle.Ixx": T[0, 0], "vehicle.Iyy": T[1, 1], "vehicle.Izz": T[2, 2],
+                "vehicle.Ixy": Sb[1, 0], "vehicle.Iyz": Sb[2, 1], "vehicle.Ixz": Sb[2, 0]}
+        for name, k in ix.items():
+            if name in phys:
+                out[k] = phys[name]
+                self.mapped.add(name)
+                self.lo[k], self.hi[k] = -_LOG_BOUND, _LOG_BOUND
+            elif name in RIGID_BODY:  # the centre of gravity: any value (the factor holds the body physical)
+                self.mapped.add(name)
+        self.groups.append(f"vehicle rigid body ({', '.join(n for n in self.free if n in RIGID_BODY)}): "
+                           f"Cholesky factor of the second moment about the centre of gravity, mass by its "
+                           f"logarithm: positive definite pseudo-inertia for every value")
+
+    def theta(self, v) -> np.ndarray:
+        return np.array(self._f(np.asarray(v, dtype=float))[0]).reshape(-1)
+
+    def jacobian(self, v) -> np.ndarray:
+        """d theta / d v (n x n)."""
+        return np.array(self._f(np.asarray(v, dtype=float))[1])
+
+    def edge(self, values: dict) -> list[str]:
+        """The mapped groups whose estimate lies near the edge of its physical set."""
+        if not self.groups:
+            return []
+        r = np.array([values["vehicle.xG"], values["vehicle.yG"], values["vehicle.zG"]])
+        lam = np.linalg.eigvalsh(_sigma_b(values) - values["vehicle.m"] * np.outer(r, r))
+        if lam[0] < EDGE_RATIO * lam[-1]:
+            return [n for n in self.free if n in RIGID_BODY]
+        return []
+
+
+def _psd(A: np.ndarray) -> bool:
+    S = 0.5 * (A + A.T)
+    return float(np.linalg.eigvalsh(S)[0]) >= -1e-9 * max(1.0, float(np.abs(S).max()))
+
+
+def _matrices(values: dict, layout) -> tuple[np.ndarray, np.ndarray]:
+    """The added mass M_A and the linear damping D (6 x 6, Fossen's signs: both positive for a physical
+    vehicle) of the hydrodynamic terms."""
+    st = layout.structure
+    scale = values["env.rho"] if st.hydro_per_rho else 1.0
+    MA, D = np.zeros((6, 6)), np.zeros((6, 6))
+    for t in st.hydro:
+        c = values[f"hydro.{t.name}"] * scale
+        if t.dot is not None:
+            MA[t.row, t.dot] -= c
+        elif t.col is not None and not t.factors:
+            D[t.row, t.col] -= c
+    return MA, D
+
+
+def loads(values: dict, layout, where: str, accept: bool, matrices: tuple[bool, bool]) -> str | None:
+    """None if the SI ``values`` pass the loader's rules (``check_physical``, ``check_plausible``'s refusals
+    unless ``accept``) and, where ``matrices`` says the start had them, keep the added mass and the linear
+    damping positive semi-definite; else the first rule broken, one line."""
+    from arvcas.system.params import ParamsError, check_physical, check_plausible
+
+    try:
+        check_physical(values, where, layout)
+        check_plausible(values, where, layout, accept)
+    except ParamsError as e:
+        return str(e)
+    MA, D = _matrices(values, layout)
+    if matrices[0] and not _psd(MA):
+        return f"{where}: the added mass's symmetric part is not positive semi-definite"
+    if matrices[1] and not _psd(D):
+        return f"{where}: the linear damping's symmetric part is not positive semi-definite"
+    return None
+
+
+def accepts_implausible(path) -> bool:
+    """The system file's ``[system] accept_implausible`` (False when the file cannot be read)."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh).get("system", {}).get("accept_implausible", False) is True
+    except (OSError, tomllib.TOMLDecodeError, AttributeError):
+        return False
+
+
+def pull_back(system, mapping: Mapping, v: np.ndarray, steps: int = 50) -> tuple[np.ndarray, float, str | None]:
+    """(v', t, why): ``v`` itself (t = 1, why None) when its parameters pass :func:`loads`, else the point
+    ``t v`` (largest t in [0, 1) found by bisection) that passes, with the rule ``v`` broke. The start (t = 0)
+    is the loaded system, which passes."""
+    lay = system.layout
+    p = system.params.vector()
+    idx = [lay.index[n] for n in mapping.free]
+    where = str(system.params.path)
+    accept = accepts_implausible(system.params.path)
+    start = dict(zip(lay.names, map(float, p)))
+    MA, D = _matrices(start, lay)
+    mats = (_psd(MA), _psd(D))
+
+    def why(t: float) -> str | None:
+        pv = p.copy()
+        pv[idx] = mapping.theta(t * v)
+        if not np.all(np.isfinite(pv)):
+            return f"{where}: a parameter is not finite"
+        return loads(dict(zip(lay.names, map(float, pv))), lay, where, accept, mats)
+
+    broke = why(1.0)
+    if broke is None or why(0.0) is not None:
+        return v, 1.0, broke
+    a, b = 0.0, 1.0
+    for _ in range(steps):
+        c = 0.5 * (a + b)
+        if why(c) is None:
+            a = c
+        else:
+            b = c
+    return a * v, a, broke
