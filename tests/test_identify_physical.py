@@ -1,0 +1,192 @@
+"""Identification that cannot leave physics, and an identified file that loads wherever it is written.
+
+* the rigid-body map (arvcas.ident.physical.Mapping) against independent checks: the loader's own
+  check_physical and NumPy's eigenvalues of the inertia about the centre of gravity, its Jacobian against
+  central differences;
+* an identification whose unconstrained optimum is not physical (synthetic trials of a body whose pitch
+  inertia breaks the triangle inequality: no model it can load can fit them exactly): without the
+  parameterisation the estimate is refused by the loader, with it the written file loads;
+* SIGTERM and SIGHUP during the optimisation: one line, non-zero exit, an existing file untouched;
+* relative thrust-table paths and long names in the identified file.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tomlkit
+
+import arvcas
+from arvcas.cli import main
+from arvcas.ident import identify as ident_mod
+from arvcas.ident import logs, physical, synthetic
+from arvcas.io import files
+from arvcas.system import System
+from arvcas.system.params import ParamsError, check_physical
+
+PRINCIPAL = ("vehicle.Ixx", "vehicle.Iyy", "vehicle.Izz")
+# the Hinsdale vehicle's Ixx + Izz is 0.691 kg m^2: a pitch inertia of 0.9 is no mass distribution's
+BROKEN = {"vehicle.Iyy": 0.9}
+
+
+@pytest.fixture(scope="module")
+def vehicle(tmp_path_factory):
+    """The Hinsdale vehicle without its arm (as tests/test_identify.py), and a 'truth' no physical body has."""
+    src = arvcas.load_system("hinsdale_bluerov2_alpha5").path
+    doc = tomlkit.parse(open(src, encoding="utf-8").read())
+    for k in ("arm", "payload", "defaults"):
+        doc.pop(k, None)
+    doc["system"]["name"] = "hinsdale_vehicle"
+    d = tmp_path_factory.mktemp("vehicle")
+    path = d / "hinsdale_vehicle.toml"
+    path.write_text(tomlkit.dumps(doc))
+    model = arvcas.load_system(path)
+    truth = System(model.params.replace(BROKEN))
+    with pytest.raises(ParamsError, match="triangle inequality"):
+        check_physical(truth.params.as_dict(), "truth", truth.layout)
+    trials = [synthetic.write_trial(d / "logs", f"b{k}", truth, duration=6.0, seed=k, p=truth.params.vector())
+              for k in (0, 1)]
+    return model, trials
+
+
+def _values(system, free, theta) -> dict:
+    v = system.params.as_dict()
+    v.update(zip(free, map(float, theta)))
+    return v
+
+
+def _inertia_about_cg(v: dict) -> np.ndarray:
+    T = np.array([[v["vehicle.Ixx"], -v["vehicle.Ixy"], -v["vehicle.Ixz"]],
+                  [-v["vehicle.Ixy"], v["vehicle.Iyy"], -v["vehicle.Iyz"]],
+                  [-v["vehicle.Ixz"], -v["vehicle.Iyz"], v["vehicle.Izz"]]])
+    r = np.array([v["vehicle.xG"], v["vehicle.yG"], v["vehicle.zG"]])
+    return T - v["vehicle.m"] * (r @ r * np.eye(3) - np.outer(r, r))  # parallel axes
+
+
+@pytest.mark.parametrize("free", [PRINCIPAL, PRINCIPAL + ("vehicle.Ixy", "vehicle.zG"),
+                                  ("vehicle.m",) + PRINCIPAL + ("vehicle.Ixz", "vehicle.Iyz", "vehicle.xG")])
+def test_rigid_body_map_stays_physical(vehicle, free):
+    model = vehicle[0]
+    mp = physical.Mapping(model.layout, free, model.params.vector())
+    assert mp.groups and np.allclose(mp.theta(np.zeros(len(free))), mp.theta0, rtol=1e-14, atol=1e-15)
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        v = rng.normal(0, 2.0, len(free))
+        vals = _values(model, free, mp.theta(v))
+        lam = np.linalg.eigvalsh(_inertia_about_cg(vals))
+        assert lam[0] > 0 and lam[0] + lam[1] >= lam[2] * (1 - 1e-9), lam  # a mass distribution has them
+        for n in model.layout.names:  # the products not freed keep their file values
+            if n.startswith("vehicle.I") and n not in free:
+                assert vals[n] == model.params[n]
+        check_physical(vals, "mapped", model.layout)  # the loader's own rules
+    v = rng.normal(0, 1.0, len(free))
+    J = mp.jacobian(v)
+    eye = np.eye(len(free))
+    fd = np.array([(mp.theta(v + 1e-6 * eye[k]) - mp.theta(v - 1e-6 * eye[k])) / 2e-6 for k in range(len(free))]).T
+    assert np.max(np.abs(J - fd)) <= 1e-6 * np.max(np.abs(fd))
+
+
+def test_nonphysical_optimum_still_writes_a_file_that_loads(vehicle, tmp_path, capsys):
+    model, trials = vehicle
+    lg = logs.load_logs(trials, n_joints=0)
+    free = PRINCIPAL
+    raw = ident_mod.identify(model, lg, free, threads=1, physical_set=False)
+    with pytest.raises(ParamsError, match="triangle inequality"):  # the unconstrained optimum: no body has it
+        check_physical(_values(model, free, raw.values), "unconstrained", model.layout)
+    assert raw.values[1] > 0.8, raw.report()  # it found the truth's pitch inertia
+    out = tmp_path / "elsewhere" / "identified.toml"
+    rc = main(["identify", "--system", model.path, "--free", ",".join(free), *map(str, trials), "--out", str(out),
+               "--threads", "1"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "physical parameterisation: vehicle rigid body" in text
+    ident = arvcas.load_system(out)  # the normal loader
+    lam = np.linalg.eigvalsh(_inertia_about_cg(ident.params.as_dict()))
+    assert lam[0] + lam[1] >= lam[2] * (1 - 1e-9)
+    fit = ident_mod.identify(model, lg, free, threads=1)
+    assert fit.cost > raw.cost  # held inside physics, the fit is worse than the impossible one
+    # a principal moment freed alone is bounded by the others: the estimate is held where the file loads
+    one = ident_mod.identify(model, lg, ("vehicle.Iyy",), threads=1)
+    assert one.pulled is not None and "triangle inequality" in one.pulled[1], one.report()
+    check_physical(_values(model, ("vehicle.Iyy",), one.values), "held", model.layout)
+    assert "held at" in one.report() and one.values[0] > model.params["vehicle.Iyy"]
+
+
+def test_iteration_cap_and_flags_in_the_report(vehicle):
+    model, trials = vehicle
+    est = ident_mod.identify(model, logs.load_logs(trials[:1], n_joints=0), PRINCIPAL, threads=1, max_iter=2)
+    rep = est.report()
+    assert est.status == "Maximum_Iterations_Exceeded" and math.isfinite(est.inf_du)
+    assert "stopped at the iteration cap (2)" in rep and f"{est.inf_du:.3g}" in rep and "--max-iter" in rep
+    moved = ident_mod.Estimate(**{**est.__dict__, "values": est.initial * np.array([1.0, 4.0, 0.2]),
+                                  "at_bound": ()})
+    names = [n for n, _ in moved.flags()]
+    assert names == ["vehicle.Iyy", "vehicle.Izz"] and "absorbs something the model lacks" in moved.report()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_terminated_identification_writes_nothing(vehicle, tmp_path, sig):
+    model, trials = vehicle
+    out = tmp_path / "id.toml"
+    files.write_text(out, "# an identified file from an earlier run\n")
+    before = out.read_bytes()
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(arvcas.__file__).parents[1]),
+                                                       os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.Popen([sys.executable, "-m", "arvcas.cli", "identify", "--system", str(model.path), "--free",
+                             ",".join(PRINCIPAL), *map(str, trials), "--out", str(out), "--threads", "1",
+                             "--max-iter", "500"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    for line in proc.stdout:
+        if line.startswith("iteration   1"):
+            proc.send_signal(sig)
+            break
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 128 + sig, err
+    assert err == f"arvcas: terminated ({signal.Signals(sig).name})\n", err
+    assert out.read_bytes() == before
+
+
+def _estimate(system, free, values):
+    n = len(free)
+    return ident_mod.Estimate(system=system, free=tuple(free), initial=np.array([system.params[k] for k in free]),
+                              values=np.array(values, dtype=float), std=np.full(n, 0.01), correlation=np.eye(n),
+                              identifiable=np.ones(n, dtype=bool), unidentifiable=(), correlated=(), trials=("t",),
+                              signals=("roll",), sigma={"roll": 0.01}, x0={}, cost0=1.0, cost=0.5, s2=1.0,
+                              n_residuals=100, status="Solve_Succeeded", iterations=3, seconds=1.0, h=0.02)
+
+
+def test_identified_file_loads_from_another_folder_with_a_long_name(tmp_path):
+    """A system whose thrust table is a relative path beside it, identified into another folder, with a name
+    of the loader's longest length."""
+    rov = arvcas.load_system("bluerov2_heavy_alpha5")
+    doc = tomlkit.parse(open(rov.path, encoding="utf-8").read())
+    for k in ("arm", "payload", "defaults"):
+        doc.pop(k, None)
+    long = "r" * 64
+    doc["system"]["name"] = long
+    (tmp_path / "sys" / "tables").mkdir(parents=True)
+    table = Path(rov.path).parent / doc["thrusters"]["map"]["t200_16v"]["table"]
+    (tmp_path / "sys" / "tables" / "mine.csv").write_text(table.read_text(encoding="utf-8"), encoding="utf-8")
+    doc["thrusters"]["map"]["t200_16v"]["table"] = "tables/mine.csv"
+    src = tmp_path / "sys" / "rov.toml"
+    src.write_text(tomlkit.dumps(doc), encoding="utf-8")
+    system = arvcas.load_system(src)
+    est = _estimate(system, ("hydro.X_u",), [1.5 * system.params["hydro.X_u"]])
+    out = tmp_path / "elsewhere" / "deeper" / "rov_identified.toml"
+    out.parent.mkdir(parents=True)
+    out.write_text(est.system_text(out), encoding="utf-8")
+    ident = arvcas.load_system(out)
+    assert ident.params["hydro.X_u"] == pytest.approx(1.5 * system.params["hydro.X_u"])
+    assert len(ident.name) == 64 and ident.name.endswith("_identified") and ident.name.startswith("rrr")
+    assert ident_mod.identified_name(ident.name) == ident.name
+    assert "../../sys/tables/mine.csv" in out.read_text(encoding="utf-8")
+    # a table file's points are not rewritten: refused before any work, naming the file
+    with pytest.raises(ident_mod.IdentifyError, match="thrusters.map.t200_16v.thrust.3 comes from the thrust "
+                                                      "table file 'tables/mine.csv'"):
+        ident_mod.writable(system, ("thrusters.map.t200_16v.thrust.3",))
