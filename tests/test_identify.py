@@ -14,13 +14,13 @@ import math
 
 import numpy as np
 import pytest
-import tomlkit
 
 import arvcas
 from arvcas.cli import main
 from arvcas.ident import identify as ident_mod
 from arvcas.ident import logs, plant, synthetic, validate
 from arvcas.system import System
+from ident_helpers import armless
 
 FREE = ("vehicle.zB", "vehicle.Ixx", "hydro.K_p", "hydro.M_q_absq")
 TRUTH_CHANGE = {"vehicle.zB": -0.012, "vehicle.Ixx": 0.40, "hydro.K_p": -0.5, "hydro.M_q_absq": -3.0}
@@ -30,14 +30,7 @@ START = {"vehicle.zB": -0.02, "vehicle.Ixx": 0.30, "hydro.K_p": -0.2, "hydro.M_q
 @pytest.fixture(scope="module")
 def vehicle(tmp_path_factory):
     """The Hinsdale vehicle without its arm, as a system file; and that system with the 'true' parameters."""
-    src = arvcas.load_system("hinsdale_bluerov2_alpha5").path
-    doc = tomlkit.parse(open(src, encoding="utf-8").read())
-    for k in ("arm", "payload", "defaults"):
-        doc.pop(k, None)
-    doc["system"]["name"] = "hinsdale_vehicle"
-    d = tmp_path_factory.mktemp("vehicle")
-    path = d / "hinsdale_vehicle.toml"
-    path.write_text(tomlkit.dumps(doc))
+    path = armless("hinsdale_bluerov2_alpha5", tmp_path_factory.mktemp("vehicle"), "hinsdale_vehicle")
     sys_ = arvcas.load_system(path)
     return sys_, System(sys_.params.replace(TRUTH_CHANGE))
 

@@ -30,6 +30,7 @@ from arvcas.ident import logs, physical, synthetic
 from arvcas.io import files
 from arvcas.system import System
 from arvcas.system.params import ParamsError, check_physical
+from ident_helpers import armless
 
 PRINCIPAL = ("vehicle.Ixx", "vehicle.Iyy", "vehicle.Izz")
 # the Hinsdale vehicle's Ixx + Izz is 0.691 kg m^2: a pitch inertia of 0.9 is no mass distribution's
@@ -39,15 +40,8 @@ BROKEN = {"vehicle.Iyy": 0.9}
 @pytest.fixture(scope="module")
 def vehicle(tmp_path_factory):
     """The Hinsdale vehicle without its arm (as tests/test_identify.py), and a 'truth' no physical body has."""
-    src = arvcas.load_system("hinsdale_bluerov2_alpha5").path
-    doc = tomlkit.parse(open(src, encoding="utf-8").read())
-    for k in ("arm", "payload", "defaults"):
-        doc.pop(k, None)
-    doc["system"]["name"] = "hinsdale_vehicle"
     d = tmp_path_factory.mktemp("vehicle")
-    path = d / "hinsdale_vehicle.toml"
-    path.write_text(tomlkit.dumps(doc))
-    model = arvcas.load_system(path)
+    model = arvcas.load_system(armless("hinsdale_bluerov2_alpha5", d, "hinsdale_vehicle"))
     truth = System(model.params.replace(BROKEN))
     with pytest.raises(ParamsError, match="triangle inequality"):
         check_physical(truth.params.as_dict(), "truth", truth.layout)
@@ -165,12 +159,8 @@ def test_identified_file_loads_from_another_folder_with_a_long_name(tmp_path):
     """A system whose thrust table is a relative path beside it, identified into another folder, with a name
     of the loader's longest length."""
     rov = arvcas.load_system("bluerov2_heavy_alpha5")
-    doc = tomlkit.parse(open(rov.path, encoding="utf-8").read())
-    for k in ("arm", "payload", "defaults"):
-        doc.pop(k, None)
-    long = "r" * 64
-    doc["system"]["name"] = long
     (tmp_path / "sys" / "tables").mkdir(parents=True)
+    doc = tomlkit.parse(armless("bluerov2_heavy_alpha5", tmp_path / "sys", "r" * 64).read_text(encoding="utf-8"))
     table = Path(rov.path).parent / doc["thrusters"]["map"]["t200_16v"]["table"]
     (tmp_path / "sys" / "tables" / "mine.csv").write_text(table.read_text(encoding="utf-8"), encoding="utf-8")
     doc["thrusters"]["map"]["t200_16v"]["table"] = "tables/mine.csv"
