@@ -15,8 +15,9 @@ The estimator minimises the simulation error of every trial at once (docs/identi
   states, the term is the maximum-likelihood one of an unknown noise level, ``N_k / 2 log(SSE_k / N_k)``,
   whose gradient weights the signal by its own mean square error (so a signal the model cannot follow,
   e.g. a drift, does not swamp the others);
-* solved by IPOPT (CasADi's ``nlpsol``) with the Gauss-Newton Hessian ``J' W J`` and bounds that keep the
-  model physical (:func:`bounds`), stopped when the objective changes by less than ``tol`` (default 0.1)
+* solved by IPOPT (CasADi's ``nlpsol``) with the Gauss-Newton Hessian ``J' W J``, the free parameters
+  mapped so that every iterate is physical (:mod:`arvcas.ident.physical`: the rigid body through its
+  pseudo-inertia's Cholesky factor, the rest by sign bounds and a hold inside the loader's rules), stopped when the objective changes by less than ``tol`` (default 0.1)
   over :data:`STALL_ITER` iterations: the objective is a negative log-likelihood, and a change of 0.5
   moves the estimate by about one standard error, so 0.1 is well inside the intervals (a tail of slow
   creeping, 1e-5 of the objective in 20 iterations on the Hinsdale trials, is cut); every trial is
@@ -51,7 +52,8 @@ from arvcas.ident.logs import SIGNALS, Log
 from arvcas.ident.physical import bounds
 from arvcas.ident.validate import initial_state, substeps
 
-__all__ = ["IdentifyError", "Estimate", "identify", "bounds", "RANK_TOL", "CORR_WARN", "Z95"]
+__all__ = ["IdentifyError", "Estimate", "identify", "bounds", "identified_name", "RANK_TOL", "CORR_WARN", "Z95",
+           "MOVE_FACTOR"]
 
 RANK_TOL = 1e-8
 STALL_ITER = 3  # iterations over which a relative objective change below ``tol`` ends the solve
