@@ -640,6 +640,8 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
     values = dict(zip(lay.names, map(float, system.params.vector())))
     values.update(zip(free, map(float, theta)))
     at_bound += [n for n in mapping.edge(values) if n not in at_bound]
+    if pulled is not None:  # held on the edge of what loads
+        at_bound += [n for k, n in enumerate(free) if theta[k] != prob.theta0[k] and n not in at_bound]
     return Estimate(system=system, free=free, initial=prob.theta0, values=theta, std=std, correlation=corr,
                     identifiable=ident, unidentifiable=tuple(lines), correlated=tuple(pairs),
                     trials=tuple(lg.name for lg in logs), signals=signals, sigma=sig,
