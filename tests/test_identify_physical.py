@@ -178,6 +178,8 @@ def test_identified_file_loads_from_another_folder_with_a_long_name(tmp_path):
     assert len(ident.name) == 64 and ident.name.endswith("_identified") and ident.name.startswith("rrr")
     assert ident_mod.identified_name(ident.name) == ident.name
     assert "../../sys/tables/mine.csv" in out.read_text(encoding="utf-8")
+    with pytest.raises(ident_mod.IdentifyError, match="free: thrusters.T1.direction.x is an element of a unit"):
+        ident_mod.identify(system, [], ("thrusters.T1.direction.x",))
     # a table file's points are not rewritten: refused before any work, naming the file
     with pytest.raises(ident_mod.IdentifyError, match="thrusters.map.t200_16v.thrust.3 comes from the thrust "
                                                       "table file 'tables/mine.csv'"):

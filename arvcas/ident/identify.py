@@ -530,6 +530,10 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
     dup = [n for n in free if free.count(n) > 1]
     if dup:
         raise IdentifyError(f"free: {dup[0]} is named twice")
+    unit = [n for n in free if ".direction." in n or (n.startswith("arm.joint") and ".axis." in n)]
+    if unit:
+        raise IdentifyError(f"free: {unit[0]} is an element of a unit vector, which no single value can move and "
+                            f"keep of length 1: hold it (give the measured direction in the system file)")
     if not logs:
         raise IdentifyError("logs: give at least one trial")
     measured = [s for s in SIGNALS if any(s in lg.signals for lg in logs)]
