@@ -87,6 +87,41 @@ def test_rigid_body_map_stays_physical(vehicle, free):
     assert np.max(np.abs(J - fd)) <= 1e-6 * np.max(np.abs(fd))
 
 
+@pytest.mark.parametrize("free", [("hydro.X_u", "hydro.Y_v", "hydro.X_v", "hydro.Y_u"),
+                                  ("hydro.X_udot", "hydro.Y_vdot", "hydro.X_vdot"), ("hydro.Y_v", "hydro.X_v"),
+                                  ("hydro.X_u", "hydro.N_r", "hydro.N_v", "hydro.Y_v", "hydro.K_p")])
+def test_hydrodynamic_matrix_maps_stay_positive(free):
+    """Haidou-1's coupled added mass and linear damping (Table A1): with off-diagonal terms free, the symmetric
+    part of each matrix stays positive semi-definite (NumPy's eigenvalues) and the held terms keep their values."""
+    system = arvcas.load_system("haidou1")
+    lay = system.layout
+    mp = physical.Mapping(lay, free, system.params.vector())
+    assert len(mp.groups) == 1 and not mp.notes
+    assert np.allclose(mp.theta(np.zeros(len(free))), mp.theta0, rtol=1e-14, atol=1e-15)
+    rng = np.random.default_rng(5)
+    base = physical._matrices(system.params.as_dict(), lay)
+    for _ in range(200):
+        vals = _values(system, free, mp.theta(rng.normal(0, 2.0, len(free))))
+        for A, A0 in zip(physical._matrices(vals, lay), base):
+            S = 0.5 * (A + A.T)
+            assert np.linalg.eigvalsh(S)[0] >= -1e-12 * np.abs(S).max()
+        for n in lay.names:
+            if n.startswith("hydro.") and n not in free:
+                assert vals[n] == system.params[n]
+    v = rng.normal(0, 1.0, len(free))
+    eye = np.eye(len(free))
+    fd = np.array([(mp.theta(v + 1e-6 * eye[k]) - mp.theta(v - 1e-6 * eye[k])) / 2e-6 for k in range(len(free))]).T
+    assert np.max(np.abs(mp.jacobian(v) - fd)) <= 1e-6 * np.max(np.abs(fd))
+    # without a factor the same terms can leave the set: a unit step of X_v alone makes the damping indefinite
+    raw = physical.Mapping(lay, free, system.params.vector(), factors=False)
+    k = free.index("hydro.X_v") if "hydro.X_v" in free else None
+    if k is not None:
+        v = np.zeros(len(free))
+        v[k] = 2000.0
+        D = physical._matrices(_values(system, free, raw.theta(v)), lay)[1]
+        assert np.linalg.eigvalsh(0.5 * (D + D.T))[0] < 0
+
+
 def test_nonphysical_optimum_still_writes_a_file_that_loads(vehicle, tmp_path, capsys):
     model, trials = vehicle
     lg = logs.load_logs(trials, n_joints=0)

@@ -19,8 +19,12 @@ variable ``v`` (zero at the starting value) mapped to its physical value (docs/i
   otherwise solved so that the product keeps its file value; the inertia about the body origin is then
   ``Sigma_b = Sigma_c + m r_G r_G'``, ``I = tr(Sigma_b) 1 - Sigma_b``.
 
+* the added mass and the linear damping, when an off-diagonal term of one is free: the symmetric part of
+  the matrix (Fossen's signs) through its Cholesky factor (:meth:`Mapping._hydro_matrix`): positive
+  semi-definite for every value, the held terms at their file values.
+
 Anything else with a physical set (a principal moment freed alone, a centre of gravity with the inertia
-held, off-diagonal added mass or damping, command-map points) is bounded per parameter, and the estimate
+held, command-map points) is bounded per parameter, and the estimate
 is held inside the set the loader checks (:func:`loads`) by :func:`pull_back`: if the optimiser's last
 point breaks a rule of ``arvcas.system.params.check_physical`` or ``check_plausible``, or makes the added
 mass or the linear damping matrix indefinite, the estimate is moved back along the way from the start to
@@ -95,6 +99,9 @@ class Mapping:
         values = {k: float(p0[layout.index[k]]) for k in layout.names}
         if factors and set(_PRINCIPAL) <= set(self.free) and all(k in layout.index for k in RIGID_BODY):
             self._rigid_body(v, out, values)
+        if factors and "env.rho" not in self.free:
+            for kind in ("added mass", "linear damping"):
+                self._hydro_matrix(kind, layout, v, out, values)
         for k, name in enumerate(self.free):
             if name in self.mapped:
                 continue
@@ -145,6 +152,81 @@ class Mapping:
                            f"Cholesky factor of the second moment about the centre of gravity, mass by its "
                            f"logarithm: positive definite pseudo-inertia for every value")
 
+    def _hydro_matrix(self, kind: str, layout, v, out: list, p: dict) -> None:
+        """The added mass or the linear damping, when an off-diagonal term of it is free: the symmetric part
+        ``S = (A + A') / 2`` of the matrix (``A[row, col] = -coefficient``, Fossen's signs) through its
+        Cholesky factor over the rows in use, those with a free diagonal last: ``L_ii = L0_ii exp(v)`` for a
+        free diagonal term, an off-diagonal ``L_ij`` free where a term of ``S_ij`` is free (the other term of
+        the pair, if free too, moves the antisymmetric part), every other entry solved so that the held terms
+        keep their values. Any ``v`` gives a positive semi-definite ``S``."""
+        st = layout.structure
+        scale = p["env.rho"] if st.hydro_per_rho else 1.0
+        terms = {}  # (row, col) -> parameter name
+        for t in st.hydro:
+            if kind == "added mass" and t.dot is not None:
+                terms[(t.row, t.dot)] = f"hydro.{t.name}"
+            elif kind == "linear damping" and t.col is not None and not t.factors:
+                terms[(t.row, t.col)] = f"hydro.{t.name}"
+        ix = {name: k for k, name in enumerate(self.free)}
+        free = {rc: n for rc, n in terms.items() if n in ix}
+        if not any(i != j for i, j in free) or scale <= 0:
+            return
+        A0 = np.zeros((6, 6))
+        for (i, j), n in terms.items():
+            A0[i, j] = -p[n] * scale
+        S0 = 0.5 * (A0 + A0.T)
+        used = [i for i in range(6) if np.any(S0[i]) or any(i in rc for rc in free)]
+        diag_free = [i for i in used if (i, i) in free]
+        order = [i for i in used if i not in diag_free] + diag_free
+        pos = {i: k for k, i in enumerate(order)}
+        held = [i for i in used if i not in diag_free]
+        bad = [rc for rc in free if rc[0] != rc[1] and rc[0] in held and rc[1] in held]
+        try:
+            L0 = np.linalg.cholesky(S0[np.ix_(order, order)])
+        except np.linalg.LinAlgError:
+            L0 = None
+        if bad or L0 is None:
+            why = ("a free term between rows whose diagonal is held" if bad else
+                   "its starting symmetric part is singular or indefinite")
+            self.notes.append(f"{kind}: {why}: its terms are bounded one by one and the estimate held inside the "
+                              f"loader's rules")
+            return
+        n = len(order)
+        L = [[ca.SX(0)] * n for _ in range(n)]
+        S = {}  # (a, b) in ``order`` positions, a >= b -> the expression of S
+        for a in range(n):
+            for b in range(a + 1):
+                i, j = order[a], order[b]
+                pair = (i, j) in free or (j, i) in free
+                if a == b and pair:
+                    L[a][a] = L0[a, a] * ca.exp(v[ix[free[(i, i)]]])
+                elif a == b:
+                    L[a][a] = ca.sqrt(S0[i, i] - sum(L[a][k] ** 2 for k in range(a)))
+                elif pair:
+                    L[a][b] = L0[a, b] + max(abs(L0[a, b]), 0.1 * L0[b, b]) * v[ix[free[_first(i, j, free)]]]
+                else:
+                    L[a][b] = (S0[i, j] - sum(L[a][k] * L[b][k] for k in range(b))) / L[b][b]
+                S[(a, b)] = sum(L[a][k] * L[b][k] for k in range(b + 1))
+        for (i, j), name in free.items():
+            a, b = max(pos[i], pos[j]), min(pos[i], pos[j])
+            sym = S[(a, b)]
+            k = ix[name]
+            first = _first(order[a], order[b], free)
+            if i == j:
+                A = sym
+            elif (j, i) not in free:  # the held partner keeps its value
+                A = 2 * sym - A0[j, i]
+            else:  # both free: the second's variable moves the antisymmetric part K = (A_second - A_first) / 2
+                second = (j, i) if (i, j) == first else (i, j)
+                ks = ix[free[second]]
+                K = 0.5 * (A0[second] - A0[first]) + self.scale[ks] * scale * v[ks]
+                A = sym + K if (i, j) == second else sym - K
+            out[k] = -A / scale
+            self.mapped.add(name)
+            self.lo[k], self.hi[k] = (-_LOG_BOUND, _LOG_BOUND) if i == j else (-np.inf, np.inf)
+        self.groups.append(f"{kind} ({', '.join(n for n in self.free if n in free.values())}): Cholesky factor of "
+                           f"its symmetric part: positive semi-definite for every value")
+
     def theta(self, v) -> np.ndarray:
         return np.array(self._f(np.asarray(v, dtype=float))[0]).reshape(-1)
 
@@ -161,6 +243,12 @@ class Mapping:
         if lam[0] < EDGE_RATIO * lam[-1]:
             return [n for n in self.free if n in RIGID_BODY]
         return []
+
+
+def _first(i: int, j: int, free: dict) -> tuple[int, int]:
+    """Of the terms (i, j) and (j, i) of a symmetric entry, the one whose variable moves the factor: (i, j)
+    if it is free, else (j, i)."""
+    return (i, j) if (i, j) in free else (j, i)
 
 
 def _psd(A: np.ndarray) -> bool:
