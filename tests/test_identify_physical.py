@@ -222,3 +222,25 @@ def test_identified_file_loads_from_another_folder_with_a_long_name(tmp_path):
     with pytest.raises(ident_mod.IdentifyError, match="thrusters.map.t200_16v.thrust.3 comes from the thrust "
                                                       "table file 'tables/mine.csv'"):
         ident_mod.writable(system, ("thrusters.map.t200_16v.thrust.3",))
+
+
+def test_identified_urdf_system_loads_from_another_folder(tmp_path):
+    """A system whose arm is a URDF at a relative path (a subfolder), identified into another folder."""
+    pytest.importorskip("pinocchio")
+    import urdf_arms as ua
+
+    dh = arvcas.load_system("haidou1")
+    v = dict(zip(dh.params.names(), np.asarray(dh.params.vector(), float)))
+    (tmp_path / "sys" / "arm").mkdir(parents=True)
+    (tmp_path / "sys" / "arm" / "haidou1_arm.urdf").write_text(ua.haidou1_urdf(v), encoding="utf-8")
+    src = tmp_path / "sys" / "haidou1_urdf.toml"
+    src.write_text(ua.haidou1_form3_toml(ua.shipped_haidou1_text(), v, urdf_name="arm/haidou1_arm.urdf"),
+                   encoding="utf-8")
+    system = arvcas.load_system(src)
+    est = _estimate(system, ("hydro.X_u",), [1.5 * system.params["hydro.X_u"]])
+    out = tmp_path / "other" / "haidou1_identified.toml"
+    out.parent.mkdir()
+    out.write_text(est.system_text(out), encoding="utf-8")
+    ident = arvcas.load_system(out)
+    assert ident.params["hydro.X_u"] == pytest.approx(1.5 * system.params["hydro.X_u"])
+    assert ident.n_joints == 6 and 'urdf = "../sys/arm/haidou1_arm.urdf"' in out.read_text(encoding="utf-8")
