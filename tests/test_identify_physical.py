@@ -112,6 +112,11 @@ def test_hydrodynamic_matrix_maps_stay_positive(free):
     eye = np.eye(len(free))
     fd = np.array([(mp.theta(v + 1e-6 * eye[k]) - mp.theta(v - 1e-6 * eye[k])) / 2e-6 for k in range(len(free))]).T
     assert np.max(np.abs(mp.jacobian(v) - fd)) <= 1e-6 * np.max(np.abs(fd))
+    # the edge of the set is flagged: a diagonal factor near zero, a nearly singular symmetric part
+    assert mp.edge(system.params.as_dict()) == []
+    v = np.zeros(len(free))
+    v[0] = -8.0
+    assert set(mp.edge(_values(system, free, mp.theta(v)))) == set(free)
     # without a factor the same terms can leave the set: a unit step of X_v alone makes the damping indefinite
     raw = physical.Mapping(lay, free, system.params.vector(), factors=False)
     k = free.index("hydro.X_v") if "hydro.X_v" in free else None

@@ -94,6 +94,7 @@ class Mapping:
         v = ca.SX.sym("v", n)
         out = [self.theta0[k] + self.scale[k] * v[k] for k in range(n)]
         self.groups: list[str] = []
+        self._edges: list[tuple[tuple[str, ...], object]] = []  # (names, values -> the group's matrix)
         self.mapped: set[str] = set()
         self.notes: list[str] = []
         values = {k: float(p0[layout.index[k]]) for k in layout.names}
@@ -148,6 +149,11 @@ class Mapping:
                 self.lo[k], self.hi[k] = -_LOG_BOUND, _LOG_BOUND
             elif name in RIGID_BODY:  # the centre of gravity: any value (the factor holds the body physical)
                 self.mapped.add(name)
+        def sigma_c(vals):
+            r = np.array([vals["vehicle.xG"], vals["vehicle.yG"], vals["vehicle.zG"]])
+            return _sigma_b(vals) - vals["vehicle.m"] * np.outer(r, r)
+
+        self._edges.append((tuple(n for n in self.free if n in RIGID_BODY), sigma_c))
         self.groups.append(f"vehicle rigid body ({', '.join(n for n in self.free if n in RIGID_BODY)}): "
                            f"Cholesky factor of the second moment about the centre of gravity, mass by its "
                            f"logarithm: positive definite pseudo-inertia for every value")
@@ -224,6 +230,13 @@ class Mapping:
             out[k] = -A / scale
             self.mapped.add(name)
             self.lo[k], self.hi[k] = (-_LOG_BOUND, _LOG_BOUND) if i == j else (-np.inf, np.inf)
+        which = 0 if kind == "added mass" else 1
+
+        def sym(vals):
+            A = _matrices(vals, layout)[which]
+            return 0.5 * (A + A.T)[np.ix_(used, used)]
+
+        self._edges.append((tuple(n for n in self.free if n in free.values()), sym))
         self.groups.append(f"{kind} ({', '.join(n for n in self.free if n in free.values())}): Cholesky factor of "
                            f"its symmetric part: positive semi-definite for every value")
 
@@ -235,14 +248,15 @@ class Mapping:
         return np.array(self._f(np.asarray(v, dtype=float))[1])
 
     def edge(self, values: dict) -> list[str]:
-        """The mapped groups whose estimate lies near the edge of its physical set."""
-        if not self.groups:
-            return []
-        r = np.array([values["vehicle.xG"], values["vehicle.yG"], values["vehicle.zG"]])
-        lam = np.linalg.eigvalsh(_sigma_b(values) - values["vehicle.m"] * np.outer(r, r))
-        if lam[0] < EDGE_RATIO * lam[-1]:
-            return [n for n in self.free if n in RIGID_BODY]
-        return []
+        """The free parameters of every mapped group whose estimate lies near the edge of its physical set: the
+        group's matrix (Sigma_c, or the symmetric part of the added mass or damping over its rows in use) has
+        an eigenvalue below :data:`EDGE_RATIO` of its largest."""
+        out = []
+        for names, matrix in self._edges:
+            lam = np.linalg.eigvalsh(matrix(values))
+            if lam[0] < EDGE_RATIO * lam[-1]:
+                out += [n for n in names if n not in out]
+        return out
 
 
 def _first(i: int, j: int, free: dict) -> tuple[int, int]:
