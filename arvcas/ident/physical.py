@@ -17,8 +17,9 @@ variable ``v`` (zero at the starting value) mapped to its physical value (docs/i
   centre of gravity whose principal moments keep the strict triangle inequalities, and every such body has
   exactly one ``v``. An off-diagonal entry of ``L`` is free where its product of inertia is free, and
   otherwise solved so that the product keeps its file value; the inertia about the body origin is then
-  ``Sigma_b = Sigma_c + m r_G r_G'``, ``I = tr(Sigma_b) 1 - Sigma_b``.
-
+  ``Sigma_b = Sigma_c + m r_G r_G'``, ``I = tr(Sigma_b) 1 - Sigma_b``. A chain-form arm link whose
+  ``inertia.ixx, iyy, izz`` are free likewise (its tensor is about its centre of mass: the mass and the
+  centre of mass do not enter, and keep their bounds);
 * the added mass and the linear damping, when an off-diagonal term of one is free: the symmetric part of
   the matrix (Fossen's signs) through its Cholesky factor (:meth:`Mapping._hydro_matrix`): positive
   semi-definite for every value, the held terms at their file values.
@@ -35,6 +36,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -45,8 +47,49 @@ __all__ = ["Mapping", "bounds", "loads", "pull_back", "RIGID_BODY", "EDGE_RATIO"
 
 RIGID_BODY = ("vehicle.m", "vehicle.Ixx", "vehicle.Iyy", "vehicle.Izz", "vehicle.Ixy", "vehicle.Iyz", "vehicle.Ixz",
               "vehicle.xG", "vehicle.yG", "vehicle.zG")
-_PRINCIPAL = ("vehicle.Ixx", "vehicle.Iyy", "vehicle.Izz")
-_PRODUCT = {(1, 0): "vehicle.Ixy", (2, 1): "vehicle.Iyz", (2, 0): "vehicle.Ixz"}
+_AXES = ((1, 0), (2, 1), (2, 0))  # the products' places in the lower triangle: xy, yz, xz
+
+
+@dataclass(frozen=True)
+class _Body:
+    """A rigid body's parameters: ``principal`` (xx, yy, zz) and ``products`` by place; ``sign``: the product
+    parameter is ``sign`` times the second moment's off-diagonal entry (Fossen's vehicle tensor writes
+    ``-Ixy``: +1; a URDF tensor ``ixy``: -1); ``com``: the centre of mass when the inertia is about another
+    point (the vehicle's body origin: then the mass enters), () when it is about the centre of mass."""
+
+    label: str
+    mass: str
+    principal: tuple[str, str, str]
+    products: dict
+    sign: float
+    com: tuple[str, ...] = ()
+
+    def sigma_c(self, p: dict) -> np.ndarray:
+        """The second moment of mass about the centre of mass, Sigma = tr(I)/2 1 - I less m r r'."""
+        T = np.diag([p[n] for n in self.principal])
+        for (i, j), n in self.products.items():
+            T[i, j] = T[j, i] = -self.sign * p[n]
+        S = 0.5 * np.trace(T) * np.eye(3) - T
+        if self.com:
+            r = np.array([p[k] for k in self.com])
+            S -= p[self.mass] * np.outer(r, r)
+        return S
+
+
+def _bodies(layout) -> list[_Body]:
+    """The vehicle and every chain-form link with an inertia tensor in ``layout``."""
+    out = []
+    if all(k in layout.index for k in RIGID_BODY):
+        out.append(_Body("vehicle rigid body", "vehicle.m", RIGID_BODY[1:4], dict(zip(_AXES, RIGID_BODY[4:7])), 1.0,
+                         RIGID_BODY[7:]))
+    for i in range(1, layout.structure.n_joints + 1):
+        k = f"arm.link{i}.inertia"
+        if f"{k}.ixx" in layout.index:
+            out.append(_Body(f"arm link {i}", f"arm.link{i}.mass", (f"{k}.ixx", f"{k}.iyy", f"{k}.izz"),
+                             dict(zip(_AXES, (f"{k}.ixy", f"{k}.iyz", f"{k}.ixz"))), -1.0))
+    return out
+
+
 _LOG_BOUND = 40.0  # |v| of a factor's logarithm: exp(40) = 2e17 times the start, far outside any vehicle
 EDGE_RATIO = 0.01  # smallest / largest eigenvalue of Sigma_c below which an estimate is "at the edge"
 
@@ -71,15 +114,6 @@ def bounds(layout, name: str) -> tuple[float, float]:
     return lo, hi
 
 
-def _sigma_b(p: dict) -> np.ndarray:
-    """The second moment of mass about the body origin from the inertia entries (Fossen's sign convention:
-    the tensor's off-diagonal entries are -Ixy, -Iyz, -Ixz): Sigma = tr(I)/2 1 - I."""
-    T = np.array([[p["vehicle.Ixx"], -p["vehicle.Ixy"], -p["vehicle.Ixz"]],
-                  [-p["vehicle.Ixy"], p["vehicle.Iyy"], -p["vehicle.Iyz"]],
-                  [-p["vehicle.Ixz"], -p["vehicle.Iyz"], p["vehicle.Izz"]]])
-    return 0.5 * np.trace(T) * np.eye(3) - T
-
-
 class Mapping:
     """``v`` (one per free parameter, zero at the start) -> the free parameters' physical values, with its
     Jacobian; ``lo, hi``: bounds on ``v``; ``groups``: one line per group mapped through a factor (none
@@ -98,8 +132,9 @@ class Mapping:
         self.mapped: set[str] = set()
         self.notes: list[str] = []
         values = {k: float(p0[layout.index[k]]) for k in layout.names}
-        if factors and set(_PRINCIPAL) <= set(self.free) and all(k in layout.index for k in RIGID_BODY):
-            self._rigid_body(v, out, values)
+        for body in _bodies(layout) if factors else ():
+            if set(body.principal) <= set(self.free):
+                self._rigid_body(v, out, values, body)
         if factors and "env.rho" not in self.free:
             for kind in ("added mass", "linear damping"):
                 self._hydro_matrix(kind, layout, v, out, values)
@@ -112,51 +147,52 @@ class Mapping:
         th = ca.vertcat(*out)
         self._f = ca.Function("ident_map", [v], [th, ca.jacobian(th, v)])
 
-    def _rigid_body(self, v, out: list, p: dict) -> None:
+    def _rigid_body(self, v, out: list, p: dict, body: "_Body") -> None:
+        """A rigid body whose three principal moments are free (module docstring): its second moment about
+        the centre of mass through its Cholesky factor; for the vehicle (inertia about the body origin) the
+        mass by its logarithm and the centre of gravity free."""
         ix = {name: k for k, name in enumerate(self.free)}
-        m0 = p["vehicle.m"]
-        r0 = np.array([p["vehicle.xG"], p["vehicle.yG"], p["vehicle.zG"]])
-        Sc0 = _sigma_b(p) - m0 * np.outer(r0, r0)
+        m0 = p[body.mass] if body.com else 0.0
+        r0 = np.array([p[k] for k in body.com]) if body.com else np.zeros(3)
+        Sc0 = body.sigma_c(p)
         try:
             L0 = np.linalg.cholesky(Sc0)
         except np.linalg.LinAlgError:
-            self.notes.append("vehicle rigid body: the starting inertia about the centre of gravity breaks the "
-                              "triangle inequality: its parameters are bounded one by one")
+            self.notes.append(f"{body.label}: the starting inertia about its centre of mass breaks the triangle "
+                              f"inequality: its parameters are bounded one by one")
             return
-        m = m0 * ca.exp(v[ix["vehicle.m"]]) if "vehicle.m" in ix else m0
-        r = [r0[i] + self.scale[ix[k]] * v[ix[k]] if k in ix else r0[i]
-             for i, k in enumerate(("vehicle.xG", "vehicle.yG", "vehicle.zG"))]
+        m = m0 * ca.exp(v[ix[body.mass]]) if body.com and body.mass in ix else m0
+        r = [r0[i] + self.scale[ix[k]] * v[ix[k]] if k in ix else r0[i] for i, k in enumerate(body.com or ("",) * 3)]
         L = [[ca.SX(0)] * 3 for _ in range(3)]
         for i in range(3):
             for j in range(i):
-                name = _PRODUCT[(i, j)]
+                name = body.products[(i, j)]
                 if name in ix:
                     L[i][j] = L0[i, j] + max(abs(L0[i, j]), 0.1 * L0[j, j]) * v[ix[name]]
-                else:  # the product keeps its file value: Sigma_c[i, j] = Ixy - m r_i r_j
-                    s = p[name] - m * r[i] * r[j] - sum(L[i][k] * L[j][k] for k in range(j))
+                else:  # the product keeps its file value: Sigma_c[i, j] = sign * product - m r_i r_j
+                    s = body.sign * p[name] - m * r[i] * r[j] - sum(L[i][k] * L[j][k] for k in range(j))
                     L[i][j] = s / L[j][j]
-            L[i][i] = L0[i, i] * ca.exp(v[ix[_PRINCIPAL[i]]])
+            L[i][i] = L0[i, i] * ca.exp(v[ix[body.principal[i]]])
         Lm = ca.vertcat(*[ca.horzcat(*row) for row in L])
         rv = ca.vertcat(*r)
-        Sb = ca.mtimes(Lm, Lm.T) + m * ca.mtimes(rv, rv.T)
+        Sb = ca.mtimes(Lm, Lm.T) + m * ca.mtimes(rv, rv.T)  # about the frame the file's inertia is written in
         T = ca.trace(Sb) * ca.DM.eye(3) - Sb
-        phys = {"vehicle.m": m, "vehicle.Ixx": T[0, 0], "vehicle.Iyy": T[1, 1], "vehicle.Izz": T[2, 2],
-                "vehicle.Ixy": Sb[1, 0], "vehicle.Iyz": Sb[2, 1], "vehicle.Ixz": Sb[2, 0]}
-        for name, k in ix.items():
+        phys = {body.principal[i]: T[i, i] for i in range(3)}
+        phys.update({name: body.sign * Sb[i, j] for (i, j), name in body.products.items()})
+        if body.com:
+            phys[body.mass] = m
+        names = tuple(n for n in self.free if n in phys or n in body.com)
+        for name in names:
+            k = ix[name]
+            self.mapped.add(name)
             if name in phys:
                 out[k] = phys[name]
-                self.mapped.add(name)
                 self.lo[k], self.hi[k] = -_LOG_BOUND, _LOG_BOUND
-            elif name in RIGID_BODY:  # the centre of gravity: any value (the factor holds the body physical)
-                self.mapped.add(name)
-        def sigma_c(vals):
-            r = np.array([vals["vehicle.xG"], vals["vehicle.yG"], vals["vehicle.zG"]])
-            return _sigma_b(vals) - vals["vehicle.m"] * np.outer(r, r)
-
-        self._edges.append((tuple(n for n in self.free if n in RIGID_BODY), sigma_c))
-        self.groups.append(f"vehicle rigid body ({', '.join(n for n in self.free if n in RIGID_BODY)}): "
-                           f"Cholesky factor of the second moment about the centre of gravity, mass by its "
-                           f"logarithm: positive definite pseudo-inertia for every value")
+            # a centre of gravity: any value (the factor holds the body physical)
+        self._edges.append((names, body.sigma_c))
+        self.groups.append(f"{body.label} ({', '.join(names)}): Cholesky factor of the second moment about its "
+                           f"centre of mass{', mass by its logarithm' if body.com else ''}: a physical body "
+                           f"(positive definite pseudo-inertia) for every value")
 
     def _hydro_matrix(self, kind: str, layout, v, out: list, p: dict) -> None:
         """The added mass or the linear damping, when an off-diagonal term of it is free: the symmetric part
@@ -313,10 +349,11 @@ def accepts_implausible(path) -> bool:
         return False
 
 
-def pull_back(system, mapping: Mapping, v: np.ndarray, steps: int = 50) -> tuple[np.ndarray, float, str | None]:
+def pull_back(system, mapping: Mapping, v: np.ndarray, steps: int = 20) -> tuple[np.ndarray, float, str | None]:
     """(v', t, why): ``v`` itself (t = 1, why None) when its parameters pass :func:`loads`, else the point
-    ``t v`` (largest t in [0, 1) found by bisection) that passes, with the rule ``v`` broke. The start (t = 0)
-    is the loaded system, which passes."""
+    ``t v`` (largest t in [0, 1) found by ``steps`` bisections: to 1e-6 of the step) that passes, with the rule
+    ``v`` broke. The start (t = 0) is the loaded system, which passes. Each check runs the loader's rules
+    (0.01 to 2 s, by system)."""
     lay = system.layout
     p = system.params.vector()
     idx = [lay.index[n] for n in mapping.free]
