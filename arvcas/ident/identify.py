@@ -16,8 +16,9 @@ The estimator minimises the simulation error of every trial at once (docs/identi
   whose gradient weights the signal by its own mean square error (so a signal the model cannot follow,
   e.g. a drift, does not swamp the others);
 * solved by IPOPT (CasADi's ``nlpsol``) with the Gauss-Newton Hessian ``J' W J``, the free parameters
-  mapped so that every iterate is physical (:mod:`arvcas.ident.physical`: the rigid body through its
-  pseudo-inertia's Cholesky factor, the rest by sign bounds and a hold inside the loader's rules), stopped when the objective changes by less than ``tol`` (default 0.1)
+  mapped so that every iterate is physical (:mod:`arvcas.ident.physical`: a rigid body through its
+  pseudo-inertia's Cholesky factor, added mass and damping through their own, the rest by sign bounds and
+  a hold inside the loader's rules), stopped when the objective changes by less than ``tol`` (default 0.1)
   over :data:`STALL_ITER` iterations: the objective is a negative log-likelihood, and a change of 0.5
   moves the estimate by about one standard error, so 0.1 is well inside the intervals (a tail of slow
   creeping, 1e-5 of the objective in 20 iterations on the Hinsdale trials, is cut); every trial is
@@ -168,7 +169,6 @@ class Estimate:
             rows += ["", f"strongly correlated (|r| > {CORR_WARN}):"] + \
                     [f"  {a} ~ {b}: r = {r:+.3f}" for a, b, r in self.correlated]
         return "\n".join(rows)
-
 
     def _solver_notes(self) -> list[str]:
         """What the solver's end means: the iteration cap with the optimality measure and what to try, the
