@@ -215,15 +215,15 @@ class _Problem:
     the maximum-likelihood ``N_k / 2 log(SSE_k / N_k)``: its gradient is the weighted least-squares one.
     """
 
-    def __init__(self, system, logs, free, signals, stated, m, K, threads, mapping):
+    def __init__(self, system, logs, free, signals, stated, m, K, threads, mapping=None):
         self.system, self.logs, self.free, self.K = system, logs, tuple(free), K
         self.plant = plant_mod.LogPlant(system, m=m, free=self.free)
         lay = system.layout
         self.p = system.params.vector()
         self.idx = np.array([lay.index[n] for n in self.free], dtype=int)
-        self.map = mapping
-        self.theta0 = mapping.theta0
-        self.scale = mapping.scale
+        self.map = mapping if mapping is not None else physical.Mapping(lay, self.free, self.p)
+        self.theta0 = self.map.theta0
+        self.scale = self.map.scale
         self.nonfinite = 0  # evaluations whose simulation was not finite (counted, not printed)
         self.nt = len(self.free)
         self.data = [plant_mod.sample_inputs(lg, system, m) for lg in logs]
