@@ -155,6 +155,19 @@ def test_hydrodynamic_matrix_maps_stay_positive(free):
         assert np.linalg.eigvalsh(0.5 * (D + D.T))[0] < 0
 
 
+def test_a_held_member_leaves_its_group(vehicle):
+    """A group member the trials carry no information about is held: the group forms without it (a principal
+    moment held: the others by their bounds; a product held: it keeps its value through the factor)."""
+    model = vehicle[0]
+    p = model.params.vector()
+    free = PRINCIPAL + ("vehicle.Ixy",)
+    assert physical.Mapping(model.layout, free, p, held=("vehicle.Izz",)).groups == []
+    mp = physical.Mapping(model.layout, free, p, held=("vehicle.Ixy",))
+    assert len(mp.groups) == 1 and "vehicle.Ixy" not in mp.mapped
+    th = mp.theta(np.array([0.3, -0.2, 0.1, 0.0]))
+    assert th[3] == model.params["vehicle.Ixy"] and th[0] != model.params["vehicle.Ixx"]
+
+
 def test_nonphysical_optimum_still_writes_a_file_that_loads(vehicle, tmp_path, capfd):
     model, trials = vehicle
     lg = logs.load_logs(trials, n_joints=0)

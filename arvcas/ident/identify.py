@@ -580,6 +580,11 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
     # would otherwise wander along it
     _, J0 = prob.evaluate(z0, True)
     dead = [k for k in range(len(free)) if not np.any(J0[:, k])]
+    held = tuple(free[k] for k in dead)
+    if any(n in mapping.mapped for n in held):  # a held member of a group: the group is formed without it
+        mapping = physical.Mapping(lay, free, system.params.vector(), factors=physical_set, held=held)
+        prob.map = mapping
+        lo[: prob.nt], hi[: prob.nt] = mapping.lo, mapping.hi
     for k in dead:
         lo[k] = hi[k] = 0.0
     stop = threading.Event()

@@ -117,11 +117,13 @@ def bounds(layout, name: str) -> tuple[float, float]:
 class Mapping:
     """``v`` (one per free parameter, zero at the start) -> the free parameters' physical values, with its
     Jacobian; ``lo, hi``: bounds on ``v``; ``groups``: one line per group mapped through a factor (none
-    without ``factors``: each parameter by its bounds alone)."""
+    without ``factors``: each parameter by its bounds alone). ``held``: free parameters held at their values
+    (no information in the trials): a group is formed as if they were not free."""
 
-    def __init__(self, layout, free: tuple[str, ...], p0: np.ndarray, factors: bool = True):
+    def __init__(self, layout, free: tuple[str, ...], p0: np.ndarray, factors: bool = True, held=()):
         self.free = tuple(free)
         n = len(self.free)
+        self._active = {name: k for k, name in enumerate(self.free) if name not in held}  # grouped if they form one
         self.theta0 = np.array([p0[layout.index[k]] for k in self.free])
         self.scale = np.where(np.abs(self.theta0) > 0, np.abs(self.theta0), 0.1)
         self.lo, self.hi = np.full(n, -np.inf), np.full(n, np.inf)
@@ -133,7 +135,7 @@ class Mapping:
         self.notes: list[str] = []
         values = {k: float(p0[layout.index[k]]) for k in layout.names}
         for body in _bodies(layout) if factors else ():
-            if set(body.principal) <= set(self.free):
+            if set(body.principal) <= set(self._active):
                 self._rigid_body(v, out, values, body)
         if factors and "env.rho" not in self.free:
             for kind in ("added mass", "linear damping"):
@@ -151,7 +153,7 @@ class Mapping:
         """A rigid body whose three principal moments are free (module docstring): its second moment about
         the centre of mass through its Cholesky factor; for the vehicle (inertia about the body origin) the
         mass by its logarithm and the centre of gravity free."""
-        ix = {name: k for k, name in enumerate(self.free)}
+        ix = dict(self._active)
         m0 = p[body.mass] if body.com else 0.0
         r0 = np.array([p[k] for k in body.com]) if body.com else np.zeros(3)
         Sc0 = body.sigma_c(p)
@@ -181,7 +183,7 @@ class Mapping:
         phys.update({name: body.sign * Sb[i, j] for (i, j), name in body.products.items()})
         if body.com:
             phys[body.mass] = m
-        names = tuple(n for n in self.free if n in phys or n in body.com)
+        names = tuple(n for n in self.free if n in ix and (n in phys or n in body.com))
         for name in names:
             k = ix[name]
             self.mapped.add(name)
@@ -209,7 +211,7 @@ class Mapping:
                 terms[(t.row, t.dot)] = f"hydro.{t.name}"
             elif kind == "linear damping" and t.col is not None and not t.factors:
                 terms[(t.row, t.col)] = f"hydro.{t.name}"
-        ix = {name: k for k, name in enumerate(self.free)}
+        ix = dict(self._active)
         free = {rc: n for rc, n in terms.items() if n in ix}
         if not any(i != j for i, j in free) or scale <= 0:
             return
