@@ -395,6 +395,25 @@ def check_identify(a) -> None:
         raise ValueError(f"--out {a.out}: the identified system file must end in .toml")
 
 
+def _check_loads(out: Path, text: str) -> None:
+    """Load ``text`` as the system file ``out`` would be (a temporary beside it, removed): one line and nothing
+    written if the loader refuses it."""
+    import os
+
+    from arvcas.io import files
+    from arvcas.system import load_system
+
+    tmp = out.parent / f".{out.stem}{files.TMP_MARK}{os.getpid()}-check.toml"
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        load_system(tmp)
+    except ValueError as e:
+        raise ValueError(f"--out {out}: the identified system would not load, so it is not written: "
+                         f"{str(e).replace(str(tmp), str(out))}") from None
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def run_identify(a) -> int:
     from arvcas.ident.identify import identify, writable
     from arvcas.io import files
@@ -428,6 +447,7 @@ def run_identify(a) -> int:
     text = est.system_text(a.out)
     header = "".join(f"# {ln}\n" if ln else "#\n" for ln in report.splitlines())
     files.prepare_dir(a.out.parent if str(a.out.parent) else Path("."), "--out")
+    _check_loads(a.out, header + "#\n" + text)
     files.write_text(a.out, header + "#\n" + text)
     print(f"wrote {a.out}" + (" (interrupted: the best iterate)" if est.status == "interrupted" else ""))
     return 0 if est.status != "interrupted" else 130

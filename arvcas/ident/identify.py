@@ -15,8 +15,10 @@ The estimator minimises the simulation error of every trial at once (docs/identi
   states, the term is the maximum-likelihood one of an unknown noise level, ``N_k / 2 log(SSE_k / N_k)``,
   whose gradient weights the signal by its own mean square error (so a signal the model cannot follow,
   e.g. a drift, does not swamp the others);
-* solved by IPOPT (CasADi's ``nlpsol``) with the Gauss-Newton Hessian ``J' W J`` and bounds that keep the
-  model physical (:func:`bounds`), stopped when the objective changes by less than ``tol`` (default 0.1)
+* solved by IPOPT (CasADi's ``nlpsol``) with the Gauss-Newton Hessian ``J' W J``, the free parameters
+  mapped so that every iterate is physical (:mod:`arvcas.ident.physical`: a rigid body through its
+  pseudo-inertia's Cholesky factor, added mass and damping through their own, the rest by sign bounds and
+  a hold inside the loader's rules), stopped when the objective changes by less than ``tol`` (default 0.1)
   over :data:`STALL_ITER` iterations: the objective is a negative log-likelihood, and a change of 0.5
   moves the estimate by about one standard error, so 0.1 is well inside the intervals (a tail of slow
   creeping, 1e-5 of the objective in 20 iterations on the Hinsdale trials, is cut); every trial is
@@ -46,41 +48,24 @@ import casadi as ca
 import numpy as np
 
 from arvcas.ident import plant as plant_mod
+from arvcas.ident import physical
 from arvcas.ident.logs import SIGNALS, Log
+from arvcas.ident.physical import bounds
 from arvcas.ident.validate import initial_state, substeps
-from arvcas.system.systemfile import parse_term
 
-__all__ = ["IdentifyError", "Estimate", "identify", "bounds", "RANK_TOL", "CORR_WARN", "Z95"]
+__all__ = ["IdentifyError", "Estimate", "identify", "bounds", "identified_name", "RANK_TOL", "CORR_WARN", "Z95",
+           "MOVE_FACTOR"]
 
 RANK_TOL = 1e-8
 STALL_ITER = 3  # iterations over which a relative objective change below ``tol`` ends the solve
 CORR_WARN = 0.95
 Z95 = 1.959963984540054  # the normal distribution's 97.5 % point
+MOVE_FACTOR = 3.0  # an estimate more than this many times (or less than 1 / this) its source value is flagged
 MAX_FREE = 64
 
 
 class IdentifyError(ValueError):
     """One line naming the argument or parameter at fault."""
-
-
-def bounds(layout, name: str) -> tuple[float, float]:
-    """(lower, upper) SI bounds that keep ``name`` physical: the layout's sign rule (``pos``: > 0, ``nonneg``:
-    >= 0), and for hydrodynamic derivatives Fossen's signs: a diagonal added-mass term (``X_udot``) and a
-    diagonal damping term (``X_u``, ``X_u_absu``: force along the velocity it multiplies) are <= 0, so that
-    the added mass is positive and the damping dissipates."""
-    i = layout.index[name]
-    rule = layout.rules[i]
-    lo, hi = -math.inf, math.inf
-    if rule == "pos":
-        lo = 1e-12
-    elif rule == "nonneg":
-        lo = 0.0
-    if name.startswith("hydro."):
-        t = parse_term(name[len("hydro."):])
-        if (t.dot is not None and t.dot == t.row) or (t.col is not None and t.col == t.row and
-                                                       all(f in (f"abs{'uvwpqr'[t.row]}",) for f in t.factors)):
-            hi = 0.0
-    return lo, hi
 
 
 @dataclass(frozen=True)
@@ -113,6 +98,31 @@ class Estimate:
     rms0: dict = field(default_factory=dict)  # unweighted RMS error per fitted signal, at the start
     rms: dict = field(default_factory=dict)  # and at the estimate
     stated: tuple[str, ...] = ()  # the signals whose noise the logs state (the others are estimated)
+    groups: tuple[str, ...] = ()  # the physical parameterisations used (arvcas.ident.physical)
+    pulled: tuple | None = None  # (fraction of the last step kept, the loader's rule it broke) or None
+    nonfinite: int = 0  # objective evaluations whose simulation was not finite
+    inf_du: float = math.nan  # IPOPT's dual infeasibility at its last iteration
+    max_iter: int = 0
+
+    def flags(self) -> list[tuple[str, str]]:
+        """(parameter, what it usually means) for every estimate at a bound, at the edge of its physical set,
+        moved more than :data:`MOVE_FACTOR` times from its source value, or changed in sign."""
+        out = []
+        for k, n in enumerate(self.free):
+            a, b = float(self.initial[k]), float(self.values[k])
+            if n in self.at_bound:
+                out.append((n, f"ended at the edge of its physical set ({b:.6g}): the data push it past what is "
+                               f"physical, usually because it absorbs an effect the model lacks (a drift, a "
+                               f"tether, a wrong number elsewhere); do not read it as measured"))
+            if a != 0 and b != 0 and (a > 0) != (b > 0):
+                out.append((n, f"changed sign ({a:.6g} -> {b:.6g}): check the model's sign convention, or what "
+                               f"the parameter absorbs"))
+            elif a != 0 and b != 0 and max(abs(b / a), abs(a / b)) > MOVE_FACTOR:
+                out.append((n, f"moved {abs(b / a):.3g} times its source value ({a:.6g} -> {b:.6g}, more than "
+                               f"{MOVE_FACTOR:g} times): a parameter that moves this far usually absorbs "
+                               f"something the model lacks (e.g. heave damping soaking up a depth drift); compare "
+                               f"fits on subsets of trials and validate on held-out ones"))
+        return out
 
     @property
     def intervals(self) -> np.ndarray:
@@ -139,21 +149,54 @@ class Estimate:
                 f"({', '.join(self.trials)}); signals {', '.join(self.signals)}; plant step {self.h:g} s",
                 f"IPOPT: {self.status}, {self.iterations} iterations, {self.seconds:.1f} s; cost "
                 f"{self.cost0:.6g} -> {self.cost:.6g}; residual variance factor s^2 = {self.s2:.4g} "
-                f"({self.n_residuals} residuals)", "",
-                f"{'parameter':28s} {'initial':>12s} {'estimate':>12s} {'95 % interval':>27s}  unit"]
+                f"({self.n_residuals} residuals)"]
+        rows += [f"physical parameterisation: {g}" for g in self.groups]
+        rows += self._solver_notes()
+        rows += ["", f"{'parameter':28s} {'initial':>12s} {'estimate':>12s} {'95 % interval':>27s}  unit"]
+        flagged = {n for n, _ in self.flags()}
         for n, a, b, s, ok, u in zip(self.free, self.initial, self.values, self.std, self.identifiable, units):
             iv = f"[{_num(b - Z95 * s, s)}, {_num(b + Z95 * s, s)}]" if ok else "not identifiable"
-            flag = "  (at its bound)" if n in self.at_bound else ""
+            flag = "  (at its bound)" if n in self.at_bound else "  (flagged)" if n in flagged else ""
             rows.append(f"{n:28s} {a:12.5g} {b:12.5g} {iv:>27s}  {u}{flag}")
         rows += ["", "The intervals assume errors independent from sample to sample; where the model cannot follow the",
                  "vehicle (errors that persist over seconds), they are too narrow: compare the estimates between",
                  "subsets of trials, and validate on trials held out of the fit."]
+        if self.flags():
+            rows += ["", "flags:"] + [f"  {n}: {why}" for n, why in self.flags()]
         if self.unidentifiable:
             rows += ["", "directions the data do not determine:"] + [f"  {u}" for u in self.unidentifiable]
         if self.correlated:
             rows += ["", f"strongly correlated (|r| > {CORR_WARN}):"] + \
                     [f"  {a} ~ {b}: r = {r:+.3f}" for a, b, r in self.correlated]
         return "\n".join(rows)
+
+    def _solver_notes(self) -> list[str]:
+        """What the solver's end means: the iteration cap with the optimality measure and what to try, the
+        count of non-finite evaluations, the hold inside the loader's rules."""
+        rows = []
+        if self.status == "Maximum_Iterations_Exceeded":
+            h = [v for v in self.history if math.isfinite(v)][-STALL_ITER - 1:]
+            rows.append(f"stopped at the iteration cap ({self.max_iter}) before converging: IPOPT's dual "
+                        f"infeasibility (its optimality measure, 0 at an optimum) is {self.inf_du:.3g}, the "
+                        f"objective changed by {max(h) - min(h) if h else math.nan:.3g} over the last "
+                        f"{len(h) - 1} iterations; try more iterations (--max-iter), fewer free parameters "
+                        f"(those named below as unidentifiable or correlated), or starting values nearer the "
+                        f"data (a previous estimate as the system file)")
+        elif self.status not in ("interrupted", "Solve_Succeeded", "Solved_To_Acceptable_Level",
+                                 "User_Requested_Stop") and not self.status.startswith("converged"):
+            rows.append(f"IPOPT ended with {self.status} (dual infeasibility {self.inf_du:.3g}): the estimate is "
+                        f"the best iterate, not an optimum; try fewer free parameters or better starting values")
+        if self.nonfinite:
+            rows.append(f"{self.nonfinite} evaluations of the simulation were not finite (NaN or inf; counted, not "
+                        f"printed): IPOPT tried parameters at which the model diverges on a trial and stepped "
+                        f"back; harmless when the fit converged, otherwise the starting values or the free set "
+                        f"let the model go unstable")
+        if self.pulled is not None:
+            frac, why = self.pulled
+            rows.append(f"the optimiser's last point broke a rule of the system file ({why}); the estimate is "
+                        f"held at {100 * frac:.3g} % of the way from the start to it, on the edge of what loads: "
+                        f"its values are bounded there, not fitted")
+        return rows
 
 
 def _num(x: float, width: float) -> str:
@@ -172,14 +215,16 @@ class _Problem:
     the maximum-likelihood ``N_k / 2 log(SSE_k / N_k)``: its gradient is the weighted least-squares one.
     """
 
-    def __init__(self, system, logs, free, signals, stated, m, K, threads):
+    def __init__(self, system, logs, free, signals, stated, m, K, threads, mapping=None):
         self.system, self.logs, self.free, self.K = system, logs, tuple(free), K
         self.plant = plant_mod.LogPlant(system, m=m, free=self.free)
         lay = system.layout
         self.p = system.params.vector()
         self.idx = np.array([lay.index[n] for n in self.free], dtype=int)
-        self.theta0 = self.p[self.idx]
-        self.scale = np.where(np.abs(self.theta0) > 0, np.abs(self.theta0), 0.1)
+        self.map = mapping if mapping is not None else physical.Mapping(lay, self.free, self.p)
+        self.theta0 = self.map.theta0
+        self.scale = self.map.scale
+        self.nonfinite = 0  # evaluations whose simulation was not finite (counted, not printed)
         self.nt = len(self.free)
         self.data = [plant_mod.sample_inputs(lg, system, m) for lg in logs]
         self.m = m
@@ -203,7 +248,14 @@ class _Problem:
         self._lock = threading.Lock()
 
     def theta(self, z: np.ndarray) -> np.ndarray:
-        return self.theta0 + self.scale * z[: self.nt]
+        return self.map.theta(z[: self.nt])
+
+    def in_v(self, z: np.ndarray, Jm: np.ndarray) -> np.ndarray:
+        """The Jacobian with respect to the optimiser's variables: theta's columns (scaled by ``scale``) through
+        d theta / d v."""
+        out = Jm.copy()
+        out[:, : self.nt] = Jm[:, : self.nt] @ (self.map.jacobian(z[: self.nt]) / self.scale[:, None])
+        return out
 
     def x0(self, z: np.ndarray, j: int) -> np.ndarray:
         return z[self.nt + 12 * j: self.nt + 12 * (j + 1)]
@@ -268,6 +320,7 @@ class _Problem:
     def cost(self, z) -> float:
         r, _ = self.evaluate(z, False)
         if not np.all(np.isfinite(r)):
+            self.nonfinite += 1
             return math.inf
         sse = self.sse(r)
         c = 0.0
@@ -281,12 +334,13 @@ class _Problem:
     def gradient(self, z) -> np.ndarray:
         r, Jm = self.evaluate(z, True)
         w = self.weights(r)[self.sig_id]
-        return Jm.T @ (w * r)
+        return self.in_v(z, Jm).T @ (w * r)
 
     def gauss_newton(self, z) -> np.ndarray:
         r, Jm = self.evaluate(z, True)
         w = self.weights(r)[self.sig_id]
-        return Jm.T @ (Jm * w[:, None])
+        Jv = self.in_v(z, Jm)
+        return Jv.T @ (Jv * w[:, None])
 
     def rms(self, z) -> dict[str, float]:
         """The RMS error of each fitted signal over every trial at ``z`` (SI)."""
@@ -389,14 +443,15 @@ class _Progress(ca.Callback):
 
 
 def _solve(prob: _Problem, z0, lo, hi, max_iter, tol, progress, stop):
-    """One IPOPT solve with the Gauss-Newton Hessian from ``z0``: (z, status, iterations, cost history)."""
+    """One IPOPT solve with the Gauss-Newton Hessian from ``z0``: (z, status, iterations, cost history, the
+    dual infeasibility of the last iteration: IPOPT's optimality measure)."""
     z = ca.MX.sym("z", prob.nz)
     fcb, gncb = _callbacks(prob)
     lam_f = ca.MX.sym("lam_f")
     hess = ca.Function("hess_gn", [z, ca.MX(0, 1), lam_f, ca.MX(0, 1)], [lam_f * ca.triu(gncb(z))],
                        ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
     prog = _Progress(prob.nz, 0, progress, stop, tol)
-    opts = {"hess_lag": hess, "iteration_callback": prog, "print_time": False,
+    opts = {"hess_lag": hess, "iteration_callback": prog, "print_time": False, "show_eval_warnings": False,
             "ipopt": {"print_level": 0, "max_iter": int(max_iter), "tol": 1e-8, "sb": "yes",
                       "mu_strategy": "adaptive"}}
     solver = ca.nlpsol("ident", "ipopt", {"x": z, "f": fcb(z)}, opts)
@@ -408,7 +463,8 @@ def _solve(prob: _Problem, z0, lo, hi, max_iter, tol, progress, stop):
     status = str(stats.get("return_status", "?"))
     if prog.converged:
         status = f"converged (objective changed by less than {tol:g} over {STALL_ITER} iterations)"
-    return zs, status, int(stats.get("iter_count", prog.k)), list(prog.history)
+    inf_du = stats.get("iterations", {}).get("inf_du") or [math.nan]
+    return zs, status, int(stats.get("iter_count", prog.k)), list(prog.history), float(inf_du[-1])
 
 
 def _fisher(Jm: np.ndarray, nt: int) -> np.ndarray:
@@ -446,14 +502,18 @@ def _directions(F: np.ndarray, names: tuple[str, ...]) -> tuple[np.ndarray, list
 
 def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None = None, h_max: float | None = None,
              max_iter: int = 100, tol: float = 0.1, threads: int = 2, K: int = 50,
-             progress=None) -> Estimate:
+             progress=None, physical_set: bool = True) -> Estimate:
     """Estimate the parameters ``free`` (names of ``system.params``) from ``logs`` (module docstring).
 
     ``signals``: the measured signals fitted (default every vehicle signal the logs measure, of
     :data:`arvcas.ident.logs.SIGNALS`); ``sigma``: noise per signal (SI), else the logs' stated ``std``,
     else estimated (module docstring); ``h_max``: the largest plant step (default the logs' sample time);
     ``progress(k, cost)``: called every IPOPT iteration. SIGINT (Ctrl-C) stops after the current
-    iteration and returns the best iterate (status "interrupted").
+    iteration and returns the best iterate (status "interrupted"); SIGTERM and SIGHUP stop it and raise
+    :class:`arvcas.io.files.Terminated` (nothing is returned, so nothing unfinished is written).
+    ``physical_set``: the physical parameterisations and the hold inside the loader's rules
+    (:mod:`arvcas.ident.physical`); False leaves each parameter only its sign bounds (to see where the
+    unconstrained optimum lies).
     """
     t_start = time.perf_counter()
     lay = system.layout
@@ -470,6 +530,10 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
     dup = [n for n in free if free.count(n) > 1]
     if dup:
         raise IdentifyError(f"free: {dup[0]} is named twice")
+    unit = [n for n in free if ".direction." in n or (n.startswith("arm.joint") and ".axis." in n)]
+    if unit:
+        raise IdentifyError(f"free: {unit[0]} is an element of a unit vector, which no single value can move and "
+                            f"keep of length 1: hold it (give the measured direction in the system file)")
     if not logs:
         raise IdentifyError("logs: give at least one trial")
     for lg in logs:  # joints, thrusters and commands against the system, before any compile
@@ -499,18 +563,18 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
             raise IdentifyError(f"sigma: {s}: expected a positive noise level, got {v!r}")
     m = substeps(logs[0].dt, logs[0].dt if h_max is None else float(h_max))
     z0 = np.concatenate([np.zeros(len(free))] + [initial_state(lg) for lg in logs])
-    prob = _Problem(system, logs, free, signals, stated, m, K, threads)
+    mapping = physical.Mapping(lay, free, system.params.vector(), factors=physical_set)
+    prob = _Problem(system, logs, free, signals, stated, m, K, threads, mapping)
     rms0 = prob.rms(z0)
     if not all(math.isfinite(v) for v in rms0.values()):
         raise IdentifyError(f"the simulation from the starting parameters is not finite on some trial "
                             f"({', '.join(lg.name for lg in logs)})")
     lo = np.full(prob.nz, -np.inf)
     hi = np.full(prob.nz, np.inf)
+    lo[: prob.nt], hi[: prob.nt] = mapping.lo, mapping.hi
     for k, n in enumerate(free):
-        a, b = bounds(lay, n)
-        lo[k] = (a - prob.theta0[k]) / prob.scale[k]
-        hi[k] = (b - prob.theta0[k]) / prob.scale[k]
         if lo[k] > 0 or hi[k] < 0:
+            a, b = bounds(lay, n)
             raise IdentifyError(f"free: {n} starts at {prob.theta0[k]:g}, outside its physical bounds [{a:g}, {b:g}]")
     cost0 = prob.cost(z0)
     # a parameter that moves no fitted signal at the start (zero column of the Jacobian: e.g. a thruster's limit
@@ -518,20 +582,45 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
     # would otherwise wander along it
     _, J0 = prob.evaluate(z0, True)
     dead = [k for k in range(len(free)) if not np.any(J0[:, k])]
+    held = tuple(free[k] for k in dead)
+    if any(n in mapping.mapped for n in held):  # a held member of a group: the group is formed without it
+        mapping = physical.Mapping(lay, free, system.params.vector(), factors=physical_set, held=held)
+        prob.map = mapping
+        lo[: prob.nt], hi[: prob.nt] = mapping.lo, mapping.hi
     for k in dead:
         lo[k] = hi[k] = 0.0
     stop = threading.Event()
-    old = None
+    caught: list[int] = []  # SIGTERM / SIGHUP received during the solve
+
+    def terminate(signum, frame):
+        caught.append(signum)
+        stop.set()
+
+    old = {}
     if threading.current_thread() is threading.main_thread():
-        old = signal.signal(signal.SIGINT, lambda *a: stop.set())
+        old[signal.SIGINT] = signal.signal(signal.SIGINT, lambda *a: stop.set())
+        for s in (signal.SIGTERM, signal.SIGHUP):
+            old[s] = signal.signal(s, terminate)
     try:
-        zs, status, iters, history = _solve(prob, z0, lo, hi, max_iter, tol, progress, stop)
+        zs, status, iters, history, inf_du = _solve(prob, z0, lo, hi, max_iter, tol, progress, stop)
     finally:
-        if old is not None:
-            signal.signal(signal.SIGINT, old)
+        for s, h in old.items():
+            signal.signal(s, h)
+        if caught and prob.pool is not None:
+            prob.pool.shutdown()
+    if caught:  # the unfinished estimate is dropped: nothing is written
+        from arvcas.io.files import Terminated
+
+        raise Terminated(caught[0])
     if stop.is_set():
         status = "interrupted"
     zs[: prob.nt] = np.clip(zs[: prob.nt], lo[: prob.nt], hi[: prob.nt])  # IPOPT relaxes bounds by 1e-8
+    pulled = None
+    if physical_set:
+        v, frac, broke = physical.pull_back(system, mapping, zs[: prob.nt])
+        if broke is not None and frac < 1.0:
+            zs[: prob.nt] = v
+            pulled = (frac, broke)
     r, Jm = prob.evaluate(zs, True)
     if prob.pool is not None:
         prob.pool.shutdown()
@@ -557,16 +646,22 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
             if ident[i] and ident[j] and abs(corr[i, j]) > CORR_WARN:
                 pairs.append((free[i], free[j], float(corr[i, j])))
     theta = prob.theta(zs)
-    at_bound = tuple(n for k, n in enumerate(free) if k not in dead and
-                     ((math.isfinite(lo[k]) and zs[k] - lo[k] < 1e-6) or (math.isfinite(hi[k]) and hi[k] - zs[k] < 1e-6)))
+    at_bound = [n for k, n in enumerate(free) if k not in dead and
+                ((math.isfinite(lo[k]) and zs[k] - lo[k] < 1e-6) or (math.isfinite(hi[k]) and hi[k] - zs[k] < 1e-6))]
+    values = dict(zip(lay.names, map(float, system.params.vector())))
+    values.update(zip(free, map(float, theta)))
+    at_bound += [n for n in mapping.edge(values) if n not in at_bound]
+    if pulled is not None:  # held on the edge of what loads
+        at_bound += [n for k, n in enumerate(free) if theta[k] != prob.theta0[k] and n not in at_bound]
     return Estimate(system=system, free=free, initial=prob.theta0, values=theta, std=std, correlation=corr,
                     identifiable=ident, unidentifiable=tuple(lines), correlated=tuple(pairs),
                     trials=tuple(lg.name for lg in logs), signals=signals, sigma=sig,
                     x0={lg.name: prob.x0(zs, j).copy() for j, lg in enumerate(logs)}, cost0=cost0, cost=cost, s2=s2,
                     n_residuals=prob.n_res, status=status, iterations=iters,
-                    seconds=time.perf_counter() - t_start, h=logs[0].dt / m, at_bound=at_bound,
-                    history=tuple(history), rms0=rms0, rms=prob.rms(zs), stated=tuple(stated))
-
+                    seconds=time.perf_counter() - t_start, h=logs[0].dt / m, at_bound=tuple(at_bound),
+                    history=tuple(history), rms0=rms0, rms=prob.rms(zs), stated=tuple(stated),
+                    groups=tuple(mapping.groups + mapping.notes), pulled=pulled, nonfinite=prob.nonfinite,
+                    inf_du=inf_du, max_iter=int(max_iter))
 
 
 # ---- the identified system file ---------------------------------------------------------------------------
@@ -593,6 +688,13 @@ def writable(system, names) -> None:
     from arvcas.io.files import read_text
 
     doc = tomllib.loads(read_text(system.path, "system file", IdentifyError))
+    maps = doc.get("thrusters", {}).get("map", {}) if isinstance(doc.get("thrusters"), dict) else {}
+    for n in names:
+        parts = n.split(".")
+        if n.startswith("thrusters.map.") and isinstance(maps.get(parts[2]), dict) and "table" in maps[parts[2]]:
+            raise IdentifyError(f"free: {n} comes from the thrust table file {maps[parts[2]]['table']!r}, which "
+                                f"arvcas does not rewrite: write the map's points in the system file "
+                                f"(command = {{...}}, thrust = {{...}}, docs/system-file.md) to identify them")
     arm = doc.get("arm", {})
     if not (isinstance(arm, dict) and "urdf" in arm):
         return
@@ -611,6 +713,19 @@ def _si_factor(unit: str, k: int) -> float:
     if u == config.SI:
         return 1.0
     return config.UNITS[u][1]
+
+
+def identified_name(name: str) -> str:
+    """``<name>_identified`` within the loader's rule for names (at most 64 characters: the old name is
+    shortened to make room); a name that already ends in ``_identified`` is kept."""
+    from arvcas.system.systemfile import NAME_RE
+
+    suffix = "_identified"
+    if name.endswith(suffix) and NAME_RE.match(name):
+        return name
+    out = name[: 64 - len(suffix)] + suffix
+    assert NAME_RE.match(out), out
+    return out
 
 
 def _system_text(est: Estimate, out_path, date: str | None) -> str:
@@ -656,7 +771,7 @@ def _system_text(est: Estimate, out_path, date: str | None) -> str:
     sysname = str(doc["system"]["name"]) if "system" in doc and "name" in doc["system"] else est.system.name
     if "system" not in doc:
         doc.add("system", tomlkit.table())
-    doc["system"]["name"] = sysname if sysname.endswith("_identified") else f"{sysname}_identified"
+    doc["system"]["name"] = identified_name(sysname)
     desc = str(doc["system"].get("description", est.system.description))
     doc["system"]["description"] = f"{desc} (identified from {len(est.trials)} trials, {date})"
     out_dir = Path(out_path).resolve().parent
@@ -665,12 +780,16 @@ def _system_text(est: Estimate, out_path, date: str | None) -> str:
         p = Path(rel)
         if p.is_absolute():
             return rel
-        return os.path.relpath((src.parent / p).resolve(), out_dir)
+        return Path(os.path.relpath((src.parent / p).resolve(), out_dir)).as_posix()
 
     for k in list(doc.get("defaults", {}).keys()):
         doc["defaults"][k] = moved(str(doc["defaults"][k]))
     if isinstance(doc.get("arm"), dict) and "urdf" in doc["arm"]:
         doc["arm"]["urdf"] = moved(str(doc["arm"]["urdf"]))
+    maps = doc.get("thrusters", {}).get("map", {}) if isinstance(doc.get("thrusters"), dict) else {}
+    for m in maps.values():  # a table beside the old file (a shipped table's bare name is found anywhere)
+        if isinstance(m, dict) and isinstance(m.get("table"), str) and (src.parent / m["table"]).exists():
+            m["table"] = moved(m["table"])
     head = (f"# Identified by arvcas identify on {date} from {src.name} and trials {trials}: parameters "
             f"{', '.join(est.free)} estimated (docs/identification.md); every other number is {src.name}'s.\n")
     return head + tomlkit.dumps(doc)
