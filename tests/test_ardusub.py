@@ -175,3 +175,26 @@ def test_closed_loop_holds_depth_and_attitude():
     assert np.abs(late[:, 3:5]).max() < 0.01  # roll, pitch within 0.6 deg (from 1 deg off)
     assert np.abs(late[:, 5]).max() < 0.1  # heading within 6 deg (dead-band limit cycle)
     assert ((r.pwm >= 1100) & (r.pwm <= 1900)).all()
+    after5 = r.eta[int(5 / cfg.time_h):]
+    print(f"ardusub closed loop: from 5 s max |z| {np.abs(after5[:, 2]).max():.4g} m, max |roll|, |pitch| "
+          f"{np.abs(after5[:, 3:5]).max(axis=0)} rad, yaw in [{after5[:, 5].min():.4g}, {after5[:, 5].max():.4g}] rad; "
+          f"RMSE {r.rmse}; CHAT {r.chat}")
+
+
+def test_thrust_of_pwm_is_the_systems_map():
+    """The law's thrust of a PWM (the truncated-power form of the map's monotone cubic) is the loop's own map
+    (arvcas.model.thrusters.map_thrust) to round-off, over the whole PWM range and beyond."""
+    from arvcas.model import thrusters
+
+    blue = arvcas.load_system("bluerov2_heavy_alpha5")
+    lay = blue.params.layout
+    p = ca.SX.sym("p", len(lay))
+    m = thrusters.thruster_maps(view(p, lay))[0]
+    x = ca.SX.sym("x")
+    F = ca.Function("F", [x, p], [ardusub._pchip_power(*thrusters.map_table(view(p, lay), m))(x)])
+    Pn = view(blue.params.vector(), lay)
+    mn = thrusters.thruster_maps(Pn)[0]
+    s = np.array([float(ca.evalf(thrusters.state_of(Pn, mn, c))) for c in np.linspace(1050, 1950, 451)])
+    got = np.array(F.map(s.size)(s[None, :], ca.repmat(ca.DM(blue.params.vector()), 1, s.size))).ravel()
+    want = np.array(thrusters.map_thrust(Pn, mn, ca.DM(s))).ravel()
+    assert np.abs(want).max() > 40 and np.abs(got - want).max() < 1e-7
