@@ -171,13 +171,13 @@ def test_closed_loop_holds_depth_and_attitude():
     r = Run("ardusub", scenario=cfg, params=blue).compile().simulate(seed=0)
     assert r.ok
     late = r.eta[int(30 / cfg.time_h):]
-    assert np.abs(late[:, 2]).max() < 0.01  # depth within 1 cm (from 2 cm off)
-    assert np.abs(late[:, 3:5]).max() < 0.01  # roll, pitch within 0.6 deg (from 1 deg off)
-    assert np.abs(late[:, 5]).max() < 0.1  # heading within 6 deg (dead-band limit cycle)
+    assert np.abs(late[:, 2]).max() < 0.01 and abs(late[:, 2].mean()) < 0.003  # depth: within 1 cm, no offset
+    assert np.abs(late[:, 3:5]).max() < 0.02 and np.abs(late[:, 3:5].mean(axis=0)).max() < 0.005  # roll, pitch
+    assert np.abs(late[:, 5]).max() < 0.1  # heading within 6 deg (the T200 dead band's limit cycle)
     assert ((r.pwm >= 1100) & (r.pwm <= 1900)).all()
     after5 = r.eta[int(5 / cfg.time_h):]
     print(f"ardusub closed loop: from 5 s max |z| {np.abs(after5[:, 2]).max():.4g} m, max |roll|, |pitch| "
-          f"{np.abs(after5[:, 3:5]).max(axis=0)} rad, yaw in [{after5[:, 5].min():.4g}, {after5[:, 5].max():.4g}] rad; "
+          f"{np.abs(after5[:, 3:5]).max(axis=0)} rad; from 30 s mean z, roll, pitch {late[:, 2:5].mean(axis=0)}, yaw in [{after5[:, 5].min():.4g}, {after5[:, 5].max():.4g}] rad; "
           f"RMSE {r.rmse}; CHAT {r.chat}")
 
 
