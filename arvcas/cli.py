@@ -113,6 +113,7 @@ def _run_export_ardusub_params(a: argparse.Namespace, d: dict) -> int:
         raise ValueError(f"--format ardusub-params: the controller is {d['controller']}, not ardusub (tune the ardusub "
                          "controller; other laws export as a C library)")
     gains = d["gains"] if d["gains"] is not None else default_gains("ardusub", d["params"])
+    ap.param_values(gains)  # a value outside ArduSub's ranges: refused before anything is written
     a.dir.mkdir(exist_ok=True)
     system = d["params"].structure.name
     path = ap.write_param_file(a.dir / ap.default_name(system), gains, system=system,

@@ -198,3 +198,25 @@ def test_thrust_of_pwm_is_the_systems_map():
     got = np.array(F.map(s.size)(s[None, :], ca.repmat(ca.DM(blue.params.vector()), 1, s.size))).ravel()
     want = np.array(thrusters.map_thrust(Pn, mn, ca.DM(s))).ravel()
     assert np.abs(want).max() > 40 and np.abs(got - want).max() < 1e-7
+
+
+def test_cli_front_member_knee_and_out_of_range_member(tmp_path, capsys):
+    """--front F --member knee: the knee's gains with the front, member and objectives in the header; a member with
+    a gain beyond ArduSub's range (1.1 x the defaults: PSC_POSZ_P 3.3 > 3) is refused, no file written."""
+    from trust_helpers import synthetic_front
+
+    front = synthetic_front(tmp_path / "front.h5", controller="ardusub")
+    out = tmp_path / "out"
+    assert main(["export-controller", str(out), "--front", str(front), "--member", "knee",
+                 "--format", "ardusub-params"]) == 0
+    f = next(out.glob("*.param"))
+    text = f.read_text()
+    assert f"# front: {front}" in text and "# member: knee" in text and "member 1 of the 3 of the front" in text
+    vals = ap.read_param_file(f)
+    assert vals["ATC_RAT_RLL_P"] == pytest.approx(0.135) and len(vals) == 12
+    capsys.readouterr()
+    out2 = tmp_path / "out2"
+    assert main(["export-controller", str(out2), "--front", str(front), "--member", "2",
+                 "--format", "ardusub-params"]) != 0
+    assert "PSC_POSZ_P = 3.3 is outside ArduSub's range [1, 3]" in capsys.readouterr().err
+    assert not out2.exists()  # refused before anything is written
