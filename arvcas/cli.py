@@ -104,6 +104,26 @@ def _run_export_c(a: argparse.Namespace) -> int:
 # ---- export-controller --------------------------------------------------------------------------
 
 
+def _run_export_ardusub_params(a: argparse.Namespace, d: dict) -> int:
+    """``--format ardusub-params``: the member's gains as an ArduSub .param file (arvcas.io.ardusub_params)."""
+    from arvcas.controllers.gains import default_gains
+    from arvcas.io import ardusub_params as ap
+
+    if d["controller"] != "ardusub":
+        raise ValueError(f"--format ardusub-params: the controller is {d['controller']}, not ardusub (tune the ardusub "
+                         "controller; other laws export as a C library)")
+    gains = d["gains"] if d["gains"] is not None else default_gains("ardusub", d["params"])
+    ap.param_values(gains)  # a value outside ArduSub's ranges: refused before anything is written
+    a.dir.mkdir(exist_ok=True)
+    system = d["params"].structure.name
+    path = ap.write_param_file(a.dir / ap.default_name(system), gains, system=system,
+                               front=str(a.front) if a.front is not None else "none (ArduSub's defaults)",
+                               member=str(a.member) if a.member is not None else "none",
+                               objectives=d["gains_source"] or "ArduSub's default gains", force=a.force)
+    print(path)
+    return 0
+
+
 def _member_arg(text: str):
     """``knee`` or an integer index of a front member."""
     if text == "knee":
@@ -133,6 +153,10 @@ def _add_export_controller(p: argparse.ArgumentParser) -> None:
     p.add_argument("--prefix", default=None,
                    help="prefix of every C symbol; the library is lib<prefix without its last _>.so "
                         "(default: arvcas_<system>_<controller>_, e.g. arvcas_haidou1_proposed_)")
+    p.add_argument("--format", choices=("c", "ardusub-params"), default="c",
+                   help="c: the C library (default); ardusub-params: the ardusub controller's gains as an ArduSub "
+                        ".param file (QGroundControl, MAVProxy) in DIR, values outside ArduSub's ranges refused "
+                        "(docs/ardusub.md)")
     _add_system_arg(p, "the front's, else haidou1")
 
 
@@ -195,6 +219,10 @@ def _export_controller_outputs(a: argparse.Namespace) -> list:
     from arvcas.io.export_controller import default_prefix, files
 
     d = _export_controller_design(a)
+    if a.format == "ardusub-params":
+        from arvcas.io.ardusub_params import default_name
+
+        return [(f"DIR {a.dir}", a.dir / default_name(d["params"].structure.name), "export-controller", a.dir)]
     return [(f"DIR {a.dir}", a.dir / n, "export-controller", a.dir)
             for n in files(a.prefix or default_prefix(d["params"], d["controller"]))]
 
@@ -203,6 +231,8 @@ def _run_export_controller(a: argparse.Namespace) -> int:
     from arvcas.io.export_controller import export_controller
 
     d = _export_controller_design(a)
+    if a.format == "ardusub-params":
+        return _run_export_ardusub_params(a, d)
     paths = export_controller(a.dir, d["controller"], gains=d["gains"], params=d["params"], scenario=d["cfg"],
                               prefix=a.prefix, gains_source=d["gains_source"], force=a.force)
     for path in paths:

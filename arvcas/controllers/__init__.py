@@ -15,6 +15,6 @@ a study's ``plugins``, an entry point of the group ``arvcas.controllers``: docs/
 """
 
 from arvcas.controllers.base import Controller, ControllerError, Gain, available, get, names, register, unregister
-from arvcas.controllers import proposed, agsta, traditional, implicit, pid  # noqa: F401,E402  (registers them)
+from arvcas.controllers import proposed, agsta, traditional, implicit, pid, ardusub  # noqa: F401,E402  (registers them)
 
 __all__ = ["Controller", "ControllerError", "Gain", "available", "get", "names", "register", "unregister"]
