@@ -239,13 +239,21 @@ def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_
     }
 
 
+def inline_json(doc) -> str:
+    """``doc`` as JSON safe inside an HTML ``<script>`` block: every ``<``, ``>`` and ``&`` written as its
+    ``\\u`` escape, so no name (``</script``, ``<!--``, ``<script``) changes how the browser parses the page;
+    ``JSON.parse`` reads the same strings back."""
+    text = json.dumps(doc, separators=(",", ":"), allow_nan=False)
+    return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
+
+
 def page_html(doc: dict) -> str:
     """The page: plotly.js, the data and the page's script inlined (no server, no network)."""
     try:
         from plotly.offline import get_plotlyjs
     except ImportError:
         raise ValueError("front explore: needs the plotly package (pip install 'arvcas[explore]')") from None
-    data = json.dumps(doc, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
+    data = inline_json(doc)
     page = (_TEMPLATES / "explore.html").read_text(encoding="utf-8")
     script = (_TEMPLATES / "explore.js").read_text(encoding="utf-8")
     parts = {"TITLE": html.escape(doc["title"]), "PLOTLY": get_plotlyjs(), "DATA": data, "SCRIPT": script}
