@@ -69,6 +69,9 @@ class Objective:
     unit: str = ""
     description: str = ""
     accumulators: tuple[Accumulator, ...] = ()
+    # True when every element is >= 0 by construction: a constraint 'name <= negative' can never hold and
+    # 'name >= 0 or less' always holds, so both are refused (parse_constraint)
+    nonnegative: bool = False
 
     def __init__(self, **kw):
         for k, v in kw.items():
@@ -102,6 +105,7 @@ class Objective:
 
 class _Chat(Objective):
     name, unit = "chat", "1"
+    nonnegative = True
     description = "mean over the 6 DOF of CHAT (eq. 42) / the AGSTA's (docs/model.md §7): the paper's f_chat"
 
     def values(self, out, ctx):
@@ -110,6 +114,7 @@ class _Chat(Objective):
 
 class _Rmse(Objective):
     name, unit = "rmse", "1"
+    nonnegative = True
     description = "mean over the 6 DOF of RMSE (eq. 43) / the AGSTA's (docs/model.md §7): the paper's f_rmse"
 
     def values(self, out, ctx):
@@ -122,6 +127,7 @@ def _lim(cfg) -> np.ndarray:
 
 class _Iae(Objective):
     name, unit = "iae", "s"
+    nonnegative = True
     description = ("integrated absolute error: mean over the 6 DOF of h sum_k |e_k| / the DOF's [limits] bound "
                    "(e = the true pose minus the reference; elements: the per-DOF integrals, m s and rad s)")
     accumulators = (Accumulator("iae", "sum", 6, lambda v: v.h * ca.fabs(v.e)),)
@@ -135,6 +141,7 @@ class _Iae(Objective):
 
 class _Energy(Objective):
     name, unit = "energy", "N^1.5 s"
+    nonnegative = True
     description = ("electrical energy proxy h sum_k sum_i |T_i|^1.5 (actuator-disk power ~ |T|^1.5; the T200 at "
                    "16 V draws 0.95 |T|^1.5 W forward, 1.31 |T|^1.5 W reverse within 17 % above 5 N: docs/objectives.md)")
     accumulators = (Accumulator("energy", "sum", 1, lambda v: v.h * ca.sum1(ca.fabs(v.thrust) ** 1.5)),)
@@ -145,6 +152,7 @@ class _Energy(Objective):
 
 class _PeakThrust(Objective):
     name, unit = "peak_thrust", "N"
+    nonnegative = True
     description = ("largest thrust of any thruster over the run (elements: each thruster's forward peak, then its "
                    "reverse peak; limit: its u_max, then -u_min)")
     accumulators = (Accumulator("peak_fwd", "max", "thrusters", lambda v: ca.fmax(v.thrust, 0)),
@@ -168,6 +176,7 @@ class _PeakThrust(Objective):
 
 class _SaturationTime(Objective):
     name, unit = "saturation_time", "s"
+    nonnegative = True
     description = "time during which the allocation asks any thruster for more than its limit (h x samples)"
     accumulators = (Accumulator("saturated", "sum", 1, lambda v: v.h * ca.if_else(
         ca.logic_or(ca.mmax(v.u_alloc - v.u_max) > 0, ca.mmax(v.u_min - v.u_alloc) > 0), 1, 0)),)
@@ -181,6 +190,7 @@ class _SettlingTime(Objective):
     end of the last sample before the next event (or the run's end) whose error leaves the band."""
 
     name, unit = "settling_time", "s"
+    nonnegative = True
     description = ("largest settling time after an event (the start, each arm motion, each payload change): the "
                    "time until |e| stays within the band (0.05 m, 0.05 rad) up to the next event; elements: per event")
 
@@ -206,6 +216,7 @@ class _SettlingTime(Objective):
 
 class _Excursion(Objective):
     name, unit = "excursion", "m"
+    nonnegative = True
     description = "largest distance of the vehicle from its reference position, max_k |e_k[x, y, z]|"
     accumulators = (Accumulator("excursion", "max", 1, lambda v: ca.norm_2(v.e[0:3])),)
 
@@ -396,4 +407,8 @@ def parse_constraint(text: str, where: str = "constraint", settling_band=None) -
         return Constraint(text=text, objective=name, op=op, factor=factor)
     if not np.isfinite(float(num)):
         raise ObjectiveError(f"{pre}{text!r}: the bound must be finite")
+    if o.nonnegative and op == "<=" and float(num) < 0:
+        raise ObjectiveError(f"{pre}{text!r} can never hold: {name} is never negative (give a bound >= 0)")
+    if o.nonnegative and op == ">=" and float(num) <= 0:
+        raise ObjectiveError(f"{pre}{text!r} always holds: {name} is never negative (give a bound > 0)")
     return Constraint(text=text, objective=name, op=op, number=float(num))

@@ -113,6 +113,16 @@ def compare_fronts(*fronts, ref=None) -> Comparison:
     ref = np.asarray(ref, dtype=float)
     if ref.shape != (len(objs),) or not np.isfinite(ref).all():
         raise ValueError(f"--ref: expected {len(objs)} finite numbers (one per objective), got {ref}")
+    from arvcas.metrics import objectives as objectives_mod
+
+    for n, r in zip(objs, ref):
+        try:
+            nonneg = objectives_mod.get(n).nonnegative
+        except objectives_mod.ObjectiveError:  # a plugin's objective not loaded: its sign is unknown
+            nonneg = False
+        if nonneg and r <= 0:
+            raise ValueError(f"--ref: the reference point's f_{n} is {r:g}, but f_{n} is never negative: no member "
+                             f"can dominate it (give a value > 0)")
     names = [f.controller for f in frs]
     labels = [f"{n} ({f.path.parent.name})" if names.count(n) > 1 else n for n, f in zip(names, frs)]
     labels = [f"{lab} [{k}]" if labels.count(lab) > 1 else lab for lab, k in zip(labels, _letters(len(frs)))]
