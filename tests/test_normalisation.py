@@ -115,3 +115,21 @@ def test_bad_normalisation_keys_are_refused_naming_the_key(system, extra, key, c
     assert cli.main(["tune", str(study), "--out", str(system / "bad")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"objectives.{key}" in err, err
+
+
+def test_the_page_names_the_normalisation_and_refuses_to_mix_two(system, capsys):
+    import json
+
+    if not (system / "out" / "front.h5").exists() or not (system / "given" / "front.h5").exists():
+        pytest.skip("needs the two studies above")
+    page = system / "pid.html"
+    assert cli.main(["front", "explore", str(system / "out"), "--out", str(page)]) == 0
+    m = re.search(r'<script type="application/json" id="data">(.*?)</script>', page.read_text(), re.S)
+    doc = json.loads(m.group(1))
+    assert doc["normalisation"] == "pid's value at the default gains of bluerov2_heavy_alpha5 on draw 1"
+    assert "pid's value" in doc["objectives"][0]["description"]
+    capsys.readouterr()
+    assert cli.main(["front", "explore", str(system / "out"), str(system / "given"), "--out",
+                     str(system / "mixed.html")]) == 2
+    err = capsys.readouterr().err
+    assert "normalised differently" in err and err.count("\n") == 1 and not (system / "mixed.html").exists()

@@ -228,7 +228,11 @@ def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_
                          "are normalised differently and cannot share one plot")
     system = systems[0]
     fronts = [_front_data(p, ch, members, samples, say) for p, ch in zip(paths, checked)]
-    norm = norm_name("" if system == "haidou1" else system)
+    recorded = sorted({ch[1].normalisation for ch in checked if ch[1].normalisation})  # fronts since it is recorded
+    if len(recorded) > 1:
+        raise ValueError(f"front explore: the fronts' objectives are normalised differently ({'; '.join(recorded)}) "
+                         f"and cannot share one plot")
+    norm = recorded[0] if recorded else norm_name("" if system == "haidou1" else system)
     objectives = _objectives(checked[0][0].objectives, fronts, norm)
     return {
         "format": FORMAT, "format_version": FORMAT_VERSION, "arvcas_version": __version__, "system": system,
