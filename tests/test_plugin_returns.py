@@ -131,3 +131,43 @@ def test_initial_is_checked_as_well():
     with pytest.raises(base.ControllerError, match=r"initial returned str 'zero' for the state entry 'w'; "
                                                    r"expected a 2-vector"):
         base.call_law(Init(), "initial", None, {})
+
+
+# ---- objectives of the user's own: what values and elements return ------------------------------------------
+
+@settings(max_examples=200, deadline=None)
+@given(st.none() | st.text(max_size=4) | st.booleans() | _numbers | st.lists(_numbers, max_size=5) |
+       st.lists(st.lists(_numbers, min_size=1, max_size=3), min_size=1, max_size=4))
+def test_any_objective_return_is_an_array_of_its_shape_or_one_line(value):
+    from arvcas.metrics import objectives
+
+    class Mine(objectives.Objective):
+        name, unit = "mine", "1"
+
+        def values(self, out, ctx):
+            return value
+
+    n = 3
+    for method in ("values", "elements"):
+        try:
+            a = objectives.call_objective(Mine(), method, {"ok": np.ones(n)}, None, n)
+        except objectives.ObjectiveError as e:
+            msg = str(e)
+            assert "\n" not in msg and msg.startswith(f"objective 'mine' (") and f": {method} " in msg, msg
+            continue
+        assert a.shape == (n,) if method == "values" else (a.ndim == 2 and a.shape[0] == n)
+
+
+def test_an_objective_that_raises_names_its_file_and_line():
+    from arvcas.metrics import objectives
+
+    class Broken(objectives.Objective):
+        name, unit = "broken", "1"
+
+        def values(self, out, ctx):
+            return out["no such output"]
+
+    with pytest.raises(objectives.ObjectiveError, match=r"^objective 'broken' \(.*test_plugin_returns.py\): values "
+                                                        r"raised KeyError: 'no such output' \(test_plugin_returns.py, "
+                                                        r"line \d+\)$"):
+        objectives.call_objective(Broken(), "values", {"ok": np.ones(2)}, None, 2)

@@ -148,7 +148,7 @@ def _where(law: Controller) -> str:
         return f"controller {law.name!r} ({p.describe()})"
     try:
         f = inspect.getsourcefile(type(law))
-    except TypeError:
+    except (TypeError, OSError):
         f = None
     return f"controller {law.name!r} ({f or type(law).__module__})"
 
@@ -213,7 +213,7 @@ def call_law(law: Controller, method: str, *args):
     except Exception as e:  # noqa: BLE001 - whatever the law's code raises
         try:
             path = inspect.getsourcefile(type(law))
-        except TypeError:
+        except (TypeError, OSError):
             path = None
         raise ControllerError(f"{_where(law)}: {method} raised {plugins.why(e, path)}") from None
     if method == "initial":

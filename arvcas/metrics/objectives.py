@@ -20,6 +20,7 @@ from __future__ import annotations
 import re
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -86,7 +87,7 @@ class Objective:
 
     def elements(self, out: dict, ctx: Context) -> np.ndarray:
         """What a constraint on this objective bounds, (n, e): by default its value (e = 1)."""
-        return self.values(out, ctx)[:, None]
+        return np.asarray(self.values(out, ctx), dtype=float)[:, None]
 
     def limit(self, ctx: Context):
         """The ``limit`` a constraint may name (per element, or a number); None: it has none."""
@@ -290,6 +291,41 @@ def get(name, settling_band=None) -> Objective:
     return o
 
 
+def call_objective(o: Objective, method: str, out: dict, ctx: Context, n: int) -> np.ndarray:
+    """``o.values(out, ctx)`` (``method`` "values": shape (n,)) or ``o.elements(out, ctx)`` ("elements": (n, k),
+    k >= 1) with what it returns checked: whatever the objective's code raises or returns (None, strings, a
+    wrong shape) is one :class:`ObjectiveError` line naming the objective, its file (or plugin) and what
+    was expected."""
+    import inspect
+
+    try:
+        where = inspect.getsourcefile(type(o)) or type(o).__module__
+    except (TypeError, OSError):
+        where = type(o).__module__
+    rec = origin(o.name)
+    if rec.get("spec"):
+        where = f"plugin {rec.get('kind', '')} {rec['spec']}".replace("  ", " ")
+    what = f"objective {o.name!r} ({where}): {method}"
+    try:
+        got = getattr(o, method)(out, ctx)
+    except ObjectiveError:
+        raise
+    except Exception as e:  # noqa: BLE001 - whatever the objective's code raises
+        raise ObjectiveError(f"{what} raised {plugins.why(e, where if Path(str(where)).exists() else None)}") from None
+    want = f"({n},)" if method == "values" else f"({n}, k)"
+    try:
+        a = np.asarray(got, dtype=float) if not isinstance(got, (str, bytes)) and got is not None else None
+    except (TypeError, ValueError):
+        a = None
+    if a is None or np.asarray(got).dtype.kind == "b" or \
+            (a.shape != (n,) if method == "values" else (a.ndim != 2 or a.shape[0] != n or a.shape[1] < 1)):
+        shape = getattr(a, "shape", None)
+        text = f"shape {shape}" if shape is not None else " ".join(repr(got).split())[:60]
+        raise ObjectiveError(f"{what} returned {type(got).__name__} {text}; expected an array of shape {want} "
+                             f"(one value per run)")
+    return a
+
+
 def origin(name: str) -> dict:
     """Where an objective from outside the package came from (empty for a built-in one)."""
     with _LOCK:
@@ -373,7 +409,8 @@ class Constraint:
     def violation(self, o: Objective, out: dict, ctx: Context) -> np.ndarray:
         """pymoo's G (<= 0 satisfied) of each run of one draw, (n,): the largest over the elements of
         (lhs - rhs) / |rhs| (``>=``: rhs - lhs), the difference alone where rhs is 0."""
-        lhs, rhs = o.elements(out, ctx), np.broadcast_to(self.rhs(o, ctx), (o.elements(out, ctx).shape[1],))
+        lhs = call_objective(o, "elements", out, ctx, len(out["ok"]))
+        rhs = np.broadcast_to(self.rhs(o, ctx), (lhs.shape[1],))
         d = lhs - rhs if self.op == "<=" else rhs - lhs
         scale = np.where(rhs != 0, np.abs(rhs), 1.0)
         return (d / scale).max(axis=1)
