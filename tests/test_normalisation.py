@@ -133,3 +133,16 @@ def test_the_page_names_the_normalisation_and_refuses_to_mix_two(system, capsys)
                      str(system / "mixed.html")]) == 2
     err = capsys.readouterr().err
     assert "normalised differently" in err and err.count("\n") == 1 and not (system / "mixed.html").exists()
+
+
+def test_compare_refuses_fronts_normalised_differently(system):
+    from arvcas.tuning.compare import compare_fronts
+    from arvcas.tuning.front import read_front
+
+    if not (system / "out" / "front.h5").exists() or not (system / "given" / "front.h5").exists():
+        pytest.skip("needs the two studies above")
+    a, b = read_front(system / "out"), read_front(system / "given")
+    assert a.normalisation.startswith("pid's value") and b.normalisation.startswith("the study's")
+    with pytest.raises(ValueError, match=r"^compare: the fronts' objectives are normalised differently \("):
+        compare_fronts(a, b)
+    assert compare_fronts(a, a).hv[0] == compare_fronts(a, a).hv[1]

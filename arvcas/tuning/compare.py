@@ -108,6 +108,10 @@ def compare_fronts(*fronts, ref=None) -> Comparison:
         if f.objectives != objs:
             raise ValueError(f"compare: {frs[0].path} has objectives {', '.join(objs)}, {f.path} has "
                              f"{', '.join(f.objectives)}: fronts of different objectives are not comparable")
+    recorded = sorted({f.normalisation for f in frs if f.normalisation and set(objs) & {"chat", "rmse"}})
+    if len(recorded) > 1:
+        raise ValueError(f"compare: the fronts' objectives are normalised differently ({'; '.join(recorded)}): "
+                         f"their f_chat and f_rmse are not comparable")
     if ref is None:
         ref = np.max([f.reference_point for f in frs], axis=0)
     ref = np.asarray(ref, dtype=float)
