@@ -182,6 +182,58 @@ def test_explore_page_loads_in_headless_chromium_without_console_errors(page, tm
         assert near > 150, (f["controller"], f["color"], near)  # every front is drawn in its colour
 
 
+# names a user controls (study, system, controller, objective, gain and file names, descriptions): each one is
+# text on the page, never markup; these break an inline script block or run code if they reach it unescaped
+HOSTILE = ("x<!--<script>y", "</script><script>document.body.setAttribute('data-pwned','1')</script>",
+           "<img src=x onerror=\"document.body.setAttribute('data-pwned','2')\">", "a&amp;b\"'<!--")
+_STRUCTURAL = {"q", "color", "dofs", "format", "format_version", "arvcas_version"}  # written by arvcas, not by users
+
+
+def _hostile(doc, payload):
+    """``doc`` with ``payload`` put in front of every string a user can control (every string but the page's
+    own structure: encoded traces, colours, DOF names, format tags)."""
+    if isinstance(doc, dict):
+        return {k: v if k in _STRUCTURAL else _hostile(v, payload) for k, v in doc.items()}
+    if isinstance(doc, list):
+        return [_hostile(v, payload) for v in doc]
+    return payload + doc if isinstance(doc, str) else doc
+
+
+def _check_hostile_page(page, payload):
+    dom, err = _chromium(["--window-size=1280,1100", "--dump-dom", page.as_uri()])
+    console = [ln for ln in err.splitlines() if ":CONSOLE" in ln]
+    assert not console, console
+    assert 'data-ready="1"' in dom and '<p id="status">ready</p>' in dom  # the page's script ran to the end
+    assert not re.search(r"data-pwned=\"\d\"", dom)  # nothing the names carry ran (the names hold it as text)
+    import html as _html
+
+    assert _html.escape(payload, quote=False) in dom  # the name shown as text
+
+
+@pytest.mark.parametrize("payload", HOSTILE)
+def test_explore_page_shows_hostile_names_as_text_and_runs_nothing(page, tmp_path, payload):
+    from arvcas.experiments.explore import inline_json, page_html
+
+    doc = _hostile(_page_data(page), payload)
+    text = page_html(doc)
+    data = re.search(r'<script type="application/json" id="data">(.*?)</script>', text, re.S).group(1)
+    assert "<" not in data and ">" not in data and "&" not in data and json.loads(data) == doc == json.loads(
+        inline_json(doc))
+    out = tmp_path / "hostile.html"
+    out.write_text(text, encoding="utf-8")
+    _check_hostile_page(out, payload)
+
+
+def test_explore_page_of_a_study_directory_with_a_hostile_name(study_dir, tmp_path):
+    payload = HOSTILE[0]
+    d = tmp_path / payload
+    shutil.copytree(study_dir / "out" / "agsta", d)
+    out = tmp_path / "p.html"
+    assert cli.main(["front", "explore", str(d), "--out", str(out)]) == 0
+    assert payload in json.dumps(_page_data(out))
+    _check_hostile_page(out, payload)
+
+
 def test_explore_refuses_before_any_run(study_dir, tmp_path, capsys):
     cases = [
         (["front", "explore", str(study_dir / "out"), "--out", str(tmp_path / "p.txt")], "name it FILE.html"),

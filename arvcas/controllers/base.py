@@ -33,7 +33,7 @@ from typing import Any, Callable
 
 from arvcas.io import plugins
 
-__all__ = ["Gain", "Controller", "ControllerError", "register", "get", "names", "available", "unregister", "adopt",
+__all__ = ["Gain", "Controller", "ControllerError", "call_law", "register", "get", "names", "available", "unregister", "adopt",
            "origin", "provenance", "describe_provenance", "GROUP"]
 
 DOFS = ("x", "y", "z", "phi", "theta", "psi")
@@ -136,6 +136,96 @@ class Controller:
 
     def __repr__(self) -> str:
         return f"<controller {self.name}: {len(self.gains)} gains per DOF>"
+
+
+# ---- calling a law: what its code returns, checked before anything is compiled --------------------------
+
+
+def _where(law: Controller) -> str:
+    """The law and the file (or plugin) its class comes from, for a one-line error."""
+    p = origin(law.name)
+    if p is not None:
+        return f"controller {law.name!r} ({p.describe()})"
+    try:
+        f = inspect.getsourcefile(type(law))
+    except (TypeError, OSError):
+        f = None
+    return f"controller {law.name!r} ({f or type(law).__module__})"
+
+
+def _shown(v) -> str:
+    text = " ".join(repr(v).split())
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _column(v, n: int):
+    """``v`` as an (n, 1) CasADi column (a CasADi expression kept as it is), or None if it is not one."""
+    import casadi as ca
+
+    if isinstance(v, (ca.SX, ca.MX, ca.DM)):
+        return v if v.shape == (n, 1) else None
+    if v is None or isinstance(v, (str, bytes, bool, dict)):
+        return None
+    try:
+        import numpy as np
+
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    if a.size != n or a.ndim > 2 or (a.ndim == 2 and a.shape[1] != 1) or not np.all(np.isfinite(a)):
+        return None
+    return ca.DM(a.reshape(n, 1))
+
+
+def _what_is(v) -> str:
+    shape = getattr(v, "shape", None)
+    return f"{type(v).__name__} of shape {tuple(shape)}" if shape is not None else f"{type(v).__name__} {_shown(v)}"
+
+
+def _state(law: Controller, method: str, got) -> dict:
+    """``got``, the law's state as ``method`` returned it, checked against :attr:`Controller.state`."""
+    want = ", ".join(f"{n} ({w})" for n, w in law.state) or "no entries"
+    if not isinstance(got, dict):
+        raise ControllerError(f"{_where(law)}: {method} returned {_what_is(got)} as its state; expected a dict of "
+                              f"the law's state: {want}")
+    out = dict(got)
+    for n, w in law.state:
+        if n not in got:
+            raise ControllerError(f"{_where(law)}: {method} returned no state entry {n!r}; expected a dict of the "
+                                  f"law's state: {want}")
+        col = _column(got[n], w)
+        if col is None:
+            raise ControllerError(f"{_where(law)}: {method} returned {_what_is(got[n])} for the state entry {n!r}; "
+                                  f"expected a {w}-vector (a CasADi expression or finite numbers)")
+        out[n] = col
+    return out
+
+
+def call_law(law: Controller, method: str, *args):
+    """``law.initial(ctx, G)`` (``method`` "initial") or ``law.step(ctx, G, x)`` ("step"), with what it returns
+    checked: the state a dict of the widths of :attr:`Controller.state`, ``tau_v`` a 6-vector. Whatever its
+    code raises, or a wrong return, is one :class:`ControllerError` line naming the law's file (or plugin),
+    the method, what it returned and what was expected; raised while the graph is built, before any compile."""
+    try:
+        got = getattr(law, method)(*args)
+    except ControllerError:
+        raise
+    except Exception as e:  # noqa: BLE001 - whatever the law's code raises
+        try:
+            path = inspect.getsourcefile(type(law))
+        except (TypeError, OSError):
+            path = None
+        raise ControllerError(f"{_where(law)}: {method} raised {plugins.why(e, path)}") from None
+    if method == "initial":
+        return _state(law, method, got)
+    if not (isinstance(got, tuple) and len(got) == 2):
+        raise ControllerError(f"{_where(law)}: step returned {_what_is(got)}; expected a pair (tau_v, next_state): "
+                              f"tau_v the commanded body wrench (a 6-vector), next_state a dict of the law's state")
+    tau = _column(got[0], 6)
+    if tau is None:
+        raise ControllerError(f"{_where(law)}: step returned {_what_is(got[0])} as tau_v; expected the commanded "
+                              f"body wrench, a 6-vector (a CasADi expression or 6 finite numbers)")
+    return tau, _state(law, method, got[1])
 
 
 _REGISTRY: dict[str, Controller] = {}

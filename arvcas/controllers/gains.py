@@ -110,11 +110,17 @@ def default_gains(controller, system=None) -> np.ndarray:
     if list(block.get("columns", ())) != c.columns():
         raise GainError(f"{where}: [{c.defaults_block}].columns {block.get('columns')} differ from "
                         f"controller {c.name}'s gain columns {c.columns()}")
-    try:
-        return np.concatenate([np.asarray(block[d], dtype=float).reshape(len(c.columns())) for d in DOFS])
-    except (KeyError, ValueError, TypeError):
-        raise GainError(f"{where}: [{c.defaults_block}]: expected {len(c.columns())} numbers for each of "
-                        f"{', '.join(DOFS)}") from None
+    k = len(c.columns())
+    for d in DOFS:
+        row = block.get(d)
+        if not isinstance(row, list) or len(row) != k:
+            raise GainError(f"{where}: [{c.defaults_block}].{d}: expected {k} numbers (one per column: "
+                            f"{', '.join(c.columns())}), got {row!r}")
+        for col, v in zip(c.columns(), row):
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise GainError(f"{where}: [{c.defaults_block}].{d}: {col} is {v!r} ({type(v).__name__}); "
+                                f"expected a number")
+    return np.concatenate([np.asarray(block[d], dtype=float) for d in DOFS])
 
 
 def upper_limits(controller, h: float) -> np.ndarray:

@@ -228,7 +228,11 @@ def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_
                          "are normalised differently and cannot share one plot")
     system = systems[0]
     fronts = [_front_data(p, ch, members, samples, say) for p, ch in zip(paths, checked)]
-    norm = norm_name("" if system == "haidou1" else system)
+    recorded = sorted({ch[1].normalisation for ch in checked if ch[1].normalisation})  # fronts since it is recorded
+    if len(recorded) > 1:
+        raise ValueError(f"front explore: the fronts' objectives are normalised differently ({'; '.join(recorded)}) "
+                         f"and cannot share one plot")
+    norm = recorded[0] if recorded else norm_name("" if system == "haidou1" else system)
     objectives = _objectives(checked[0][0].objectives, fronts, norm)
     return {
         "format": FORMAT, "format_version": FORMAT_VERSION, "arvcas_version": __version__, "system": system,
@@ -239,13 +243,21 @@ def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_
     }
 
 
+def inline_json(doc) -> str:
+    """``doc`` as JSON safe inside an HTML ``<script>`` block: every ``<``, ``>`` and ``&`` written as its
+    ``\\u`` escape, so no name (``</script``, ``<!--``, ``<script``) changes how the browser parses the page;
+    ``JSON.parse`` reads the same strings back."""
+    text = json.dumps(doc, separators=(",", ":"), allow_nan=False)
+    return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
+
+
 def page_html(doc: dict) -> str:
     """The page: plotly.js, the data and the page's script inlined (no server, no network)."""
     try:
         from plotly.offline import get_plotlyjs
     except ImportError:
         raise ValueError("front explore: needs the plotly package (pip install 'arvcas[explore]')") from None
-    data = json.dumps(doc, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
+    data = inline_json(doc)
     page = (_TEMPLATES / "explore.html").read_text(encoding="utf-8")
     script = (_TEMPLATES / "explore.js").read_text(encoding="utf-8")
     parts = {"TITLE": html.escape(doc["title"]), "PLOTLY": get_plotlyjs(), "DATA": data, "SCRIPT": script}

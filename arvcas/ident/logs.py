@@ -350,43 +350,121 @@ class _Table:
 
 
 def _read_csv(path: Path, names: list[str], time_col: str, mapping: str) -> _Table:
-    from arvcas.io.files import read_bytes
+    """The columns ``names`` (and the time) of a CSV log (``.gz``: gzip), streamed in blocks of whole lines
+    (:data:`CSV_BLOCK_BYTES`): what it costs is the columns read, not the file. Every row must have as many
+    fields as the header (a decimal comma shifts every column: refused naming the row); a corrupt gzip
+    file, more than :data:`MAX_LOG_BYTES` of text or :data:`MAX_SAMPLES` rows are one line."""
+    import zlib
 
-    raw = read_bytes(path, "log file", LogError, max_bytes=MAX_LOG_BYTES)
-    if path.suffix == ".gz":
-        try:
-            with gzip.GzipFile(fileobj=io.BytesIO(raw)) as g:
-                raw = g.read(MAX_LOG_BYTES + 1)
-        except (OSError, EOFError) as e:
-            raise LogError(f"{path}: not a readable gzip file ({e})") from None
-        if len(raw) > MAX_LOG_BYTES:
-            raise LogError(f"{path}: more than {MAX_LOG_BYTES} bytes once decompressed")
+    from arvcas.io.files import check_input
+
+    check_input(path, "log file", LogError)
+    gz = path.suffix == ".gz"
+    if not gz and path.stat().st_size > MAX_LOG_BYTES:
+        raise LogError(f"{path}: more than {MAX_LOG_BYTES} bytes (arvcas.ident.logs.MAX_LOG_BYTES)")
     try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        raise LogError(f"{path}: not UTF-8 text (byte {e.start})") from None
-    head, _, body = text.partition("\n")
-    header = [h.strip().strip('"') for h in head.strip().split(",")]
-    if len(set(header)) != len(header):
-        dup = next(h for h in header if header.count(h) > 1)
-        raise LogError(f"{path}: header names column {dup!r} twice")
-    want = [time_col] + [n for n in names if n != time_col]
-    for n in want:
-        if n not in header:
-            raise LogError(f"{path}: no column {n!r} (named in {mapping}){config.closest(n, header)}")
-    idx = [header.index(n) for n in want]
+        f = gzip.open(path, "rb") if gz else open(path, "rb")
+    except OSError as e:
+        raise LogError(f"{path}: cannot be read ({e.strerror or e})") from None
+    blocks, n_rows, line, total = [], 0, 2, 0  # line: the file line the next block starts at (the header: 1)
     try:
-        data = np.loadtxt(io.StringIO(body), delimiter=",", usecols=idx, ndmin=2, dtype=float,
-                          max_rows=MAX_SAMPLES + 1)
-    except ValueError as e:
-        msg = " ".join(str(e).split())
-        raise LogError(f"{path}: a number could not be read ({msg[:160]})") from None
-    if data.shape[0] > MAX_SAMPLES:
-        raise LogError(f"{path}: more than {MAX_SAMPLES} rows")
+        with f:
+            head = f.readline(1 << 20)
+            header = [h.strip().strip('"') for h in _utf8(head, path, 1).lstrip("\ufeff").strip().split(",")]
+            if len(set(header)) != len(header):
+                dup = next(h for h in header if header.count(h) > 1)
+                raise LogError(f"{path}: header names column {dup!r} twice")
+            want = [time_col] + [n for n in names if n != time_col]
+            for n in want:
+                if n not in header:
+                    raise LogError(f"{path}: no column {n!r} (named in {mapping}){config.closest(n, header)}")
+            idx = [header.index(n) for n in want]
+            rest = b""
+            while True:
+                chunk = f.read(CSV_BLOCK_BYTES)
+                total += len(chunk)
+                if total > MAX_LOG_BYTES:
+                    raise LogError(f"{path}: more than {MAX_LOG_BYTES} bytes{' once decompressed' if gz else ''} "
+                                   f"(arvcas.ident.logs.MAX_LOG_BYTES)")
+                data = rest + chunk
+                if chunk:
+                    cut = data.rfind(b"\n") + 1
+                    data, rest = data[:cut], data[cut:]
+                if data:
+                    block, n_lines = _csv_block(data, path, line, len(header), idx)
+                    line += n_lines
+                    n_rows += block.shape[0]
+                    if n_rows > MAX_SAMPLES or n_rows * len(want) > MAX_CSV_VALUES:
+                        raise LogError(f"{path}: more than {min(MAX_SAMPLES, MAX_CSV_VALUES // len(want))} rows of "
+                                       f"the {len(want)} columns read (arvcas.ident.logs.MAX_SAMPLES, MAX_CSV_VALUES)")
+                    blocks.append(block)
+                if not chunk:
+                    break
+    except (EOFError, zlib.error, gzip.BadGzipFile) as e:
+        raise LogError(f"{path}: not a readable gzip file ({' '.join(str(e).split()) or type(e).__name__})") from None
+    except OSError as e:
+        raise LogError(f"{path}: {'not a readable gzip file' if gz else 'cannot be read'} "
+                       f"({' '.join(str(e).split())})") from None
+    data = np.concatenate(blocks) if blocks else np.zeros((0, len(want)))
     if data.shape[0] < 2:
         raise LogError(f"{path}: fewer than 2 rows of data")
     cols = {n: data[:, i] for i, n in enumerate(want)}
     return _Table(str(path), cols.pop(time_col), time_col, cols)
+
+
+CSV_BLOCK_BYTES = 8 << 20  # a CSV log is read this much at a time
+MAX_CSV_VALUES = 100_000_000  # numbers kept of one CSV stream (800 MB as float64): rows x the columns read
+
+
+def _utf8(raw: bytes, path: Path, line: int) -> str:
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise LogError(f"{path}: not UTF-8 text (row {line}, byte {e.start})") from None
+
+
+def _csv_block(data: bytes, path: Path, line: int, width: int, idx: list[int]) -> tuple[np.ndarray, int]:
+    """The columns ``idx`` of whole CSV lines ``data`` (file line ``line`` first); every line that is not blank
+    or a comment has ``width`` fields. Returns (rows, lines read)."""
+    lines = data.split(b"\n")
+    if lines and lines[-1] == b"":
+        lines.pop()
+    for k, ln in enumerate(lines):
+        n = ln.count(b",") + 1
+        if n != width and ln.strip() and not ln.lstrip().startswith(b"#"):
+            why = " (a decimal comma? fields are separated by commas and decimals take a point)" if n > width else ""
+            raise LogError(f"{path}: row {line + k}: {n} fields, the header has {width}{why}")
+    try:
+        rows = np.loadtxt(io.StringIO(_utf8(data, path, line)), delimiter=",", usecols=idx, ndmin=2, dtype=float)
+    except ValueError as e:
+        msg = " ".join(str(e).split())
+        raise LogError(f"{path}: a number could not be read in rows {line} to {line + len(lines) - 1} "
+                       f"({msg[:160]})") from None
+    return rows.reshape(-1, len(idx)), len(lines)
+
+
+def _check_quaternion_order(sm, q: np.ndarray, R: np.ndarray, acc, Cw, Cb, what: str) -> None:
+    """The quaternion's component order, checked against the accelerometer of the same stream (``acc``; no
+    check without one): the direction of its specific force (at rest ``-R^T g``, up in the body: ``-R[2, :]``)
+    against the attitude's, median over the rows. Refused when the order given is more than 20 deg off and
+    the other order within 10 deg. (The tilt alone cannot tell: a body frame given wrong tilts the vehicle
+    too, and the other order can look level by chance.) ``q``: the unit quaternion as read, x, y, z, w."""
+    if acc is None:
+        return
+    other = "wxyz" if sm.quaternion_order == "xyzw" else "xyzw"
+    raw = q[:, [3, 0, 1, 2]] if sm.quaternion_order == "wxyz" else q  # the columns as the file has them
+    R_other = Cw @ R_from_quaternion(raw[:, [1, 2, 3, 0]] if other == "wxyz" else raw) @ Cb
+    f = acc @ Cb.T
+    n = np.linalg.norm(f, axis=1)
+
+    def off(Rm: np.ndarray) -> float:
+        c = np.einsum("ni,ni->n", f, -Rm[:, 2, :]) / np.where(n > 0, n, 1.0)
+        return float(np.degrees(np.median(np.arccos(np.clip(c, -1.0, 1.0)))))
+
+    given, alt = off(R), off(R_other)
+    if given > 20.0 and alt < 10.0:
+        raise LogError(f"{what} = \"{sm.quaternion_order}\" looks wrong: the accelerometer's gravity direction is "
+                       f"{given:.0f} deg from the attitude's (median); with \"{other}\" it is {alt:.0f} deg")
 
 
 def _field(msg: Any, path: str) -> float:
@@ -756,6 +834,8 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
                 raise LogError(f"{tb.where}: columns {', '.join(sm.quaternion.columns)}: not a unit quaternion at "
                                f"row {bad[0] + 2} (norm {nrm[bad[0]]:.4g})")
             R = Cw @ R_from_quaternion(qv / nrm[:, None]) @ Cb
+            _check_quaternion_order(sm, qv / nrm[:, None], R, cols("acceleration")[0] if sm.acceleration is not None else None,
+                                    Cw, Cb, f"{tb.where}: {where} {key}.quaternion_order")
         elif sm.euler is not None:
             ev, s_e = cols("euler")
             R = Cw @ R_from_euler(ev) @ Cb

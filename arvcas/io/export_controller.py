@@ -322,10 +322,13 @@ def _header(I: _Info) -> str:
         "",
         "/* errors returned by init and step (0: success) */",
         f"#define {up}E_GAIN (-1)     /* init: a gain is not finite, not > 0, or not below its stability limit */",
-        f"#define {up}E_PARAM (-2)    /* init: unc, eta_d or p not finite, or ekf not finite with q >= 0, var > 0 */",
+        f"#define {up}E_PARAM (-2)    /* init: a parameter not finite or impossible: unc < 0, ekf q < 0 or var <= 0,",
+        "                                * eta_d's pitch at or beyond +-90 deg, p breaking the system file's sign",
+        "                                * rules (a mass, inertia or water density <= 0, ...) */",
         f"#define {up}E_NOT_INIT (-3) /* step: the state was not initialised (init) */",
         f"#define {up}E_INPUT (-4)    /* step: y, t or tau_arm not finite: nothing changed */",
         f"#define {up}E_OUTPUT (-5)   /* step: the new state or command is not finite: nothing changed */",
+        f"#define {up}E_NULL (-6)     /* init: s or prm is NULL; step: s or y is NULL (nothing written) */",
         "",
         "/* The controller's parameters. gains[] per DOF (x, y, z, phi, theta, psi), each DOF in this order:",
     ]
@@ -352,6 +355,9 @@ def _header(I: _Info) -> str:
           f"}} {pre}state;", "",
           f"/* the exported defaults (gains: {c_comment(d.gains_source)}); see {d.lib}_params.h */",
           f"void {pre}default_params({pre}params* prm);",
+          "/* NULL: init and step return E_NULL for a NULL s, prm or y (tau_arm and u may be NULL, as said at",
+          " * step); reset(NULL) does nothing; diagnostics(NULL) and command(NULL) return NULL;",
+          " * bad_index(NULL) returns -1. */",
           "/* check prm, compute its derived terms, then reset; returns 0, or E_GAIN / E_PARAM: a refused entry",
           " * (bad_index says which) leaves the state as it was; derived terms that are not finite (e.g. a",
           " * singular thruster matrix; bad_index -1) leave it uninitialised */",
@@ -403,7 +409,7 @@ def _api_c(I: _Info) -> str:
         step_cmd = (f"\n  arg[0] = u_new;\n  arg[1] = s->tab;\n  arg[2] = s->k + {off['p']};\n  res[0] = cmd_new;\n"
                     f"  if ({cas}call({cas}command, arg, res, s) || {cas}finite(cmd_new, {sz.n_u}) >= 0) return {up}E_OUTPUT;")
         copy_cmd = "\n  memcpy(s->command, cmd_new, sizeof cmd_new);"
-        cmd_fn = f"\nconst double* {pre}command(const {pre}state* s) {{\n  return s->command;\n}}\n"
+        cmd_fn = f"\nconst double* {pre}command(const {pre}state* s) {{\n  return s ? s->command : 0;\n}}\n"
     return f"""
 
 /* ---------------------------------------------------------------------------------------------
@@ -418,6 +424,16 @@ static const double {cas}upper[{sz.n_gains}] = {{{", ".join(_limit(v) for v in I
 static int {cas}finite(const double* v, int n) {{
   for (int i = 0; i < n; ++i)
     if (!(v[i] - v[i] == 0.0)) return i;  /* NaN and inf fail */
+  return -1;
+}}
+
+/* the system file's sign rule of each entry of p (1: > 0, 2: >= 0, 0: any), as arvcas's loader checks them */
+static const signed char {cas}p_rule[{sz.n_p}] = {{{_p_rules(I)}}};
+
+/* the first entry of p that breaks its sign rule, or -1 */
+static int {cas}p_signs(const double* p) {{
+  for (int i = 0; i < {sz.n_p}; ++i)
+    if (({cas}p_rule[i] == 1 && !(p[i] > 0.0)) || ({cas}p_rule[i] == 2 && !(p[i] >= 0.0))) return i;
   return -1;
 }}
 
@@ -442,16 +458,22 @@ int {pre}init({pre}state* s, const {pre}params* prm) {{
   const double* arg[{I.sz_arg}];
   double* res[{I.sz_res}];
   int i, bad = -1, rc = 0;
+  if (!s) return {up}E_NULL;
+  if (!prm) {{ s->bad_index = -1; return {up}E_NULL; }}
   /* the checks first: a refused prm leaves the state as it was (but for bad_index) */
   for (i = 0; i < {sz.n_gains} && bad < 0; ++i)
     if (!(prm->gains[i] > 0.0 && prm->gains[i] < {cas}upper[i])) {{ bad = {off['gains']} + i; rc = {up}E_GAIN; }}
-  if (bad < 0 && (i = {cas}finite(prm->unc, 4)) >= 0) {{ bad = {off['unc']} + i; rc = {up}E_PARAM; }}
+  for (i = 0; i < 4 && bad < 0; ++i)  /* the nominal-model factors: finite and >= 0 */
+    if (!(prm->unc[i] - prm->unc[i] == 0.0) || prm->unc[i] < 0.0) {{ bad = {off['unc']} + i; rc = {up}E_PARAM; }}
   for (i = 0; i < {sz.n_ekf} && bad < 0; ++i)
     if (!(prm->ekf[i] - prm->ekf[i] == 0.0) || (i < 2 ? prm->ekf[i] < 0.0 : prm->ekf[i] <= 0.0)) {{
       bad = {off['ekf']} + i; rc = {up}E_PARAM;
     }}
   if (bad < 0 && (i = {cas}finite(prm->eta_d, 6)) >= 0) {{ bad = {off['eta_d']} + i; rc = {up}E_PARAM; }}
+  /* the set point's pitch inside +-90 deg (the Euler angles' singularity), as the scenario loader asks */
+  if (bad < 0 && !(prm->eta_d[4] > -{_HALF_PI} && prm->eta_d[4] < {_HALF_PI})) {{ bad = {off['eta_d']} + 4; rc = {up}E_PARAM; }}
   if (bad < 0 && (i = {cas}finite(prm->p, {sz.n_p})) >= 0) {{ bad = {off['p']} + i; rc = {up}E_PARAM; }}
+  if (bad < 0 && (i = {cas}p_signs(prm->p)) >= 0) {{ bad = {off['p']} + i; rc = {up}E_PARAM; }}
   s->bad_index = bad;
   if (rc) return rc;
   memset(s, 0, sizeof *s);
@@ -475,6 +497,7 @@ int {pre}init({pre}state* s, const {pre}params* prm) {{
 }}
 
 void {pre}reset({pre}state* s) {{
+  if (!s) return;
   memset(s->mem, 0, sizeof s->mem);
   memset(s->u, 0, sizeof s->u);
   memset(s->diag, 0, sizeof s->diag);{reset_cmd}
@@ -487,6 +510,7 @@ int {pre}step({pre}state* s, const double* y, double t, const double* tau_arm, d
   double* res[{I.sz_res}];
   double u_new[{sz.n_u}], diag_new[{sz.n_diag}]{", cmd_new[" + str(sz.n_u) + "]" if I.has_map else ""};
   double* next;
+  if (!s || !y) return {up}E_NULL;
   if (!s->initialized) return {up}E_NOT_INIT;
   if ({cas}finite(y, 12) >= 0 || {cas}finite(&t, 1) >= 0 || (tau_arm && {cas}finite(tau_arm, 6) >= 0))
     return {up}E_INPUT;
@@ -511,21 +535,23 @@ int {pre}step({pre}state* s, const double* y, double t, const double* tau_arm, d
 }}
 
 const double* {pre}diagnostics(const {pre}state* s) {{
-  return s->diag;
+  return s ? s->diag : 0;
 }}
 {cmd_fn}
 int {pre}bad_index(const {pre}state* s) {{
-  return s->bad_index;
+  return s ? s->bad_index : -1;
 }}
 
 const char* {pre}error(int code) {{
   switch (code) {{
     case 0: return "success";
     case {up}E_GAIN: return "init: a gain is not finite, not > 0, or not below its stability limit";
-    case {up}E_PARAM: return "init: a parameter is not finite, or ekf has q < 0 or a variance <= 0";
+    case {up}E_PARAM: return "init: a parameter is not finite or impossible (unc < 0, ekf q < 0 or variance <= 0, "
+                             "pitch set point at or beyond +-90 deg, p against its sign rule)";
     case {up}E_NOT_INIT: return "step: the state was not initialised with init";
     case {up}E_INPUT: return "step: y, t or tau_arm is not finite; nothing changed";
     case {up}E_OUTPUT: return "step: the new state or command is not finite; nothing changed";
+    case {up}E_NULL: return "a NULL pointer where a state, params or measurement is needed; nothing written";
     default: return "unknown error code";
   }}
 }}
@@ -538,6 +564,20 @@ unsigned long {pre}params_size(void) {{
   return (unsigned long) sizeof({pre}params);
 }}
 """
+
+
+_HALF_PI = "1.5707963267948966"  # pi / 2 in C
+
+
+def _p_rules(I: _Info) -> str:
+    """The sign rule of each entry of p for C (1: > 0, 2: >= 0, 0: any): the system file's, from its layout;
+    and the water's density > 0 where the exported system has water (a system file may give env.rho = 0 for a
+    vehicle described without fluid; a controller exported for one in water must not be given none)."""
+    rules = [{"pos": 1, "nonneg": 2}.get(r, 0) for r in I.P.layout.rules]
+    names = list(I.P.layout.names)
+    if "env.rho" in names and I.P["env.rho"] > 0:
+        rules[names.index("env.rho")] = 1
+    return ", ".join(str(r) for r in rules)
 
 
 def _init_tab(I: _Info) -> str:
@@ -725,7 +765,7 @@ COMMAND_UNITS = {[unit for _, unit, _ in I.commands]!r}
 GAIN_NAMES = {I.gain_names!r}
 # diagnostics: (name, offset, width, units, frame)
 DIAGNOSTICS = {diag!r}
-ERRORS = {{-1: "E_GAIN", -2: "E_PARAM", -3: "E_NOT_INIT", -4: "E_INPUT", -5: "E_OUTPUT"}}
+ERRORS = {{-1: "E_GAIN", -2: "E_PARAM", -3: "E_NOT_INIT", -4: "E_INPUT", -5: "E_OUTPUT", -6: "E_NULL"}}
 _FIELDS = {list(sz.params.items())!r}
 
 _d = ctypes.c_double

@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ["GROUPS", "PluginError", "Plugin", "add_registry", "load", "find", "load_group", "failures",
-           "current", "loaded", "source_files", "digest", "is_file_spec"]
+           "current", "loaded", "source_files", "digest", "is_file_spec", "why"]
 
 GROUPS = ("arvcas.controllers", "arvcas.objectives")  # entry-point groups (arvcas.metrics.objectives: the second)
 
@@ -222,7 +222,7 @@ def _running(plugin: Plugin, code: Callable[[], object], what: str, path: Path |
     except KeyboardInterrupt:
         raise
     except BaseException as e:  # noqa: BLE001 - whatever the plugin's code raises
-        raise PluginError(f"{what}: {_why(e, path)}") from None
+        raise PluginError(f"{what}: {why(e, path)}") from None
     finally:
         _CURRENT.pop()
 
@@ -254,7 +254,7 @@ def _same_file(a, b) -> bool:
         return False
 
 
-def _why(e: BaseException, path: Path | None = None) -> str:
+def why(e: BaseException, path: Path | None = None) -> str:
     """One line: the exception and, when it has one, the place in the plugin's own code."""
     if isinstance(e, SyntaxError):
         where = f" ({Path(e.filename).name}, line {e.lineno})" if e.filename and e.lineno else ""

@@ -20,6 +20,7 @@ from __future__ import annotations
 import re
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -69,6 +70,9 @@ class Objective:
     unit: str = ""
     description: str = ""
     accumulators: tuple[Accumulator, ...] = ()
+    # True when every element is >= 0 by construction: a constraint 'name <= negative' can never hold and
+    # 'name >= 0 or less' always holds, so both are refused (parse_constraint)
+    nonnegative: bool = False
 
     def __init__(self, **kw):
         for k, v in kw.items():
@@ -83,7 +87,7 @@ class Objective:
 
     def elements(self, out: dict, ctx: Context) -> np.ndarray:
         """What a constraint on this objective bounds, (n, e): by default its value (e = 1)."""
-        return self.values(out, ctx)[:, None]
+        return np.asarray(self.values(out, ctx), dtype=float)[:, None]
 
     def limit(self, ctx: Context):
         """The ``limit`` a constraint may name (per element, or a number); None: it has none."""
@@ -102,6 +106,7 @@ class Objective:
 
 class _Chat(Objective):
     name, unit = "chat", "1"
+    nonnegative = True
     description = "mean over the 6 DOF of CHAT (eq. 42) / the AGSTA's (docs/model.md §7): the paper's f_chat"
 
     def values(self, out, ctx):
@@ -110,6 +115,7 @@ class _Chat(Objective):
 
 class _Rmse(Objective):
     name, unit = "rmse", "1"
+    nonnegative = True
     description = "mean over the 6 DOF of RMSE (eq. 43) / the AGSTA's (docs/model.md §7): the paper's f_rmse"
 
     def values(self, out, ctx):
@@ -122,6 +128,7 @@ def _lim(cfg) -> np.ndarray:
 
 class _Iae(Objective):
     name, unit = "iae", "s"
+    nonnegative = True
     description = ("integrated absolute error: mean over the 6 DOF of h sum_k |e_k| / the DOF's [limits] bound "
                    "(e = the true pose minus the reference; elements: the per-DOF integrals, m s and rad s)")
     accumulators = (Accumulator("iae", "sum", 6, lambda v: v.h * ca.fabs(v.e)),)
@@ -135,6 +142,7 @@ class _Iae(Objective):
 
 class _Energy(Objective):
     name, unit = "energy", "N^1.5 s"
+    nonnegative = True
     description = ("electrical energy proxy h sum_k sum_i |T_i|^1.5 (actuator-disk power ~ |T|^1.5; the T200 at "
                    "16 V draws 0.95 |T|^1.5 W forward, 1.31 |T|^1.5 W reverse within 17 % above 5 N: docs/objectives.md)")
     accumulators = (Accumulator("energy", "sum", 1, lambda v: v.h * ca.sum1(ca.fabs(v.thrust) ** 1.5)),)
@@ -145,6 +153,7 @@ class _Energy(Objective):
 
 class _PeakThrust(Objective):
     name, unit = "peak_thrust", "N"
+    nonnegative = True
     description = ("largest thrust of any thruster over the run (elements: each thruster's forward peak, then its "
                    "reverse peak; limit: its u_max, then -u_min)")
     accumulators = (Accumulator("peak_fwd", "max", "thrusters", lambda v: ca.fmax(v.thrust, 0)),
@@ -168,6 +177,7 @@ class _PeakThrust(Objective):
 
 class _SaturationTime(Objective):
     name, unit = "saturation_time", "s"
+    nonnegative = True
     description = "time during which the allocation asks any thruster for more than its limit (h x samples)"
     accumulators = (Accumulator("saturated", "sum", 1, lambda v: v.h * ca.if_else(
         ca.logic_or(ca.mmax(v.u_alloc - v.u_max) > 0, ca.mmax(v.u_min - v.u_alloc) > 0), 1, 0)),)
@@ -181,6 +191,7 @@ class _SettlingTime(Objective):
     end of the last sample before the next event (or the run's end) whose error leaves the band."""
 
     name, unit = "settling_time", "s"
+    nonnegative = True
     description = ("largest settling time after an event (the start, each arm motion, each payload change): the "
                    "time until |e| stays within the band (0.05 m, 0.05 rad) up to the next event; elements: per event")
 
@@ -206,6 +217,7 @@ class _SettlingTime(Objective):
 
 class _Excursion(Objective):
     name, unit = "excursion", "m"
+    nonnegative = True
     description = "largest distance of the vehicle from its reference position, max_k |e_k[x, y, z]|"
     accumulators = (Accumulator("excursion", "max", 1, lambda v: ca.norm_2(v.e[0:3])),)
 
@@ -277,6 +289,41 @@ def get(name, settling_band=None) -> Objective:
     if name == "settling_time" and settling_band is not None and tuple(settling_band) != o.band:
         return _SettlingTime(band=settling_band)
     return o
+
+
+def call_objective(o: Objective, method: str, out: dict, ctx: Context, n: int) -> np.ndarray:
+    """``o.values(out, ctx)`` (``method`` "values": shape (n,)) or ``o.elements(out, ctx)`` ("elements": (n, k),
+    k >= 1) with what it returns checked: whatever the objective's code raises or returns (None, strings, a
+    wrong shape) is one :class:`ObjectiveError` line naming the objective, its file (or plugin) and what
+    was expected."""
+    import inspect
+
+    try:
+        where = inspect.getsourcefile(type(o)) or type(o).__module__
+    except (TypeError, OSError):
+        where = type(o).__module__
+    rec = origin(o.name)
+    if rec.get("spec"):
+        where = f"plugin {rec.get('kind', '')} {rec['spec']}".replace("  ", " ")
+    what = f"objective {o.name!r} ({where}): {method}"
+    try:
+        got = getattr(o, method)(out, ctx)
+    except ObjectiveError:
+        raise
+    except Exception as e:  # noqa: BLE001 - whatever the objective's code raises
+        raise ObjectiveError(f"{what} raised {plugins.why(e, where if Path(str(where)).exists() else None)}") from None
+    want = f"({n},)" if method == "values" else f"({n}, k)"
+    try:
+        a = np.asarray(got, dtype=float) if not isinstance(got, (str, bytes)) and got is not None else None
+    except (TypeError, ValueError):
+        a = None
+    if a is None or np.asarray(got).dtype.kind == "b" or \
+            (a.shape != (n,) if method == "values" else (a.ndim != 2 or a.shape[0] != n or a.shape[1] < 1)):
+        shape = getattr(a, "shape", None)
+        text = f"shape {shape}" if shape is not None else " ".join(repr(got).split())[:60]
+        raise ObjectiveError(f"{what} returned {type(got).__name__} {text}; expected an array of shape {want} "
+                             f"(one value per run)")
+    return a
 
 
 def origin(name: str) -> dict:
@@ -362,7 +409,8 @@ class Constraint:
     def violation(self, o: Objective, out: dict, ctx: Context) -> np.ndarray:
         """pymoo's G (<= 0 satisfied) of each run of one draw, (n,): the largest over the elements of
         (lhs - rhs) / |rhs| (``>=``: rhs - lhs), the difference alone where rhs is 0."""
-        lhs, rhs = o.elements(out, ctx), np.broadcast_to(self.rhs(o, ctx), (o.elements(out, ctx).shape[1],))
+        lhs = call_objective(o, "elements", out, ctx, len(out["ok"]))
+        rhs = np.broadcast_to(self.rhs(o, ctx), (lhs.shape[1],))
         d = lhs - rhs if self.op == "<=" else rhs - lhs
         scale = np.where(rhs != 0, np.abs(rhs), 1.0)
         return (d / scale).max(axis=1)
@@ -396,4 +444,8 @@ def parse_constraint(text: str, where: str = "constraint", settling_band=None) -
         return Constraint(text=text, objective=name, op=op, factor=factor)
     if not np.isfinite(float(num)):
         raise ObjectiveError(f"{pre}{text!r}: the bound must be finite")
+    if o.nonnegative and op == "<=" and float(num) < 0:
+        raise ObjectiveError(f"{pre}{text!r} can never hold: {name} is never negative (give a bound >= 0)")
+    if o.nonnegative and op == ">=" and float(num) <= 0:
+        raise ObjectiveError(f"{pre}{text!r} always holds: {name} is never negative (give a bound > 0)")
     return Constraint(text=text, objective=name, op=op, number=float(num))

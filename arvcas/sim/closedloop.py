@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 
 from arvcas.controllers import atd, gains as gains_mod
-from arvcas.controllers.base import Controller, get as get_controller
+from arvcas.controllers.base import Controller, call_law, get as get_controller
 from arvcas.model import manipulator, thrusters, vehicle, water as water_mod
 from arvcas.sim import accumulate, scenario, schedule, signals as signals_mod
 from arvcas.system.params import Layout as ParamLayout, default_layout, view
@@ -493,9 +493,23 @@ def _thr_const_sizes(spec: RunSpec) -> tuple[int, int] | None:
     return E.shape[0], tabs.shape[0]
 
 
+def check_law(law: Controller, cfg: ScenarioConfig, lay) -> None:
+    """The law's ``initial`` and ``step`` called once on symbols (:func:`arvcas.controllers.base.call_law`): a
+    law whose code raises or returns the wrong thing is one line before the run's graph is built."""
+    sym = ca.SX.sym
+    ctx = StepContext(t=sym("t"), h=cfg.time_h, first=ca.SX(1.0), P=view(sym("p", len(lay)), lay), Mhat=sym("Mhat", 6),
+                      unc=sym("unc", 4), eta_d=sym("eta_d", 6), eta_hat=sym("eta_hat", 6), nu_hat=sym("nu_hat", 6),
+                      eta_dot_hat=sym("eta_dot_hat", 6), eta_ref=sym("y1", 6), eta_ref_dot=sym("y2", 6), e=sym("e", 6),
+                      e_dot=sym("e_dot", 6), tau_arm=sym("tau_arm", 6))
+    G = {c: sym(c, 6) for c in law.columns()}
+    call_law(law, "initial", ctx, G)
+    call_law(law, "step", ctx, G, {name: sym(f"c_{name}", n) for name, n in law.state})
+
+
 def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     """The SX functions of one controller sample (see :func:`_build_steps`, which calls them)."""
     law, cfg, lay = spec.law, spec.cfg, spec.lay
+    check_law(law, cfg, lay)
     cols = law.columns()
     ng = 6 * len(cols)
     rk4, pc_fn = _plant_substep(spec)
@@ -642,9 +656,9 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
     ctx = StepContext(t=tk, h=h, first=first, P=P, Mhat=Mhat, unc=unc, eta_d=eta_d, eta_hat=eta_hat,
                       nu_hat=nu_hat, eta_dot_hat=eta_dot_hat, eta_ref=y1, eta_ref_dot=y2, e=e, e_dot=e_dot,
                       tau_arm=tau_arm)
-    init = law.initial(ctx, G)
+    init = call_law(law, "initial", ctx, G)
     xc = {name: ca.if_else(first, init[name], memory[f"c_{name}"]) for name, _ in law.state}
-    tau_v, xc_next = law.step(ctx, G, xc)
+    tau_v, xc_next = call_law(law, "step", ctx, G, xc)
 
     # 5. allocation and saturation
     u_cmd = thrusters.allocate(P, tau_v)

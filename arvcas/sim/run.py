@@ -51,6 +51,18 @@ LOCKSTEP_ENV = "ARVCAS_LOCKSTEP"
 _OUT_BYTES = 2 * 8 * (6 + 6 + 1 + 1 + 6)  # a run's outputs (chat, rmse, ok, t_fail, chat_delivered) and copies
 
 
+
+def _nonnegative_factors(unc: np.ndarray) -> None:
+    """The nominal-model factors [C, D, g, arm] (rows of 4) scale model terms: each is >= 0 (the scenario's
+    and a study's draws follow the same rule)."""
+    bad = np.argwhere(np.asarray(unc) < 0)
+    if bad.size:
+        at = tuple(int(i) for i in bad[0])
+        row = f"row {at[0]}, " if len(at) == 2 else ""
+        name = "CDg"[at[-1]] if at[-1] < 3 else "arm"
+        raise SimulationError(f"uncertainty: {row}factor {name} is {float(np.asarray(unc)[at]):g}; the nominal-model "
+                              f"factors [C, D, g, arm] are >= 0")
+
 class SimulationError(ValueError):
     """Bad input to a simulation (one line), raised before anything runs."""
 
@@ -192,6 +204,7 @@ class CompiledRun:
         ph = np.array(self.cfg.disturbance_phase) if phase is None else calls.real_array(phase, "phase", SimulationError)
         if unc.shape != (4,) or not np.isfinite(unc).all():
             raise SimulationError(f"uncertainty: expected 4 finite factors [C, D, g, arm], got {unc}")
+        _nonnegative_factors(unc)
         if ph.shape != (6,) or not np.isfinite(ph).all():
             raise SimulationError(f"phase: expected 6 finite disturbance phases (rad), got {ph}")
         return unc, ph
@@ -329,6 +342,7 @@ class CompiledRun:
             return a
 
         U = rows(uncertainty, unc0, 4, "uncertainty")
+        _nonnegative_factors(U)
         PH = rows(phase, ph0, 6, "phase")
         first = scenario.noise_sequence(self.cfg, int(seeds[0]))  # every draw's noise block has its shape
         k = first.shape[1]

@@ -556,14 +556,35 @@ def _check_within_run(cfg: ScenarioConfig, where: str) -> None:
     if cfg.arm_waypoint is None and cfg.arm_qg is not None:
         late += [(f"arm.{k}", getattr(cfg, "arm_" + k)) for k in ("hold_until", "payload_on", "return_start")
                  if getattr(cfg, "arm_" + k) >= T]
+    task = None  # the vehicle's task: its start after the run's end (it runs nothing)
+    if cfg.has_trajectory:
+        times = cfg.trajectory().times
+        key = "trajectory.waypoint[1].t" if cfg.trajectory_pattern == "waypoints" else "trajectory.start"
+        if times[0] >= T:
+            task = (key, float(times[0]), "the task starts at or after the run's end, so it runs nothing")
+    # a waypoint whose motion starts within the run but ends after it is never reached
+    unreached = [(f"arm.waypoint[{j}].t", w.t) for j, w in enumerate(cfg.arm_waypoint or (), start=1)
+                 if w.t > T and (j == 1 or cfg.arm_waypoint[j - 2].t < T)]
+    if cfg.has_trajectory and task is None and cfg.trajectory().times[-1] > T:
+        ts = cfg.trajectory().times
+        j = int(np.argmax(ts > T))
+        unreached.append((f"trajectory.waypoint[{j + 1}].t" if cfg.trajectory_pattern == "waypoints" else
+                          f"trajectory (point {j + 1} of {len(ts)})", float(ts[j])))
+    found = []
     if late:
-        import warnings
-
         key, t = late[0]
         more = f" (and {len(late) - 1} more)" if len(late) > 1 else ""
-        msg = (f"{where}: {key}: {t:g} s: this event starts at or after the run's end (time.duration {T:g} s), so "
-               f"it changes nothing{more}")
+        found.append(f"{where}: {key}: {t:g} s: this event starts at or after the run's end (time.duration {T:g} s), "
+                     f"so it changes nothing{more}")
+    if task is not None:
+        found.append(f"{where}: {task[0]}: {task[1]:g} s: {task[2]} (time.duration {T:g} s)")
+    for key, t in unreached:
+        found.append(f"{where}: {key}: {t:g} s is after the run's end (time.duration {T:g} s): this waypoint is "
+                     f"never reached")
+    for msg in found:
         if msg not in _WARNED:  # once per process
+            import warnings
+
             _WARNED.add(msg)
             warnings.warn(msg, ScenarioWarning, stacklevel=3)
 

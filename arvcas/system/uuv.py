@@ -49,6 +49,12 @@ THRUSTER_PLUGINS = ("libuuv_thruster_ros_plugin.so", "libuuv_thruster_plugin.so"
 PLUGIN_DENSITY = 1028.0  # UnderwaterObjectPlugin.cc's fluidDensity when <fluid_density> is absent
 SDF_GRAVITY = 9.8  # SDF's default world <gravity> 0 0 -9.8: uuv_simulator's worlds set none
 MAX_PACKAGE_SCAN = 20000  # directories looked at when indexing ROS packages for $(find ...)
+# Bounds of a xacro expansion (macros can expand exponentially: a macro calling another twice, 40 deep, is
+# 2^40 elements): elements evaluated, their nesting, and seconds. The RexROV 2 + Oberon 7 of
+# tests/data/uuv_rexrov2 evaluates 921 elements nested 10 deep in 0.5 s (measured), the RexROV 2 alone 417.
+MAX_XACRO_ELEMENTS = 20_000
+MAX_XACRO_DEPTH = 100
+MAX_XACRO_SECONDS = 30.0
 _DOF = "XYZKMN"
 _VEL = "uvwpqr"
 
@@ -158,19 +164,50 @@ def expand(path: Path, packages: dict[str, Path], args: dict[str, str], error=Im
 
     xacro.parse = parse_without_dtd
     xacro.all_includes = []
+    real_eval_all = xacro.eval_all
+    xacro.eval_all = _bounded(real_eval_all, path, error)
     try:
         xacro.init_stacks(None)
         with contextlib.redirect_stderr(io.StringIO()):  # xacro's warnings (redefined symbols, ...)
             doc = xacro.process_file(str(path.resolve()), mappings=dict(args), verbosity=0)
         return doc.toxml(), list(xacro.all_includes)
-    except ImportError_:
+    except (ImportError_, error):
         raise
     except Exception as e:  # noqa: BLE001 (xacro's own message, one line)
         raise error(f"{path}: xacro: {' '.join(str(e).split())}") from None
     finally:
         sa._eval_find, sa._eval_dict["find"] = old
         xacro.parse = real_parse
+        xacro.eval_all = real_eval_all
         xacro.init_stacks(None)
+
+
+def _bounded(eval_all, path: Path, error):
+    """xacro's ``eval_all`` (it evaluates one element and, recursively, what it expands to) counted: more than
+    :data:`MAX_XACRO_ELEMENTS` elements, a nesting deeper than :data:`MAX_XACRO_DEPTH` or more than
+    :data:`MAX_XACRO_SECONDS` stops the expansion with one line naming the file and the bound."""
+    import time
+
+    state = {"n": 0, "depth": 0, "t0": time.monotonic()}
+
+    def counted(node, macros, symbols):
+        state["n"] += 1
+        state["depth"] += 1
+        try:
+            if state["n"] > MAX_XACRO_ELEMENTS:
+                raise error(f"{path}: xacro: the expansion passed {MAX_XACRO_ELEMENTS:,} elements (a macro that "
+                            f"expands without bound?); refused (arvcas.system.uuv.MAX_XACRO_ELEMENTS)")
+            if state["depth"] > MAX_XACRO_DEPTH:
+                raise error(f"{path}: xacro: elements nested more than {MAX_XACRO_DEPTH} deep (a macro that "
+                            f"calls itself?); refused (arvcas.system.uuv.MAX_XACRO_DEPTH)")
+            if time.monotonic() - state["t0"] > MAX_XACRO_SECONDS:
+                raise error(f"{path}: xacro: the expansion took more than {MAX_XACRO_SECONDS:g} s after "
+                            f"{state['n']:,} elements; refused (arvcas.system.uuv.MAX_XACRO_SECONDS)")
+            return eval_all(node, macros, symbols)
+        finally:
+            state["depth"] -= 1
+
+    return counted
 
 
 def _yaml(path: Path, what: str, error) -> Any:

@@ -144,6 +144,7 @@ class Checkpoint:
     system: str = ""  # the system the runs used: a shipped name or a system file ("": Haidou-1)
     ref_chat: np.ndarray | None = None  # the objectives' per-DOF normalisation (None: Table 3's AGSTA)
     ref_rmse: np.ndarray | None = None
+    normalisation: str = ""  # where ref_chat, ref_rmse come from, in words ("": not recorded)
     plugin: dict = field(default_factory=dict)  # where a controller from outside the package came from
     survival: str = ""  # NSGA-III's normalisation state (JSON); "" for NSGA-II
     engine: str = ""
@@ -358,6 +359,8 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
         f.attrs["plugin"] = json.dumps(c.plugin, sort_keys=True)
     if c.survival:
         f.attrs["survival"] = c.survival
+    if c.normalisation:
+        f.attrs["normalisation"] = c.normalisation
     if c.ref_chat is not None:
         f.attrs["ref_chat"] = np.asarray(c.ref_chat, dtype=float)
         f.attrs["ref_rmse"] = np.asarray(c.ref_rmse, dtype=float)
@@ -492,6 +495,7 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     kw["system"] = _s(f.attrs["system"]) if "system" in f.attrs else ""
     kw["plugin"] = _json_attr(f, "plugin", path, dict) if "plugin" in f.attrs else {}
     kw["survival"] = _s(f.attrs["survival"]) if "survival" in f.attrs else ""
+    kw["normalisation"] = _s(f.attrs["normalisation"]) if "normalisation" in f.attrs else ""
     if "ref_chat" in f.attrs:
         kw["ref_chat"], kw["ref_rmse"] = np.asarray(f.attrs["ref_chat"], float), np.asarray(f.attrs["ref_rmse"], float)
     if "population" in f:

@@ -203,8 +203,9 @@ def run_compare(a: argparse.Namespace) -> int:
             ref = [float(x) for x in a.ref.split(",")]
         except ValueError:
             ref = None
-        if ref is None or len(ref) != 2:
-            raise ValueError(f"--ref: expected two numbers 'f_chat,f_rmse', got {a.ref!r}")
+        if ref is None:
+            raise ValueError(f"--ref: expected numbers separated by commas, one per objective ('f_chat,f_rmse'), "
+                             f"got {a.ref!r}")
     frs = [read_front(p) for p in a.fronts]
     changed = sorted({w for f in frs[1:] for w in [check_same_model(frs[0].path, f.path, a.allow_model_change)] if w})
     if changed:

@@ -108,11 +108,25 @@ def compare_fronts(*fronts, ref=None) -> Comparison:
         if f.objectives != objs:
             raise ValueError(f"compare: {frs[0].path} has objectives {', '.join(objs)}, {f.path} has "
                              f"{', '.join(f.objectives)}: fronts of different objectives are not comparable")
+    recorded = sorted({f.normalisation for f in frs if f.normalisation and set(objs) & {"chat", "rmse"}})
+    if len(recorded) > 1:
+        raise ValueError(f"compare: the fronts' objectives are normalised differently ({'; '.join(recorded)}): "
+                         f"their f_chat and f_rmse are not comparable")
     if ref is None:
         ref = np.max([f.reference_point for f in frs], axis=0)
     ref = np.asarray(ref, dtype=float)
     if ref.shape != (len(objs),) or not np.isfinite(ref).all():
         raise ValueError(f"--ref: expected {len(objs)} finite numbers (one per objective), got {ref}")
+    from arvcas.metrics import objectives as objectives_mod
+
+    for n, r in zip(objs, ref):
+        try:
+            nonneg = objectives_mod.get(n).nonnegative
+        except objectives_mod.ObjectiveError:  # a plugin's objective not loaded: its sign is unknown
+            nonneg = False
+        if nonneg and r <= 0:
+            raise ValueError(f"--ref: the reference point's f_{n} is {r:g}, but f_{n} is never negative: no member "
+                             f"can dominate it (give a value > 0)")
     names = [f.controller for f in frs]
     labels = [f"{n} ({f.path.parent.name})" if names.count(n) > 1 else n for n, f in zip(names, frs)]
     labels = [f"{lab} [{k}]" if labels.count(lab) > 1 else lab for lab, k in zip(labels, _letters(len(frs)))]

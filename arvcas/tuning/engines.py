@@ -52,6 +52,7 @@ class EvalTask:
     # other objectives or constraints than the paper's (docs/objectives.md): the accumulators the compiled run
     # carries for them; none: the paper's run and evaluation, unchanged
     accumulators: tuple = ()
+    normalisation: str = ""  # where ``ref`` comes from (arvcas.tuning.run.normalisation), in words
 
 
 def run_key(controller: str, cfg: ScenarioConfig, params: Params | None = None, accumulators: tuple = ()) -> str:

@@ -103,6 +103,7 @@ class Front:
     system: str = ""  # the study's system ("": Haidou-1, objectives normalised by the paper's Table 3)
     plugin: dict | None = None  # a controller from outside the package: where it came from (checkpoint.py)
     objectives: tuple = ("chat", "rmse")  # the study's objectives, the columns of F (docs/objectives.md)
+    normalisation: str = ""  # where f_chat and f_rmse's reference comes from, in words ("": not recorded)
 
     @property
     def size(self) -> int:
@@ -150,7 +151,7 @@ def read_front(path: str | Path) -> Front:
         reference_point=c.reference_point, history=c.history, seed=c.seed, draw_seeds=c.draw_seeds,
         draw_uncertainty=c.draw_uncertainty, draw_phase=c.draw_phase, scenario_text=c.scenario_text,
         study_text=c.study_text, versions=c.versions, system=c.system, plugin=c.plugin or None,
-        objectives=objective_names(c),
+        objectives=objective_names(c), normalisation=c.normalisation,
     )
 
 

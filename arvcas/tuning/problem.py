@@ -104,6 +104,8 @@ def assemble_objectives(outs: list, objectives, constraints, ctx, duration: floa
     :meth:`arvcas.sim.run.CompiledRun.outputs`, with ``chat`` the study's CHAT); ``objectives``:
     :class:`arvcas.metrics.objectives.Objective` s; ``constraints``: (objective, Constraint) pairs;
     ``ctx``: their :class:`arvcas.metrics.objectives.Context`."""
+    from arvcas.metrics import objectives as objectives_mod
+
     K, n, m = len(outs), len(outs[0]["ok"]), len(objectives)
     ok = np.stack([np.asarray(o["ok"]) > 0.5 for o in outs])
     t_fail = np.stack([np.where(k, np.nan, o["t_fail"]) for k, o in zip(ok, outs)])
@@ -116,7 +118,7 @@ def assemble_objectives(outs: list, objectives, constraints, ctx, duration: floa
     with np.errstate(all="ignore"):
         for d, out in enumerate(outs):
             for j, o in enumerate(objectives):
-                vals[d, :, j] = np.where(ok[d], o.values(out, ctx), np.nan)
+                vals[d, :, j] = np.where(ok[d], objectives_mod.call_objective(o, "values", out, ctx, n), np.nan)
         F = vals[0].copy() if K == 1 else vals.mean(axis=0)
         for j, (o, c) in enumerate(constraints):
             v = np.stack([c.violation(o, out, ctx) for out in outs]).max(axis=0)

@@ -235,26 +235,48 @@ def eval_task(study: Study, controller: str, params=None) -> EvalTask:
             src = objectives_mod.origin(o.name)
             if src.get("kind") in ("file", "module") and src["spec"] not in ship:
                 ship += (src["spec"],)
-    return EvalTask(controller=controller, draws=draws, cfg=cfg, params=params, ref=reference(study, params, draws),
-                    plugins=ship, chat=study.objectives.chat, accumulators=accs)
+    ref, norm = normalisation(study, params, draws)
+    return EvalTask(controller=controller, draws=draws, cfg=cfg, params=params, ref=ref, plugins=ship,
+                    chat=study.objectives.chat, accumulators=accs, normalisation=norm)
 
 
-def reference(study: Study, params, draws) -> tuple | None:
-    """The objectives' per-DOF normalisation: None (the paper's Table 3 AGSTA) for Haidou-1; for another
-    system, the AGSTA at that system's default gains on the study's first draw (docs/model.md §7: the
-    system's own AGSTA scores (1, 1))."""
-    if study.system is None:
-        return None
+def normalisation(study: Study, params, draws) -> tuple[tuple | None, str]:
+    """The objectives' per-DOF normalisation and where it comes from (docs/objectives.md, "Normalisation"):
+    ``(None, "the paper's AGSTA value")`` (Table 3) for Haidou-1 unless the study names another; else the
+    values the study gives (``objectives.normalisation_chat``, ``normalisation_rmse``), or a law at its
+    default gains on the study's first draw: the one ``objectives.normalisation`` names, or with "auto"
+    the first of the AGSTA and the study's own controllers whose defaults run to the end on that draw (the
+    AGSTA first: the system's own AGSTA scores (1, 1), docs/model.md §7). A law without defaults, or whose
+    defaults diverge, is passed over; none left is one line."""
+    o = study.objectives
+    if o.normalisation_chat is not None:
+        return (tuple(o.normalisation_chat), tuple(o.normalisation_rmse)), \
+            "the study's objectives.normalisation_chat and normalisation_rmse"
+    if study.system is None and o.normalisation == "auto":
+        return None, "the paper's AGSTA value"
+    from arvcas.controllers.base import ControllerError
     from arvcas.sim.simulation import compiled_run
 
+    laws = list(dict.fromkeys(["agsta", *study.controllers])) if o.normalisation == "auto" else [o.normalisation]
     seed, unc, ph = draws[0]
-    run = compiled_run("agsta", params, study.scenario)
-    chat, rmse, ok, _ = run.many(run.default_gains(), [seed], uncertainty=unc, phase=ph, n_threads=1,
-                                 chat=study.objectives.chat)
-    if not ok[0]:
-        raise StudyError(f"{study.path}: evaluation.system: the AGSTA at the default gains of "
-                         f"{params.structure.name} diverges on draw 1: no normalisation for the objectives")
-    return tuple(chat[0].tolist()), tuple(rmse[0].tolist())
+    tried = []
+    for law in laws:
+        try:
+            run = compiled_run(law, params, study.scenario)
+            gains = run.default_gains()
+        except ControllerError as e:
+            if o.normalisation != "auto":
+                raise StudyError(f"{study.path}: objectives.normalisation: {e}") from None
+            tried.append(f"{law} has no default gains")
+            continue
+        chat, rmse, ok, t_fail = run.many(gains, [seed], uncertainty=unc, phase=ph, n_threads=1, chat=o.chat)
+        if ok[0]:
+            return (tuple(chat[0].tolist()), tuple(rmse[0].tolist())), \
+                f"{law}'s value at the default gains of {params.structure.name} on draw 1"
+        tried.append(f"{law} at its default gains diverges at {t_fail[0]:.3g} s")
+    raise StudyError(f"{study.path}: objectives.normalisation: no normalisation for the objectives on draw 1 of "
+                     f"{params.structure.name} ({'; '.join(tried)}): give objectives.normalisation_chat and "
+                     f"normalisation_rmse (six values each), or name a law whose defaults run")
 
 
 def evaluate_gains(engine, task: EvalTask, gains: np.ndarray, objectives=None) -> Evaluation:
@@ -322,6 +344,7 @@ def _new_checkpoint(study: Study, controller: str, task: EvalTask) -> ck.Checkpo
         versions=ck.versions(), model_hash=model_hash(), system=_system_ref(study),
         ref_chat=None if task.ref is None else np.asarray(task.ref[0]),
         ref_rmse=None if task.ref is None else np.asarray(task.ref[1]), plugin=provenance(controller),
+        normalisation=task.normalisation,
     )
 
 
@@ -505,6 +528,7 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
     task = eval_task(study, controller, params)
     say(f"{controller}: {len(names)} gains, population {study.algorithm.population}, engine {engine.describe()}; "
         f"preparing the compiled run ...")
+    say(f"{controller}: objectives normalised by {task.normalisation}")
     key = engine.prepare(task)
     objs = study.objectives.objects() if task.accumulators else None
     n_constr = 1 + len(study.objectives.constraints)

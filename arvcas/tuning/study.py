@@ -160,11 +160,25 @@ class ObjectivesConfig:
     chat: str = setting(Choices(CHAT_KINDS, "CHAT signal"), default="commanded")
     constraints: tuple[str, ...] = setting(Unique(), scalar_ok=True, default=())  # "peak_thrust <= 0.8 * limit"
     settling_band: tuple[float, ...] | None = quantity(("length", "angle"), gt(0), default=None)  # settling_time
+    # what f_chat and f_rmse divide by (docs/objectives.md, "Normalisation"): "auto" (the AGSTA at the system's
+    # default gains, else the first of the study's laws whose defaults run), a law's name (its default gains),
+    # or the per-DOF values given below (CHAT in the units of eq. 42, RMSE in m and rad)
+    normalisation: str = setting(default="auto")
+    normalisation_chat: tuple[float, ...] | None = quantity("1", gt(0), n=6, default=None)
+    normalisation_rmse: tuple[float, ...] | None = quantity("1", gt(0), n=6, default=None)
 
     def _config_check(self, given: frozenset[str]) -> None:
         if len(self.reference_point) != len(self.names):
             raise Invalid("reference_point", f"{len(self.reference_point)} values for {len(self.names)} objectives "
                                              f"({', '.join(self.names)}): give one per objective")
+        if (self.normalisation_chat is None) != (self.normalisation_rmse is None):
+            raise Invalid("normalisation_chat" if self.normalisation_chat is None else "normalisation_rmse",
+                          "give normalisation_chat and normalisation_rmse together (six values each)")
+        if self.normalisation_chat is not None and "normalisation" in given:
+            raise Invalid("normalisation", "give a law's name or the values normalisation_chat and "
+                                           "normalisation_rmse, not both")
+        if not (self.normalisation == "auto" or self.normalisation.isidentifier()):
+            raise Invalid("normalisation", f"{self.normalisation!r}: \"auto\" or a controller's name")
         from arvcas.metrics import objectives as objectives_mod
 
         for c in self.constraints:
@@ -302,7 +316,12 @@ class Study:
                            **({"chat": self.objectives.chat} if self.objectives.chat != "commanded" else {}),
                            **({"constraints": list(self.objectives.constraints)} if self.objectives.constraints else {}),
                            **({"settling_band": list(self.objectives.settling_band)}
-                              if self.objectives.settling_band is not None else {})},
+                              if self.objectives.settling_band is not None else {}),
+                           **({"normalisation": self.objectives.normalisation}
+                              if self.objectives.normalisation != "auto" else {}),
+                           **({"normalisation_chat": list(self.objectives.normalisation_chat),
+                               "normalisation_rmse": list(self.objectives.normalisation_rmse)}
+                              if self.objectives.normalisation_chat is not None else {})},
             "draws": [dataclasses.asdict(d) for d in self.draws],
             "scenario_text": self.scenario.text if self.scenario is not None else "",
             **({"system": self.params.structure.name} if self.system is not None else {}),

@@ -21,6 +21,8 @@
     return Number(v).toPrecision(d || 4).replace(/\.?0+(e|$)/, "$1");
   }
 
+  // every text a user controls (names, labels, descriptions, paths) goes through esc before it reaches HTML or
+  // a plotly label (plotly reads the same entities back as text)
   function esc(s) {
     return String(s).replace(/[&<>"]/g, function (c) {
       return { "&": "&amp;", "<": "&lt;", ">": "&gt;", "\"": "&quot;" }[c];
@@ -131,20 +133,20 @@
       var keys = f.F.map(function (_, i) { return String(i); });
       out.push({ x: mem.x, y: mem.y, customdata: keys, text: keys.map(function (k) { return hoverText(fi, k); }),
                  hoverinfo: "text", mode: LINES ? "lines+markers" : "markers", type: "scatter", legendgroup: f.path,
-                 name: f.label + ": front (" + f.F.length + "), HV " + fmt(f.hv),
+                 name: esc(f.label) + ": front (" + f.F.length + "), HV " + fmt(f.hv),
                  line: { color: f.color, width: 1.2 }, marker: { color: f.color, size: 6 } });
       meta.push({ front: fi });
       if (f.knee >= 0) {
         out.push({ x: [f.F[f.knee][ix]], y: [f.F[f.knee][iy]], customdata: [String(f.knee)],
                    text: [hoverText(fi, String(f.knee))], hoverinfo: "text", mode: "markers", type: "scatter",
-                   legendgroup: f.path, name: f.label + ": knee (member " + f.knee + ")",
+                   legendgroup: f.path, name: esc(f.label) + ": knee (member " + f.knee + ")",
                    marker: { color: f.color, size: 13, symbol: "diamond", line: { color: "#000", width: 1 } } });
         meta.push({ front: fi });
       }
       if (f.defaults.F[ix] !== null && f.defaults.F[iy] !== null) {
         out.push({ x: [f.defaults.F[ix]], y: [f.defaults.F[iy]], customdata: ["defaults"],
                    text: [hoverText(fi, "defaults")], hoverinfo: "text", mode: "markers", type: "scatter",
-                   legendgroup: f.path, name: f.label + ": " + doc.defaults_name + ", same draw",
+                   legendgroup: f.path, name: esc(f.label) + ": " + esc(doc.defaults_name) + ", same draw",
                    marker: { color: f.color, size: 16, symbol: "star", line: { color: "#000", width: 1 } } });
         meta.push({ front: fi });
       }
@@ -160,7 +162,7 @@
 
   function frontLayout() {
     function axis(o) {
-      return { type: o.log ? "log" : "linear", title: { text: o.label }, gridcolor: "#e5e5e5" };
+      return { type: o.log ? "log" : "linear", title: { text: esc(o.label) }, gridcolor: "#e5e5e5" };
     }
     return {
       margin: { l: 55, r: 10, t: 30, b: 40 }, hovermode: "closest", hoverlabel: { align: "left", font: { size: 11 } },
@@ -264,14 +266,14 @@
       var f = fronts[s.front], tr = trace(s.front, s.key), name = memberInfo(s.front, s.key).name;
       doc.dofs.forEach(function (d, i) {
         traces.push({ x: f.t, y: tr.e[i], xaxis: "x" + (i + 1), yaxis: "y" + (i + 1), type: "scatter", mode: "lines",
-                      line: { color: f.color, width: 1.2, dash: DASH[n % DASH.length] }, name: name,
+                      line: { color: f.color, width: 1.2, dash: DASH[n % DASH.length] }, name: esc(name),
                       legendgroup: s.id, showlegend: i === 0, hovertemplate: "%{y:.4g}" });
       });
     });
     var last = selected[selected.length - 1], lf = fronts[last.front], lt = trace(last.front, last.key);
     lf.thrusters.forEach(function (tn, j) {
       traces.push({ x: lf.t, y: lt.u[j], xaxis: "x7", yaxis: "y7", type: "scatter", mode: "lines",
-                    line: { color: THRUST_COLORS[j % THRUST_COLORS.length], width: 1 }, name: tn,
+                    line: { color: THRUST_COLORS[j % THRUST_COLORS.length], width: 1 }, name: esc(tn),
                     legendgroup: "thrust", hovertemplate: "%{y:.4g}" });
     });
     if (!lt.ok) {
@@ -323,7 +325,7 @@
     if (r.reproduced) { what = "replays reproduce the stored CHAT and RMSE bit for bit"; }
     else if (f.draws > 1) { what = "objectives over " + f.draws + " draws; time responses of the first"; }
     else { what = "replays differ from the stored metrics by up to " + fmt(r.max_difference, 3) +
-                  (r.model_change ? " (" + r.model_change + ")" : ""); }
+                  (r.model_change ? " (" + esc(r.model_change) + ")" : ""); }
     var n = Object.keys(f.traces).length - 1;
     var dflt = f.defaults.F[0] === null ? ", its " + esc(doc.defaults_name) + " diverge on the study's draw" : "";
     return "<b>" + esc(f.label) + "</b>: " + f.F.length + " members, " + n + " with a stored time response, " +

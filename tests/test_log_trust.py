@@ -1,0 +1,150 @@
+"""A CSV log that would be read wrong is refused in one line, and what a log costs is bounded: a quaternion
+in the other component order (found by the accelerometer's gravity direction), a
+row with more or fewer fields than the header (a decimal comma shifts every column), a corrupt or truncated
+gzip file; the CSV reader streams blocks of lines (its memory is the columns it keeps, not the file) and
+any block size reads the same numbers (Hypothesis over CSV contents)."""
+
+from __future__ import annotations
+
+import gzip
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from scipy.spatial.transform import Rotation
+
+from arvcas.ident import logs
+from arvcas.ident.logs import LogError, load_log
+
+T = np.arange(0.0, 20.0 + 1e-9, 0.02)
+G = 9.80665
+
+
+def _pose(d: Path, yaw0: float, file_order: str, said_order: str, accel: bool, gz: bool = False) -> Path:
+    """A pose stream (NED, FRD) whose quaternion the file holds in ``file_order`` and the mapping calls
+    ``said_order``; with ``accel``, the accelerometer's specific force at rest plus 0.3 m/s^2 of motion."""
+    rng = np.random.default_rng(1)
+    e = np.stack([0.1 * np.sin(0.7 * T), 0.08 * np.cos(0.5 * T), yaw0 + 0.02 * T], axis=1)
+    Rm = Rotation.from_euler("ZYX", e[:, ::-1])
+    q = Rm.as_quat()
+    if file_order == "wxyz":
+        q = q[:, [3, 0, 1, 2]]
+    cols, hdr = [T, *q.T], ["t", "q0", "q1", "q2", "q3"]
+    if accel:
+        f = -G * Rm.as_matrix()[:, 2, :] + 0.3 * rng.standard_normal((len(T), 3))
+        cols += list(f.T)
+        hdr += ["ax", "ay", "az"]
+    name = "pose.csv.gz" if gz else "pose.csv"
+    text = ",".join(hdr) + "\n" + "\n".join(",".join(f"{v:.12g}" for v in row) for row in np.stack(cols, 1)) + "\n"
+    (d / name).write_bytes(gzip.compress(text.encode()) if gz else text.encode())
+    acc = 'acceleration = { columns = ["ax", "ay", "az"], unit = "m/s^2" }\n' if accel else ""
+    (d / "trial.log.toml").write_text(f'''[log]
+name = "trial"
+passive = true
+rate = 25.0
+
+[[stream]]
+file = "{name}"
+time = "t"
+world = "ned"
+body = "frd"
+quaternion_order = "{said_order}"
+quaternion = {{ columns = ["q0", "q1", "q2", "q3"] }}
+{acc}''')
+    return d / "trial.log.toml"
+
+
+@pytest.mark.parametrize("file_order, said", [("wxyz", "xyzw"), ("xyzw", "wxyz")])
+def test_a_quaternion_in_the_other_order_is_found_by_the_accelerometer(tmp_path, file_order, said):
+    # heading 2.3 rad: the other order is 37 deg off the accelerometer (median), a tilt the tilt check alone passes
+    with pytest.raises(LogError, match=rf'pose.csv: .*trial.log.toml stream\[1\].quaternion_order = "{said}" looks '
+                                       rf"wrong: the accelerometer's gravity direction is \d+ deg from the attitude's "
+                                       rf'\(median\); with "{file_order}" it is \d deg$'):
+        load_log(_pose(tmp_path, 2.3, file_order, said, accel=True))
+    assert load_log(_pose(tmp_path, 2.3, file_order, file_order, accel=True)).duration == pytest.approx(20.0)
+
+
+def test_without_an_accelerometer_nothing_is_guessed(tmp_path):
+    """The tilt alone is no evidence (a wrong body frame tilts the vehicle too): the frame check speaks."""
+    with pytest.raises(LogError, match=r"the attitude's frame does not match: median roll"):
+        load_log(_pose(tmp_path, 0.4, "wxyz", "xyzw", accel=False))
+
+
+def _stream(tmp_path, text: bytes, name="s.csv") -> Path:
+    p = tmp_path / name
+    p.write_bytes(text)
+    return p
+
+
+@pytest.mark.parametrize("row, fields", [(b"0.02,1,2,3\n", 4), (b"0.02,1\n", 2), (b"0.02,1,2,5,\n", 5)])
+def test_a_row_with_another_number_of_fields_than_the_header_is_refused_naming_it(tmp_path, row, fields):
+    p = _stream(tmp_path, b"t,a,b\n0,1,2\n\n0.01,1,2\n" + row + b"0.03,1,2\n")  # row 5 of the file
+    why = r" \(a decimal comma\?" if fields > 3 else "$"
+    with pytest.raises(LogError, match=rf"^{p}: row 5: {fields} fields, the header has 3{why}"):
+        logs._read_csv(p, ["a"], "t", "m.log.toml")  # even where the column read is before the extra fields
+
+
+def test_a_decimal_comma_row_is_named_in_a_large_file(tmp_path, monkeypatch):
+    monkeypatch.setattr(logs, "CSV_BLOCK_BYTES", 64)  # many blocks: the row number counts across them
+    rows = [f"{0.01 * k:.2f},{k},{2 * k}" for k in range(200)]
+    rows[150] = "1,50,3,5"  # 3,5 written with a decimal comma
+    p = _stream(tmp_path, ("t,a,b\n" + "\n".join(rows) + "\n").encode())
+    with pytest.raises(LogError, match=rf"^{p}: row 152: 4 fields, the header has 3 \(a decimal comma\? fields are "
+                                       rf"separated by commas and decimals take a point\)$"):
+        logs._read_csv(p, ["a", "b"], "t", "m.log.toml")
+
+
+@pytest.mark.parametrize("damage", ["truncated", "flipped", "not gzip"])
+def test_a_corrupt_gzip_log_is_one_line(tmp_path, damage):
+    raw = gzip.compress(("t,a\n" + "".join(f"{k * 0.01},{k}\n" for k in range(5000))).encode())
+    if damage == "truncated":
+        raw = raw[: len(raw) // 2]
+    elif damage == "flipped":
+        raw = raw[:200] + bytes([raw[200] ^ 0xFF]) + raw[201:]
+    else:
+        raw = b"t,a\n0,1\n"
+    p = _stream(tmp_path, raw, "s.csv.gz")
+    with pytest.raises(LogError, match=rf"^{p}: not a readable gzip file \(.+\)$") as e:
+        logs._read_csv(p, ["a"], "t", "m.log.toml")
+    assert "\n" not in str(e.value)
+
+
+def test_a_log_is_bounded_by_the_values_it_keeps(tmp_path, monkeypatch):
+    p = _stream(tmp_path, ("t,a,b,c\n" + "".join(f"{k},{k},{k},{k}\n" for k in range(1000))).encode())
+    monkeypatch.setattr(logs, "CSV_BLOCK_BYTES", 256)
+    monkeypatch.setattr(logs, "MAX_CSV_VALUES", 2500)
+    assert logs._read_csv(p, ["a"], "t", "m").time.size == 1000  # 2 columns kept: 2000 values
+    with pytest.raises(LogError, match=r"more than 833 rows of the 3 columns read \(arvcas.ident.logs.MAX_SAMPLES, "
+                                       r"MAX_CSV_VALUES\)"):
+        logs._read_csv(p, ["a", "b"], "t", "m")
+
+
+_floats = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(2, 40), st.integers(1, 5), st.integers(16, 400), st.booleans(), st.booleans(), st.data())
+def test_any_block_size_reads_the_numbers_written(tmp_path_factory, n, m, block, gz, crlf, data):
+    """Property: a CSV of n rows and m columns (any finite floats, as repr writes them; blank and comment
+    lines between rows; CRLF or LF) reads back exactly, whatever the block size."""
+    a = np.array(data.draw(st.lists(st.lists(_floats, min_size=m + 1, max_size=m + 1), min_size=n, max_size=n)))
+    nl = "\r\n" if crlf else "\n"
+    lines = [",".join(["t"] + [f"c{j}" for j in range(m)])]
+    for k, row in enumerate(a):
+        lines.append(",".join(repr(float(v)) for v in row))
+        if k % 7 == 3:
+            lines.append("# a comment" if k % 2 else "")
+    text = (nl.join(lines) + nl).encode()
+    d = tmp_path_factory.mktemp("csv")
+    p = d / ("s.csv.gz" if gz else "s.csv")
+    p.write_bytes(gzip.compress(text) if gz else text)
+    old = logs.CSV_BLOCK_BYTES
+    logs.CSV_BLOCK_BYTES = block
+    try:
+        tab = logs._read_csv(p, [f"c{j}" for j in range(m)], "t", "m")
+    finally:
+        logs.CSV_BLOCK_BYTES = old
+    np.testing.assert_array_equal(tab.time, a[:, 0])
+    for j in range(m):
+        np.testing.assert_array_equal(tab.cols[f"c{j}"], a[:, j + 1])
