@@ -148,6 +148,8 @@ class Checkpoint:
     restamps: list = field(default_factory=list)  # run digests set after a bit-for-bit replay (arvcas front restamp)
     model_changes: list = field(default_factory=list)  # resumes allowed under other code or parameters
     system: str = ""  # the system the runs used: a shipped name or a system file ("": Haidou-1)
+    # "instantaneous": that system with thrusters that deliver their command at once (Params.instantaneous())
+    system_variant: str = ""
     ref_chat: np.ndarray | None = None  # the objectives' per-DOF normalisation (None: Table 3's AGSTA)
     ref_rmse: np.ndarray | None = None
     plugin: dict = field(default_factory=dict)  # where a controller from outside the package came from
@@ -253,6 +255,9 @@ def controller_of(c, where: str):
         src, hint = base.describe_provenance(c.plugin)
         raise CheckpointError(f"{where}: controller '{c.controller}' is not registered; it came from {src} (source "
                               f"sha256 {str(c.plugin.get('digest', ''))[:12]}): {hint}") from None
+
+
+SYSTEM_VARIANTS = ("", "instantaneous")  # Checkpoint.system_variant
 
 
 def run_digest(c: Checkpoint, params) -> str:
@@ -399,6 +404,8 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
     f.attrs["model_changes"] = json.dumps(list(c.model_changes))
     if c.system:
         f.attrs["system"] = c.system
+    if c.system_variant:
+        f.attrs["system_variant"] = c.system_variant
     if c.plugin:
         f.attrs["plugin"] = json.dumps(c.plugin, sort_keys=True)
     if c.survival:
@@ -539,6 +546,10 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     kw["restamps"] = _json_attr(f, "restamps", path, list) if "restamps" in f.attrs else []
     kw["model_changes"] = _json_attr(f, "model_changes", path, list) if "model_changes" in f.attrs else []
     kw["system"] = _s(f.attrs["system"]) if "system" in f.attrs else ""
+    kw["system_variant"] = _s(f.attrs["system_variant"]) if "system_variant" in f.attrs else ""
+    if kw["system_variant"] not in SYSTEM_VARIANTS:
+        raise CheckpointError(f"{path}: system_variant {kw['system_variant']!r}: allowed "
+                              f"{', '.join(repr(v) for v in SYSTEM_VARIANTS)}")
     kw["plugin"] = _json_attr(f, "plugin", path, dict) if "plugin" in f.attrs else {}
     kw["survival"] = _s(f.attrs["survival"]) if "survival" in f.attrs else ""
     if "ref_chat" in f.attrs:

@@ -148,9 +148,9 @@ def run_front_restamp(a: argparse.Namespace) -> int:
             bad += 1
             continue
         if a.check:
-            ok = r.bitwise and c.run_digest == r.run_digest
+            ok = r.bitwise and c.run_digest == r.run_digest and c.system_variant == r.system_variant
             bad += not ok
-            why = "" if ok else ("; its run digest is not today's" if r.bitwise else "")
+            why = "" if ok or not r.bitwise else "; its run digest is not today's (re-stamp it)"
             print(f"{'ok' if ok else 'FAILED'} {r.describe()}{why}")
         else:
             print(f"{'unchanged' if c.run_digest == r.run_digest else 're-stamped'} {r.describe()}")

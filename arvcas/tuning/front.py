@@ -28,8 +28,8 @@ from arvcas.metrics import DOFS, table3
 from arvcas.tuning import checkpoint as ck
 
 __all__ = ["Front", "read_front", "knee_index", "export_front", "plot_front", "plot_fronts", "member_gains",
-           "member_index", "replay", "replay_all", "restamp", "Replayed", "resolve_front_path", "front_paths", "check_provenance", "check_same_model",
-           "system_params"]
+           "member_index", "replay", "replay_all", "restamp", "Replayed", "resolve_front_path", "front_paths",
+           "check_provenance", "check_same_model", "system_params"]
 
 
 def resolve_front_path(p: str | Path) -> Path:
@@ -392,11 +392,31 @@ def plot_front(front: Front | str | Path, ax=None, **kw):
 
 
 def system_params(c: ck.Checkpoint):
-    """The parameters of the system a checkpoint's study ran on (Haidou-1's when it names none)."""
+    """The parameters of the system a checkpoint's study ran on (Haidou-1's when it names none; with
+    instantaneous thrusters when its ``system_variant`` says so)."""
     from arvcas.system.params import load
     from arvcas.system import load_system
 
-    return load_system(c.system).params if c.system else load()
+    p = load_system(c.system).params if c.system else load()
+    return p.instantaneous() if c.system_variant == "instantaneous" else p
+
+
+def _same(p, c: ck.Checkpoint) -> bool:
+    v = p.vector()
+    return v.shape == c.params.shape and np.array_equal(v, c.params)
+
+
+def _replay_params(c: ck.Checkpoint, path: Path):
+    """(the parameters a replay of ``c`` runs on, the system variant they are): the system's, or, for a
+    study of a system whose file has since gained thruster dynamics, its instantaneous variant when
+    that has exactly the study's parameter vector (the replay then checks every number)."""
+    p = system_params(c)
+    if _same(p, c):
+        return p, c.system_variant
+    if not c.system_variant and _same(p.instantaneous(), c):
+        return p.instantaneous(), "instantaneous"
+    raise ck.CheckpointError(f"{path}: the study used other parameter values than the packaged system's "
+                             f"({c.params.size} values, {p.vector().size} now); a replay cannot reproduce it")
 
 
 def check_provenance(path: str | Path, params, allow: bool, what: str) -> str:
@@ -408,18 +428,26 @@ def check_provenance(path: str | Path, params, allow: bool, what: str) -> str:
     c = ck.read_checkpoint(path)
     diff = ck.provenance_diff(c, params, str(path))
     if diff and not allow:
-        raise ck.CheckpointError(f"{what} {path}: {'; '.join(diff)}; a re-run would not reproduce the study "
-                                 f"(--allow-model-change to run anyway; the output records it)")
+        unknown = all(d.endswith(ck.restamp_hint(str(path))) for d in diff)  # an older file: not known to differ
+        raise ck.CheckpointError(f"{what} {path}: {'; '.join(diff)}"
+                                 + ("" if unknown else "; a re-run would not reproduce the study")
+                                 + " (--allow-model-change to run anyway; the output records it)")
     return "; ".join(diff)
 
 
 def check_same_model(a: str | Path, b: str | Path, allow: bool) -> str:
     """Refuse to compare two fronts computed with different model code, data or parameters; with
-    ``allow`` returns what differs (empty if nothing)."""
-    ca, cb = ck.read_checkpoint(resolve_front_path(a)), ck.read_checkpoint(resolve_front_path(b))
+    ``allow`` returns what differs (empty if nothing). Two fronts written by the same source (equal model
+    hashes) compare; so do two whose runs both replay on today's code (:func:`ck.provenance_diff`)."""
+    pa, pb = resolve_front_path(a), resolve_front_path(b)
+    ca, cb = ck.read_checkpoint(pa), ck.read_checkpoint(pb)
     why = []
     if ca.model_hash != cb.model_hash:
-        why.append(f"model hash {ca.model_hash[:12] or 'none'} vs {cb.model_hash[:12] or 'none'}")
+        stale = [f"{p}: {'; '.join(d)}" for p, c in ((pa, ca), (pb, cb))
+                 for d in [ck.provenance_diff(c, system_params(c), str(p))] if d]
+        if stale:
+            why.append(f"model hash {ca.model_hash[:12] or 'none'} vs {cb.model_hash[:12] or 'none'}, and "
+                       + "; ".join(stale))
     if ca.params.shape != cb.params.shape or not np.array_equal(ca.params, cb.params):
         why.append("different parameter vectors")
     da, db = ca.plugin.get("digest", ""), cb.plugin.get("digest", "")
@@ -522,6 +550,7 @@ class Replayed:
     F: float
     metrics: float
     run_digest: str
+    system_variant: str = ""
 
     @property
     def bitwise(self) -> bool:
@@ -560,10 +589,7 @@ def replay_all(path: str | Path, members="all", n_threads: int | None = None, ch
     fr = read_front(path)
     c = ck.read_checkpoint(path)
     ck.controller_of(c, str(path))
-    p = system_params(c)
-    if p.vector().shape != c.params.shape or not np.array_equal(p.vector(), c.params):
-        raise ck.CheckpointError(f"{path}: the study used other parameter values than the packaged system's; "
-                                 f"a replay cannot reproduce it")
+    p, variant = _replay_params(c, path)
     if fr.size == 0:
         raise ck.CheckpointError(f"{path}: the front is empty: nothing to replay")
     if members == "knee":
@@ -585,13 +611,14 @@ def replay_all(path: str | Path, members="all", n_threads: int | None = None, ch
     chat = np.concatenate([e.chat for e in evs], axis=1)
     rmse = np.concatenate([e.rmse for e in evs], axis=1)
     return Replayed(path, len(fr.gains) if members == "all" else 1, len(gains) > len(fr.gains), _differ(F, F_ref), max(_differ(chat, chat_ref), _differ(rmse, rmse_ref)),
-                    ck.run_digest(c, p))
+                    ck.run_digest(c, p), variant)
 
 
 def restamp(path: str | Path, n_threads: int | None = None) -> Replayed:
     """Record today's run digest in a front whose every member and default gains replay bit for bit on
-    today's code (:func:`replay_all`); nothing else in the file changes (its objectives, its ``updated``),
-    and ``restamps`` records when, the digest and what replayed. Refuses (one line) if any number differs:
+    today's code (:func:`replay_all`); nothing else in the file changes (its objectives, its ``updated``)
+    but, for a study whose system file has since gained thruster dynamics, ``system_variant`` (the variant
+    the replay found); ``restamps`` records when, the digest and what replayed. Refuses (one line) if any number differs:
     such a front must be re-run, not re-stamped. A front already stamped with today's digest is left as it is."""
     path = resolve_front_path(path)
     c = ck.read_checkpoint(path)
@@ -599,13 +626,14 @@ def restamp(path: str | Path, n_threads: int | None = None) -> Replayed:
     if not r.bitwise:
         raise ck.CheckpointError(f"front restamp: {r.describe()}: not re-stamped; re-run the study "
                                  f"(arvcas tune) to get a front of today's code")
-    if c.run_digest == r.run_digest:
+    if c.run_digest == r.run_digest and c.system_variant == r.system_variant:
         return r
     from arvcas.build.provenance import model_hash
 
     c.restamps = list(c.restamps) + [{
         "time": ck._now(), "run_digest": r.run_digest, "previous_run_digest": c.run_digest,
-        "model_hash": model_hash(), "replayed": r.what() + ", bit for bit"}]
-    c.run_digest = r.run_digest
+        "model_hash": model_hash(), "replayed": r.what() + ", bit for bit",
+        **({"system_variant": r.system_variant} if r.system_variant != c.system_variant else {})}]
+    c.run_digest, c.system_variant = r.run_digest, r.system_variant
     ck.write_checkpoint(c, path, touch=False)
     return r
