@@ -10,6 +10,10 @@ with ``cc`` and loaded with :func:`casadi.external`. Builds are cached between p
 * **verified**: an artifact ``<cache>/<name>-<key[:20]>.so`` is loaded only if its manifest
   ``<name>-<key[:20]>.json`` exists, holds the same key, and the sha256 of the ``.so`` bytes matches
   the manifest. A truncated, tampered or foreign file is rebuilt, never loaded.
+* **what it computes**: the manifest also holds ``c_sha256``, the sha256 of the function's own
+  generated C (the same text in every process: no path, time or version in it). :func:`described_digest`
+  answers it from the manifest without a compile, or from the graph's C when the cache lacks it; a
+  result records it to say which computation made it (docs/provenance.md).
 * **written atomically**: each build happens in a temporary directory inside the cache, then
   ``os.replace`` publishes the ``.so`` and, last, the manifest.
 * **locked**: an ``fcntl.flock`` lock file per key (exclusive to build, shared to verify and load),

@@ -14,7 +14,8 @@ trace), their cache keys, the run's time table, and the named inputs of one run
 Compiling never builds a CasADi graph when the compile cache holds the library: the cache key is
 the description (controller identity and source, the scenario's graph-shaping fields, the options)
 plus the package's model code and data (:func:`arvcas.build.provenance.model_hash`) and the
-toolchain, so a warm start only loads a shared library.
+toolchain, so a warm start only loads a shared library. What a run computes is named by
+:meth:`CompiledRun.digest` (the sha256 of its generated C), which a front records (docs/provenance.md).
 """
 
 from __future__ import annotations
