@@ -60,15 +60,17 @@ def _replace(path: Path, old: str, new: str) -> None:
 
 def test_described_digest_compiles_nothing_and_equals_the_manifest(cache):
     x = ca.SX.sym("x", 2)
+    made = []
 
     def make():
+        made.append(1)
         return ca.Function("digest_probe", [x], [ca.sin(x) * 3.0 + x[0]])
 
     before = codegen.stats()["compile"]
     d = codegen.described_digest("digest_probe", "digest probe 1", make)
     assert codegen.stats()["compile"] == before and len(d) == 64
     f = codegen.build_described("digest_probe", "digest probe 1", make)
-    assert codegen.stats()["compile"] == before + 1
+    assert codegen.stats()["compile"] == before + 1 and len(made) == 1  # the digest's graph was compiled
     assert codegen.digest_of(f) == d == codegen.artifact_of(f)["c_sha256"]
     codegen._DIGESTS.clear()  # a new process: the cache's manifest answers, make() is not called
     assert codegen.described_digest("digest_probe", "digest probe 1", lambda: pytest.fail("built a graph")) == d
