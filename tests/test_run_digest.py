@@ -30,7 +30,8 @@ from trust_helpers import assert_refused, run3, synthetic_front
 
 PKG = Path(codegen.__file__).resolve().parents[1]
 OLD = "0" * 64
-_DIGEST = "import arvcas; from arvcas.sim.simulation import compiled_run; print(arvcas.__file__, compiled_run('agsta').digest())"
+_DIGEST = ("import arvcas; from arvcas.sim.simulation import compiled_run; "
+           "print(arvcas.__file__, compiled_run('agsta').digest())")
 
 
 def _digest_in_fresh_process(pythonpath: Path, cache: Path) -> str:

@@ -32,7 +32,8 @@ def test_replays_refuse_another_model(tmp_path, capsys):
     other_params = synthetic_front(d / "b" / "front.h5", params=load().vector() * 1.01)
     good = synthetic_front(d / "c" / "front.h5")
     cases = [
-        (["simulate", "--from-front", other_model, "--index", "0"], "the compiled run changed (run digest 000000000000"),
+        (["simulate", "--from-front", other_model, "--index", "0"],
+         "the compiled run changed (run digest 000000000000"),
         (["simulate", "--from-front", old_source, "--index", "0"],
          "records only the hash of the source that wrote it (model hash 000000000000, "),
         (["simulate", "--from-front", old_source, "--index", "0"], f"re-stamp it: arvcas front restamp {old_source}"),

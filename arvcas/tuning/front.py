@@ -610,16 +610,17 @@ def replay_all(path: str | Path, members="all", n_threads: int | None = None, ch
     F = np.vstack([e.F for e in evs])
     chat = np.concatenate([e.chat for e in evs], axis=1)
     rmse = np.concatenate([e.rmse for e in evs], axis=1)
-    return Replayed(path, len(fr.gains) if members == "all" else 1, len(gains) > len(fr.gains), _differ(F, F_ref), max(_differ(chat, chat_ref), _differ(rmse, rmse_ref)),
-                    ck.run_digest(c, p), variant)
+    return Replayed(path, len(fr.gains) if members == "all" else 1, len(gains) > len(fr.gains), _differ(F, F_ref),
+                    max(_differ(chat, chat_ref), _differ(rmse, rmse_ref)), ck.run_digest(c, p), variant)
 
 
 def restamp(path: str | Path, n_threads: int | None = None) -> Replayed:
     """Record today's run digest in a front whose every member and default gains replay bit for bit on
     today's code (:func:`replay_all`); nothing else in the file changes (its objectives, its ``updated``)
     but, for a study whose system file has since gained thruster dynamics, ``system_variant`` (the variant
-    the replay found); ``restamps`` records when, the digest and what replayed. Refuses (one line) if any number differs:
-    such a front must be re-run, not re-stamped. A front already stamped with today's digest is left as it is."""
+    the replay found); ``restamps`` records when, the digest and what replayed. Refuses (one line) if any
+    number differs: such a front must be re-run, not re-stamped. A front already stamped with today's
+    digest is left as it is."""
     path = resolve_front_path(path)
     c = ck.read_checkpoint(path)
     r = replay_all(path, "all", n_threads)
