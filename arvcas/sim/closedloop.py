@@ -751,7 +751,10 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
     fns = {"mhat": ca.Function(prefix + "mhat", [p], [nominal_inertia(view(p, layout))], ["p"], ["Mhat"])}
     for first in (True, False):
         mem, k = ca.SX.sym("mem", sz.n_mem), ca.SX.sym("k", sz.n_k)
-        y, t, tau_arm = ca.SX.sym("y", 12), ca.SX.sym("t"), ca.SX.sym("tau_arm", 6)
+        meas = [i for i, _, _ in scenario.measured(cfg)]  # a sensor set's components of [eta; nu] (docs/sensors.md)
+        y, t, tau_arm = ca.SX.sym("y", len(meas)), ca.SX.sym("t"), ca.SX.sym("tau_arm", 6)
+        y12 = y if scenario.sensor_set(cfg) is None else \
+            ca.vertcat(*[y[meas.index(i)] if i in meas else 0 for i in range(12)])
         f, i = {}, 0
         for name, n in (*sz.params.items(), ("Mhat", 6)):
             f[name] = k[i:i + n]
@@ -760,7 +763,7 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
         for name, n in controller_memory(law):
             memory[name] = mem[i:i + n]
             i += n
-        cs = controller_sample(law, cfg, view(f["p"], layout), y, t, ca.SX(1.0 if first else 0.0), memory,
+        cs = controller_sample(law, cfg, view(f["p"], layout), y12, t, ca.SX(1.0 if first else 0.0), memory,
                                f["gains"], f["unc"], f["ekf"], f["Mhat"], f["eta_d"], tau_arm)
         ctx = cs.ctx
         ctx.__dict__.update(tau_v=cs.tau_v, u_sat=cs.u_sat)
