@@ -1083,6 +1083,7 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     N = n - 1
     hp, h = cfg.time_h_plant, cfg.time_h
     noise = scenario.noise_sequence(cfg, seed)
+    held = np.array(scenario.held_dofs(cfg), dtype=float)
     ph = np.array(cfg.disturbance_phase, dtype=float)
     cos_ph = np.array([math.cos(v) for v in ph])
     sin_ph = np.array([math.sin(v) for v in ph])
@@ -1134,7 +1135,7 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
             tau_del = np.asarray(thrust(u)).ravel()
         series["q"].append(q)
         series["payload"].append(pl)
-        e = x[0:6] - y1
+        e = (x[0:6] - y1) * held  # the error of the DOFs the task holds (docs/sensors.md)
         if k > 0:
             chat_sum = chat_sum + np.abs(tau_v - tau_prev)
             chatd_sum = chatd_sum + np.abs(tau_del - tdel_prev)  # CHAT on the delivered wrench (docs/model.md §6)
