@@ -3,7 +3,8 @@
 One controller sample k (t_k = k h) of :func:`step`:
 
 1. sensors: ``y_k = [eta; nu](t_k) + noise_k`` (noise is an input: a seeded sequence);
-2. EKF update on ``[eta; nu]`` (measuring both; its prediction for k+1 ends the step);
+2. EKF update on ``[eta; nu]`` (measuring both, or a scenario's sensor set: docs/sensors.md; its prediction
+   for k+1 ends the step);
 3. the reference ``(y1, y2)`` of the adaptive tracking differentiator (eq. 12-13) and the errors
    ``e = eta_hat - y1``, ``e_dot = eta_dot_hat - y2``;
 4. the controller (an :class:`arvcas.controllers.Controller` object: its ``step`` from the
@@ -998,7 +999,8 @@ def _ekf_update(xh, Pu, y, r, rows=None):
     ``_PSYM`` order); each scalar update ``P - P_i P_i' / s`` is symmetric, so only that triangle is
     computed and P stays symmetric by construction. ``rows``: a sensor set's measured components as
     ``(index, due)`` (``due`` 1 when the sensor has a fresh reading at this sample, else 0: its gain is
-    zero; None: every sample), None for all twelve at every sample (docs/sensors.md). Returns (xh, the updated triangle).
+    zero; None: every sample), or None for all twelve at every sample (docs/sensors.md).
+    Returns (xh, the updated triangle).
     """
     n = xh.shape[0]
     Pu = list(Pu)
