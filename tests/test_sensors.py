@@ -222,8 +222,8 @@ def test_a_short_study_with_imu_and_depth(tmp_path):
     (tmp_path / "study.toml").write_text(study.replace(
         "[evaluation]\n", f'[evaluation]\nsystem = "{SYSTEM}"\nscenario = "short.toml"\n'), encoding="utf-8")
     assert cli.main(["tune", str(tmp_path / "study.toml"), "--out", str(tmp_path / "out")]) == 0
-    c = ck.read_checkpoint(tmp_path / "out" / "agsta" / "front.h5")
+    c = ck.read_checkpoint(tmp_path / "out" / "front.h5")
     assert np.all(c.ref_rmse[0:2] == 0) and np.all(c.ref_rmse[2:6] > 0)
     np.testing.assert_allclose(c.table2_F, [1.0, 1.0], rtol=1e-12)
-    fr = read_front(tmp_path / "out" / "agsta" / "front.h5")
+    fr = read_front(tmp_path / "out" / "front.h5")
     assert fr.size >= 1 and np.isfinite(fr.F).all()
