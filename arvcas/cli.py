@@ -618,13 +618,30 @@ def _check_simulate(a: argparse.Namespace) -> None:
         raise ValueError("--from-front needs --index I")
 
 
-def _metrics_table(chat, rmse) -> str:
+def _metrics_table(chat, rmse, held=(True,) * 6) -> str:
     from arvcas.controllers.gains import DOFS
 
     lines = [f"{'DOF':>6} {'CHAT':>12} {'RMSE':>12}"]
-    for d, c, r in zip(DOFS, chat, rmse):
-        lines.append(f"{d:>6} {c:12.5g} {r:12.5g}")
+    for d, c, r, k in zip(DOFS, chat, rmse, held):
+        lines.append(f"{d:>6} {c:12.5g} " + (f"{r:12.5g}" if k else f"{'not held':>12}"))
     return "\n".join(lines)
+
+
+def _drift_note(cfg, eta) -> str | None:
+    """Without a position fix (docs/sensors.md): what is held, and the horizontal drift, reported, not penalised."""
+    from arvcas.controllers.gains import DOFS
+    from arvcas.sim import scenario
+
+    held = scenario.held_dofs(cfg)
+    if all(held):
+        return None
+    import numpy as np
+
+    xy = np.asarray(eta)[:, 0:2] - np.asarray(cfg.initial_eta_d)[0:2]
+    d = np.hypot(xy[:, 0], xy[:, 1])
+    return (f"held: {', '.join(n for n, k in zip(DOFS, held) if k)} (no position sensor); RMSE on those only. "
+            f"horizontal drift (not held): {d[-1]:.4g} m at the end (x {xy[-1, 0]:+.4g}, y {xy[-1, 1]:+.4g} m), "
+            f"at most {d.max():.4g} m")
 
 
 def _run_simulate(a: argparse.Namespace) -> int:
@@ -666,7 +683,9 @@ def _run_simulate(a: argparse.Namespace) -> int:
     status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s" + (
         f": {r.meta['failure']}" if r.meta.get("failure") else "")
     print(f"{controller}: seed {r.seed}, {r.t[-1]:g} s, {status}")
-    print(_metrics_table(r.chat, r.rmse))
+    print(_metrics_table(r.chat, r.rmse, scenario.held_dofs(cfg)))
+    if (note := _drift_note(cfg, r.eta)) is not None:
+        print(note)
     if a.out is not None and a.out.suffix == ".mat":
         from arvcas.io.matfile import write_result_mat
 

@@ -155,8 +155,9 @@ class MonteCarlo:
         """docs/model.md §7 normalised (f_chat, f_rmse) per run, shape (runs, 2) (NaN for diverged runs)."""
         out = np.full((self.runs, 2), np.nan)
         ref = self.meta.get("reference")
+        held = scenario.held_dofs(scenario.loads_scenario(self.config_text, "the runs' scenario"))  # docs/sensors.md
         for i in np.flatnonzero(self.ok):
-            out[i] = metrics.normalised_objectives(self.chat[i], self.rmse[i], ref)
+            out[i] = metrics.normalised_objectives(self.chat[i], self.rmse[i], ref, held)
         return out
 
 

@@ -106,8 +106,9 @@ class Sweep:
         """docs/model.md §7 (f_chat, f_rmse), shape [controller, h, seed, 2]; NaN for diverged runs."""
         out = np.full(self.ok.shape + (2,), np.nan)
         ref = self.meta.get("reference")
+        held = scenario.held_dofs(scenario.loads_scenario(self.config_text, "the sweep's scenario"))  # docs/sensors.md
         for idx in zip(*np.nonzero(self.ok)):
-            out[idx] = metrics.normalised_objectives(self.chat[idx], self.rmse[idx], ref)
+            out[idx] = metrics.normalised_objectives(self.chat[idx], self.rmse[idx], ref, held)
         return out
 
 

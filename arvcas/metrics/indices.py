@@ -109,7 +109,7 @@ def table3() -> Table3:
     )
 
 
-def normalised_objectives(chat_values, rmse_values, ref=None):
+def normalised_objectives(chat_values, rmse_values, ref=None, held=None):
     """The two tuning objectives of docs/model.md §7: ``(f_chat, f_rmse)``.
 
     ``f_chat = mean_i chat_i / CHAT_AGSTA,i`` and ``f_rmse = mean_i rmse_i / RMSE_AGSTA,i`` over
@@ -121,6 +121,8 @@ def normalised_objectives(chat_values, rmse_values, ref=None):
         rmse_values: per-DOF RMSE, shape ``(6,)`` (from :func:`rmse`).
         ref: ``(chat_ref, rmse_ref)`` per DOF to normalise by instead of Table 3's AGSTA (another
             system: its AGSTA at its default gains on the study's first draw, arvcas.tuning.run).
+        held: the DOFs the task holds (6 booleans; None: all): ``f_rmse`` is the mean over those only
+            (without a position sensor x and y are not held, docs/sensors.md).
     """
     c = np.asarray(chat_values, dtype=float)
     r = np.asarray(rmse_values, dtype=float)
@@ -128,6 +130,10 @@ def normalised_objectives(chat_values, rmse_values, ref=None):
         raise ValueError(
             f"normalised_objectives: expected two shape-(6,) arrays, got {c.shape} and {r.shape}"
         )
+    if held is not None and not all(held):
+        c_ref, r_ref = reference_values(ref)
+        k = np.asarray(held, dtype=bool)
+        return float(np.mean(c / c_ref)), float(np.mean(r[k] / np.asarray(r_ref)[k]))
     if ref is not None:
         return float(np.mean(c / np.asarray(ref[0]))), float(np.mean(r / np.asarray(ref[1])))
     t = table3()

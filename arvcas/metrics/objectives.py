@@ -27,6 +27,7 @@ import numpy as np
 
 from arvcas.io import plugins
 from arvcas.metrics.indices import normalised_objectives
+from arvcas.sim import scenario
 from arvcas.sim.accumulate import Accumulator, event_times, width
 
 __all__ = ["Objective", "ObjectiveError", "Context", "Constraint", "register", "get", "names", "available",
@@ -116,10 +117,12 @@ class _Chat(Objective):
 class _Rmse(Objective):
     name, unit = "rmse", "1"
     nonnegative = True
-    description = "mean over the 6 DOF of RMSE (eq. 43) / the AGSTA's (docs/model.md §7): the paper's f_rmse"
+    description = ("mean over the held DOFs (all 6; z, phi, theta, psi without a position sensor: docs/sensors.md) of "
+                   "RMSE (eq. 43) / the AGSTA's (docs/model.md §7): the paper's f_rmse")
 
-    def values(self, out, ctx):
-        return np.array([normalised_objectives(c, r, ctx.ref)[1] for c, r in zip(out[ctx.chat], out["rmse"])])
+    def values(self, out, ctx):  # the DOFs the task holds (all six, or without a position fix four: docs/sensors.md)
+        held = None if ctx.cfg is None else scenario.held_dofs(ctx.cfg)
+        return np.array([normalised_objectives(c, r, ctx.ref, held)[1] for c, r in zip(out[ctx.chat], out["rmse"])])
 
 
 def _lim(cfg) -> np.ndarray:

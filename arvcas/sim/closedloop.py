@@ -3,7 +3,8 @@
 One controller sample k (t_k = k h) of :func:`step`:
 
 1. sensors: ``y_k = [eta; nu](t_k) + noise_k`` (noise is an input: a seeded sequence);
-2. EKF update on ``[eta; nu]`` (measuring both; its prediction for k+1 ends the step);
+2. EKF update on ``[eta; nu]`` (measuring both, or a scenario's sensor set: docs/sensors.md; its prediction
+   for k+1 ends the step);
 3. the reference ``(y1, y2)`` of the adaptive tracking differentiator (eq. 12-13) and the errors
    ``e = eta_hat - y1``, ``e_dot = eta_dot_hat - y2``;
 4. the controller (an :class:`arvcas.controllers.Controller` object: its ``step`` from the
@@ -634,10 +635,12 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
         r_meas = ekf[2:14]
     else:
         r_meas = ca.vertcat(ca.repmat(ekf[2], 3, 1), ca.repmat(ekf[3], 3, 1), ca.repmat(ekf[4], 6, 1))
-    xh = ca.if_else(first, y, memory["xh"])
+    rows = _sensor_rows(cfg, tk)  # None: the whole [eta; nu] at every sample
+    y0 = y if rows is None else ca.vertcat(*[y[i] if i in dict(rows) else 0 for i in range(12)])
+    xh = ca.if_else(first, y0, memory["xh"])
     Pu = memory["Pc"]
     Pc = [ca.if_else(first, r_meas[i] if i == j else 0, Pu[k]) for k, (i, j) in enumerate(_PSYM)]
-    xh, Pc = _ekf_update(xh, Pc, y, r_meas)
+    xh, Pc = _ekf_update(xh, Pc, y, r_meas, rows)
     eta_hat, nu_hat = xh[0:6], xh[6:12]
     eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
 
@@ -649,8 +652,8 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
         r0 = ca.if_else(first, r0_first, memory["r0"])
         y1 = ca.if_else(first, eta_hat, memory["y1"])
         y2 = ca.if_else(first, ca.DM.zeros(6), memory["y2"])
-    e = eta_hat - y1
-    e_dot = eta_dot_hat - y2
+    e = held_only(cfg, eta_hat - y1)
+    e_dot = held_only(cfg, eta_dot_hat - y2)
 
     # 4. the controller: its state (initial values at the first sample), its step
     ctx = StepContext(t=tk, h=h, first=first, P=P, Mhat=Mhat, unc=unc, eta_d=eta_d, eta_hat=eta_hat,
@@ -763,7 +766,10 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
     fns = {"mhat": ca.Function(prefix + "mhat", [p], [nominal_inertia(view(p, layout))], ["p"], ["Mhat"])}
     for first in (True, False):
         mem, k = ca.SX.sym("mem", sz.n_mem), ca.SX.sym("k", sz.n_k)
-        y, t, tau_arm = ca.SX.sym("y", 12), ca.SX.sym("t"), ca.SX.sym("tau_arm", 6)
+        meas = [i for i, _, _ in scenario.measured(cfg)]  # a sensor set's components of [eta; nu] (docs/sensors.md)
+        y, t, tau_arm = ca.SX.sym("y", len(meas)), ca.SX.sym("t"), ca.SX.sym("tau_arm", 6)
+        y12 = y if scenario.sensor_set(cfg) is None else \
+            ca.vertcat(*[y[meas.index(i)] if i in meas else 0 for i in range(12)])
         f, i = {}, 0
         for name, n in (*sz.params.items(), ("Mhat", 6)):
             f[name] = k[i:i + n]
@@ -772,7 +778,7 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
         for name, n in controller_memory(law):
             memory[name] = mem[i:i + n]
             i += n
-        cs = controller_sample(law, cfg, view(f["p"], layout), y, t, ca.SX(1.0 if first else 0.0), memory,
+        cs = controller_sample(law, cfg, view(f["p"], layout), y12, t, ca.SX(1.0 if first else 0.0), memory,
                                f["gains"], f["unc"], f["ekf"], f["Mhat"], f["eta_d"], tau_arm)
         ctx = cs.ctx
         ctx.__dict__.update(tau_v=cs.tau_v, u_sat=cs.u_sat)
@@ -895,7 +901,8 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
     f_true = Mhat * eta_ddot - ca.mtimes(J_inv(eta).T, tau_real_held)
 
     # metrics (docs/model.md §6) and divergence of the controller part
-    e_true = eta - (y1 if ref is None else ref[0:6])  # a task's error is against the desired trajectory (docs/tasks.md)
+    # a task's error is against the desired trajectory (docs/tasks.md); only on the DOFs it holds (docs/sensors.md)
+    e_true = held_only(cfg, eta - (y1 if ref is None else ref[0:6]))
     chat_sum = L.get(S, "chat_sum") + ca.if_else(first, 0, ca.fabs(tau_v - L.get(S, "tau_prev")))
     # CHAT on the delivered wrench (what the water sees): the realised B sat(u) of each sample, or with
     # dynamics the rotors' wrench at each sample time (docs/model.md §6)
@@ -998,25 +1005,45 @@ def _sym_get(Pu, i, j):
     return Pu[_PSYM_INDEX[(i, j) if i <= j else (j, i)]]
 
 
-def _ekf_update(xh, Pu, y, r):
+def _ekf_update(xh, Pu, y, r, rows=None):
     """EKF measurement update with H = I and diagonal R = diag(r), as 12 sequential scalar updates.
 
     Exactly the batch update ``K = P (P + R)^-1`` for uncorrelated measurement noise, at a fraction
     of the cost of a 12x12 solve in the graph. ``Pu``: the covariance's upper triangle (a list in
     ``_PSYM`` order); each scalar update ``P - P_i P_i' / s`` is symmetric, so only that triangle is
-    computed and P stays symmetric by construction. Returns (xh, the updated triangle).
+    computed and P stays symmetric by construction. ``rows``: a sensor set's measured components as
+    ``(index, due)`` (``due`` 1 when the sensor has a fresh reading at this sample, else 0: its gain is
+    zero; None: every sample), or None for all twelve at every sample (docs/sensors.md).
+    Returns (xh, the updated triangle).
     """
     n = xh.shape[0]
     Pu = list(Pu)
     xh = [xh[a] for a in range(n)]
-    for i in range(n):
+    for i, due in ((i, None) for i in range(n)) if rows is None else rows:
         col = [_sym_get(Pu, a, i) for a in range(n)]  # P[:, i] = P[i, :]
         s = col[i] + r[i]
-        K = [c / s for c in col]
+        K = [c / s for c in col] if due is None else [due * c / s for c in col]
         innov = y[i] - xh[i]
         xh = [xh[a] + K[a] * innov for a in range(n)]
         Pu = [Pu[k] - K[a] * col[b] for k, (a, b) in enumerate(_PSYM)]
     return ca.vertcat(*xh), Pu
+
+
+def _sensor_rows(cfg: ScenarioConfig, tk):
+    """A sensor set's EKF rows ``(index in [eta; nu], due)`` (:func:`_ekf_update`): ``due`` is 1 at the samples
+    ``k = round(t_k / h)`` that are multiples of the sensor's ``every``, else 0 (``every`` 1: always 1, a
+    constant); None when the scenario names no sensor set (the whole [eta; nu] at every sample)."""
+    if scenario.sensor_set(cfg) is None:
+        return None
+    k = ca.floor(tk / cfg.time_h + 0.5)
+    return [(i, None if every == 1 else ca.fmod(k, every) == 0) for i, _, every in scenario.measured(cfg)]
+
+
+def held_only(cfg: ScenarioConfig, e):
+    """``e`` (6, per DOF) with the DOFs the task does not hold set to 0 (docs/sensors.md); ``e`` itself when it
+    holds all six."""
+    held = scenario.held_dofs(cfg)
+    return e if all(held) else ca.vertcat(*[e[d] if held[d] else 0 for d in range(6)])
 
 
 def _ekf_f(xh, h):

@@ -25,6 +25,7 @@ __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
     "quintic", "has_arm_motion", "joint_trajectory", "payload_profile", "disturbance", "disturbance_tabulated", "noise_sequence",
     "check_joint_limits", "check_trajectory_limits", "n_samples", "table_bytes", "ScenarioFile", "MAX_SUBSTEPS",
+    "SENSORS", "sensor_set", "measured", "held_dofs",
 ]
 
 
@@ -117,6 +118,12 @@ class _Sensors:
     var_eta: tuple[float, ...] | None = quantity(("length^2",) * 3 + ("angle^2",) * 3, ge(0), default=None)
     var_nu: tuple[float, ...] | None = quantity(("velocity^2",) * 3 + ("angular_velocity^2",) * 3, ge(0),
                                                 default=None)
+    # the vehicle's sensor set (docs/sensors.md): a sensor is fitted when its sampling period is given; none
+    # given: the whole [eta; nu] is measured at every sample (section 4.1)
+    imu_period: float | None = quantity("time", gt(0), default=None)
+    depth_period: float | None = quantity("time", gt(0), default=None)
+    dvl_period: float | None = quantity("time", gt(0), default=None)
+    position_period: float | None = quantity("time", gt(0), default=None)
 
     def _config_check(self, given: frozenset[str]) -> None:
         group = [k for k in ("var_position", "var_attitude", "var_velocity") if k in given]
@@ -332,6 +339,10 @@ class ScenarioConfig:
     trajectory_target: tuple | None = None
     trajectory_duration: float | None = None
     time_thrust_quadrature: int | None = None  # nodes per half plant step for the thrusters' forcing (docs/model.md §9)
+    sensors_imu_period: float | None = None  # the sensor set (docs/sensors.md); all None: [eta; nu] in full
+    sensors_depth_period: float | None = None
+    sensors_dvl_period: float | None = None
+    sensors_position_period: float | None = None
     text: str = ""  # the file's text, stored in result files
     path: str = ""
 
@@ -671,11 +682,70 @@ def _check_consistency(cfg: ScenarioConfig, where: str) -> None:
                             f"{MAX_SUBSTEPS} (they are unrolled in the compiled sample step)")
     _check_motion(cfg, where)
     _check_motion_steps(cfg, where)
+    _check_sensors(cfg, where)
     _check_current(cfg, where)
     if cfg.time_duration < cfg.time_h:
         raise ScenarioError(f"{where}: time.duration must be at least one sample time.h")
     config.check_memory(table_bytes(cfg), f"the run's time table ({n_samples(cfg)} samples of "
                         f"{cfg.substeps} plant steps)", where, "time.duration", ScenarioError)
+
+
+# ---- the sensor set (docs/sensors.md) ----------------------------------------------------------------
+# each sensor: the components of [eta; nu] (x y z phi theta psi u v w p q r) it measures
+SENSORS = {"imu": (3, 4, 5, 9, 10, 11), "depth": (2,), "dvl": (6, 7, 8), "position": (0, 1)}
+SENSOR_WHAT = {"imu": "attitude phi theta psi and body rates p q r", "depth": "depth z from pressure",
+               "dvl": "body velocity u v w (DVL)", "position": "horizontal position x y (USBL, motion capture)"}
+COMPONENTS = ("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r")
+
+
+def sensor_set(cfg: ScenarioConfig) -> tuple[tuple[str, int], ...] | None:
+    """The scenario's sensors as ``(name, every)``, ``every`` the controller samples between two fresh readings
+    (1: every sample; a sensor faster than the controller is read once per sample, its newest reading), in
+    :data:`SENSORS` order; None when the scenario names none: the whole ``[eta; nu]`` at every sample."""
+    got = [(n, getattr(cfg, f"sensors_{n}_period")) for n in SENSORS]
+    if all(p is None for _, p in got):
+        return None
+    return tuple((n, max(1, int(round(p / cfg.time_h)))) for n, p in got if p is not None)
+
+
+def measured(cfg: ScenarioConfig) -> tuple[tuple[int, str, int], ...]:
+    """The measurement vector, component by component: ``(index in [eta; nu], sensor, every)`` in the order of
+    [eta; nu]; all twelve (sensor ``"state"``, every 1) when the scenario names no sensor set."""
+    sset = sensor_set(cfg)
+    if sset is None:
+        return tuple((i, "state", 1) for i in range(12))
+    by = {i: (n, every) for n, every in sset for i in SENSORS[n]}
+    return tuple((i, *by[i]) for i in sorted(by))
+
+
+def held_dofs(cfg: ScenarioConfig) -> tuple[bool, ...]:
+    """The DOFs (x y z phi theta psi) the task holds: all six, or without a position sensor depth, attitude and
+    heading (x, y drift: reported, not penalised; docs/sensors.md)."""
+    sset = sensor_set(cfg)
+    return (True,) * 6 if sset is None or "position" in dict(sset) else (False, False, True, True, True, True)
+
+
+def _check_sensors(cfg: ScenarioConfig, where: str) -> None:
+    """A sensor set observes what the task holds: IMU and depth always, a position fix for a trajectory (it moves
+    the vehicle in x, y); each period is the controller's h or a whole multiple of it, or faster than h."""
+    sset = sensor_set(cfg)
+    if sset is None:
+        return
+    names = dict(sset)
+    for n in ("imu", "depth"):
+        if n not in names:
+            raise ScenarioError(f"{where}: sensors.{n}_period: missing: a sensor set needs the {n} "
+                                f"({SENSOR_WHAT[n]}), which station keeping holds")
+    if cfg.has_trajectory and "position" not in names:
+        raise ScenarioError(f"{where}: sensors.position_period: missing: a trajectory task moves the vehicle in x, "
+                            f"y, which a sensor set without a position fix cannot observe (without one the task is "
+                            f"a depth, attitude and heading hold)")
+    for n in names:
+        p = getattr(cfg, f"sensors_{n}_period")
+        r = p / cfg.time_h
+        if r > 1 + 1e-9 and abs(r - round(r)) > 1e-9:
+            raise ScenarioError(f"{where}: sensors.{n}_period: {p:g} s must be at most time.h ({cfg.time_h:g} s) or "
+                                f"a whole multiple of it (the controller reads its sensors at its own samples)")
 
 
 def _check_current(cfg: ScenarioConfig, where: str) -> None:

@@ -33,6 +33,7 @@ import numpy as np
 from pymoo.core.problem import Problem
 
 from arvcas.metrics import normalised_objectives
+from arvcas.sim.scenario import held_dofs
 
 __all__ = ["INFEASIBLE_F", "Evaluation", "GainProblem", "to_gains", "assemble", "assemble_objectives"]
 
@@ -76,9 +77,10 @@ def pymoo_F(F: np.ndarray, G: np.ndarray) -> np.ndarray:
     return out
 
 
-def assemble(chat, rmse, ok, t_fail, duration: float, ref=None) -> Evaluation:
+def assemble(chat, rmse, ok, t_fail, duration: float, ref=None, held=None) -> Evaluation:
     """Objectives and constraint from per-draw metrics (K, n, 6) and status (K, n); ``ref``: the
-    per-DOF normalisation (:func:`arvcas.metrics.normalised_objectives`), None for Table 3's AGSTA."""
+    per-DOF normalisation (:func:`arvcas.metrics.normalised_objectives`), None for Table 3's AGSTA; ``held``:
+    the DOFs the task holds (:func:`arvcas.sim.scenario.held_dofs`; None: all six)."""
     chat, rmse = np.asarray(chat, dtype=float), np.asarray(rmse, dtype=float)
     ok, t_fail = np.asarray(ok, dtype=bool), np.asarray(t_fail, dtype=float)
     K, n = ok.shape
@@ -90,7 +92,7 @@ def assemble(chat, rmse, ok, t_fail, duration: float, ref=None) -> Evaluation:
             left = [x if np.isfinite(x) else 1.0 for x in left]
             G[i, 0] = 1.0 + min(1.0, max(0.0, max(left)))
             continue
-        per_draw = [normalised_objectives(chat[d, i], rmse[d, i], ref) for d in range(K)]
+        per_draw = [normalised_objectives(chat[d, i], rmse[d, i], ref, held) for d in range(K)]
         f = per_draw[0] if K == 1 else tuple(float(np.mean([p[j] for p in per_draw])) for j in range(2))
         if not all(np.isfinite(f)):
             G[i, 0] = 2.0
@@ -111,7 +113,8 @@ def assemble_objectives(outs: list, objectives, constraints, ctx, duration: floa
     t_fail = np.stack([np.where(k, np.nan, o["t_fail"]) for k, o in zip(ok, outs)])
     chat = np.stack([np.where(k[:, None], o["chat"], np.nan) for k, o in zip(ok, outs)])
     rmse = np.stack([np.where(k[:, None], o["rmse"], np.nan) for k, o in zip(ok, outs)])
-    ev = assemble(chat, rmse, ok, t_fail, duration, ctx.ref)  # G's first column: divergence, as the paper's
+    ev = assemble(chat, rmse, ok, t_fail, duration, ctx.ref,  # G's first column: divergence, as the paper's
+                  None if ctx.cfg is None else held_dofs(ctx.cfg))
     G = np.zeros((n, 1 + len(constraints)))
     G[:, 0] = np.where(ev.G[:, 0] == 2.0, 0.0, ev.G[:, 0])
     vals = np.full((K, n, m), np.nan)

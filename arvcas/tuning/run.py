@@ -45,6 +45,7 @@ from pymoo.operators.sampling.rnd import FloatRandomSampling
 
 from arvcas.build.provenance import model_hash
 from arvcas.controllers.base import provenance
+from arvcas.sim.scenario import held_dofs
 from arvcas.sim.simulation import compiled_run
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.engines import EngineError, EvalTask, make_engine
@@ -293,7 +294,7 @@ def evaluate_gains(engine, task: EvalTask, gains: np.ndarray, objectives=None) -
                                                                   task.cfg))
         return assemble_objectives(engine.evaluate(task, G), objs, cons, ctx, task.cfg.time_duration)
     chat, rmse, ok, t_fail = engine.evaluate(task, G)
-    return assemble(chat, rmse, ok, t_fail, task.cfg.time_duration, task.ref)
+    return assemble(chat, rmse, ok, t_fail, task.cfg.time_duration, task.ref, held_dofs(task.cfg))
 
 
 # ---- interruption --------------------------------------------------------------------------------
