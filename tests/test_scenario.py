@@ -51,7 +51,7 @@ BAD_EDITS = [
      "arm.qg: unknown unit 'degrees' (allowed for an angle: rad, deg)"),
     ('unit = "m,m,m,deg,deg,deg"', 'unit = "m,m,m,degrees,deg,deg"', "initial.eta0: unknown unit 'degrees' of element 4"),
     ('unit = "m,m,m,deg,deg,deg"', 'unit = "deg,m,m,deg,deg,deg"',
-     "initial.eta0: unit 'deg' of element 1 is not a length (allowed: m, mm)"),
+     "initial.eta0: unit 'deg' of element 1 is not a length (allowed: m, mm, cm)"),
     ('unit = "m,m,m,deg,deg,deg"', 'unit = "deg"', "initial.eta0: one unit 'deg' for elements of length and angle"),
     ('unit = "m/s,rad/s"', 'unit = "rad/s,m/s"', "initial.nu0: unit 'rad/s' of element 1 is not a velocity"),
     ('unit = "m/s,rad/s"', 'unit = "m/s,rad/s,m/s"', "initial.nu0: unit list 'm/s,rad/s,m/s' does not match 6 values"),
