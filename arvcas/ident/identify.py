@@ -33,6 +33,14 @@ and the report says so. Directions of ``F`` whose eigenvalue
 is below :data:`RANK_TOL` of the largest (in parameters scaled by their values) are reported as
 unidentifiable, with the parameters that make them, and no interval is printed for those parameters;
 pairs correlated beyond :data:`CORR_WARN` are named.
+
+``cost="prediction", horizon=K`` minimises the K-step-ahead prediction error instead of the simulation error:
+each trial cut into segments of K samples, each simulated from the state the log gives at its first sample
+(:func:`arvcas.ident.validate.logged_states`, the unmeasured parts from the open-loop simulation at the
+starting parameters, all held fixed), so that an error the model cannot follow grows over K samples only;
+the initial states are then not free. :func:`jackknife` adds leave-one-trial-out intervals (one refit per
+trial), which carry the trial-to-trial spread and the errors correlated within a trial that the Fisher
+intervals do not (docs/identification.md).
 """
 
 from __future__ import annotations
@@ -646,6 +654,7 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
     lay = system.layout
     free = tuple(free)
     horizon = check_cost(cost, horizon)
+    kind = cost
     if not free:
         raise IdentifyError("free: name at least one parameter to identify")
     if len(free) > MAX_FREE:
@@ -792,7 +801,7 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
                     seconds=time.perf_counter() - t_start, h=logs[0].dt / m, at_bound=tuple(at_bound),
                     history=tuple(history), rms0=rms0, rms=prob.rms(zs), stated=tuple(stated),
                     groups=tuple(mapping.groups + mapping.notes), pulled=pulled, nonfinite=prob.nonfinite,
-                    inf_du=inf_du, max_iter=int(max_iter), cost_kind=cost, horizon=horizon, dt=logs[0].dt)
+                    inf_du=inf_du, max_iter=int(max_iter), cost_kind=kind, horizon=horizon, dt=logs[0].dt)
 
 
 def jackknife(est: Estimate, logs: list[Log], progress=None, **kw) -> Estimate:
@@ -816,8 +825,8 @@ def jackknife(est: Estimate, logs: list[Log], progress=None, **kw) -> Estimate:
     start = System(est.system.params.replace(est.as_dict()))
     out = {}
     for j, lg in enumerate(logs):
-        sub = identify(start, [x for i, x in enumerate(logs) if i != j], est.free, signals=est.signals,
-                       cost=est.cost_kind, horizon=est.horizon, **kw)
+        sub = identify(start, [x for i, x in enumerate(logs) if i != j], est.free,
+                       **{**kw, "signals": est.signals, "cost": est.cost_kind, "horizon": est.horizon})
         out[lg.name] = sub.values.copy()
         if progress is not None:
             progress(lg.name, sub)
