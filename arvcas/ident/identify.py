@@ -61,7 +61,8 @@ from arvcas.ident.logs import SIGNALS, Log
 from arvcas.ident.physical import bounds
 from arvcas.ident.validate import initial_state, logged_states, substeps
 
-__all__ = ["IdentifyError", "Estimate", "identify", "jackknife", "check_cost", "COSTS", "bounds", "identified_name", "RANK_TOL", "CORR_WARN", "Z95",
+__all__ = ["IdentifyError", "Estimate", "identify", "jackknife", "check_cost", "COSTS", "bounds", "identified_name",
+           "RANK_TOL", "CORR_WARN", "Z95",
            "MOVE_FACTOR"]
 
 RANK_TOL = 1e-8
@@ -72,6 +73,7 @@ MOVE_FACTOR = 3.0  # an estimate more than this many times (or less than 1 / thi
 MAX_FREE = 64
 COSTS = ("simulation", "prediction")  # the costs identify can minimise (docs/identification.md)
 MAX_HORIZON = 100_000
+REFIT_TOL = 1e-4  # the leave-one-trial-out refits' stop (objective change over STALL_ITER iterations)
 
 
 def check_cost(cost: str, horizon) -> int | None:
@@ -701,7 +703,8 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
     m = substeps(logs[0].dt, logs[0].dt if h_max is None else float(h_max))
     if horizon is not None and horizon >= max(len(lg.t) for lg in logs) - 1:
         raise IdentifyError(f"horizon: {horizon} samples is as long as the longest trial "
-                            f"({max(len(lg.t) for lg in logs) - 1} steps): that is the simulation error, --cost simulation")
+                            f"({max(len(lg.t) for lg in logs) - 1} steps): that is the simulation error, "
+                            f"--cost simulation")
     mapping = physical.Mapping(lay, free, system.params.vector(), factors=physical_set)
     prob = _Problem(system, logs, free, signals, stated, m, K, threads, mapping, horizon)
     z0 = np.concatenate([np.zeros(len(free))] + ([initial_state(lg) for lg in logs] if prob.nx else []))
@@ -810,7 +813,9 @@ def jackknife(est: Estimate, logs: list[Log], progress=None, **kw) -> Estimate:
     (the same cost, signals, noise and step as ``est``'s). Their spread gives
     :attr:`Estimate.jackknife_intervals`: each trial is one draw of whatever varies from trial to trial (a
     tether's pull, the water, the model's error) and carries its own correlated errors, so the spread holds
-    both, where the Fisher intervals hold neither. ``progress(trial, estimate)`` after each refit."""
+    both, where the Fisher intervals hold neither. ``progress(trial, estimate)`` after each refit. The refits
+    stop at an objective change of :data:`REFIT_TOL` (not ``identify``'s 0.1): started next to their optimum,
+    a loose stop would end them before they move, and the spread would be too small."""
     from dataclasses import replace
 
     from arvcas.system import System
@@ -822,6 +827,7 @@ def jackknife(est: Estimate, logs: list[Log], progress=None, **kw) -> Estimate:
     names = [lg.name for lg in logs]
     if len(set(names)) != len(names):
         raise IdentifyError(f"logs: two trials are named {next(n for n in names if names.count(n) > 1)!r}")
+    kw.setdefault("tol", REFIT_TOL)
     start = System(est.system.params.replace(est.as_dict()))
     out = {}
     for j, lg in enumerate(logs):
