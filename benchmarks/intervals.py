@@ -234,8 +234,8 @@ def readme(out: Path) -> None:
             name = cost + (f" (horizon {f['horizon']})" if f["horizon"] else "")
             lines.append(f"| {name} | " + " | ".join(f"{v:.4g} ({abs(v / d['truth'][n] - 1):.1%} off)"
                                                      for n, v in zip(d["free"], f["values"])) + " |")
-        lines += ["", "On this vehicle the heave it cannot follow drags neither cost far: its heave hardly couples into "
-                      "roll and pitch. On the Hinsdale vehicle without its arm (tests/test_identify_costs.py, the same "
+        lines += ["", "On this vehicle the heave it cannot follow drags neither cost far, and the prediction error, "
+                      "which uses less of each trial, lands a little further off. On the Hinsdale vehicle without its arm (tests/test_identify_costs.py, the same "
                       "experiment with vehicle.zB and hydro.K_p free) it does: the simulation error ends at zB = "
                       "-0.0177 m (truth -0.012) and K_p = 0 (truth -0.5, at its bound), the 25-step prediction error "
                       "at -0.0110 and -0.468.", ""]
