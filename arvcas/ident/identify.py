@@ -225,11 +225,12 @@ class Estimate:
         for k, (n, a, b, s, ok, u) in enumerate(zip(self.free, self.initial, self.values, self.std, self.identifiable,
                                                     units)):
             iv = f"[{_num(b - Z95 * s, s)}, {_num(b + Z95 * s, s)}]" if ok else "not identifiable"
+            iv = f"{iv:>27s}"
             if jk is not None:
                 w = (jk[k, 1] - jk[k, 0]) / 2
                 iv += f" {'[' + _num(jk[k, 0], w) + ', ' + _num(jk[k, 1], w) + ']':>27s}"
             flag = "  (at its bound)" if n in self.at_bound else "  (flagged)" if n in flagged else ""
-            rows.append(f"{n:28s} {a:12.5g} {b:12.5g} {iv:>27s}  {u}{flag}")
+            rows.append(f"{n:28s} {a:12.5g} {b:12.5g} {iv}  {u}{flag}")
         rows += ["", "The Fisher intervals assume errors independent from sample to sample; where the model cannot",
                  "follow the vehicle (errors that persist over seconds), they are too narrow."]
         if jk is not None:
