@@ -198,7 +198,9 @@ def readme(out: Path) -> None:
         lines += ["", f"Cross-coverage over {n} (parameter, direction) pairs: Fisher **{c['fisher']['rate']:.0%}**, "
                       f"leave-one-trial-out **{c['jackknife']['rate']:.0%}**. Two independent estimates of equal "
                       f"precision differ by sqrt(2) standard errors each, so even exact 95 % intervals cover the "
-                      f"other subset's estimate only about 83 % of the time: that, not 95 %, is the mark.", "",
+                      f"other subset's estimate only about 83 % of the time: that, not 95 %, is the mark. The "
+                      f"Fisher intervals assume white residuals and one fixed model; the trials disagree by far more "
+                      f"than that, and the refits without one trial show how much.", "",
                   f"Fit times (both subsets, with the refits): "
                   f"{A['seconds']:.0f} s and {B['seconds']:.0f} s; IPOPT: A {A['status']}, B {B['status']}.", ""]
     s = out / "synthetic.json"
