@@ -380,6 +380,14 @@ def add_identify(p: argparse.ArgumentParser) -> None:
                    help="the measured signals to fit (default: every vehicle signal the logs give)")
     p.add_argument("--max-iter", type=int, default=100, metavar="N", help="IPOPT iterations (default 100)")
     p.add_argument("--threads", type=int, default=2, metavar="N", help="trials simulated at once (default 2)")
+    p.add_argument("--cost", default="simulation", metavar="simulation|prediction",
+                   help="the cost minimised: simulation error (open loop over each trial, default) or the k-step-ahead "
+                        "prediction error (each trial restarted from the log every --horizon samples)")
+    p.add_argument("--horizon", type=int, default=None, metavar="K",
+                   help="the prediction error's horizon in samples (with --cost prediction)")
+    p.add_argument("--intervals", default="fisher", metavar="fisher|jackknife",
+                   help="fisher (default); jackknife: also leave-one-trial-out intervals, one refit per trial "
+                        "(at least 3 trials)")
 
 
 def identify_outputs(a) -> list:
@@ -393,6 +401,16 @@ def check_identify(a) -> None:
         raise ValueError(f"--threads: must be in [1, 256], got {a.threads}")
     if a.out.suffix.lower() != ".toml":
         raise ValueError(f"--out {a.out}: the identified system file must end in .toml")
+    from arvcas.ident.identify import IdentifyError, check_cost
+
+    try:
+        check_cost(a.cost, a.horizon)
+    except IdentifyError as e:
+        raise ValueError(f"--{e}") from None
+    if a.intervals not in ("fisher", "jackknife"):
+        raise ValueError(f"--intervals: expected fisher or jackknife, got {a.intervals!r}")
+    if a.intervals == "jackknife" and len(a.logs) < 3:
+        raise ValueError(f"--intervals jackknife: leave-one-trial-out needs at least 3 trials, got {len(a.logs)}")
 
 
 def _check_loads(out: Path, text: str) -> None:
@@ -440,8 +458,15 @@ def run_identify(a) -> int:
         print(f"iteration {k:3d}: cost {f:.8g}", flush=True)
 
     print(f"identifying {len(a.free)} parameters of {system.name} on {len(logs)} trials ...", flush=True)
-    est = identify(system, logs, a.free, signals=a.signals, h_max=h, max_iter=a.max_iter, threads=a.threads,
-                   progress=progress)
+    kw = {"h_max": h, "max_iter": a.max_iter, "threads": a.threads}
+    est = identify(system, logs, a.free, signals=a.signals, progress=progress, cost=a.cost, horizon=a.horizon, **kw)
+    if a.intervals == "jackknife" and est.status != "interrupted":
+        from arvcas.ident.identify import jackknife
+
+        print(f"leave-one-trial-out: {len(logs)} refits, each without one trial ...", flush=True)
+        est = jackknife(est, logs, progress=lambda name, sub: print(f"  without {name}: {sub.status}, "
+                                                                     f"{sub.iterations} iterations", flush=True),
+                        **kw)
     report = est.report()
     print(report)
     text = est.system_text(a.out)

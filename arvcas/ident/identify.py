@@ -33,6 +33,14 @@ and the report says so. Directions of ``F`` whose eigenvalue
 is below :data:`RANK_TOL` of the largest (in parameters scaled by their values) are reported as
 unidentifiable, with the parameters that make them, and no interval is printed for those parameters;
 pairs correlated beyond :data:`CORR_WARN` are named.
+
+``cost="prediction", horizon=K`` minimises the K-step-ahead prediction error instead of the simulation error:
+each trial cut into segments of K samples, each simulated from the state the log gives at its first sample
+(:func:`arvcas.ident.validate.logged_states`, the unmeasured parts from the open-loop simulation at the
+starting parameters, all held fixed), so that an error the model cannot follow grows over K samples only;
+the initial states are then not free. :func:`jackknife` adds leave-one-trial-out intervals (one refit per
+trial), which carry the trial-to-trial spread and the errors correlated within a trial that the Fisher
+intervals do not (docs/identification.md).
 """
 
 from __future__ import annotations
@@ -51,9 +59,10 @@ from arvcas.ident import plant as plant_mod
 from arvcas.ident import physical
 from arvcas.ident.logs import SIGNALS, Log
 from arvcas.ident.physical import bounds
-from arvcas.ident.validate import initial_state, substeps
+from arvcas.ident.validate import initial_state, logged_states, substeps
 
-__all__ = ["IdentifyError", "Estimate", "identify", "bounds", "identified_name", "RANK_TOL", "CORR_WARN", "Z95",
+__all__ = ["IdentifyError", "Estimate", "identify", "jackknife", "check_cost", "COSTS", "bounds", "identified_name",
+           "RANK_TOL", "CORR_WARN", "Z95",
            "MOVE_FACTOR"]
 
 RANK_TOL = 1e-8
@@ -62,6 +71,31 @@ CORR_WARN = 0.95
 Z95 = 1.959963984540054  # the normal distribution's 97.5 % point
 MOVE_FACTOR = 3.0  # an estimate more than this many times (or less than 1 / this) its source value is flagged
 MAX_FREE = 64
+COSTS = ("simulation", "prediction")  # the costs identify can minimise (docs/identification.md)
+MAX_HORIZON = 100_000
+REFIT_TOL = 1e-4  # the leave-one-trial-out refits' stop (objective change over STALL_ITER iterations)
+
+
+def check_cost(cost: str, horizon) -> int | None:
+    """The prediction horizon (samples) for ``cost``, or None for the simulation error; one line for a bad pair."""
+    if cost not in COSTS:
+        raise IdentifyError(f"cost: expected one of {', '.join(COSTS)}, got {cost!r}")
+    if cost == "simulation":
+        if horizon is not None:
+            raise IdentifyError("horizon: only the prediction cost has a horizon (--cost prediction --horizon K)")
+        return None
+    if horizon is None:
+        raise IdentifyError("horizon: the prediction cost needs its horizon in samples (--horizon K, e.g. 25)")
+    if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or not 1 <= horizon <= MAX_HORIZON:
+        raise IdentifyError(f"horizon: expected a whole number of samples in [1, {MAX_HORIZON}], got {horizon!r}")
+    return int(horizon)
+
+
+def t95(dof: int) -> float:
+    """The two-sided 95 % point of Student's t with ``dof`` degrees of freedom."""
+    from scipy.stats import t
+
+    return float(t.ppf(0.975, dof))
 
 
 class IdentifyError(ValueError):
@@ -103,6 +137,37 @@ class Estimate:
     nonfinite: int = 0  # objective evaluations whose simulation was not finite
     inf_du: float = math.nan  # IPOPT's dual infeasibility at its last iteration
     max_iter: int = 0
+    cost_kind: str = "simulation"  # the cost minimised (COSTS)
+    horizon: int | None = None  # the prediction error's k (samples)
+    dt: float = math.nan  # the logs' sample time (s)
+    jackknife: dict | None = None  # leave-one-trial-out: trial -> estimates (jackknife_intervals)
+
+    @property
+    def cost_text(self) -> str:
+        """The cost minimised, in words."""
+        if self.cost_kind == "prediction":
+            return (f"{self.horizon}-step-ahead prediction error ({self.horizon * self.dt:g} s: "
+                    f"each trial cut into segments of {self.horizon} samples, each restarted from the logged state)")
+        return "simulation error (open loop over each whole trial, its initial state free)"
+
+    @property
+    def jackknife_std(self) -> np.ndarray | None:
+        """The leave-one-trial-out standard error per parameter, ``sqrt((T-1)/T sum (theta_(-j) - mean)^2)``."""
+        if not self.jackknife:
+            return None
+        v = np.array(list(self.jackknife.values()))
+        T = len(v)
+        return np.sqrt((T - 1) / T * np.sum((v - v.mean(axis=0)) ** 2, axis=0))
+
+    @property
+    def jackknife_intervals(self) -> np.ndarray | None:
+        """(n, 2) 95 % intervals ``estimate +- t_(T-1) sd_jackknife`` (Student's t with T - 1 degrees of freedom:
+        T trials are T draws of everything a trial varies in); None without :func:`jackknife`."""
+        sd = self.jackknife_std
+        if sd is None:
+            return None
+        q = t95(len(self.jackknife) - 1)
+        return np.stack([self.values - q * sd, self.values + q * sd], axis=1)
 
     def flags(self) -> list[tuple[str, str]]:
         """(parameter, what it usually means) for every estimate at a bound, at the edge of its physical set,
@@ -147,20 +212,34 @@ class Estimate:
         units = [self.system.params.unit(n) for n in self.free]
         rows = [f"identification of {len(self.free)} parameters of {self.system.name} on {len(self.trials)} trials "
                 f"({', '.join(self.trials)}); signals {', '.join(self.signals)}; plant step {self.h:g} s",
+                f"cost minimised: {self.cost_text}",
                 f"IPOPT: {self.status}, {self.iterations} iterations, {self.seconds:.1f} s; cost "
                 f"{self.cost0:.6g} -> {self.cost:.6g}; residual variance factor s^2 = {self.s2:.4g} "
                 f"({self.n_residuals} residuals)"]
         rows += [f"physical parameterisation: {g}" for g in self.groups]
         rows += self._solver_notes()
-        rows += ["", f"{'parameter':28s} {'initial':>12s} {'estimate':>12s} {'95 % interval':>27s}  unit"]
+        jk = self.jackknife_intervals
+        rows += ["", f"{'parameter':28s} {'initial':>12s} {'estimate':>12s} {'95 % interval (Fisher)':>27s}" +
+                 (f" {'95 % (leave-one-trial-out)':>27s}" if jk is not None else "") + "  unit"]
         flagged = {n for n, _ in self.flags()}
-        for n, a, b, s, ok, u in zip(self.free, self.initial, self.values, self.std, self.identifiable, units):
+        for k, (n, a, b, s, ok, u) in enumerate(zip(self.free, self.initial, self.values, self.std, self.identifiable,
+                                                    units)):
             iv = f"[{_num(b - Z95 * s, s)}, {_num(b + Z95 * s, s)}]" if ok else "not identifiable"
+            iv = f"{iv:>27s}"
+            if jk is not None:
+                w = (jk[k, 1] - jk[k, 0]) / 2
+                iv += f" {'[' + _num(jk[k, 0], w) + ', ' + _num(jk[k, 1], w) + ']':>27s}"
             flag = "  (at its bound)" if n in self.at_bound else "  (flagged)" if n in flagged else ""
-            rows.append(f"{n:28s} {a:12.5g} {b:12.5g} {iv:>27s}  {u}{flag}")
-        rows += ["", "The intervals assume errors independent from sample to sample; where the model cannot follow the",
-                 "vehicle (errors that persist over seconds), they are too narrow: compare the estimates between",
-                 "subsets of trials, and validate on trials held out of the fit."]
+            rows.append(f"{n:28s} {a:12.5g} {b:12.5g} {iv}  {u}{flag}")
+        rows += ["", "The Fisher intervals assume errors independent from sample to sample; where the model cannot",
+                 "follow the vehicle (errors that persist over seconds), they are too narrow."]
+        if jk is not None:
+            rows += [f"The leave-one-trial-out (jackknife) intervals come from {len(self.jackknife)} refits, each "
+                     f"without one trial:", "they carry the trial-to-trial spread and errors correlated within a "
+                     "trial (docs/identification.md)."]
+        else:
+            rows += ["For intervals that carry them, --intervals jackknife (at least 3 trials); validate on held-out "
+                     "trials."]
         if self.flags():
             rows += ["", "flags:"] + [f"  {n}: {why}" for n, why in self.flags()]
         if self.unidentifiable:
@@ -215,8 +294,11 @@ class _Problem:
     the maximum-likelihood ``N_k / 2 log(SSE_k / N_k)``: its gradient is the weighted least-squares one.
     """
 
-    def __init__(self, system, logs, free, signals, stated, m, K, threads, mapping=None):
+    def __init__(self, system, logs, free, signals, stated, m, K, threads, mapping=None, horizon=None):
         self.system, self.logs, self.free, self.K = system, logs, tuple(free), K
+        self.horizon = horizon  # None: simulation error; else the k-step-ahead prediction error's k (samples)
+        self.nx = 12 if horizon is None else 0  # free initial state per trial (simulation error only)
+        self.r0 = 0 if horizon is None else 1  # the first residual row (a prediction restarts at sample 0)
         self.plant = plant_mod.LogPlant(system, m=m, free=self.free)
         lay = system.layout
         self.p = system.params.vector()
@@ -237,11 +319,23 @@ class _Problem:
         for lg in logs:
             sig = [s for s in signals if s in lg.signals]
             self.sel.append((np.array([SIGNALS.index(s) for s in sig], dtype=int),
-                             np.stack([lg.signals[s] for s in sig], axis=1)))
-            ids.append(np.tile([self.signals.index(s) for s in sig], len(lg.t)))
+                             np.stack([lg.signals[s] for s in sig], axis=1)[self.r0:]))
+            ids.append(np.tile([self.signals.index(s) for s in sig], len(lg.t) - self.r0))
         self.sig_id = np.concatenate(ids)  # the fitted signal of each residual
         self.n_sig = np.bincount(self.sig_id, minlength=len(self.signals))
-        self.nz = self.nt + 12 * len(logs)
+        self.nz = self.nt + self.nx * len(logs)
+        self.states = None  # prediction error: per trial, the state each segment restarts from (N x 12)
+        if horizon is not None:
+            p0 = self.p.copy()
+            self.states = []
+            for lg, d in zip(logs, self.data):
+                x0 = initial_state(lg)
+                X = plant_mod.simulate(self.plant, lg, x0, p0, K, d)
+                st = logged_states(lg, X)
+                if not np.all(np.isfinite(st)):
+                    raise IdentifyError(f"{lg.name}: the simulation from the starting parameters is not finite, so "
+                                        f"the unmeasured parts of the state to restart from are unknown")
+                self.states.append(st)
         self.n_res = self.sig_id.size
         self.pool = ThreadPoolExecutor(max(1, threads)) if threads > 1 and len(logs) > 1 else None
         self._last: tuple | None = None
@@ -258,7 +352,28 @@ class _Problem:
         return out
 
     def x0(self, z: np.ndarray, j: int) -> np.ndarray:
+        if self.states is not None:
+            return self.states[j][0]
         return z[self.nt + 12 * j: self.nt + 12 * (j + 1)]
+
+    def _segments(self, j: int, d: dict, pv: np.ndarray, th: np.ndarray, sens: bool):
+        """The k-step-ahead prediction of trial ``j`` (rows 1..N-1) and its Jacobian in theta: the trial cut into
+        segments of ``horizon`` samples, each simulated from :attr:`states` at its first sample."""
+        st, H, m = self.states[j], self.horizon, self.m
+        N = st.shape[0]
+        nf = self.nt
+        X = np.empty((N - 1, 12))
+        dX = np.empty((N - 1, 12, nf)) if sens else None
+        for a in range(0, N - 1, H):
+            e = min(a + H, N - 1)
+            ds = _slice(d, a, e, m, nf)
+            if sens:
+                Xs, dXs = plant_mod.simulate_sens(self.plant, None, st[a], pv, th, self.K, ds)
+                dX[a:e] = dXs[1:, :, 12:]
+            else:
+                Xs = plant_mod.simulate(self.plant, None, st[a], pv, self.K, ds)
+            X[a:e] = Xs[1:]
+        return X, dX
 
     def _one(self, j: int, z: np.ndarray, sens: bool):
         lg, d = self.logs[j], self.data[j]
@@ -275,6 +390,12 @@ class _Problem:
                 full = np.zeros((part.shape[0], len(self.free), n_st))
                 full[:, self.thrust_idx, :] = part.reshape(part.shape[0], len(tf), n_st, order="F")
                 d["dU"] = full.reshape(part.shape[0], len(self.free) * n_st, order="F")
+        if self.states is not None:
+            X, dX = self._segments(j, d, pv, th, sens)
+            r = (X[:, idx] - Y).reshape(-1)
+            if dX is None:
+                return r, None
+            return r, (None, dX[:, idx, :].reshape(-1, self.nt) * self.scale[None, :])
         if sens:
             X, dX = plant_mod.simulate_sens(self.plant, lg, self.x0(z, j), pv, th, self.K, d)
         else:
@@ -302,7 +423,8 @@ class _Problem:
             row = 0
             for j, (a, (Jx, Jt)) in enumerate(res):
                 Jm[row:row + a.size, : self.nt] = Jt
-                Jm[row:row + a.size, self.nt + 12 * j: self.nt + 12 * (j + 1)] = Jx
+                if Jx is not None:
+                    Jm[row:row + a.size, self.nt + 12 * j: self.nt + 12 * (j + 1)] = Jx
                 row += a.size
         with self._lock:
             self._last = (z.copy(), r, Jm)
@@ -467,9 +589,23 @@ def _solve(prob: _Problem, z0, lo, hi, max_iter, tol, progress, stop):
     return zs, status, int(stats.get("iter_count", prog.k)), list(prog.history), float(inf_du[-1])
 
 
+def _slice(d: dict, a: int, e: int, m: int, nf: int) -> dict:
+    """The block inputs (:func:`arvcas.ident.plant.sample_inputs`) of samples ``a..e`` (steps a m .. e m)."""
+    out = dict(d)
+    for k in ("W", "payload"):
+        out[k] = d[k][:, a * m: e * m]
+    for k in ("U", "Q", "QD", "QDD"):
+        out[k] = d[k][:, 3 * a * m: 3 * e * m]
+    if "dU" in d:
+        out["dU"] = d["dU"][:, a * m * nf: e * m * nf]
+    return out
+
+
 def _fisher(Jm: np.ndarray, nt: int) -> np.ndarray:
     """The information about theta (scaled) with the initial states eliminated: F_tt - F_tx F_xx^+ F_xt."""
     F = Jm.T @ Jm
+    if F.shape[0] == nt:
+        return F
     Ftt, Ftx, Fxx = F[:nt, :nt], F[:nt, nt:], F[nt:, nt:]
     return Ftt - Ftx @ np.linalg.pinv(Fxx, rcond=1e-12, hermitian=True) @ Ftx.T
 
@@ -502,7 +638,8 @@ def _directions(F: np.ndarray, names: tuple[str, ...]) -> tuple[np.ndarray, list
 
 def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None = None, h_max: float | None = None,
              max_iter: int = 100, tol: float = 0.1, threads: int = 2, K: int = 50,
-             progress=None, physical_set: bool = True) -> Estimate:
+             progress=None, physical_set: bool = True, cost: str = "simulation",
+             horizon: int | None = None) -> Estimate:
     """Estimate the parameters ``free`` (names of ``system.params``) from ``logs`` (module docstring).
 
     ``signals``: the measured signals fitted (default every vehicle signal the logs measure, of
@@ -513,11 +650,14 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
     :class:`arvcas.io.files.Terminated` (nothing is returned, so nothing unfinished is written).
     ``physical_set``: the physical parameterisations and the hold inside the loader's rules
     (:mod:`arvcas.ident.physical`); False leaves each parameter only its sign bounds (to see where the
-    unconstrained optimum lies).
+    unconstrained optimum lies). ``cost``: ``"simulation"`` (open loop over each trial, its initial state
+    free) or ``"prediction"`` (the ``horizon``-step-ahead prediction error: :data:`COSTS`).
     """
     t_start = time.perf_counter()
     lay = system.layout
     free = tuple(free)
+    horizon = check_cost(cost, horizon)
+    kind = cost
     if not free:
         raise IdentifyError("free: name at least one parameter to identify")
     if len(free) > MAX_FREE:
@@ -562,9 +702,13 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
         if not (math.isfinite(v) and v > 0):
             raise IdentifyError(f"sigma: {s}: expected a positive noise level, got {v!r}")
     m = substeps(logs[0].dt, logs[0].dt if h_max is None else float(h_max))
-    z0 = np.concatenate([np.zeros(len(free))] + [initial_state(lg) for lg in logs])
+    if horizon is not None and horizon >= max(len(lg.t) for lg in logs) - 1:
+        raise IdentifyError(f"horizon: {horizon} samples is as long as the longest trial "
+                            f"({max(len(lg.t) for lg in logs) - 1} steps): that is the simulation error, "
+                            f"--cost simulation")
     mapping = physical.Mapping(lay, free, system.params.vector(), factors=physical_set)
-    prob = _Problem(system, logs, free, signals, stated, m, K, threads, mapping)
+    prob = _Problem(system, logs, free, signals, stated, m, K, threads, mapping, horizon)
+    z0 = np.concatenate([np.zeros(len(free))] + ([initial_state(lg) for lg in logs] if prob.nx else []))
     rms0 = prob.rms(z0)
     if not all(math.isfinite(v) for v in rms0.values()):
         raise IdentifyError(f"the simulation from the starting parameters is not finite on some trial "
@@ -661,7 +805,39 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
                     seconds=time.perf_counter() - t_start, h=logs[0].dt / m, at_bound=tuple(at_bound),
                     history=tuple(history), rms0=rms0, rms=prob.rms(zs), stated=tuple(stated),
                     groups=tuple(mapping.groups + mapping.notes), pulled=pulled, nonfinite=prob.nonfinite,
-                    inf_du=inf_du, max_iter=int(max_iter))
+                    inf_du=inf_du, max_iter=int(max_iter), cost_kind=kind, horizon=horizon, dt=logs[0].dt)
+
+
+def jackknife(est: Estimate, logs: list[Log], progress=None, **kw) -> Estimate:
+    """``est`` with leave-one-trial-out estimates: one refit per trial of ``logs`` (the trials ``est`` was fitted
+    on) without it, started from ``est`` (its values as the system's), with :func:`identify`'s options ``kw``
+    (the same cost, signals, noise and step as ``est``'s). Their spread gives
+    :attr:`Estimate.jackknife_intervals`: each trial is one draw of whatever varies from trial to trial (a
+    tether's pull, the water, the model's error) and carries its own correlated errors, so the spread holds
+    both, where the Fisher intervals hold neither. ``progress(trial, estimate)`` after each refit. The refits
+    stop at an objective change of :data:`REFIT_TOL` (not ``identify``'s 0.1): started next to their optimum,
+    a loose stop would end them before they move, and the spread would be too small."""
+    from dataclasses import replace
+
+    from arvcas.system import System
+
+    if len(logs) < 3:
+        raise IdentifyError(f"intervals: leave-one-trial-out needs at least 3 trials, got {len(logs)}")
+    if tuple(lg.name for lg in logs) != est.trials:
+        raise IdentifyError("logs: give the trials the estimate was fitted on")
+    names = [lg.name for lg in logs]
+    if len(set(names)) != len(names):
+        raise IdentifyError(f"logs: two trials are named {next(n for n in names if names.count(n) > 1)!r}")
+    kw.setdefault("tol", REFIT_TOL)
+    start = System(est.system.params.replace(est.as_dict()))
+    out = {}
+    for j, lg in enumerate(logs):
+        sub = identify(start, [x for i, x in enumerate(logs) if i != j], est.free,
+                       **{**kw, "signals": est.signals, "cost": est.cost_kind, "horizon": est.horizon})
+        out[lg.name] = sub.values.copy()
+        if progress is not None:
+            progress(lg.name, sub)
+    return replace(est, jackknife=out)
 
 
 # ---- the identified system file ---------------------------------------------------------------------------
@@ -763,11 +939,16 @@ def _system_text(est: Estimate, out_path, date: str | None) -> str:
         if est.identifiable[k]:
             lo, hi = (est.values[k] - Z95 * est.std[k]) / f, (est.values[k] + Z95 * est.std[k]) / f
             w = Z95 * est.std[k] / f
-            what = f"95 % interval [{_num(lo, w)}, {_num(hi, w)}] {unit}"
+            what = f"95 % interval [{_num(lo, w)}, {_num(hi, w)}] {unit} (Gauss-Newton, s^2 = {est.s2:.3g})"
         else:
             what = "not identifiable from these trials alone (a combination is; see the report): value of the joint fit"
-        entry["source"] = (f"identified by arvcas identify on {date} from trials {trials} ({what}; Gauss-Newton, "
-                           f"s^2 = {est.s2:.3g}); was {old / f:.6g} {unit}: {old_src}")
+        jk = est.jackknife_intervals
+        if jk is not None:
+            w = (jk[k, 1] - jk[k, 0]) / 2 / f
+            what += f"; leave-one-trial-out 95 % interval [{_num(jk[k, 0] / f, w)}, {_num(jk[k, 1] / f, w)}] {unit}"
+        what += f"; cost: {est.cost_kind}" + (f", horizon {est.horizon} samples" if est.horizon else "")
+        entry["source"] = (f"identified by arvcas identify on {date} from trials {trials} ({what}); "
+                           f"was {old / f:.6g} {unit}: {old_src}")
     sysname = str(doc["system"]["name"]) if "system" in doc and "name" in doc["system"] else est.system.name
     if "system" not in doc:
         doc.add("system", tomlkit.table())
@@ -791,5 +972,6 @@ def _system_text(est: Estimate, out_path, date: str | None) -> str:
         if isinstance(m, dict) and isinstance(m.get("table"), str) and (src.parent / m["table"]).exists():
             m["table"] = moved(m["table"])
     head = (f"# Identified by arvcas identify on {date} from {src.name} and trials {trials}: parameters "
-            f"{', '.join(est.free)} estimated (docs/identification.md); every other number is {src.name}'s.\n")
+            f"{', '.join(est.free)} estimated (docs/identification.md) by minimising the {est.cost_text}; every "
+            f"other number is {src.name}'s.\n")
     return head + tomlkit.dumps(doc)
