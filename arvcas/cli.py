@@ -818,6 +818,9 @@ def _table() -> tuple[Command, ...]:
         Command("front plot", "plot the front, the default gains (Haidou-1: Table 2) on the same draws and the knee "
                 "point (PNG, PDF or SVG)", t.add_front_plot,
                 t.run_front_plot, inputs=(("file", "front"),), outputs=t.front_plot_outputs),
+        Command("front restamp", "replay every member of a front on today's code; if all reproduce bit for bit, "
+                "record today's run digest so the front stays valid (--check: report only)", t.add_front_restamp,
+                t.run_front_restamp, inputs=(("fronts", "front"),), plugins=True),
         Command("front explore", "one self-contained HTML page of every front: hover a member for its gains and "
                 "metrics, click it for its time response", x.add_explore, x.run_explore, inputs=(("fronts", "front"),),
                 outputs=x.explore_outputs, check=x.check_explore, plugins=True),

@@ -3,7 +3,7 @@
 The template is the README's text with placeholders ``{{FILE:KEY/KEY/...|SPEC}}``: ``FILE`` a JSON file relative to
 the repository's root, the keys a path into it (``/`` between keys, since keys such as
 ``plain_rk4_h_plant_0.0025`` hold dots), an optional scale ``*K`` after the path, and ``SPEC`` a Python format
-spec (``,.0f``, ``.2f``; default ``g``). A value measured on a tree with uncommitted changes (a section of
+spec (``,.0f``, ``.2f``; none: the value as it is). A value measured on a tree with uncommitted changes (a section of
 ``results/bench.json`` whose ``git_commit`` ends in ``+dirty``) is refused: the README quotes nothing that the
 repository cannot reproduce.
 
@@ -64,7 +64,7 @@ def value(root: Path, file: str, path: str):
 def render(template: str, root: Path = ROOT) -> str:
     """The README's text: every placeholder of ``template`` replaced by its formatted value."""
     def one(m: re.Match) -> str:
-        file, path, scale, spec = m.group(1), m.group(2), m.group(3), (m.group(4) or "g").strip()
+        file, path, scale, spec = m.group(1), m.group(2), m.group(3), (m.group(4) or "").strip()
         x = value(root, file, path)
         if scale is not None:
             if isinstance(x, bool) or not isinstance(x, (int, float)):

@@ -1,6 +1,7 @@
-"""Provenance on resume and replay: a front records model_hash() and the parameter vector; resume,
-replay, front robust, montecarlo --from-front and compare refuse a mismatch unless --allow-model-change,
-and then the output records it."""
+"""Provenance on resume and replay: a front records the digest of its compiled run and the parameter
+vector; resume, replay, front robust, montecarlo --from-front and compare refuse a mismatch (or a file of
+an older arvcas that records only its source's hash) unless --allow-model-change, and then the output
+records it."""
 
 from __future__ import annotations
 
@@ -25,17 +26,23 @@ def test_replays_refuse_another_model(tmp_path, capsys):
     (d / "a").mkdir()
     (d / "b").mkdir()
     (d / "c").mkdir()
-    other_model = synthetic_front(d / "a" / "front.h5", model_hash=OLD)
+    (d / "o").mkdir()
+    other_model = synthetic_front(d / "a" / "front.h5", run_digest=OLD)
+    old_source = synthetic_front(d / "o" / "front.h5", model_hash=OLD)
     other_params = synthetic_front(d / "b" / "front.h5", params=load().vector() * 1.01)
     good = synthetic_front(d / "c" / "front.h5")
     cases = [
-        (["simulate", "--from-front", other_model, "--index", "0"], "the model code or data changed"),
+        (["simulate", "--from-front", other_model, "--index", "0"],
+         "the compiled run changed (run digest 000000000000"),
+        (["simulate", "--from-front", old_source, "--index", "0"],
+         "records only the hash of the source that wrote it (model hash 000000000000, "),
+        (["simulate", "--from-front", old_source, "--index", "0"], f"re-stamp it: arvcas front restamp {old_source}"),
         (["simulate", "--from-front", other_params, "--index", "0"], "other parameter values than the packaged file"),
         (["montecarlo", "--from-front", other_model, "--index", "knee", "--runs", "2", "--out", d / "m.h5"],
-         "the model code or data changed"),
+         "the compiled run changed"),
         (["front", "robust", other_model, "--runs", "2"], "front robust"),
         (["front", "robust", other_params, "--runs", "2"], "other parameter values"),
-        (["compare", good, other_model], "were computed with different models (model hash"),
+        (["compare", good, old_source], "were computed with different models (model hash"),
         (["compare", good, other_params], "different parameter vectors"),
     ]
     for argv, msg in cases:
@@ -49,7 +56,7 @@ def test_allowed_model_change_is_recorded(tmp_path, capsys):
     rc, text, err = run3(["simulate", "--from-front", front, "--index", "1", "--allow-model-change", "--out", out],
                          capsys)
     assert rc in (0, 1), err
-    assert "the model code or data changed" in read_result(out).meta["model_change_allowed"]
+    assert "records only the hash of the source" in read_result(out).meta["model_change_allowed"]
     assert "note: replayed under another model" in text
     (tmp_path / "g").mkdir()
     good = synthetic_front(tmp_path / "g" / "front.h5")
@@ -64,15 +71,15 @@ def test_resume_refuses_another_model_and_records_an_allowed_one(tmp_path, capsy
     run_study(load_study(study), out, say=lambda m: None, stop_after=1)
     path = out / "front.h5"
     c = ck.read_checkpoint(path)
-    assert len(c.model_hash) == 64 and np.array_equal(c.params, load().vector())
-    with h5py.File(path, "r+") as f:  # as if written by an older model
-        f.attrs["model_hash"] = OLD
-    err = assert_refused(["tune", study, "--out", out, "--resume"], capsys, tmp_path, "the model code or data changed")
+    assert len(c.model_hash) == 64 and len(c.run_digest) == 64 and np.array_equal(c.params, load().vector())
+    with h5py.File(path, "r+") as f:  # as if computed by another model
+        f.attrs["run_digest"] = OLD
+    err = assert_refused(["tune", study, "--out", out, "--resume"], capsys, tmp_path, "the compiled run changed")
     assert "continuing would mix two models" in err
     rc, err = run(["tune", study, "--out", out, "--resume", "--allow-model-change"], capsys)
     assert rc == 0, err
     c = ck.read_checkpoint(path)
-    assert c.model_hash != OLD and c.n_gen > 1
+    assert c.run_digest == ck.run_digest(c, load()) and c.n_gen > 1
     assert len(c.model_changes) == 1 and "resumed at generation 1" in c.model_changes[0]
     with h5py.File(path, "r") as f:
         assert json.loads(f.attrs["model_changes"]) == c.model_changes

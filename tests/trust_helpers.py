@@ -84,8 +84,10 @@ def assert_refused(argv, capsys, d, message: str, timeout: float = 300.0) -> str
     return err
 
 
-def synthetic_front(path: Path, *, model_hash: str | None = None, params=None, controller: str = "agsta") -> Path:
-    """A finished three-member front.h5 written by arvcas's checkpoint writer (no tuning run)."""
+def synthetic_front(path: Path, *, model_hash: str | None = None, params=None, controller: str = "agsta",
+                    run_digest: str = "") -> Path:
+    """A finished three-member front.h5 written by arvcas's checkpoint writer (no tuning run); ``model_hash``
+    default today's, ``run_digest`` default none (valid by the model hash alone)."""
     from arvcas.build.provenance import model_hash as current_hash
     from arvcas.controllers import gains as gains_mod
     from arvcas.system.params import load
@@ -111,6 +113,7 @@ def synthetic_front(path: Path, *, model_hash: str | None = None, params=None, c
         table2_F=np.array([1.0, 1.0]), table2_G=np.array([-1.0]), table2_chat=np.ones((1, 6)),
         table2_rmse=np.ones((1, 6)), table2_ok=np.ones(1, bool), table2_t_fail=np.full(1, np.nan),
         versions=ck.versions(), model_hash=current_hash() if model_hash is None else model_hash,
+        run_digest=run_digest,
     )
     assert X.shape == (n, m)
     return ck.write_checkpoint(c, path)

@@ -10,6 +10,10 @@ with ``cc`` and loaded with :func:`casadi.external`. Builds are cached between p
 * **verified**: an artifact ``<cache>/<name>-<key[:20]>.so`` is loaded only if its manifest
   ``<name>-<key[:20]>.json`` exists, holds the same key, and the sha256 of the ``.so`` bytes matches
   the manifest. A truncated, tampered or foreign file is rebuilt, never loaded.
+* **what it computes**: the manifest also holds ``c_sha256``, the sha256 of the function's own
+  generated C (the same text in every process: no path, time or version in it). :func:`described_digest`
+  answers it from the manifest without a compile, or from the graph's C when the cache lacks it; a
+  result records it to say which computation made it (docs/provenance.md).
 * **written atomically**: each build happens in a temporary directory inside the cache, then
   ``os.replace`` publishes the ``.so`` and, last, the manifest.
 * **locked**: an ``fcntl.flock`` lock file per key (exclusive to build, shared to verify and load),
@@ -359,9 +363,17 @@ class _Plan:
     compiler: str
     cmd_flags: tuple[str, ...]
     key: str
+    c_sha256: str = ""  # of the function's own generated C (without extra_c): what it computes
 
     def stem(self) -> str:
         return f"{self.name}-{self.key[:20]}"
+
+
+def _c_text(fn: ca.Function) -> str:
+    """CasADi's C for ``fn`` (its symbols prefixed by its name): the same text in every process."""
+    cg = ca.CodeGenerator(fn.name(), _CODEGEN_OPTS)  # CASADI_PREFIX(ID) = <name>_ID: symbols prefixed by name
+    cg.add(fn)
+    return cg.dump()
 
 
 def _plan(fn: ca.Function, cmd_flags: list[str], extra_c: str = "") -> _Plan:
@@ -369,16 +381,16 @@ def _plan(fn: ca.Function, cmd_flags: list[str], extra_c: str = "") -> _Plan:
     if not name.isidentifier() or not name.isascii():
         raise ValueError(f"function name {name!r} is not a C identifier")
     t0 = time.perf_counter()
-    cg = ca.CodeGenerator(name, _CODEGEN_OPTS)  # CASADI_PREFIX(ID) = <name>_ID: symbols prefixed by name
-    cg.add(fn)
-    text = cg.dump() + extra_c
+    own = _c_text(fn)
+    text = own + extra_c
     codegen_s = time.perf_counter() - t0
     try:
         n_ins = int(fn.n_instructions())
     except RuntimeError:  # not an SX/MX Function
         n_ins = -1
     compiler = _compiler_id()
-    return _Plan(name, n_ins, text, codegen_s, compiler, tuple(cmd_flags), _key(text, compiler, cmd_flags))
+    return _Plan(name, n_ins, text, codegen_s, compiler, tuple(cmd_flags), _key(text, compiler, cmd_flags),
+                 hashlib.sha256(own.encode()).hexdigest())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -500,6 +512,7 @@ def _manifest(plan: _Plan, so_sha256: str, compile_s: float) -> dict:
         "name": plan.name,
         "key": plan.key,
         "so_sha256": so_sha256,
+        "c_sha256": plan.c_sha256,
         "flags": list(plan.cmd_flags),
         "compiler": plan.compiler,
         "compile_time_s": round(compile_s, 4),
@@ -708,21 +721,13 @@ def build_described(
     ``extra_c``: called with ``make()``'s Function after it, returns C appended to the library (e.g. a
     lockstep loop, :mod:`arvcas.sim.lockstep`); ``description`` must say what it holds.
     """
-    from arvcas.build.provenance import model_hash
-
-    cmd_flags = _check_flags(opt_level, flags)
-    if not name.isidentifier() or not name.isascii():
-        raise ValueError(f"function name {name!r} is not a C identifier")
-    if batch_loop:
-        description = description + " +batch_loop"
-    ident = _ident(name, description, cmd_flags)
+    cmd_flags, description, ident = _described(name, description, opt_level, flags, batch_loop)
     with _LOCK:
         f = _PRELOADED.get(ident)  # shipped by a client (a Dask worker): no compiler needed
         if f is not None:
             _STATS["memo_hit"] += 1
             return f
-    compiler = _compiler_id()
-    key = _key("described:" + name + "\0" + description + "\0" + model_hash(), compiler, cmd_flags)
+    key = _described_key(name, description, cmd_flags)
     mkey = (name, key, str(_cache_path()))
     with _LOCK:
         f = _DESCRIBED.get(mkey)
@@ -731,16 +736,85 @@ def build_described(
             return f
 
         def make_plan() -> _Plan:
-            fn = make()
+            with _LOCK:
+                made = _MADE.pop(key, None)
+            fn = made if made is not None else make()
             if not isinstance(fn, ca.Function) or fn.name() != name:
                 raise TypeError(f"build_described: make() must return a casadi.Function named {name!r}")
             p = _plan(fn, cmd_flags, (batch_loop_c(fn) if batch_loop else "") + (extra_c(fn) if extra_c else ""))
-            return _Plan(p.name, p.n_instructions, p.c_text, p.codegen_s, p.compiler, p.cmd_flags, key)
+            return _Plan(p.name, p.n_instructions, p.c_text, p.codegen_s, p.compiler, p.cmd_flags, key, p.c_sha256)
 
         f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout, label)
         _MANIFESTS[f.__hash__()]["ident"] = ident
         _DESCRIBED[mkey] = f
         return f
+
+
+def _described(name: str, description: str, opt_level: str, flags, batch_loop: bool) -> tuple[list[str], str, str]:
+    """(compiler flags, the full description, its :func:`_ident`) of a :func:`build_described` call."""
+    cmd_flags = _check_flags(opt_level, flags)
+    if not name.isidentifier() or not name.isascii():
+        raise ValueError(f"function name {name!r} is not a C identifier")
+    if batch_loop:
+        description = description + " +batch_loop"
+    return cmd_flags, description, _ident(name, description, cmd_flags)
+
+
+def _described_key(name: str, description: str, cmd_flags: list[str]) -> str:
+    from arvcas.build.provenance import model_hash
+
+    return _key("described:" + name + "\0" + description + "\0" + model_hash(), _compiler_id(), cmd_flags)
+
+
+_DIGESTS: dict[str, str] = {}  # cache key -> c_sha256, for digests computed without a compile
+_MADE: dict[str, ca.Function] = {}  # the last graphs described_digest built: a build that follows reuses them
+
+
+def described_digest(name: str, description: str, make: Callable[[], ca.Function], *,
+                     opt_level: str = DEFAULT_OPT_LEVEL, flags: tuple[str, ...] = (), batch_loop: bool = False) -> str:
+    """sha256 of the C that CasADi generates for the function a :func:`build_described` call with the same
+    arguments compiles (without its appended loops): what the function computes, the same in every
+    process and on every machine (no paths, times or versions in it).
+
+    Never compiles: a function loaded in this process or shipped to it, or one in the compile cache,
+    answers from its manifest (no graph is built); otherwise ``make()`` builds the graph and CasADi
+    generates its C (the run of a system: 2.5 s for Haidou-1's, 10 s for the BlueROV2's), remembered in
+    this process; the graph is kept for a :func:`build_described` of the same key that follows (a replay
+    after its check builds it once).
+    """
+    cmd_flags, description, ident = _described(name, description, opt_level, flags, batch_loop)
+    key = _described_key(name, description, cmd_flags)
+    with _LOCK:
+        f = _PRELOADED.get(ident) or _DESCRIBED.get((name, key, str(_cache_path())))
+        m = _MANIFESTS.get(f.__hash__()) if f is not None else None
+        if m and m.get("c_sha256"):
+            return str(m["c_sha256"])
+        if key in _DIGESTS:
+            return _DIGESTS[key]
+    look = _Lookup(name, key)
+    try:
+        m = json.loads((_cache_path() / f"{look.stem()}.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        m = None
+    if isinstance(m, dict) and m.get("key") == key and m.get("name") == name and m.get("c_sha256"):
+        return str(m["c_sha256"])
+    fn = make()
+    if not isinstance(fn, ca.Function) or fn.name() != name:
+        raise TypeError(f"described_digest: make() must return a casadi.Function named {name!r}")
+    h = hashlib.sha256(_c_text(fn).encode()).hexdigest()
+    with _LOCK:
+        _DIGESTS[key] = h
+        _MADE[key] = fn
+        while len(_MADE) > 3:  # a run's three functions (the run, its time table's two)
+            _MADE.pop(next(iter(_MADE)))
+    return h
+
+
+def digest_of(f: ca.Function) -> str:
+    """:func:`described_digest` of a Function returned by :func:`build` or :func:`build_described`
+    ("" when its manifest does not record it)."""
+    m = artifact_of(f)
+    return str(m.get("c_sha256", "")) if m else ""
 
 
 def batch_loop_c(f: ca.Function) -> str:

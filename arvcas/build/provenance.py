@@ -4,11 +4,12 @@
 simulated number: the model layer (``arvcas/model``), the simulation layer (``arvcas/sim``), the
 controllers (``arvcas/controllers``), code generation (``arvcas/build/codegen.py``, the lane rewrite ``arvcas/build/lanes.py``), the parameter and
 configuration readers, and the packaged data files (``arvcas/data``). It keys the compile cache (a
-warm start loads a library without building its graph, :mod:`arvcas.build.codegen`) and is stored in
-checkpoints and fronts so that a resume or a replay under other physics can be refused.
+warm start loads a library without building its graph, :mod:`arvcas.build.codegen`).
 
 Editing any of these files, even a comment, changes the hash: the cache rebuilds rather than risk a
-stale library.
+stale library. That makes it too coarse to say whether a result is still valid: a front records the
+digest of its compiled run instead (:meth:`arvcas.sim.run.CompiledRun.digest`, docs/provenance.md),
+and this hash only as the source that wrote it (a file of an older arvcas is checked by it).
 """
 
 from __future__ import annotations

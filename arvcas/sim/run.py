@@ -14,7 +14,8 @@ trace), their cache keys, the run's time table, and the named inputs of one run
 Compiling never builds a CasADi graph when the compile cache holds the library: the cache key is
 the description (controller identity and source, the scenario's graph-shaping fields, the options)
 plus the package's model code and data (:func:`arvcas.build.provenance.model_hash`) and the
-toolchain, so a warm start only loads a shared library.
+toolchain, so a warm start only loads a shared library. What a run computes is named by
+:meth:`CompiledRun.digest` (the sha256 of its generated C), which a front records (docs/provenance.md).
 """
 
 from __future__ import annotations
@@ -153,21 +154,41 @@ class CompiledRun:
         return (f"run controller={law.identity()} own_source={law.source_digest()} trace={trace} "
                 f"scenario={self.cfg.graph_key()!r} options={self.opts!r}{system}{acc}")
 
+    def _described(self, trace: bool):
+        """(name, description, make) of the compiled run function (:func:`arvcas.build.codegen.build_described`)."""
+        spec = closedloop.RunSpec(self.controller, self.cfg.graph_key(), self.opts, self.params.layout,
+                                  self.accumulators)
+        name = f"run_{self.controller.name}" + ("_trace" if trace else "")
+        return name, self.description(trace), lambda: closedloop.build_run(spec, trace)
+
     def function(self, trace: bool) -> ca.Function:
         """The compiled run function (metrics only, or with the trace), loaded from the cache when it is there."""
         fn = self._fns.get(trace)
         if fn is None:
-            spec = closedloop.RunSpec(self.controller, self.cfg.graph_key(), self.opts, self.params.layout,
-                                      self.accumulators)
-            name = f"run_{self.controller.name}" + ("_trace" if trace else "")
-            fn = _FUNCTIONS.get((name, self.description(trace)))
+            name, desc, make = self._described(trace)
+            fn = _FUNCTIONS.get((name, desc))
             if fn is None:
                 what = f"the run for {self.params.structure.name} / {self.controller.name}" + (" (traced)" if trace else "")
-                fn = codegen.build_described(name, self.description(trace), lambda: closedloop.build_run(spec, trace),
-                                             batch_loop=True, label=what)
-                _FUNCTIONS[(name, self.description(trace))] = fn
+                fn = codegen.build_described(name, desc, make, batch_loop=True, label=what)
+                _FUNCTIONS[(name, desc)] = fn
             self._fns[trace] = fn
         return fn
+
+    def digest(self) -> str:
+        """sha256 (hex) of what a metrics-only run computes: the C that CasADi generates for the run
+        function and for the two functions of its time table (:func:`arvcas.build.codegen.described_digest`).
+        Equal digests, equal compiled arithmetic: a front computed by a run of this digest replays on it
+        (with the same parameter vector and inputs). Compiles nothing; from the cache's manifests when
+        it holds the run, else builds the graphs and generates their C (about a second for a run)."""
+        import hashlib
+
+        name, desc, make = self._described(False)
+        parts = [codegen.described_digest(name, desc, make, batch_loop=True),
+                 *schedule.digests(self.cfg, self.opts, self.params.layout)]
+        h = hashlib.sha256(b"arvcas-run-digest-1")
+        for part in parts:
+            h.update(bytes.fromhex(part))
+        return h.hexdigest()
 
     def compiled_functions(self, trace: bool = False) -> list[ca.Function]:
         """Every compiled function a run calls: the run itself and the two that build its time table

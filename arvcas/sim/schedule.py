@@ -40,7 +40,7 @@ from arvcas.model.uvms import ModelOptions
 
 __all__ = [
     "Records", "records", "RECORD_FIELDS", "RECORD_SIZE", "ARM_FIELDS", "ARM_SIZE", "TIME_FIELDS", "TIME_SIZE",
-    "Table", "record_slices", "unpack", "stage_times", "n_stages", "record_expr", "table", "functions",
+    "Table", "record_slices", "unpack", "stage_times", "n_stages", "record_expr", "table", "functions", "digests",
     "clear_cache", "REF_ROWS", "time_rows",
 ]
 
@@ -185,16 +185,20 @@ _TABLES: "OrderedDict[tuple, Table]" = OrderedDict()
 _TABLES_KEEP = 4  # a table is ~20 MB at the paper's sampling
 
 
+def _described(kind: str, key, structure=None) -> tuple[str, str]:
+    """(name, description) of the table function ``kind`` for ``key`` (:func:`arvcas.build.codegen.build_described`)."""
+    st = "" if structure is None else system_tag(structure)
+    return {"time": "sched_time_map", "arm": "sched_arm_map"}[kind], f"schedule {kind} {key!r} chunk={ARM_CHUNK}{st}"
+
+
 def _compiled(kind: str, key, make, structure=None) -> ca.Function:
     """The compiled table function ``kind`` for ``key`` (a frozen description of what shapes it):
     loaded from the cache by that description, its graph built only on a miss."""
-    name = {"time": "sched_time_map", "arm": "sched_arm_map"}[kind]
-    st = "" if structure is None else system_tag(structure)
     with _FUNCS_LOCK:
         f = _FUNCS.get((kind, key, structure))
         if f is None:
             what = f"the {kind} table for {(structure or default_layout().structure).name}"
-            f = codegen.build_described(name, f"schedule {kind} {key!r} chunk={ARM_CHUNK}{st}", make, label=what)
+            f = codegen.build_described(*_described(kind, key, structure), make, label=what)
             _FUNCS[(kind, key, structure)] = f
         return f
 
@@ -246,6 +250,14 @@ def functions(cfg: ScenarioConfig, opts: ModelOptions = ModelOptions(), layout=N
     lay = layout or default_layout()
     return (_compiled("time", cfg.graph_key(), lambda: _time_function(cfg, lay), lay.structure),
             _compiled("arm", opts, lambda: _arm_function(opts, lay), lay.structure))
+
+
+def digests(cfg: ScenarioConfig, opts: ModelOptions = ModelOptions(), layout=None) -> tuple[str, str]:
+    """:func:`arvcas.build.codegen.described_digest` of the two functions of :func:`functions` (nothing compiled)."""
+    lay = layout or default_layout()
+    return (codegen.described_digest(*_described("time", cfg.graph_key(), lay.structure),
+                                     lambda: _time_function(cfg, lay)),
+            codegen.described_digest(*_described("arm", opts, lay.structure), lambda: _arm_function(opts, lay)))
 
 
 def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions(), layout=None) -> Table:

@@ -14,11 +14,15 @@ study file), ``study_path``, ``identity`` (JSON of what shapes the search, see
 :meth:`Study.identity`), ``scenario_text``, ``seed`` (NSGA-II), ``status`` (``running``,
 ``interrupted``, ``finished``), ``stop_reason``, ``n_gen``, ``n_eval``, ``rng_state`` (JSON),
 ``reference_point``, ``versions`` (JSON: arvcas, pymoo, casadi, numpy, h5py, python),
-``artifact_key`` (content hash of the compiled run), ``engine`` (last session), ``created``,
+``artifact_key`` (the compile cache's key of the run), ``run_digest`` (what the study computed:
+:meth:`arvcas.sim.run.CompiledRun.digest`, the sha256 of the C of its compiled run and time table;
+a replay is checked against it), ``model_hash`` (:func:`arvcas.build.provenance.model_hash`, the
+source that wrote it: informative), ``engine`` (last session), ``created``,
 ``updated`` (ISO 8601 UTC); for a controller defined outside the package, ``plugin`` (JSON of
 :func:`arvcas.controllers.base.provenance`: the controller's class, the sha256 of its source files,
 and the plugin file, module or entry point and distribution it came from); for NSGA-III, ``survival``
-(JSON: the ideal, worst and extreme points of its hyperplane normalisation, which a resume restores).
+(JSON: the ideal, worst and extreme points of its hyperplane normalisation, which a resume restores);
+``restamps`` (JSON list, when the file was re-stamped: when, which run digest, what replayed bit for bit).
 
 =====================  ===========  =============================================================
 dataset                shape        content
@@ -66,7 +70,7 @@ from arvcas.io import files
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "HISTORY_FIELDS", "CheckpointError", "Checkpoint", "write_checkpoint",
     "read_checkpoint", "StudyLock", "check_out_dir", "front_indices", "versions", "FRONT_NAME",
-    "remove_stale_temps", "provenance_diff", "controller_of",
+    "remove_stale_temps", "provenance_diff", "run_digest", "objectives_of", "controller_of",
 ]
 
 FORMAT = "arvcas.tuning.front"
@@ -140,8 +144,12 @@ class Checkpoint:
     versions: dict = field(default_factory=dict)
     artifact_key: str = ""
     model_hash: str = ""  # arvcas.build.provenance.model_hash() of the code and data that computed it
+    run_digest: str = ""  # arvcas.sim.run.CompiledRun.digest() of the run that computed it ("": older file)
+    restamps: list = field(default_factory=list)  # run digests set after a bit-for-bit replay (arvcas front restamp)
     model_changes: list = field(default_factory=list)  # resumes allowed under other code or parameters
     system: str = ""  # the system the runs used: a shipped name or a system file ("": Haidou-1)
+    # "instantaneous": that system with thrusters that deliver their command at once (Params.instantaneous())
+    system_variant: str = ""
     ref_chat: np.ndarray | None = None  # the objectives' per-DOF normalisation (None: Table 3's AGSTA)
     ref_rmse: np.ndarray | None = None
     normalisation: str = ""  # where ref_chat, ref_rmse come from, in words ("": not recorded)
@@ -250,11 +258,44 @@ def controller_of(c, where: str):
                               f"sha256 {str(c.plugin.get('digest', ''))[:12]}): {hint}") from None
 
 
-def provenance_diff(c: Checkpoint, params_vector, where: str = "front") -> list[str]:
-    """What differs between the code, data and parameters that computed ``c`` and this installation's
-    (``params_vector``): empty when a resume or replay under them reproduces the stored numbers. A
-    controller from a plugin must be registered (:func:`controller_of`); its source files are compared
-    with the digest the file records."""
+SYSTEM_VARIANTS = ("", "instantaneous")  # Checkpoint.system_variant
+
+
+def run_digest(c: Checkpoint, params) -> str:
+    """:meth:`arvcas.sim.run.CompiledRun.digest` of the run of ``c``'s study (its controller, its scenario,
+    the accumulators of its objectives) on ``params`` (:class:`arvcas.system.params.Params`): what a
+    replay of ``c`` computes with this installation. Compiles nothing (the cache's manifests answer)."""
+    from arvcas.sim.scenario import loads_scenario
+    from arvcas.sim.simulation import compiled_run
+
+    cfg = loads_scenario(c.scenario_text, "the study scenario")
+    return compiled_run(c.controller, params, cfg, accumulators=objectives_of(c).accumulators()).digest()
+
+
+def objectives_of(c: Checkpoint):
+    """The :class:`arvcas.tuning.study.ObjectivesConfig` of ``c``'s study (from its identity; the paper's
+    when it names none)."""
+    from arvcas.tuning.study import ObjectivesConfig
+
+    obj = json.loads(c.identity or "{}").get("objectives") or {}
+    return ObjectivesConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in obj.items()
+                               if k in ("names", "reference_point", "chat", "constraints", "settling_band")})
+
+
+def restamp_hint(where: str) -> str:
+    return f"check that it replays and re-stamp it: arvcas front restamp {where}"
+
+
+def provenance_diff(c: Checkpoint, params, where: str = "front") -> list[str]:
+    """What differs between the computation that wrote ``c`` and this installation's on ``params`` (a
+    :class:`arvcas.system.params.Params`): empty when a resume or replay reproduces the stored numbers.
+
+    A file with a ``run_digest`` is compared with :func:`run_digest` (the compiled run: an edit of
+    arvcas that leaves the run's generated C unchanged leaves the file valid). An older file records
+    only the hash of the source that wrote it: valid if it equals this installation's
+    (:func:`arvcas.build.provenance.model_hash`), else refused with how to re-stamp it. A controller
+    from a plugin must be registered (:func:`controller_of`); its source files are compared with the
+    digest the file records. The parameter vector must equal the file's."""
     from arvcas.build.provenance import model_hash
 
     out = []
@@ -265,12 +306,17 @@ def provenance_diff(c: Checkpoint, params_vector, where: str = "front") -> list[
 
             out.append(f"the source of controller '{c.controller}' changed ({describe_provenance(c.plugin)[0]}: sha256 "
                        f"{str(c.plugin.get('digest', ''))[:12]} in the file, {now[:12]} now)")
-    if not c.model_hash:
+    pv = np.asarray(params.vector(), dtype=float)
+    if c.run_digest:
+        now = run_digest(c, params)
+        if now != c.run_digest:
+            out.append(f"the compiled run changed (run digest {c.run_digest[:12]} in the file, {now[:12]} now: "
+                       f"the model code or data differ)")
+    elif not c.model_hash:
         out.append("the file records no model hash (written by an older arvcas)")
     elif c.model_hash != model_hash():
-        out.append(f"the model code or data changed (model hash {c.model_hash[:12]} in the file, "
-                   f"{model_hash()[:12]} now)")
-    pv = np.asarray(params_vector, dtype=float)
+        out.append(f"the file records only the hash of the source that wrote it (model hash {c.model_hash[:12]}, "
+                   f"{model_hash()[:12]} now), not the digest of its compiled run; {restamp_hint(where)}")
     if pv.shape != c.params.shape or not np.array_equal(pv, c.params):
         out.append("the study used other parameter values than the packaged file" if pv.shape == c.params.shape
                    else f"the parameter vector has {pv.size} entries, the file's {c.params.size}")
@@ -352,9 +398,15 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
     f.attrs["reference_point"] = np.asarray(c.reference_point, dtype=float)
     f.attrs["versions"] = json.dumps(c.versions, sort_keys=True)
     f.attrs["model_hash"] = c.model_hash
+    if c.run_digest:
+        f.attrs["run_digest"] = c.run_digest
+    if c.restamps:
+        f.attrs["restamps"] = json.dumps(list(c.restamps))
     f.attrs["model_changes"] = json.dumps(list(c.model_changes))
     if c.system:
         f.attrs["system"] = c.system
+    if c.system_variant:
+        f.attrs["system_variant"] = c.system_variant
     if c.plugin:
         f.attrs["plugin"] = json.dumps(c.plugin, sort_keys=True)
     if c.survival:
@@ -416,13 +468,15 @@ def _doc_objectives(f: h5py.File, c: Checkpoint) -> None:
                                              + " (docs/objectives.md), the mean over the draws; NaN when infeasible")
 
 
-def write_checkpoint(c: Checkpoint, path: Path) -> Path:
+def write_checkpoint(c: Checkpoint, path: Path, touch: bool = True) -> Path:
     """Write ``c`` to ``path`` atomically (temp file in the same directory, fsync, rename).
 
-    On any failure the temp file is removed and the previous ``path`` is left as it was.
+    On any failure the temp file is removed and the previous ``path`` is left as it was. ``touch``:
+    set ``updated`` to now (False: keep the study's, for a rewrite that computes nothing).
     """
     path = Path(path)
-    c.updated = _now()
+    if touch or not c.updated:
+        c.updated = _now()
     if not c.created:
         c.created = c.updated
     try:
@@ -491,8 +545,14 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     kw["reference_point"] = _attr(f, "reference_point", path, _point)
     kw["versions"] = _json_attr(f, "versions", path, dict)
     kw["model_hash"] = _s(f.attrs["model_hash"]) if "model_hash" in f.attrs else ""
+    kw["run_digest"] = _s(f.attrs["run_digest"]) if "run_digest" in f.attrs else ""
+    kw["restamps"] = _json_attr(f, "restamps", path, list) if "restamps" in f.attrs else []
     kw["model_changes"] = _json_attr(f, "model_changes", path, list) if "model_changes" in f.attrs else []
     kw["system"] = _s(f.attrs["system"]) if "system" in f.attrs else ""
+    kw["system_variant"] = _s(f.attrs["system_variant"]) if "system_variant" in f.attrs else ""
+    if kw["system_variant"] not in SYSTEM_VARIANTS:
+        raise CheckpointError(f"{path}: system_variant {kw['system_variant']!r}: allowed "
+                              f"{', '.join(repr(v) for v in SYSTEM_VARIANTS)}")
     kw["plugin"] = _json_attr(f, "plugin", path, dict) if "plugin" in f.attrs else {}
     kw["survival"] = _s(f.attrs["survival"]) if "survival" in f.attrs else ""
     kw["normalisation"] = _s(f.attrs["normalisation"]) if "normalisation" in f.attrs else ""

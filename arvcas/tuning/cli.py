@@ -12,7 +12,8 @@ import sys
 from pathlib import Path
 
 __all__ = ["add_tune", "check_tune", "run_tune", "add_front_export", "run_front_export", "add_front_plot",
-           "run_front_plot", "front_plot_outputs", "add_compare", "run_compare"]
+           "run_front_plot", "front_plot_outputs", "add_compare", "run_compare", "add_front_restamp",
+           "run_front_restamp"]
 
 
 # ---- tune -----------------------------------------------------------------------------------------
@@ -116,6 +117,44 @@ def add_front_plot(pl: argparse.ArgumentParser) -> None:
     pl.add_argument("--paper", action="store_true",
                     help="Haidou-1: also mark the paper's Table 3 points (their simulator)")
     add_figure_format(pl)
+
+
+def add_front_restamp(p: argparse.ArgumentParser) -> None:
+    from arvcas.io.cliargs import count_arg
+
+    p.add_argument("fronts", type=Path, nargs="+", metavar="FRONT",
+                   help="front.h5 files or study output directories (every front in them)")
+    p.add_argument("--check", action="store_true",
+                   help="replay and report only; write nothing (exit 1 if a front does not replay bit for bit or "
+                        "its run digest is not today's)")
+    p.add_argument("--threads", type=count_arg(1, 1024, "--threads"), default=None, metavar="N",
+                   help="threads of the replay (default 1)")
+
+
+def run_front_restamp(a: argparse.Namespace) -> int:
+    """Replay every member and the default gains of each front on today's code; where every number is
+    reproduced bit for bit, record today's run digest (docs/provenance.md)."""
+    from arvcas.tuning import checkpoint as ck
+    from arvcas.tuning.front import front_paths, replay_all, restamp
+
+    paths = [f for p in a.fronts for f in front_paths(p)]
+    bad = 0
+    for path in paths:
+        c = ck.read_checkpoint(path)
+        try:
+            r = replay_all(path, "all", a.threads) if a.check else restamp(path, a.threads)
+        except ck.CheckpointError as e:
+            print(f"FAILED {e}")
+            bad += 1
+            continue
+        if a.check:
+            ok = r.bitwise and c.run_digest == r.run_digest and c.system_variant == r.system_variant
+            bad += not ok
+            why = "" if ok or not r.bitwise else "; its run digest is not today's (re-stamp it)"
+            print(f"{'ok' if ok else 'FAILED'} {r.describe()}{why}")
+        else:
+            print(f"{'unchanged' if c.run_digest == r.run_digest else 're-stamped'} {r.describe()}")
+    return 1 if bad else 0
 
 
 def check_front_export(a: argparse.Namespace) -> None:

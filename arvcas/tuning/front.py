@@ -28,8 +28,8 @@ from arvcas.metrics import DOFS, table3
 from arvcas.tuning import checkpoint as ck
 
 __all__ = ["Front", "read_front", "knee_index", "export_front", "plot_front", "plot_fronts", "member_gains",
-           "member_index", "replay", "resolve_front_path", "front_paths", "check_provenance", "check_same_model",
-           "system_params"]
+           "member_index", "replay", "replay_all", "restamp", "Replayed", "resolve_front_path", "front_paths",
+           "check_provenance", "check_same_model", "system_params"]
 
 
 def resolve_front_path(p: str | Path) -> Path:
@@ -406,34 +406,62 @@ def plot_front(front: Front | str | Path, ax=None, **kw):
 
 
 def system_params(c: ck.Checkpoint):
-    """The parameters of the system a checkpoint's study ran on (Haidou-1's when it names none)."""
+    """The parameters of the system a checkpoint's study ran on (Haidou-1's when it names none; with
+    instantaneous thrusters when its ``system_variant`` says so)."""
     from arvcas.system.params import load
     from arvcas.system import load_system
 
-    return load_system(c.system).params if c.system else load()
+    p = load_system(c.system).params if c.system else load()
+    return p.instantaneous() if c.system_variant == "instantaneous" else p
+
+
+def _same(p, c: ck.Checkpoint) -> bool:
+    v = p.vector()
+    return v.shape == c.params.shape and np.array_equal(v, c.params)
+
+
+def _replay_params(c: ck.Checkpoint, path: Path):
+    """(the parameters a replay of ``c`` runs on, the system variant they are): the system's, or, for a
+    study of a system whose file has since gained thruster dynamics, its instantaneous variant when
+    that has exactly the study's parameter vector (the replay then checks every number)."""
+    p = system_params(c)
+    if _same(p, c):
+        return p, c.system_variant
+    if not c.system_variant and _same(p.instantaneous(), c):
+        return p.instantaneous(), "instantaneous"
+    raise ck.CheckpointError(f"{path}: the study used other parameter values than the packaged system's "
+                             f"({c.params.size} values, {p.vector().size} now); a replay cannot reproduce it")
 
 
 def check_provenance(path: str | Path, params, allow: bool, what: str) -> str:
-    """Refuse to re-run a front's members under other model code, data or parameters (``params``: a
-    :class:`arvcas.system.params.Params` or its vector) than the study's: the stored numbers would not be
-    reproduced. With ``allow`` returns what differs (empty if nothing), for the output to record."""
+    """Refuse to re-run a front's members under another compiled run or parameters (``params``: a
+    :class:`arvcas.system.params.Params`) than the study's (:func:`arvcas.tuning.checkpoint.provenance_diff`):
+    the stored numbers would not be reproduced. With ``allow`` returns what differs (empty if nothing),
+    for the output to record."""
     path = resolve_front_path(path)
     c = ck.read_checkpoint(path)
-    vec = params.vector() if hasattr(params, "vector") else params
-    diff = ck.provenance_diff(c, vec, str(path))
+    diff = ck.provenance_diff(c, params, str(path))
     if diff and not allow:
-        raise ck.CheckpointError(f"{what} {path}: {'; '.join(diff)}; a re-run would not reproduce the study "
-                                 f"(--allow-model-change to run anyway; the output records it)")
+        unknown = all(d.endswith(ck.restamp_hint(str(path))) for d in diff)  # an older file: not known to differ
+        raise ck.CheckpointError(f"{what} {path}: {'; '.join(diff)}"
+                                 + ("" if unknown else "; a re-run would not reproduce the study")
+                                 + " (--allow-model-change to run anyway; the output records it)")
     return "; ".join(diff)
 
 
 def check_same_model(a: str | Path, b: str | Path, allow: bool) -> str:
     """Refuse to compare two fronts computed with different model code, data or parameters; with
-    ``allow`` returns what differs (empty if nothing)."""
-    ca, cb = ck.read_checkpoint(resolve_front_path(a)), ck.read_checkpoint(resolve_front_path(b))
+    ``allow`` returns what differs (empty if nothing). Two fronts written by the same source (equal model
+    hashes) compare; so do two whose runs both replay on today's code (:func:`ck.provenance_diff`)."""
+    pa, pb = resolve_front_path(a), resolve_front_path(b)
+    ca, cb = ck.read_checkpoint(pa), ck.read_checkpoint(pb)
     why = []
     if ca.model_hash != cb.model_hash:
-        why.append(f"model hash {ca.model_hash[:12] or 'none'} vs {cb.model_hash[:12] or 'none'}")
+        stale = [f"{p}: {'; '.join(d)}" for p, c in ((pa, ca), (pb, cb))
+                 for d in [ck.provenance_diff(c, system_params(c), str(p))] if d]
+        if stale:
+            why.append(f"model hash {ca.model_hash[:12] or 'none'} vs {cb.model_hash[:12] or 'none'}, and "
+                       + "; ".join(stale))
     if ca.params.shape != cb.params.shape or not np.array_equal(ca.params, cb.params):
         why.append("different parameter vectors")
     da, db = ca.plugin.get("digest", ""), cb.plugin.get("digest", "")
@@ -486,24 +514,141 @@ def member_gains(path: str | Path, index: int):
     return fr.controller, fr.gains[i].copy(), int(fr.draw_seeds[0]), fr.scenario_text
 
 
+def _task(fr: Front, c: ck.Checkpoint, params):
+    """(the study's :class:`~arvcas.tuning.engines.EvalTask`, its objectives for
+    :func:`~arvcas.tuning.run.evaluate_gains`) on ``params``: its controller, draws, scenario,
+    normalisation, CHAT signal and objectives, as the study evaluated them."""
+    from arvcas.sim.scenario import loads_scenario
+    from arvcas.tuning.engines import EvalTask
+
+    cfg = loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)")
+    draws = tuple((int(s), u, ph) for s, u, ph in zip(fr.draw_seeds, fr.draw_uncertainty, fr.draw_phase))
+    ref = None if c.ref_chat is None else (tuple(c.ref_chat), tuple(c.ref_rmse))
+    obj = ck.objectives_of(c)
+    task = EvalTask(controller=fr.controller, draws=draws, cfg=cfg, params=params, ref=ref, chat=obj.chat,
+                    accumulators=obj.accumulators())
+    return task, (obj.objects() if task.accumulators else None)
+
+
+def _evaluate(fr: Front, c: ck.Checkpoint, params, gains: np.ndarray, n_threads: int | None):
+    """:func:`~arvcas.tuning.run.evaluate_gains` of the gain sets ``gains`` as the study evaluated its members."""
+    from arvcas.tuning.engines import LocalEngine
+    from arvcas.tuning.run import evaluate_gains
+
+    task, objs = _task(fr, c, params)
+    return evaluate_gains(LocalEngine(n_threads or 1), task, gains, objs)
+
+
 def replay(path: str | Path, index: int, n_threads: int | None = None):
     """Re-evaluate front member ``index`` on all the study's draws (same code path as the study).
 
     Returns the :class:`~arvcas.tuning.problem.Evaluation` of that one member (F, G, per-DOF metrics).
     """
-    from arvcas.system.params import Params
-    from arvcas.sim.scenario import loads_scenario
-    from arvcas.tuning.engines import EvalTask, LocalEngine
-    from arvcas.tuning.run import evaluate_gains
-
     fr = read_front(path)
     i = _member(fr, index)
-    cfg = loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)")
     c = ck.read_checkpoint(resolve_front_path(path))
     p = system_params(c)
     check_provenance(fr.path, p, False, "replay")
-    draws = tuple((int(s), u, ph) for s, u, ph in zip(fr.draw_seeds, fr.draw_uncertainty, fr.draw_phase))
-    ref = None if c.ref_chat is None else (tuple(c.ref_chat), tuple(c.ref_rmse))
-    task = EvalTask(controller=fr.controller, draws=draws, cfg=cfg, params=p, ref=ref)
-    assert isinstance(p, Params)
-    return evaluate_gains(LocalEngine(n_threads or 1), task, fr.gains[i][None, :])
+    return _evaluate(fr, c, p, fr.gains[i][None, :], n_threads)
+
+
+@dataclass
+class Replayed:
+    """What :func:`replay_all` found: the worst absolute differences of the replayed objectives (``F``)
+    and per-DOF CHAT and RMSE (``metrics``) from the stored ones, over ``members`` front members (and the
+    default gains if ``defaults``); ``run_digest`` of today's run."""
+
+    path: Path
+    members: int
+    defaults: bool
+    F: float
+    metrics: float
+    run_digest: str
+    system_variant: str = ""
+
+    @property
+    def bitwise(self) -> bool:
+        return self.F == 0.0 and self.metrics == 0.0
+
+    def what(self) -> str:
+        return (f"the knee" if self.members == 1 and not self.defaults else
+                f"{self.members} front members" + (" and the default gains" if self.defaults else ""))
+
+    def describe(self) -> str:
+        if self.bitwise:
+            return f"{self.path}: {self.what()}: replayed bit for bit (run digest {self.run_digest[:12]})"
+        return (f"{self.path}: {self.what()}: replayed with max |difference| {self.F:.3g} in the objectives, "
+                f"{self.metrics:.3g} in the per-DOF CHAT/RMSE (run digest {self.run_digest[:12]})")
+
+
+def _differ(a, b) -> float:
+    """Worst absolute difference of two arrays (inf where one is NaN and the other not, 0 where both are)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.shape != b.shape:
+        return float("inf")
+    nan_a, nan_b = np.isnan(a), np.isnan(b)
+    if np.any(nan_a != nan_b):
+        return float("inf")
+    d = np.abs(a[~nan_a] - b[~nan_b])
+    return float(d.max()) if d.size else 0.0
+
+
+def replay_all(path: str | Path, members="all", n_threads: int | None = None, chunk: int = 32) -> Replayed:
+    """Replay front members on today's code (no provenance check: this is the check) and compare their
+    objectives and per-DOF metrics with the stored ones. ``members``: ``"all"`` (every member and the
+    default gains) or ``"knee"`` (the knee alone). Evaluated ``chunk`` gain sets at a time (below
+    :data:`arvcas.sim.run.LOCKSTEP_MIN_RUNS`: no lockstep library is built; its outputs equal the scalar
+    run's to the bit, tests/test_lockstep.py)."""
+    path = resolve_front_path(path)
+    fr = read_front(path)
+    c = ck.read_checkpoint(path)
+    ck.controller_of(c, str(path))
+    p, variant = _replay_params(c, path)
+    if fr.size == 0:
+        raise ck.CheckpointError(f"{path}: the front is empty: nothing to replay")
+    if members == "knee":
+        rows = [fr.knee()]
+        gains, F_ref = fr.gains[rows], fr.F[rows]
+        chat_ref, rmse_ref = fr.chat[:, rows], fr.rmse[:, rows]
+    elif members == "all" and c.table2_chat is None:  # written before the defaults were evaluated
+        gains, F_ref, chat_ref, rmse_ref = fr.gains, fr.F, fr.chat, fr.rmse
+    elif members == "all":
+        gains = np.vstack([fr.gains, fr.table2[None, :]])
+        t2F = fr.table2_F if fr.table2_F.size == fr.F.shape[1] else np.full(fr.F.shape[1], np.nan)
+        F_ref = np.vstack([fr.F, t2F[None, :]])
+        chat_ref = np.concatenate([fr.chat, c.table2_chat[:, None, :]], axis=1)
+        rmse_ref = np.concatenate([fr.rmse, c.table2_rmse[:, None, :]], axis=1)
+    else:
+        raise ValueError(f"members: 'all' or 'knee', got {members!r}")
+    evs = [_evaluate(fr, c, p, gains[i:i + chunk], n_threads) for i in range(0, len(gains), chunk)]
+    F = np.vstack([e.F for e in evs])
+    chat = np.concatenate([e.chat for e in evs], axis=1)
+    rmse = np.concatenate([e.rmse for e in evs], axis=1)
+    return Replayed(path, len(fr.gains) if members == "all" else 1, len(gains) > len(fr.gains), _differ(F, F_ref),
+                    max(_differ(chat, chat_ref), _differ(rmse, rmse_ref)), ck.run_digest(c, p), variant)
+
+
+def restamp(path: str | Path, n_threads: int | None = None) -> Replayed:
+    """Record today's run digest in a front whose every member and default gains replay bit for bit on
+    today's code (:func:`replay_all`); nothing else in the file changes (its objectives, its ``updated``)
+    but, for a study whose system file has since gained thruster dynamics, ``system_variant`` (the variant
+    the replay found); ``restamps`` records when, the digest and what replayed. Refuses (one line) if any
+    number differs: such a front must be re-run, not re-stamped. A front already stamped with today's
+    digest is left as it is."""
+    path = resolve_front_path(path)
+    c = ck.read_checkpoint(path)
+    r = replay_all(path, "all", n_threads)
+    if not r.bitwise:
+        raise ck.CheckpointError(f"front restamp: {r.describe()}: not re-stamped; re-run the study "
+                                 f"(arvcas tune) to get a front of today's code")
+    if c.run_digest == r.run_digest and c.system_variant == r.system_variant:
+        return r
+    from arvcas.build.provenance import model_hash
+
+    c.restamps = list(c.restamps) + [{
+        "time": ck._now(), "run_digest": r.run_digest, "previous_run_digest": c.run_digest,
+        "model_hash": model_hash(), "replayed": r.what() + ", bit for bit",
+        **({"system_variant": r.system_variant} if r.system_variant != c.system_variant else {})}]
+    c.run_digest, c.system_variant = r.run_digest, r.system_variant
+    ck.write_checkpoint(c, path, touch=False)
+    return r

@@ -45,6 +45,7 @@ from pymoo.operators.sampling.rnd import FloatRandomSampling
 
 from arvcas.build.provenance import model_hash
 from arvcas.controllers.base import provenance
+from arvcas.sim.simulation import compiled_run
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.engines import EngineError, EvalTask, make_engine
 from arvcas.tuning.problem import Evaluation, GainProblem, assemble, assemble_objectives, pymoo_F
@@ -225,12 +226,11 @@ def eval_task(study: Study, controller: str, params=None) -> EvalTask:
     params = params if params is not None else study.system_params()
     src = provenance(controller)
     ship = (src["spec"],) if src.get("kind") in ("file", "module") else ()  # an entry point is found by itself
-    accs = ()
+    accs = study.objectives.accumulators()
     if not study.objectives.default:
         from arvcas.metrics import objectives as objectives_mod
 
         objs, cons = study.objectives.objects()
-        accs = objectives_mod.accumulators_of(list(objs) + [o for o, _ in cons])
         for o in list(objs) + [o for o, _ in cons]:
             src = objectives_mod.origin(o.name)
             if src.get("kind") in ("file", "module") and src["spec"] not in ship:
@@ -475,7 +475,7 @@ def run_study(study: Study, out: str | Path, *, controllers: tuple[str, ...] | N
                 if diff:
                     raise TuningError(f"--resume: {study.path} differs from the study in {path} in {', '.join(diff)} "
                                       f"(only [termination] and [engine] may change between sessions)")
-                changed = ck.provenance_diff(existing, (params if params is not None else study.system_params()).vector(),
+                changed = ck.provenance_diff(existing, params if params is not None else study.system_params(),
                                              str(path))
                 if changed and not allow_model_change:
                     raise TuningError(f"--resume {path}: {'; '.join(changed)}; continuing would mix two models in "
@@ -485,6 +485,7 @@ def run_study(study: Study, out: str | Path, *, controllers: tuple[str, ...] | N
                         f"{ck._now()}: resumed at generation {existing.n_gen} with --allow-model-change: "
                         + "; ".join(changed)]
                     existing.model_hash = model_hash()
+                    existing.run_digest = ""  # set by the session below, from the run it compiles
                     existing.plugin = provenance(c)
                     existing.params = (params if params is not None else study.system_params()).vector()
             elif resume:
@@ -530,6 +531,7 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
         f"preparing the compiled run ...")
     say(f"{controller}: objectives normalised by {task.normalisation}")
     key = engine.prepare(task)
+    digest = compiled_run(task.controller, task.params, task.cfg, accumulators=task.accumulators).digest()
     objs = study.objectives.objects() if task.accumulators else None
     n_constr = 1 + len(study.objectives.constraints)
     problem = GainProblem(names, np.log10(lo), np.log10(hi), lambda G: evaluate_gains(engine, task, G, objs),
@@ -540,7 +542,7 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
 
     if c is None:
         c = _new_checkpoint(study, controller, task)
-        c.artifact_key, c.engine = key, engine.describe()
+        c.artifact_key, c.run_digest, c.engine = key, digest, engine.describe()
         t2 = evaluate_gains(engine, task, g0[None, :], objs)
         c.table2_F, c.table2_G = t2.F[0], t2.G[0]
         c.table2_chat, c.table2_rmse = t2.chat[:, 0], t2.rmse[:, 0]
@@ -553,11 +555,11 @@ def _run_one(study: Study, controller: str, path: Path, c: ck.Checkpoint | None,
     else:
         if c.n_gen > 0:
             _restore(alg, term, c)
-        if c.artifact_key and c.artifact_key != key:
-            say(f"{controller}: warning: the compiled run differs from the checkpoint's "
-                f"({key[:12]} vs {c.artifact_key[:12]}): the continued study is not bit-identical to an "
+        if c.run_digest and c.run_digest != digest:
+            say(f"{controller}: warning: the compiled run differs from the checkpoint's (run digest "
+                f"{digest[:12]} vs {c.run_digest[:12]}): the continued study is not bit-identical to an "
                 f"uninterrupted one")
-        c.engine = engine.describe()
+        c.artifact_key, c.run_digest, c.engine = key, digest, engine.describe()
         say(f"{controller}: resuming {path} after generation {c.n_gen} ({c.n_eval} evaluations)")
 
     hist = {k: list(np.asarray(c.history[k], dtype=float)) for k in ck.HISTORY_FIELDS}

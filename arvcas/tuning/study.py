@@ -202,6 +202,15 @@ class ObjectivesConfig:
                       for t in self.constraints))
         return objs, cons
 
+    def accumulators(self) -> tuple:
+        """What the compiled run carries for these objectives and constraints (none for the paper's)."""
+        if self.default:
+            return ()
+        from arvcas.metrics import objectives as objectives_mod
+
+        objs, cons = self.objects()
+        return objectives_mod.accumulators_of(list(objs) + [o for o, _ in cons])
+
 
 @dataclass(frozen=True)
 class Draw:

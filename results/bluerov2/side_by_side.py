@@ -20,8 +20,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 STUDIES = {"instantaneous thrusters, current as a wrench (issue 12)": HERE,
-           "T200 + current + tether, group noise (issue 22)": HERE / "t200_group_noise",
-           "T200 + current + tether, per-axis noise (issue 22, the shipped scenario)": HERE / "t200"}
+           "T200 + current + tether, group noise": HERE / "t200_group_noise",
+           "T200 + current + tether, per-axis noise (the shipped scenario)": HERE / "t200"}
 CONTROLLERS = ("proposed", "agsta", "pid")
 PAIRS = (("proposed", "agsta"), ("pid", "proposed"), ("pid", "agsta"))
 REF = (2.0, 2.0)
@@ -79,7 +79,7 @@ def main() -> str:
     L += ["", "## Knees: CHAT and RMSE per DOF (replays of each front's knee)", "",
           "CHAT in N (x, y, z) and N m (phi, theta, psi) per controller sample, on the commanded wrench (eq. 42) and "
           "on the wrench the thrusters deliver; RMSE in m and rad. With instantaneous thrusters the delivered wrench "
-          "is B sat(u) (a knee file written before issue 22 has no delivered CHAT: it is recomputed from its "
+          "is B sat(u) (a knee file written before the thruster dynamics has no delivered CHAT: it is recomputed from its "
           "thrust series).", "",
           "| study | controller | CHAT commanded (x y z phi theta psi) | CHAT delivered | RMSE | largest thrust N |",
           "|---|---|---|---|---|---|"]
