@@ -313,7 +313,7 @@ def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bo
             a, p = _paper_points()
             ax.plot(*a, "s", mfc="none", mec="0.3", ms=5, label="paper Table 3 AGSTA (their simulator)")
             ax.plot(*p, "^", mfc="none", mec="0.3", ms=5, label="paper Table 3 proposed (their simulator)")
-        norm = "paper's AGSTA" if not any(fr.system for fr in fronts) else "AGSTA at its defaults"
+        norm = _norm_label(fronts)
         ax.set_xlabel(f"f_chat: CHAT / {norm}")
         ax.set_ylabel(f"f_rmse: RMSE / {norm}")
         ax.set_xscale("log")
@@ -327,6 +327,19 @@ def plot_fronts(fronts, ax=None, labels=None, population: bool = True, paper: bo
         return fig
 
     return draw(ax)
+
+
+def _norm_label(fronts) -> str:
+    """The axes' word for the objectives' reference: the fronts' recorded normalisation (compare refuses fronts
+    normalised differently), or for fronts that predate the record, the rule of their day."""
+    rec = {fr.normalisation for fr in fronts} - {""}
+    if len(rec) == 1:
+        (n,) = rec
+        if n.startswith("the study's objectives.normalisation_chat"):
+            return "the study's reference values"
+        if "'s value at the default gains of " in n:
+            return f"{n.split(chr(39) + 's value', 1)[0]} at its defaults"
+    return "paper's AGSTA" if not any(fr.system for fr in fronts) else "AGSTA at its defaults"
 
 
 def _plot_pairs(fronts, labels=None, population: bool = True):
