@@ -863,7 +863,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _parser() -> argparse.ArgumentParser:
-    from arvcas import __version__
+    from arvcas._version import __version__
 
     ap = _Parser(prog="arvcas", description="Haidou-1 ARV + manipulator: CasADi models compiled to C")
     ap.add_argument("--version", action="version", version=f"arvcas {__version__}")

@@ -344,7 +344,7 @@ def _compiler_id() -> str:
 
 
 def _key(c_text: str, compiler: str, cmd_flags: list[str]) -> str:
-    from arvcas import __version__ as arvcas_version  # late: arvcas/__init__ may import this module
+    from arvcas._version import __version__ as arvcas_version
 
     h = hashlib.sha256()
     for part in ("arvcas-build-1", c_text, compiler, "\0".join(cmd_flags), ca.__version__, arvcas_version):
@@ -505,7 +505,7 @@ def _compile(plan: _Plan, work: Path) -> tuple[Path, float]:
 
 
 def _manifest(plan: _Plan, so_sha256: str, compile_s: float) -> dict:
-    from arvcas import __version__ as arvcas_version
+    from arvcas._version import __version__ as arvcas_version
 
     return {
         "format": MANIFEST_FORMAT,

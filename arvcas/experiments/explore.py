@@ -205,7 +205,7 @@ def _front_data(path: Path, checked, members, samples: int, say) -> dict:
 def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_change: bool = False,
               say=None) -> dict:
     """Everything the page shows, as JSON-ready data (module docstring)."""
-    from arvcas import __version__
+    from arvcas._version import __version__
     from arvcas.controllers.gains import DOFS
     from arvcas.metrics.indices import norm_name
 

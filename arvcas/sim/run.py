@@ -28,7 +28,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from arvcas import __version__
+from arvcas._version import __version__
 from arvcas.build import calls, codegen
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller, provenance
