@@ -28,13 +28,6 @@ LAYERS = [name.strip() for layer in CONTRACT["contracts"][0]["layers"] for name 
 # one signal table, sim/signals.py, a leaf module (it imports nothing of arvcas)
 TOP_LEVEL_EXCEPTIONS = {"arvcas.sim.signals"}
 
-# Deliberate circles, each broken by one import inside a function (checked below), with the reason.
-ALLOWED_CYCLE = {
-    ("arvcas.sim.scenario", "arvcas.sim.schedule"): "a scenario file's load refuses a time table too large for "
-                                                    "memory before any work; the table's record size is the schedule's",
-}
-
-
 def _modules() -> dict[str, Path]:
     out = {}
     for f in PKG.rglob("*.py"):
@@ -133,7 +126,7 @@ def test_graph_is_read():
 def test_no_import_cycles():
     """No circle between arvcas modules, counting imports inside functions (the package root, which
     re-exports the public API, is left out: importing any submodule runs it first)."""
-    edges = {m: {t for t, _, lazy in imps if t != "arvcas" and t != m and not (lazy and (m, t) in ALLOWED_CYCLE)}
+    edges = {m: {t for t, _, lazy in imps if t != "arvcas" and t != m}
              for m, imps in GRAPH.items() if m != "arvcas"}
     assert _cycles(edges) == []
 
@@ -166,11 +159,3 @@ def test_exceptions_are_made_inside_a_function():
                 top += [f"{m}:{line} imports {t} at its top" for t, line, lazy in GRAPH[m]
                         if t == target and not lazy and t not in TOP_LEVEL_EXCEPTIONS]
     assert top == []
-
-
-@pytest.mark.parametrize("edge", sorted(ALLOWED_CYCLE))
-def test_allowed_cycle_is_live(edge):
-    """Each listed circle-breaking import is still in the code, inside a function."""
-    m, t = edge
-    lazy = {lz for tt, _, lz in GRAPH[m] if tt == t}
-    assert lazy == {True}, f"{m} -> {t}: no longer imported, or imported at the top"

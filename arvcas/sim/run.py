@@ -98,6 +98,7 @@ class Run:
             raise SimulationError(f"options: expected arvcas.model.uvms.ModelOptions, got {type(self.options).__name__}")
         scenario.check_joint_limits(cfg, params)
         scenario.check_trajectory_limits(cfg, params)
+        schedule.check_table_memory(cfg, params.layout)
         _check_lag(cfg, params)
         return CompiledRun(with_law, cfg, params, self.options, tuple(self.accumulators))
 
