@@ -44,7 +44,7 @@ __all__ = ["page_data", "page_html", "write_page", "member_selection", "explore_
 FORMAT = "arvcas-front-explorer"
 FORMAT_VERSION = 2  # 2: "objectives" (the columns of F, the axes), F of 2-4 objectives
 DEFAULT_SAMPLES = 300
-_TEMPLATES = Path(__file__).resolve().parents[1] / "io" / "templates"
+_TEMPLATES = Path(__file__).resolve().parent / "templates"
 _NAN = 65535  # the quantised code of a missing (non-finite) sample
 
 
