@@ -294,11 +294,12 @@ _QG_DEG = (60.0, 60.0, -60.0, 0.0, 60.0, 0.0)
 
 def _quintic(t: float, q0, qg, t0: float, t1: float):
     """Rest-to-rest quintic from q0 (t <= t0) to qg (t >= t1): (q, qd, qdd), elementwise."""
+    from arvcas.sim.trajectory import rest_to_rest
+
     T = t1 - t0
     s = min(max((t - t0) / T, 0.0), 1.0)
-    pos = 10 * s**3 - 15 * s**4 + 6 * s**5
-    vel = (30 * s**2 - 60 * s**3 + 30 * s**4) / T
-    acc = (60 * s - 180 * s**2 + 120 * s**3) / T**2
+    pos, vel, acc = rest_to_rest(s)
+    vel, acc = vel / T, acc / T**2
     q = [a + (b - a) * pos for a, b in zip(q0, qg)]
     qd = [(b - a) * vel for a, b in zip(q0, qg)]
     qdd = [(b - a) * acc for a, b in zip(q0, qg)]
