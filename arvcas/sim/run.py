@@ -193,7 +193,7 @@ class CompiledRun:
 
     def compiled_functions(self, trace: bool = False) -> list[ca.Function]:
         """Every compiled function a run calls: the run itself and the two that build its time table
-        (what a process without a compiler needs: :func:`arvcas.build.codegen.bundle`)."""
+        (what a process without a compiler needs: :func:`arvcas.build.shipping.bundle`)."""
         return [self.function(trace), *schedule.functions(self.cfg, self.opts, self.params.layout)]
 
     def artifact(self, trace: bool = False) -> dict:
