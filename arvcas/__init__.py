@@ -8,10 +8,9 @@ C as CasADi Functions) and :func:`dynamics` (the same, and their Jacobians, on N
 (a vehicle, its thrusters and its arm described by a file, docs/system-file.md).
 """
 
-__version__ = "0.1.0"
+from arvcas._version import __version__
 
-from arvcas.build.codegen import compiled  # noqa: E402
-from arvcas.build.dynamics import dynamics  # noqa: E402
+from arvcas.build.dynamics import compiled, dynamics  # noqa: E402
 from arvcas.sim.run import CompiledRun, Run  # noqa: E402
 from arvcas.sim.simulation import Result, default_gains, simulate, simulate_batch, simulate_many  # noqa: E402
 from arvcas.controllers import Controller, Gain, register as register_controller  # noqa: E402

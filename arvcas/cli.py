@@ -2,7 +2,8 @@
 
 :data:`TABLE` lists every command and sub-command (``"front export"``) as a :class:`Command`: its
 name, help, ``add_arguments`` and ``run`` (the handlers live with their packages: here, in
-:mod:`arvcas.tuning.cli` and :mod:`arvcas.experiments.cli`), the arguments that are input files,
+:mod:`arvcas.tuning.cli`, :mod:`arvcas.experiments.cli` (``simulate``, ``paper``, ``knees``, ...) and
+:mod:`arvcas.experiments.validation`), the arguments that are input files,
 the files it will write and a ``check`` of the options that do not apply. :func:`main` parses, then,
 before calling ``run``:
 
@@ -29,7 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from arvcas.io.cliargs import add_figure_format, count_arg, refuse, seed_arg
+from arvcas.io.cliargs import (RESULT_FORMATS, add_model_args, add_system_arg, model_options, out_file,
+                                refuse)
 
 __all__ = ["main", "TABLE", "COMMANDS", "Command"]
 
@@ -56,23 +58,6 @@ class Command:
     plugins: bool = False
 
 
-def _model_options(n_quad: int):
-    from arvcas.model.uvms import ModelOptions
-
-    return ModelOptions(n_quad=n_quad)
-
-
-def _add_system_arg(p: argparse.ArgumentParser, default: str = "haidou1") -> None:
-    p.add_argument("--system", "--params", dest="params", metavar="NAME|FILE", type=Path, default=None,
-                   help=f"the system: a shipped one (arvcas systems) or a system file (default: {default})")
-
-
-def _add_model_args(p: argparse.ArgumentParser) -> None:
-    _add_system_arg(p)
-    p.add_argument("--n-quad", metavar="N", type=count_arg(1, 20, "--n-quad"), default=5,
-                   help="Gauss-Legendre points per link for the drag integral (default: 5)")
-
-
 # ---- export-c ----------------------------------------------------------------------------------
 
 
@@ -81,7 +66,7 @@ def _add_export_c(p: argparse.ArgumentParser) -> None:
     p.add_argument("--prefix", default=None,
                    help="prefix of every C symbol; the library is lib<prefix without its last _>.so "
                         "(default: arvcas_<system>_, e.g. arvcas_haidou1_)")
-    _add_model_args(p)
+    add_model_args(p)
 
 
 def _export_c_outputs(a: argparse.Namespace) -> list:
@@ -94,7 +79,7 @@ def _run_export_c(a: argparse.Namespace) -> int:
     from arvcas.build.export import export_c
     from arvcas.system.params import load
 
-    paths = export_c(a.dir, opts=_model_options(a.n_quad), params=load(a.params), prefix=a.prefix, force=a.force)
+    paths = export_c(a.dir, opts=model_options(a.n_quad), params=load(a.params), prefix=a.prefix, force=a.force)
     for path in paths:
         print(path)
     print(f"build with: make -C {a.dir}")
@@ -157,7 +142,7 @@ def _add_export_controller(p: argparse.ArgumentParser) -> None:
                    help="c: the C library (default); ardusub-params: the ardusub controller's gains as an ArduSub "
                         ".param file (QGroundControl, MAVProxy) in DIR, values outside ArduSub's ranges refused "
                         "(docs/ardusub.md)")
-    _add_system_arg(p, "the front's, else haidou1")
+    add_system_arg(p, "the front's, else haidou1")
 
 
 def _check_export_controller(a: argparse.Namespace) -> None:
@@ -251,13 +236,13 @@ def _add_export_fmu(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inputs", choices=("wrench", "thrusters"), default="wrench",
                    help="first inputs: the body wrench tau at the COB in {b} (six, default) or the system's thruster "
                         "commands u (one per thruster)")
-    _add_model_args(p)
+    add_model_args(p)
 
 
 def _run_export_fmu(a: argparse.Namespace) -> int:
     from arvcas.build.fmu import export_fmu
 
-    print(export_fmu(a.file, params=a.params, opts=_model_options(a.n_quad), force=a.force, inputs=a.inputs))
+    print(export_fmu(a.file, params=a.params, opts=model_options(a.n_quad), force=a.force, inputs=a.inputs))
     return 0
 
 
@@ -294,11 +279,12 @@ _QG_DEG = (60.0, 60.0, -60.0, 0.0, 60.0, 0.0)
 
 def _quintic(t: float, q0, qg, t0: float, t1: float):
     """Rest-to-rest quintic from q0 (t <= t0) to qg (t >= t1): (q, qd, qdd), elementwise."""
+    from arvcas.sim.trajectory import rest_to_rest
+
     T = t1 - t0
     s = min(max((t - t0) / T, 0.0), 1.0)
-    pos = 10 * s**3 - 15 * s**4 + 6 * s**5
-    vel = (30 * s**2 - 60 * s**3 + 30 * s**4) / T
-    acc = (60 * s - 180 * s**2 + 120 * s**3) / T**2
+    pos, vel, acc = rest_to_rest(s)
+    vel, acc = vel / T, acc / T**2
     q = [a + (b - a) * pos for a, b in zip(q0, qg)]
     qd = [(b - a) * vel for a, b in zip(q0, qg)]
     qdd = [(b - a) * acc for a, b in zip(q0, qg)]
@@ -315,7 +301,7 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
     import casadi as ca
     import numpy as np
 
-    from arvcas.build.codegen import compiled
+    from arvcas.build.dynamics import compiled
     from arvcas.system.params import default_layout, load, view
 
     params = load(params_path)
@@ -332,7 +318,7 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
                              f"([defaults] scenario): the demo follows its arm motion")
         cfg = scenario.load_scenario(params.default("scenario"))
         scenario.check_joint_limits(cfg, params)
-    f = compiled("arm_wrench", _model_options(n_quad), system=params)
+    f = compiled("arm_wrench", model_options(n_quad), system=params)
     z6 = np.zeros(6)
     if params.structure == default_layout().structure:
         q0 = [math.radians(v) for v in _Q0_DEG]
@@ -355,7 +341,7 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
 
 
 def _add_demo(p: argparse.ArgumentParser) -> None:
-    _add_model_args(p)
+    add_model_args(p)
 
 
 def _run_demo(a: argparse.Namespace) -> int:
@@ -564,156 +550,6 @@ def _run_controllers(a: argparse.Namespace) -> int:
     return 0
 
 
-# ---- knees ---------------------------------------------------------------------------------------
-
-
-def _add_knees(p: argparse.ArgumentParser) -> None:
-    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR",
-                   help="the --out directory of arvcas tune (one front, or one per controller), or a front.h5")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="where to write (created if missing)")
-    add_figure_format(p)
-
-
-def _knees_outputs(a):
-    from arvcas.experiments.knees import front_controllers, output_files
-
-    return _kinds([(f"--out {a.out}", p) for p in output_files(a.out, front_controllers(a.study_dir), a.format or "png")],
-                  _RESULT)
-
-
-def _run_knees(a: argparse.Namespace) -> int:
-    from arvcas.experiments.knees import replay_knees
-    from arvcas.io import files
-
-    files.prepare_dir(a.out, f"--out {a.out}")
-    replay_knees(a.study_dir, a.out, fmt=a.format or "png")
-    return 0
-
-
-# ---- simulate ----------------------------------------------------------------------------------
-
-
-def _add_simulate(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--controller", default=None,
-                   help="a controller: proposed, agsta, traditional, implicit, pid, or a plugin's (arvcas controllers; "
-                        "required unless --from-front)")
-    p.add_argument("--out", type=Path, default=None, metavar="FILE.h5",
-                   help="write the result here: HDF5 (.h5), or a MATLAB file if the name ends in .mat")
-    p.add_argument("--seed", type=seed_arg, default=None, help="sensor-noise seed (default 0; 0 <= seed < 2**63)")
-    p.add_argument("--config", type=Path, default=None, metavar="FILE",
-                   help="scenario file (default: the system's scenario)")
-    p.add_argument("--from-front", type=Path, default=None, metavar="FRONT.h5",
-                   help="replay a member of a tuning front (with --index)")
-    p.add_argument("--index", type=int, default=None, help="front member to replay")
-    p.add_argument("--allow-model-change", action="store_true",
-                   help="with --from-front: replay even if the model code or parameters changed since the study "
-                        "(the result records it)")
-    _add_model_args(p)
-
-
-def _check_simulate(a: argparse.Namespace) -> None:
-    if a.from_front is None:
-        refuse(a, ("index", "allow_model_change"), "only with --from-front")
-    elif a.index is None:
-        raise ValueError("--from-front needs --index I")
-
-
-def _metrics_table(chat, rmse, held=(True,) * 6) -> str:
-    from arvcas.controllers.gains import DOFS
-
-    lines = [f"{'DOF':>6} {'CHAT':>12} {'RMSE':>12}"]
-    for d, c, r, k in zip(DOFS, chat, rmse, held):
-        lines.append(f"{d:>6} {c:12.5g} " + (f"{r:12.5g}" if k else f"{'not held':>12}"))
-    return "\n".join(lines)
-
-
-def _drift_note(cfg, eta) -> str | None:
-    """Without a position fix (docs/sensors.md): what is held, and the horizontal drift, reported, not penalised."""
-    from arvcas.controllers.gains import DOFS
-    from arvcas.sim import scenario
-
-    held = scenario.held_dofs(cfg)
-    if all(held):
-        return None
-    import numpy as np
-
-    xy = np.asarray(eta)[:, 0:2] - np.asarray(cfg.initial_eta_d)[0:2]
-    d = np.hypot(xy[:, 0], xy[:, 1])
-    return (f"held: {', '.join(n for n, k in zip(DOFS, held) if k)} (no position sensor); RMSE on those only. "
-            f"horizontal drift (not held): {d[-1]:.4g} m at the end (x {xy[-1, 0]:+.4g}, y {xy[-1, 1]:+.4g} m), "
-            f"at most {d.max():.4g} m")
-
-
-def _run_simulate(a: argparse.Namespace) -> int:
-    from arvcas.io import results
-    from arvcas.sim import scenario
-    from arvcas.system.params import load
-    from arvcas.sim.simulation import simulate
-
-    if a.out is not None:
-        results.check_dir(a.out.parent, f"--out {a.out}")
-    params = load(a.params)
-    if a.from_front is not None and a.params is None:  # the front's own system
-        from arvcas.tuning import checkpoint as ck
-        from arvcas.tuning.front import resolve_front_path, system_params
-
-        params = system_params(ck.read_checkpoint(resolve_front_path(a.from_front)))
-    cfg = scenario.load_scenario(a.config if a.config is not None else params.default("scenario"))
-    gains = None
-    controller, seed = a.controller, a.seed
-    if a.from_front is not None:
-        from arvcas.tuning.front import check_provenance, member_gains
-
-        changed = check_provenance(a.from_front, params, a.allow_model_change, "--from-front")
-        controller_f, gains, seed_f, cfg_text = member_gains(a.from_front, a.index)
-        if controller is not None and controller != controller_f:
-            raise ValueError(f"--controller {controller} differs from the front's controller {controller_f}")
-        controller = controller_f
-        seed = seed_f if seed is None else seed
-        if a.config is None and cfg_text:
-            cfg = scenario.loads_scenario(cfg_text, f"{a.from_front} (study scenario)")
-    if controller is None:
-        raise ValueError("--controller: required (proposed, agsta, traditional, implicit, pid, or a plugin's: "
-                         "arvcas controllers)")
-    r = simulate(controller, gains=gains, seed=0 if seed is None else seed, params=params, cfg=cfg,
-                 opts=_model_options(a.n_quad))
-    if a.from_front is not None and changed:
-        r.meta["model_change_allowed"] = changed
-        print(f"note: replayed under another model than the study's ({changed}), as allowed by --allow-model-change")
-    status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s" + (
-        f": {r.meta['failure']}" if r.meta.get("failure") else "")
-    print(f"{controller}: seed {r.seed}, {r.t[-1]:g} s, {status}")
-    print(_metrics_table(r.chat, r.rmse, scenario.held_dofs(cfg)))
-    if (note := _drift_note(cfg, r.eta)) is not None:
-        print(note)
-    if a.out is not None and a.out.suffix == ".mat":
-        from arvcas.io.matfile import write_result_mat
-
-        print(f"wrote {write_result_mat(r, a.out)}")
-    elif a.out is not None:
-        print(f"wrote {results.write_result(r, a.out)}")
-    return 0 if r.ok else 1
-
-
-# ---- paper -------------------------------------------------------------------------------------
-
-
-def _add_paper(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
-    p.add_argument("--seed", type=seed_arg, default=0, help="sensor-noise seed shared by the runs (default 0)")
-    add_figure_format(p, "Figures 5-11")
-
-
-def _run_paper(a: argparse.Namespace) -> int:
-    from arvcas.experiments.paper import run_paper
-
-    out = run_paper(a.out, seed=a.seed, fmt=a.format or "png")
-    print((a.out / "table3.md").read_text())
-    # the job succeeded when every run completed; whether the paper's comparison reproduces is
-    # a finding, reported in table3.md, not an error
-    return 0 if all(r.ok for r in out["results"].values()) else 1
-
-
 # ---- bench -------------------------------------------------------------------------------------
 
 
@@ -760,32 +596,6 @@ def _run_bench(a: argparse.Namespace) -> int:
 # ---- declared outputs -------------------------------------------------------------------------------------
 
 
-def _kinds(outs, formats: dict[str, str]) -> list:
-    """``(label, path)`` outputs with the kind (:mod:`arvcas.io.files`) each will be written as, by suffix:
-    ``formats`` maps ``h5`` or ``mat`` to the arvcas format written there (others: by suffix)."""
-    from arvcas.io.matfile import mat_kind
-
-    kinds = {"h5": formats.get("h5"), "mat": mat_kind(formats["mat"]) if "mat" in formats else None}
-    return [(lab, p, kinds.get(p.suffix.lower().lstrip("."))) for lab, p in outs]
-
-
-def _out_file(dest: str, label: str | None = None, **formats: str) -> Paths:
-    def outs(a):
-        p = getattr(a, dest)
-        return [] if p is None else _kinds([(label or f"--{dest.replace('_', '-')}", Path(p))], formats)
-
-    return outs
-
-
-_RESULT = {"h5": "arvcas-result", "mat": "arvcas-result"}  # io.results.FORMAT, io.matfile's "arvcas-result"
-
-
-def _paper_outputs(a):
-    from arvcas.experiments.paper import output_files
-
-    return _kinds([(f"--out {a.out}", p) for p in output_files(a.out, fmt=a.format or "png")], _RESULT)
-
-
 def _bench_outputs(a):
     return [(f"--out {a.out}", a.out / n) for n in ("bench.json", "bench.md")]
 
@@ -804,7 +614,7 @@ def _table() -> tuple[Command, ...]:
                 inputs=(("config", "file"), ("params", "system"), ("front", "front")),
                 outputs=_export_controller_outputs, check=_check_export_controller, plugins=True),
         Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
-                _add_export_fmu, _run_export_fmu, inputs=(("params", "system"),), outputs=_out_file("file", "FILE.fmu")),
+                _add_export_fmu, _run_export_fmu, inputs=(("params", "system"),), outputs=out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
         Command("params", "list every parameter of a system: name (what identify --free takes), SI value, unit, "
                           "source", _add_params, _run_params),
@@ -814,25 +624,25 @@ def _table() -> tuple[Command, ...]:
                 "an arm) as a system file, in arvcas's body frame (docs/importing.md)", _add_import_uuv,
                 _run_import_uuv, inputs=(("description", "description", "robot description"),
                                          ("thruster_manager", "file"), ("check_tam", "file")),
-                outputs=_out_file("out"), check=_check_import_uuv),
+                outputs=out_file("out"), check=_check_import_uuv),
         Command("controllers", "list the controllers: the package's, the plugins' (entry points, --plugin) and "
                 "where each comes from", _add_controllers, _run_controllers, plugins=True),
         Command("knees", "replay the knee of every front of a study directory: result files, figures, a table",
-                _add_knees, _run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=_knees_outputs,
+                x.add_knees, x.run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=x.knees_outputs,
                 plugins=True),
         Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
                 _add_demo, _run_demo, inputs=(("params", "system"),)),
         Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
-                _add_simulate, _run_simulate, inputs=(("config", "file"), ("params", "system"), ("from_front", "front")),
-                outputs=_out_file("out", **_RESULT), check=_check_simulate, plugins=True),
+                x.add_simulate, x.run_simulate, inputs=(("config", "file"), ("params", "system"), ("from_front", "front")),
+                outputs=out_file("out", **RESULT_FORMATS), check=x.check_simulate, plugins=True),
         Command("paper", "the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
-                _add_paper, _run_paper, outputs=_paper_outputs),
+                x.add_paper, x.run_paper, outputs=x.paper_outputs),
         Command("bench", "measure plant, closed-loop and compile speed; write bench.json and bench.md",
                 _add_bench, _run_bench, outputs=_bench_outputs),
         Command("tune", "NSGA-II on the CHAT/RMSE front from a study file (resumable, local or Dask)",
                 t.add_tune, t.run_tune, inputs=(("study", "file", "study file"),), check=t.check_tune, plugins=True),
         Command("front export", "the front as CSV or JSON (stdout, or --out FILE), or a MATLAB .mat file",
-                t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=_out_file("out", mat="arvcas-front"),
+                t.add_front_export, t.run_front_export, inputs=(("file", "front"),), outputs=out_file("out", mat="arvcas-front"),
                 check=t.check_front_export),
         Command("front plot", "plot the front, the default gains (Haidou-1: Table 2) on the same draws and the knee "
                 "point (PNG, PDF or SVG)", t.add_front_plot,
@@ -882,7 +692,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _parser() -> argparse.ArgumentParser:
-    from arvcas import __version__
+    from arvcas._version import __version__
 
     ap = _Parser(prog="arvcas", description="Haidou-1 ARV + manipulator: CasADi models compiled to C")
     ap.add_argument("--version", action="version", version=f"arvcas {__version__}")

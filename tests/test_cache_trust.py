@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from arvcas.build import codegen
+from arvcas.build import codegen, dynamics
 
 SLOW_BUILD = """
 import signal, sys
@@ -69,8 +69,8 @@ def test_cache_without_writable_lock_files_serves_verified_artifacts(tmp_path, m
     cache = tmp_path / "cache"
     monkeypatch.setenv("ARVCAS_CACHE", str(cache))
     monkeypatch.setattr(codegen, "_DESCRIBED", {})
-    monkeypatch.setattr(codegen, "_COMPILED", {})
-    f = codegen.compiled("thrust")
+    monkeypatch.setattr(dynamics, "_PLANT_COMPILED", {})
+    f = dynamics.compiled("thrust")
     path = codegen.artifact_of(f)["path"]
     real_open = os.open
 
@@ -81,10 +81,10 @@ def test_cache_without_writable_lock_files_serves_verified_artifacts(tmp_path, m
 
     monkeypatch.setattr(codegen.os, "open", read_only)
     monkeypatch.setattr(codegen, "_DESCRIBED", {})
-    monkeypatch.setattr(codegen, "_COMPILED", {})
+    monkeypatch.setattr(dynamics, "_PLANT_COMPILED", {})
     before = codegen.stats()
     with caplog.at_level(logging.INFO, logger=codegen.__name__):
-        g = codegen.compiled("thrust")
+        g = dynamics.compiled("thrust")
     after = codegen.stats()
     assert after["disk_hit"] == before["disk_hit"] + 1 and after["compile"] == before["compile"]
     assert codegen.artifact_of(g)["path"] == path

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from arvcas.build import codegen as C
+from arvcas.build.dynamics import compiled
 from arvcas.model import uvms
 from arvcas.system.params import load
 
@@ -358,9 +359,9 @@ def test_other_opt_level_is_another_artifact(fresh_cache):
 
 def test_compiled_unknown_name():
     with pytest.raises(ValueError, match="allowed: vehicle_rhs, arm_wrench, uvms_rhs, allocate, thrust"):
-        C.compiled("uvms")
+        compiled("uvms")
     with pytest.raises(ValueError, match="ModelOptions"):
-        C.compiled("thrust", opts={"n_quad": 5})
+        compiled("thrust", opts={"n_quad": 5})
 
 
 def test_isa_flags_follow_the_cpu_and_the_environment(monkeypatch):

@@ -13,6 +13,7 @@ import re
 import time
 import tomllib
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -113,8 +114,6 @@ def test_scenario_other_units_convert():
 
 
 @pytest.mark.parametrize("old,new,fragment", [
-    ("duration = { value = 100.0,", "duration = { value = 30000.0,",
-     "time.duration: the run's time table (300001 samples of 2 plant steps) would need about 2.58 GB, more than the 2 GB cap"),
     ("duration = { value = 100.0,", "duration = { value = 1e9,", "time.duration: value must be <= 1e+06 s, got 1000000000.0"),
     ("h_plant = { value = 0.05,", "h_plant = { value = 1e-9,", "time.h_plant: value must be >= 1e-06 s, got 1e-09"),
     ("h_plant = { value = 0.05,", "h_plant = { value = 0.00001,", "time.h: h / h_plant = 10000 plant steps per sample, at most 1000"),
@@ -134,9 +133,51 @@ def test_time_table_estimate_is_the_table():
     cfg = dataclasses.replace(load_scenario(), time_duration=3.0)
     from arvcas.sim import schedule
 
-    assert scenario.table_bytes(load_scenario()) == pytest.approx(8.62e6, rel=0.01)  # 100 s at h_plant = 0.05 s
+    assert schedule.table_bytes(load_scenario()) == pytest.approx(8.62e6, rel=0.01)  # 100 s at h_plant = 0.05 s
     tab = schedule.table(cfg, ap.load().vector())
-    assert scenario.table_bytes(cfg) == tab.time.nbytes + tab.arm.nbytes
+    assert schedule.table_bytes(cfg) == tab.time.nbytes + tab.arm.nbytes
+
+
+def _scenario_text(system: str) -> str:
+    from arvcas.system import resolve
+
+    return Path(resolve(system).params.default("scenario")).read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("system,old,duration,size", [
+    ("haidou1", "duration = { value = 100.0,", 30000.0, "2.58 GB"),
+    ("bluerov2", "duration = { value = 60.0,", 20000.0, "3.6 GB"),
+])
+def test_time_table_too_large_refused_before_compile(tmp_path, monkeypatch, system, old, duration, size):
+    """A scenario whose time table for the run's system exceeds the cap is refused by Run.compile, one line
+    naming the file and time.duration, before anything is built."""
+    from arvcas.build import codegen
+    from arvcas.sim.run import Run
+
+    monkeypatch.setattr(codegen, "build_described", lambda *a, **k: pytest.fail("built before the check"))
+    p = tmp_path / "s.toml"
+    text = _scenario_text(system)
+    assert old in text
+    p.write_text(text.replace(old, f"duration = {{ value = {duration},"))
+    with pytest.raises(ScenarioError) as ei:
+        Run("proposed", str(p), system).compile()
+    msg = str(ei.value)
+    assert "\n" not in msg and msg.startswith(f"{p}: time.duration: the run's time table (") and size in msg, msg
+
+
+def test_time_table_check_uses_the_systems_record():
+    """The estimate is the system's record size: 8000 s of the BlueROV2's scenario (107 doubles a record, no
+    arm) is 1.44 GB and passes; the same with Haidou-1's record (215 doubles, six joints) would be refused."""
+    from arvcas.sim import schedule
+    from arvcas.system import resolve
+
+    bluerov2, haidou1 = resolve("bluerov2").params.layout, resolve("haidou1").params.layout
+    cfg = dataclasses.replace(load_scenario(resolve("bluerov2").params.default("scenario")), time_duration=8000.0)
+    assert (schedule.records(bluerov2).size, schedule.records(haidou1).size) == (107, 215)
+    assert schedule.table_bytes(cfg, bluerov2) == scenario.n_samples(cfg) * 21 * 107 * 8
+    schedule.check_table_memory(cfg, bluerov2)
+    with pytest.raises(ScenarioError, match="time.duration: the run's time table"):
+        schedule.check_table_memory(cfg, haidou1)
 
 
 def test_with_h_checks_the_field_rule():

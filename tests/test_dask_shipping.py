@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from arvcas.build import codegen
+from arvcas.build import codegen, shipping
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning import engines, load_study, run_study
 
@@ -98,7 +98,7 @@ def test_a_worker_refuses_libraries_of_another_platform(tmp_path, cluster):
     alien = dict(bundle, platform={**bundle["platform"], "machine": "riscv128"})
     client = distributed.Client(address, timeout="30s")
     try:
-        fut = client.submit(codegen.preload, alien, pure=False)
+        fut = client.submit(shipping.preload, alien, pure=False)
         with pytest.raises(Exception) as e:
             fut.result(timeout=60)
         msg = str(e.value)
@@ -117,7 +117,7 @@ def test_a_bundle_needing_an_instruction_set_the_cpu_lacks_is_refused(monkeypatc
     needs = dict(bundle, platform={**bundle["platform"], "isa": ["-mavx"]})
     monkeypatch.setattr(codegen, "supported_isa", lambda: ())
     with pytest.raises(codegen.CacheError, match="need -mavx, which this CPU lacks.*ARVCAS_ISA=baseline") as e:
-        codegen.preload(needs)
+        shipping.preload(needs)
     assert "\n" not in str(e.value)
     monkeypatch.setattr(codegen, "supported_isa", lambda: ("-mavx",))
-    assert codegen.preload(dict(bundle, platform={**bundle["platform"], "isa": []})) >= 0  # baseline runs anywhere
+    assert shipping.preload(dict(bundle, platform={**bundle["platform"], "isa": []})) >= 0  # baseline runs anywhere

@@ -24,7 +24,7 @@ from fmpy.fmi2 import FMU2Model, FMU2Slave  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
 from arvcas.build import fmu as fmu_mod  # noqa: E402
-from arvcas.build.codegen import compiled  # noqa: E402
+from arvcas.build.dynamics import compiled  # noqa: E402
 from arvcas.io import files  # noqa: E402
 
 from trust_helpers import bounded  # noqa: E402

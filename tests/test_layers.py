@@ -1,62 +1,32 @@
-"""The package's layers (docs/architecture.md): no import circle between arvcas modules, and no layer
-importing one above it. Imports inside functions count as well as those at the top of a module.
+"""The package's layers (docs/architecture.md).
 
-The import graph is read from the source with ``ast`` (nothing is imported): ``import arvcas.x.y`` and
+The layers themselves are import-linter's layers contract in pyproject.toml (``lint-imports`` at the
+repository's root runs it; the imports against the order are its ``ignore_imports``, each with its reason).
+What that contract cannot say is checked here from the source, read with ``ast`` (nothing is imported):
+no import circle between modules of one layer, every module in a layer of the contract, and each exception
+made inside a function (an import at a module's top would load the higher layer with the lower one).
+Imports inside functions count as well as those at the top of a module. ``import arvcas.x.y`` and
 ``from arvcas.x import y`` are edges to ``arvcas.x.y`` (a module, when it is one) or to the package
-``arvcas.x``; relative imports are resolved. ``from arvcas import __version__`` is allowed everywhere (the
-version is set before the package's ``__init__`` imports anything); any other import of the package root
-``arvcas`` (the public facade) is an import of the top layer.
+``arvcas.x``; relative imports are resolved.
 """
 
 from __future__ import annotations
 
 import ast
+import fnmatch
+import tomllib
 from pathlib import Path
 
 import pytest
 
 PKG = Path(__file__).resolve().parents[1] / "arvcas"
 
-# docs/architecture.md's table, lowest first: a module may import its own layer and those before it.
-LAYERS = (
-    ("files", ("arvcas.io.files",)),  # atomic writes, locks, bounded reads: used by every layer that touches a file
-    ("plugins", ("arvcas.io.plugins",)),  # code from outside the package: used by every registry
-    ("parameters and systems", ("arvcas.system",)),
-    ("models", ("arvcas.model",)),
-    ("build", ("arvcas.build",)),
-    ("controllers", ("arvcas.controllers",)),
-    ("simulation", ("arvcas.sim",)),
-    ("metrics", ("arvcas.metrics",)),
-    ("I/O", ("arvcas.io",)),
-    ("tuning", ("arvcas.tuning",)),
-    ("logs, validation and identification", ("arvcas.ident",)),
-    ("experiments", ("arvcas.experiments",)),
-    ("command line and the public facade", ("arvcas.cli", "arvcas")),
-    ("benchmark", ("arvcas.bench",)),  # arvcas bench: measures every layer, runs the command line
-)
-
-# Deliberate imports against the order, each inside a function (checked below), with the reason.
-ALLOWED_UPWARD = {
-    ("arvcas.system.params", "arvcas.model.manipulator"): "the physical check evaluates the model's own matrices",
-    ("arvcas.system.params", "arvcas.model.thrusters"): "the physical check evaluates the model's own matrices",
-    ("arvcas.system.params", "arvcas.model.vehicle"): "the physical check evaluates the model's own matrices",
-    ("arvcas.build.fmu", "arvcas.sim.scenario"): "an FMU's start values are the system's default scenario's",
-    ("arvcas.controllers.base", "arvcas.sim.signals"): "a registered law's signals are checked against the one "
-                                                       "signal table (sim/signals.py imports nothing of arvcas)",
-}
-# Imports against the order at a module's top: controllers declare their traced signals with the run's
-# one signal table, sim/signals.py, a leaf module (it imports nothing of arvcas).
-ALLOWED_UPWARD_TOP = {
-    ("arvcas.controllers.pid", "arvcas.sim.signals"),
-    ("arvcas.controllers.smc", "arvcas.sim.signals"),
-}
-
-# Deliberate circles, each broken by one import inside a function (checked below), with the reason.
-ALLOWED_CYCLE = {
-    ("arvcas.sim.scenario", "arvcas.sim.schedule"): "a scenario file's load refuses a time table too large for "
-                                                    "memory before any work; the table's record size is the schedule's",
-}
-
+ROOT = PKG.parent
+CONTRACT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["importlinter"]
+LAYERS = [name.strip() for layer in CONTRACT["contracts"][0]["layers"] for name in layer.split(":")]
+# exceptions that may stand at a module's top: the controllers declare their traced signals with the run's
+# one signal table, sim/signals.py, a leaf module (it imports nothing of arvcas)
+TOP_LEVEL_EXCEPTIONS = {"arvcas.sim.signals"}
 
 def _modules() -> dict[str, Path]:
     out = {}
@@ -90,8 +60,6 @@ def _imports(name: str, path: Path) -> list[tuple[str, int, bool]]:
                     mod = child.module or ""
                 if mod.split(".")[0] != "arvcas":
                     continue
-                if mod == "arvcas" and [a.name for a in child.names] == ["__version__"]:
-                    continue
                 for a in child.names:
                     sub = f"{mod}.{a.name}"
                     out.append((sub if sub in MODULES else mod, child.lineno, in_function))
@@ -104,14 +72,15 @@ def _imports(name: str, path: Path) -> list[tuple[str, int, bool]]:
 GRAPH = {m: _imports(m, p) for m, p in MODULES.items()}
 
 
-def layer_of(module: str) -> int:
-    best, level = -1, None
-    for i, (_, prefixes) in enumerate(LAYERS):
-        for pre in prefixes:
-            if (module == pre or module.startswith(pre + ".")) and len(pre) > best:
-                best, level = len(pre), i
-    assert level is not None, f"{module}: in no layer of LAYERS (docs/architecture.md)"
-    return level
+def layer_of(module: str) -> str | None:
+    """The contract's layer that holds ``module`` (the longest name that is it or a package above it)."""
+    held = [name for name in LAYERS if module == name or module.startswith(name + ".")]
+    return max(held, key=len, default=None)
+
+
+def _ignored() -> list[tuple[str, str]]:
+    """(importer pattern, imported) of each of the contract's ``ignore_imports``."""
+    return [tuple(part.strip() for part in rule.split("->")) for rule in CONTRACT["contracts"][0]["ignore_imports"]]
 
 
 def _cycles(edges: dict[str, set[str]]) -> list[list[str]]:
@@ -157,29 +126,36 @@ def test_graph_is_read():
 def test_no_import_cycles():
     """No circle between arvcas modules, counting imports inside functions (the package root, which
     re-exports the public API, is left out: importing any submodule runs it first)."""
-    edges = {m: {t for t, _, lazy in imps if t != "arvcas" and t != m and not (lazy and (m, t) in ALLOWED_CYCLE)}
+    edges = {m: {t for t, _, lazy in imps if t != "arvcas" and t != m}
              for m, imps in GRAPH.items() if m != "arvcas"}
     assert _cycles(edges) == []
 
 
-def test_layers_import_only_downward():
-    bad = []
-    for m, imps in sorted(GRAPH.items()):
-        for t, line, lazy in imps:
-            if layer_of(t) <= layer_of(m):
-                continue
-            if (m, t) in ALLOWED_UPWARD and lazy or (m, t) in ALLOWED_UPWARD_TOP:
-                continue
-            bad.append(f"{MODULES[m].relative_to(PKG.parent)}:{line}: {m} ({LAYERS[layer_of(m)][0]}) imports "
-                       f"{t} ({LAYERS[layer_of(t)][0]})" + (" inside a function" if lazy else ""))
-    assert not bad, "imports from a higher layer:\n" + "\n".join(bad)
+def test_layers_contract(capsys):
+    """import-linter's layers contract (pyproject.toml) holds: no module imports a layer above its own,
+    except the listed ``ignore_imports`` (an entry that no longer matches an import fails too)."""
+    from importlinter.cli import lint_imports
+
+    code = lint_imports(config_filename=str(ROOT / "pyproject.toml"), no_cache=True, no_logo=True)
+    assert code == 0, capsys.readouterr().out
 
 
-@pytest.mark.parametrize("edge", sorted(ALLOWED_UPWARD) + sorted(ALLOWED_UPWARD_TOP) + sorted(ALLOWED_CYCLE))
-def test_allowed_exceptions_are_live(edge):
-    """Each listed exception is still in the code (a stale entry would silently allow a new one)."""
-    m, t = edge
-    lazy = {lz for tt, _, lz in GRAPH[m] if tt == t}
-    assert lazy, f"{m} no longer imports {t}: remove it from the exceptions"
-    if edge not in ALLOWED_UPWARD_TOP:
-        assert lazy == {True}, f"{m} imports {t} at its top: only an import inside a function is allowed"
+def test_every_module_is_in_a_layer():
+    """A module that no layer of the contract holds would be checked by nothing (the I/O layer names its
+    modules one by one, since files and plugins are the ground floor)."""
+    # the package root (the public facade, above every layer), its version (a leaf, below every layer) and
+    # the I/O package's docstring-only __init__
+    outside = ("arvcas", "arvcas._version", "arvcas.io")
+    assert [m for m in MODULES if m not in outside and layer_of(m) is None] == []
+
+
+def test_exceptions_are_made_inside_a_function():
+    """Each import against the order that the contract ignores is made inside a function (the signal
+    table, a leaf module, excepted), so the higher layer is not loaded with the lower one."""
+    top = []
+    for pattern, target in _ignored():
+        for m in MODULES:
+            if fnmatch.fnmatchcase(m, pattern):
+                top += [f"{m}:{line} imports {t} at its top" for t, line, lazy in GRAPH[m]
+                        if t == target and not lazy and t not in TOP_LEVEL_EXCEPTIONS]
+    assert top == []

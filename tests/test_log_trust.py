@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
-from arvcas.ident import logs
+from arvcas.ident import logs, streams
 from arvcas.ident.logs import LogError, load_log
 
 T = np.arange(0.0, 20.0 + 1e-9, 0.02)
@@ -82,17 +82,17 @@ def test_a_row_with_another_number_of_fields_than_the_header_is_refused_naming_i
     p = _stream(tmp_path, b"t,a,b\n0,1,2\n\n0.01,1,2\n" + row + b"0.03,1,2\n")  # row 5 of the file
     why = r" \(a decimal comma\?" if fields > 3 else "$"
     with pytest.raises(LogError, match=rf"^{p}: row 5: {fields} fields, the header has 3{why}"):
-        logs._read_csv(p, ["a"], "t", "m.log.toml")  # even where the column read is before the extra fields
+        streams.read_csv(p, ["a"], "t", "m.log.toml")  # even where the column read is before the extra fields
 
 
 def test_a_decimal_comma_row_is_named_in_a_large_file(tmp_path, monkeypatch):
-    monkeypatch.setattr(logs, "CSV_BLOCK_BYTES", 64)  # many blocks: the row number counts across them
+    monkeypatch.setattr(streams, "CSV_BLOCK_BYTES", 64)  # many blocks: the row number counts across them
     rows = [f"{0.01 * k:.2f},{k},{2 * k}" for k in range(200)]
     rows[150] = "1,50,3,5"  # 3,5 written with a decimal comma
     p = _stream(tmp_path, ("t,a,b\n" + "\n".join(rows) + "\n").encode())
     with pytest.raises(LogError, match=rf"^{p}: row 152: 4 fields, the header has 3 \(a decimal comma\? fields are "
                                        rf"separated by commas and decimals take a point\)$"):
-        logs._read_csv(p, ["a", "b"], "t", "m.log.toml")
+        streams.read_csv(p, ["a", "b"], "t", "m.log.toml")
 
 
 @pytest.mark.parametrize("damage", ["truncated", "flipped", "not gzip"])
@@ -106,18 +106,18 @@ def test_a_corrupt_gzip_log_is_one_line(tmp_path, damage):
         raw = b"t,a\n0,1\n"
     p = _stream(tmp_path, raw, "s.csv.gz")
     with pytest.raises(LogError, match=rf"^{p}: not a readable gzip file \(.+\)$") as e:
-        logs._read_csv(p, ["a"], "t", "m.log.toml")
+        streams.read_csv(p, ["a"], "t", "m.log.toml")
     assert "\n" not in str(e.value)
 
 
 def test_a_log_is_bounded_by_the_values_it_keeps(tmp_path, monkeypatch):
     p = _stream(tmp_path, ("t,a,b,c\n" + "".join(f"{k},{k},{k},{k}\n" for k in range(1000))).encode())
-    monkeypatch.setattr(logs, "CSV_BLOCK_BYTES", 256)
-    monkeypatch.setattr(logs, "MAX_CSV_VALUES", 2500)
-    assert logs._read_csv(p, ["a"], "t", "m").time.size == 1000  # 2 columns kept: 2000 values
-    with pytest.raises(LogError, match=r"more than 833 rows of the 3 columns read \(arvcas.ident.logs.MAX_SAMPLES, "
+    monkeypatch.setattr(streams, "CSV_BLOCK_BYTES", 256)
+    monkeypatch.setattr(streams, "MAX_CSV_VALUES", 2500)
+    assert streams.read_csv(p, ["a"], "t", "m").time.size == 1000  # 2 columns kept: 2000 values
+    with pytest.raises(LogError, match=r"more than 833 rows of the 3 columns read \(arvcas.ident.streams.MAX_SAMPLES, "
                                        r"MAX_CSV_VALUES\)"):
-        logs._read_csv(p, ["a", "b"], "t", "m")
+        streams.read_csv(p, ["a", "b"], "t", "m")
 
 
 _floats = st.floats(allow_nan=False, allow_infinity=False, width=64)
@@ -139,12 +139,12 @@ def test_any_block_size_reads_the_numbers_written(tmp_path_factory, n, m, block,
     d = tmp_path_factory.mktemp("csv")
     p = d / ("s.csv.gz" if gz else "s.csv")
     p.write_bytes(gzip.compress(text) if gz else text)
-    old = logs.CSV_BLOCK_BYTES
-    logs.CSV_BLOCK_BYTES = block
+    old = streams.CSV_BLOCK_BYTES
+    streams.CSV_BLOCK_BYTES = block
     try:
-        tab = logs._read_csv(p, [f"c{j}" for j in range(m)], "t", "m")
+        tab = streams.read_csv(p, [f"c{j}" for j in range(m)], "t", "m")
     finally:
-        logs.CSV_BLOCK_BYTES = old
+        streams.CSV_BLOCK_BYTES = old
     np.testing.assert_array_equal(tab.time, a[:, 0])
     for j in range(m):
         np.testing.assert_array_equal(tab.cols[f"c{j}"], a[:, j + 1])

@@ -13,7 +13,7 @@ def test_every_command_is_declared_once_in_the_table():
     assert len(names) == len(set(names)) and set(cli.COMMANDS) == set(names)
     assert {"simulate", "tune", "front export", "front plot", "front explore", "front robust", "compare", "sweep",
             "montecarlo", "paper", "bench", "export-c", "export-fmu", "cache", "demo", "systems", "knees",
-            "validate", "identify", "export-controller", "import-system uuv", "controllers"} == set(names)
+            "validate", "identify", "export-controller", "import-system uuv", "controllers", "params", "front restamp"} == set(names)
     ap = cli._parser()
     for c in cli.TABLE:
         argv = c.name.split() + ["--help"]

@@ -26,12 +26,13 @@ PKG = Path(arvcas.__file__).resolve().parent
 CHILD = """
 import json
 from arvcas.build import codegen as C
+from arvcas.build.dynamics import compiled
 from arvcas.model import uvms
 def no_graph(*a, **k):
     raise AssertionError("a warm start built a graph")
 if {forbid_graph!r}:
     uvms.plant_functions = no_graph
-f = C.compiled("thrust", uvms.ModelOptions(n_quad={n_quad}))
+f = compiled("thrust", uvms.ModelOptions(n_quad={n_quad}))
 print(json.dumps({{"stats": C.stats(), "path": C.artifact_of(f)["path"],
                   "tau": [float(v) for v in f([10, 20, 30, 40, 50, 60], __import__("arvcas.system.params").system.params.load().vector()).full().ravel()]}}))
 """

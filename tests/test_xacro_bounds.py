@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip("xacro")
 
 from arvcas.cli import main  # noqa: E402
-from arvcas.system import uuv  # noqa: E402
+from arvcas.system import rosfiles, uuv  # noqa: E402
 
 DATA = Path(__file__).parent / "data" / "uuv_rexrov2"
 HEAD = '<?xml version="1.0"?>\n<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro">\n'
@@ -47,7 +47,7 @@ def test_the_time_bound(tmp_path, monkeypatch):
     src = tmp_path / "small.xacro"
     src.write_text(_bomb(3))
     assert uuv.expand(src, {}, {})[0].count("<link") == 8  # 2^3 links: within every bound
-    monkeypatch.setattr(uuv, "MAX_XACRO_SECONDS", 0.0)
+    monkeypatch.setattr(rosfiles, "MAX_XACRO_SECONDS", 0.0)
     with pytest.raises(uuv.ImportError_, match=r"xacro: the expansion took more than 0 s after 1 elements; refused"):
         uuv.expand(src, {}, {})
 
@@ -57,9 +57,9 @@ def test_a_bounded_expansion_just_below_the_element_bound_and_the_real_descripti
 
     src = tmp_path / "b.xacro"
     src.write_text(_bomb(6))  # 2^6 links
-    monkeypatch.setattr(uuv, "MAX_XACRO_ELEMENTS", 1000)
+    monkeypatch.setattr(rosfiles, "MAX_XACRO_ELEMENTS", 1000)
     assert uuv.expand(src, {}, {})[0].count("<link") == 64
-    monkeypatch.setattr(uuv, "MAX_XACRO_ELEMENTS", 64)  # every link is one element: 64 are not enough
+    monkeypatch.setattr(rosfiles, "MAX_XACRO_ELEMENTS", 64)  # every link is one element: 64 are not enough
     with pytest.raises(uuv.ImportError_, match="the expansion passed 64 elements"):
         uuv.expand(src, {}, {})
     monkeypatch.undo()

@@ -25,7 +25,7 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from arvcas import __version__
+from arvcas._version import __version__
 from arvcas.build import codegen
 
 

@@ -193,7 +193,7 @@ def _bench_length(s: Settings, log) -> dict:
         if not all(a.tobytes() == b.tobytes() for a, b in zip(ref, got)):
             raise BenchError(f"cost: run length {L:g} s: the lockstep batch differs from the one at a time")
         n = scenario.n_samples(run.cfg)
-        row = {"length_s": L, "n_samples": n, "table_mb": scenario.table_bytes(run.cfg) / 1e6, "W": ls.W, "batch_n": nb, "ok_share": float(np.mean(ref[2])),
+        row = {"length_s": L, "n_samples": n, "table_mb": schedule.table_bytes(run.cfg, run.params.layout) / 1e6, "W": ls.W, "batch_n": nb, "ok_share": float(np.mean(ref[2])),
                "call_s": _stat(t["call"]), "one_run_s": _stat(t["one_run"]),
                "batch_scalar_s_per_run": _stat([v / nb for v in t["batch_scalar"]]),
                "batch_lanes_s_per_run": _stat([v / nb for v in t["batch_lanes"]])}

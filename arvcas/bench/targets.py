@@ -21,7 +21,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from arvcas.build import calls, codegen
-from arvcas.sim import closedloop, scenario, simulation
+from arvcas.sim import closedloop, scenario, schedule, simulation
 from arvcas.controllers import gains as gains_mod
 from arvcas.bench.closed_loop import _run_args, _step_instructions
 from arvcas.bench.common import BenchError, CONTROLLER, Settings, _stat, _time
@@ -192,7 +192,7 @@ def _bench_targets(s: Settings, cfg, P, log) -> dict:
             "ratio_2_over_1_best": min(bt[1]) / min(bt[2]),
             "study_min": STUDY_RUNS / rps[2] / 60.0,
             "work_mb_per_thread": (fn[k].sz_w() + fn[k].sz_iw()) * 8 / 1e6,
-            "table_mb": scenario.table_bytes(c) / 1e6,
+            "table_mb": schedule.table_bytes(c) / 1e6,  # the paper's system, Haidou-1
         }
     log("targets: peak memory per thread (fresh processes) ...")
     for k, c in steps.items():

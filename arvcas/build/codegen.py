@@ -64,11 +64,10 @@ from typing import Callable, Iterator
 
 import casadi as ca
 
+from arvcas.build.progress import PROGRESS_AFTER_S, Progress as _Progress, report_progress  # noqa: F401 (re-exported)
+
 __all__ = [
     "build_described",
-    "bundle",
-    "preload",
-    "platform_id",
     "isa_flags",
     "batch_loop_c",
     "supported_isa",
@@ -149,7 +148,6 @@ class Artifact:
     verified: bool  # manifest present, key consistent, .so sha256 matches
 
 
-PROGRESS_AFTER_S = 1.0  # a build that takes longer says so (report_progress)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -159,67 +157,8 @@ _LOCK = threading.RLock()
 _MEMO: dict[tuple, tuple[ca.Function, ca.Function]] = {}  # (fn identity, flags, dir) -> (fn, lib)
 _MANIFESTS: dict[int, dict] = {}  # hash of a returned external Function -> its manifest
 _KEEP: list[ca.Function] = []  # keeps returned Functions alive so _MANIFESTS keys stay unique
-_PLANT: dict[str, dict[str, ca.Function]] = {}
-_COMPILED: dict[tuple[str, str], ca.Function] = {}
 _STATS: Counter = Counter()
 _PRIVATE_DIRS: list[Path] = []
-_PROGRESS: list = []  # the stream report_progress set (at most one)
-
-
-@contextlib.contextmanager
-def report_progress(stream=None, after: float | None = None) -> Iterator[None]:
-    """Within this block, every build that takes more than ``after`` seconds (default
-    :data:`PROGRESS_AFTER_S`) writes ``arvcas: compiling <what> ...`` to ``stream`` (default standard
-    error) when that time has passed, and the build's duration when it ends, on the same line."""
-    entry = (stream if stream is not None else sys.stderr, PROGRESS_AFTER_S if after is None else float(after))
-    with _LOCK:
-        _PROGRESS.append(entry)
-    try:
-        yield
-    finally:
-        with _LOCK:
-            _PROGRESS.remove(entry)
-
-
-class _Progress:
-    """The progress line of one build (:func:`report_progress`); silent when none was asked for."""
-
-    def __init__(self, what: str):
-        self.what, self.shown, self.timer = what, False, None
-        self.lock = threading.Lock()
-        with _LOCK:
-            self.sink = _PROGRESS[-1] if _PROGRESS else None
-
-    def __enter__(self):
-        self.t0 = time.perf_counter()
-        if self.sink is not None:
-            self.timer = threading.Timer(self.sink[1], self._start)
-            self.timer.daemon = True
-            self.timer.start()
-        return self
-
-    def _start(self) -> None:
-        with self.lock:
-            if self.timer is None:
-                return
-            self.shown = True
-            self._write(f"arvcas: compiling {self.what} ...")
-
-    def _write(self, text: str) -> None:
-        try:
-            self.sink[0].write(text)
-            self.sink[0].flush()
-        except (OSError, ValueError):  # a closed stream: progress is not worth an error
-            pass
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        with self.lock:
-            if self.timer is not None:
-                self.timer.cancel()
-                self.timer = None
-            if self.shown:
-                dt = time.perf_counter() - self.t0
-                self._write(f" {dt:.1f} s\n" if exc_type is None else f" failed after {dt:.1f} s\n")
 
 
 def stats() -> dict[str, int]:
@@ -344,7 +283,7 @@ def _compiler_id() -> str:
 
 
 def _key(c_text: str, compiler: str, cmd_flags: list[str]) -> str:
-    from arvcas import __version__ as arvcas_version  # late: arvcas/__init__ may import this module
+    from arvcas._version import __version__ as arvcas_version
 
     h = hashlib.sha256()
     for part in ("arvcas-build-1", c_text, compiler, "\0".join(cmd_flags), ca.__version__, arvcas_version):
@@ -505,7 +444,7 @@ def _compile(plan: _Plan, work: Path) -> tuple[Path, float]:
 
 
 def _manifest(plan: _Plan, so_sha256: str, compile_s: float) -> dict:
-    from arvcas import __version__ as arvcas_version
+    from arvcas._version import __version__ as arvcas_version
 
     return {
         "format": MANIFEST_FORMAT,
@@ -861,7 +800,7 @@ CASADI_SYMBOL_EXPORT int {name}_arvcas_batch(long long int n, long long int chun
 
 
 # ---------------------------------------------------------------------------------------------
-# shipping compiled libraries to processes without a compiler (Dask workers)
+# what a shipped library is known by (arvcas.build.shipping: libraries for processes without a compiler)
 
 _PRELOADED: dict[str, ca.Function] = {}  # ident -> a shipped library, loaded
 
@@ -879,102 +818,6 @@ def _ident(name: str, description: str, cmd_flags) -> str:
     return h.hexdigest()
 
 
-def platform_id() -> dict:
-    """What a compiled library needs of the machine that loads it."""
-    import platform as _pf
-
-    return {"system": sys.platform, "machine": _pf.machine(), "libc": " ".join(_pf.libc_ver()).strip(),
-            "casadi": ca.__version__, "isa": list(isa_flags())}
-
-
-def bundle(fns) -> dict:
-    """The compiled libraries behind ``fns`` (Functions returned by :func:`build_described`) as bytes
-    with their verified sha256, for :func:`preload` in another process."""
-    from arvcas.build.provenance import model_hash
-
-    items = []
-    for f in fns:
-        m = artifact_of(f)
-        if m is None or "ident" not in m:
-            raise CacheError(f"bundle: {f.name()} was not built by build_described; nothing to ship")
-        data = Path(m["path"]).read_bytes()
-        if hashlib.sha256(data).hexdigest() != m["so_sha256"]:
-            raise CacheError(f"bundle: {m['path']} no longer matches its manifest; rebuild it")
-        items.append({"name": m["name"], "ident": m["ident"], "so": data,
-                      "manifest": {k: v for k, v in m.items() if k != "path"}})
-    return {"format": "arvcas-bundle", "platform": platform_id(), "model_hash": model_hash(), "items": items}
-
-
-def process_name() -> str:
-    """This process, for messages: the Dask worker's name and address, else host and pid."""
-    try:
-        from distributed import get_worker
-
-        w = get_worker()
-        return f"worker {w.name} ({w.address})"
-    except (ImportError, ValueError):
-        import socket
-
-        return f"process {os.getpid()} on {socket.gethostname()}"
-
-
-def preload(b: dict) -> int:
-    """Load the libraries of a :func:`bundle` in this process (no compiler, no cache needed); later
-    :func:`build_described` calls of the same description get them. Returns how many were new.
-
-    Refuses, one line naming this process (a Dask worker by name), libraries built for another
-    platform or CasADi, or by other arvcas model code; each library's bytes are checked against its
-    sha256 before loading.
-    """
-    from arvcas.build.provenance import model_hash
-
-    here = process_name()
-    if not isinstance(b, dict) or b.get("format") != "arvcas-bundle":
-        raise CacheError(f"{here}: not an arvcas bundle of compiled libraries")
-    mine, theirs = platform_id(), dict(b.get("platform", {}))
-    need = theirs.pop("isa", [])
-    mine.pop("isa")
-    missing = [f for f in need if f not in supported_isa()]
-    if missing:
-        raise CacheError(f"{here}: the client's compiled libraries need {' '.join(missing)}, which this CPU lacks; "
-                         f"build them on the client with {ISA_ENV}=baseline, or give the worker a compiler and arvcas's cache")
-    if mine != theirs:
-        diff = ", ".join(f"{k} {theirs.get(k)!r} here {mine.get(k)!r}" for k in mine if mine.get(k) != theirs.get(k))
-        raise CacheError(f"{here}: the client's compiled libraries do not fit this machine ({diff}); "
-                         f"run the worker on the client's platform or give it a compiler and arvcas's cache")
-    if b.get("model_hash") != model_hash():
-        raise CacheError(f"{here}: arvcas's model code or data differs from the client's (model hash "
-                         f"{model_hash()[:12]} here, {str(b.get('model_hash'))[:12]} there); install the same arvcas")
-    n = 0
-    with _LOCK:
-        todo = [it for it in b["items"] if it["ident"] not in _PRELOADED]
-        if not todo:
-            return 0
-        from arvcas.io.files import private_dir
-
-        d = private_dir("shipped")
-        if not _PRIVATE_DIRS:
-            atexit.register(_remove_private_dirs)
-        _PRIVATE_DIRS.append(d)
-        for it in todo:
-            data = it["so"]
-            if hashlib.sha256(data).hexdigest() != it["manifest"].get("so_sha256"):
-                raise CacheError(f"{here}: shipped library {it['name']} does not match its sha256; refusing to load it")
-            so = d / f"{it['name']}-{it['ident'][:20]}.so"
-            so.write_bytes(data)
-            os.chmod(so, 0o500)
-            try:
-                f = ca.external(it["name"], str(so))
-            except RuntimeError as e:
-                why = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
-                raise CacheError(f"{here}: shipped library {it['name']} does not load ({why[:160]})") from None
-            _KEEP.append(f)
-            _MANIFESTS[f.__hash__()] = dict(it["manifest"], path=str(so), shipped=True)
-            _PRELOADED[it["ident"]] = f
-            n += 1
-    return n
-
-
 def artifact_of(f: ca.Function) -> dict | None:
     """The manifest (key, so_sha256, flags, path, ...) of a Function returned by :func:`build`.
 
@@ -983,44 +826,6 @@ def artifact_of(f: ca.Function) -> dict | None:
     with _LOCK:
         m = _MANIFESTS.get(f.__hash__())
         return dict(m) if m is not None else None
-
-
-# ---------------------------------------------------------------------------------------------
-# the plant
-
-
-def compiled(name: str, opts=None, system=None) -> ca.Function:
-    """The public plant function ``name`` (see :data:`arvcas.model.uvms.PUBLIC_FUNCTIONS`), compiled to C.
-
-    ``opts`` is an :class:`arvcas.model.uvms.ModelOptions` (default: ``ModelOptions()``); ``system`` a
-    name, a system file or an :class:`arvcas.system.System` (default Haidou-1): the inputs are sized by
-    it (``q[n_joints]``, ``u[n_thrusters]``, ``p``: ``system.params.vector()``). Memoized per process by
-    ``(name, opts, structure)``; the library comes from the build cache when it is there.
-    """
-    from arvcas.model.uvms import PUBLIC_FUNCTIONS, ModelOptions, plant_functions
-    from arvcas.system import resolve
-
-    if name not in PUBLIC_FUNCTIONS:
-        raise ValueError(f"unknown plant function {name!r}; allowed: {', '.join(PUBLIC_FUNCTIONS)}")
-    opts = ModelOptions.checked(opts)
-    lay = resolve(system).layout
-    st = lay.structure
-    tag = (opts.tag(), st)
-    mkey = (name, tag, str(_cache_path()))
-    with _LOCK:
-        f = _COMPILED.get(mkey)
-        if f is None:
-            def make():
-                if tag not in _PLANT:
-                    _PLANT[tag] = plant_functions(opts, lay)
-                return _PLANT[tag][name]
-
-            from arvcas.system.params import system_tag
-
-            desc = f"plant {name} {opts!r}{system_tag(st)}"
-            f = build_described(name, desc, make, label=f"{name} for {st.name}")
-            _COMPILED[mkey] = f
-        return f
 
 
 # ---------------------------------------------------------------------------------------------

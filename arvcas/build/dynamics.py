@@ -42,10 +42,10 @@ import threading
 import casadi as ca
 import numpy as np
 
-from arvcas.build import calls
+from arvcas.build import calls, codegen
 from arvcas.model.uvms import PUBLIC_FUNCTIONS
 
-__all__ = ["dynamics", "jacobian_functions", "Dynamics", "NAMES", "JACOBIANS", "THREAD_MIN_BATCH", "BLOCKS_PER_THREAD"]
+__all__ = ["compiled", "dynamics", "jacobian_functions", "Dynamics", "NAMES", "JACOBIANS", "THREAD_MIN_BATCH", "BLOCKS_PER_THREAD"]
 
 # name -> (plant function, inputs differentiated); outputs: xdot, then d xdot / d input per input
 JACOBIANS = {
@@ -58,6 +58,42 @@ BLOCKS_PER_THREAD = 4  # a threaded batch is taken in blocks of n / (threads * t
 _LOCK = threading.RLock()
 _SX: dict[str, dict[str, ca.Function]] = {}
 _COMPILED: dict[tuple[str, str], ca.Function] = {}
+_PLANT: dict[str, dict[str, ca.Function]] = {}  # (options tag, structure) -> the plant's graphs
+_PLANT_COMPILED: dict[tuple, ca.Function] = {}  # (name, tag, cache directory) -> compiled() 's Function
+
+
+def compiled(name: str, opts=None, system=None) -> ca.Function:
+    """The public plant function ``name`` (see :data:`arvcas.model.uvms.PUBLIC_FUNCTIONS`), compiled to C.
+
+    ``opts`` is an :class:`arvcas.model.uvms.ModelOptions` (default: ``ModelOptions()``); ``system`` a
+    name, a system file or an :class:`arvcas.system.System` (default Haidou-1): the inputs are sized by
+    it (``q[n_joints]``, ``u[n_thrusters]``, ``p``: ``system.params.vector()``). Memoized per process by
+    ``(name, opts, structure)``; the library comes from the build cache when it is there.
+    """
+    from arvcas.model.uvms import ModelOptions, plant_functions
+    from arvcas.system import resolve
+
+    if name not in PUBLIC_FUNCTIONS:
+        raise ValueError(f"unknown plant function {name!r}; allowed: {', '.join(PUBLIC_FUNCTIONS)}")
+    opts = ModelOptions.checked(opts)
+    lay = resolve(system).layout
+    st = lay.structure
+    tag = (opts.tag(), st)
+    mkey = (name, tag, str(codegen._cache_path()))
+    with codegen._LOCK:
+        f = _PLANT_COMPILED.get(mkey)
+        if f is None:
+            def make():
+                if tag not in _PLANT:
+                    _PLANT[tag] = plant_functions(opts, lay)
+                return _PLANT[tag][name]
+
+            from arvcas.system.params import system_tag
+
+            desc = f"plant {name} {opts!r}{system_tag(st)}"
+            f = codegen.build_described(name, desc, make, label=f"{name} for {st.name}")
+            _PLANT_COMPILED[mkey] = f
+        return f
 _LOOPS: dict[tuple, "_Loop"] = {}
 _DEFAULT_P: list[np.ndarray] = []
 _F64 = np.dtype(np.float64)
@@ -102,7 +138,7 @@ def _compiled(name: str, opts, params=None) -> ca.Function:
             if name in JACOBIANS:  # one library for single calls and batches (its loop appended)
                 _COMPILED[key] = _loop(name, opts, params).keep
             else:  # the same Function arvcas.compiled returns
-                _COMPILED[key] = codegen.compiled(name, opts, system=params)
+                _COMPILED[key] = compiled(name, opts, system=params)
         return _COMPILED[key]
 
 

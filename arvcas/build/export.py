@@ -232,7 +232,7 @@ def _params_header(P, opts, prefix: str, title: str = "Default parameter vector 
                    extra=()) -> str:
     """``<lib>_params.h``: the default ``p`` with an index macro, name and SI unit per entry; ``extra``:
     further lines before the end (other defaults of an export); ``opts`` None: no model options line."""
-    from arvcas import __version__
+    from arvcas._version import __version__
     from arvcas.build.units import si_unit
 
     up = prefix.upper()
@@ -336,7 +336,7 @@ def _size(sh) -> str:
 
 
 def _header(fns: dict[str, ca.Function], c_text: str, prefix: str, opts, P) -> str:
-    from arvcas import __version__
+    from arvcas._version import __version__
 
     lib = prefix.rstrip("_")
     guard = f"{lib.upper()}_H"
@@ -738,7 +738,7 @@ target_link_libraries(example_cpp PRIVATE arvcas::{lib})
 
 
 def _readme(fns, opts, P, inputs, prefix: str) -> str:
-    from arvcas import __version__
+    from arvcas._version import __version__
 
     lib = prefix.rstrip("_")
     gl = _glossary(P)
@@ -867,7 +867,7 @@ def write_package(out: Path, texts: dict[str, str], prefix: str, what: str) -> l
     atomic writer, then the manifest listing them with their sha256 (last, so it lists only finished
     files). The caller has checked the directory (:func:`check_out_dir`) and that every file may be
     replaced (:func:`check_replaceable`). Returns the paths, the manifest last."""
-    from arvcas import __version__
+    from arvcas._version import __version__
 
     out.mkdir(exist_ok=True)
     written = {}

@@ -267,7 +267,7 @@ def _dependencies(fn: ca.Function) -> list[list[int]]:
 
 
 def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: str, P) -> str:
-    from arvcas import __version__
+    from arvcas._version import __version__
 
     bases = {v["unit"]: v.get("base") or _UNITS[v["unit"]] for v in V if v["unit"]}
     used = [u for u in _UNITS if u in bases] + [u for u in bases if u not in _UNITS]  # derived units last

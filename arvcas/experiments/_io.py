@@ -12,7 +12,7 @@ import casadi as ca
 import h5py
 import numpy as np
 
-from arvcas import __version__
+from arvcas._version import __version__
 from arvcas.io import files
 from arvcas.io.results import ResultsError, atomic_write
 

@@ -1,5 +1,5 @@
-"""Command-line handlers of :mod:`arvcas.experiments`: ``sweep``, ``montecarlo``, ``front robust`` and
-``compare`` (fronts, Monte Carlo files or robust fronts).
+"""Command-line handlers of :mod:`arvcas.experiments`: ``simulate``, ``paper``, ``knees``, ``sweep``,
+``montecarlo``, ``front robust``, ``front explore`` and ``compare`` (fronts, Monte Carlo files or robust fronts).
 
 The commands are declared in the table of :mod:`arvcas.cli`, which applies the input and output
 policies before calling a handler; ``check_*`` refuse options that do not apply and requests too large,
@@ -12,10 +12,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from arvcas.io.cliargs import (RESULT_FORMATS, add_figure_format, add_model_args, model_options, output_kinds, refuse,
+                               seed_arg)
+
 __all__ = ["add_sweep", "check_sweep", "run_sweep", "sweep_outputs", "add_montecarlo", "check_montecarlo",
            "run_montecarlo", "montecarlo_outputs", "add_robust", "check_robust", "run_robust", "robust_outputs",
            "add_compare", "check_compare", "run_compare", "compare_outputs", "add_explore", "check_explore", "run_explore", "explore_outputs",
-           "MAX_RUNS", "MAX_SEEDS"]
+           "add_simulate", "check_simulate", "run_simulate", "add_paper", "run_paper", "paper_outputs", "add_knees",
+           "run_knees", "knees_outputs", "MAX_RUNS", "MAX_SEEDS"]
 
 MAX_RUNS = 1_000_000  # Monte Carlo draws per study (or per front member)
 MAX_SEEDS = 10_000  # noise seeds of a sweep
@@ -470,3 +474,159 @@ def run_compare(a: argparse.Namespace) -> int:
 
         return run_front_compare(a)
     return _run_compare_mc(a, kind)
+
+
+# ---- knees ---------------------------------------------------------------------------------------
+
+
+def add_knees(p: argparse.ArgumentParser) -> None:
+    p.add_argument("study_dir", type=Path, metavar="STUDY_DIR",
+                   help="the --out directory of arvcas tune (one front, or one per controller), or a front.h5")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="where to write (created if missing)")
+    add_figure_format(p)
+
+
+def knees_outputs(a):
+    from arvcas.experiments.knees import front_controllers, output_files
+
+    return output_kinds([(f"--out {a.out}", p) for p in output_files(a.out, front_controllers(a.study_dir), a.format or "png")],
+                  RESULT_FORMATS)
+
+
+def run_knees(a: argparse.Namespace) -> int:
+    from arvcas.experiments.knees import replay_knees
+    from arvcas.io import files
+
+    files.prepare_dir(a.out, f"--out {a.out}")
+    replay_knees(a.study_dir, a.out, fmt=a.format or "png")
+    return 0
+
+
+# ---- simulate ----------------------------------------------------------------------------------
+
+
+def add_simulate(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--controller", default=None,
+                   help="a controller: proposed, agsta, traditional, implicit, pid, or a plugin's (arvcas controllers; "
+                        "required unless --from-front)")
+    p.add_argument("--out", type=Path, default=None, metavar="FILE.h5",
+                   help="write the result here: HDF5 (.h5), or a MATLAB file if the name ends in .mat")
+    p.add_argument("--seed", type=seed_arg, default=None, help="sensor-noise seed (default 0; 0 <= seed < 2**63)")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="scenario file (default: the system's scenario)")
+    p.add_argument("--from-front", type=Path, default=None, metavar="FRONT.h5",
+                   help="replay a member of a tuning front (with --index)")
+    p.add_argument("--index", type=int, default=None, help="front member to replay")
+    p.add_argument("--allow-model-change", action="store_true",
+                   help="with --from-front: replay even if the model code or parameters changed since the study "
+                        "(the result records it)")
+    add_model_args(p)
+
+
+def check_simulate(a: argparse.Namespace) -> None:
+    if a.from_front is None:
+        refuse(a, ("index", "allow_model_change"), "only with --from-front")
+    elif a.index is None:
+        raise ValueError("--from-front needs --index I")
+
+
+def _metrics_table(chat, rmse, held=(True,) * 6) -> str:
+    from arvcas.controllers.gains import DOFS
+
+    lines = [f"{'DOF':>6} {'CHAT':>12} {'RMSE':>12}"]
+    for d, c, r, k in zip(DOFS, chat, rmse, held):
+        lines.append(f"{d:>6} {c:12.5g} " + (f"{r:12.5g}" if k else f"{'not held':>12}"))
+    return "\n".join(lines)
+
+
+def _drift_note(cfg, eta) -> str | None:
+    """Without a position fix (docs/sensors.md): what is held, and the horizontal drift, reported, not penalised."""
+    from arvcas.controllers.gains import DOFS
+    from arvcas.sim import scenario
+
+    held = scenario.held_dofs(cfg)
+    if all(held):
+        return None
+    import numpy as np
+
+    xy = np.asarray(eta)[:, 0:2] - np.asarray(cfg.initial_eta_d)[0:2]
+    d = np.hypot(xy[:, 0], xy[:, 1])
+    return (f"held: {', '.join(n for n, k in zip(DOFS, held) if k)} (no position sensor); RMSE on those only. "
+            f"horizontal drift (not held): {d[-1]:.4g} m at the end (x {xy[-1, 0]:+.4g}, y {xy[-1, 1]:+.4g} m), "
+            f"at most {d.max():.4g} m")
+
+
+def run_simulate(a: argparse.Namespace) -> int:
+    from arvcas.io import results
+    from arvcas.sim import scenario
+    from arvcas.system.params import load
+    from arvcas.sim.simulation import simulate
+
+    if a.out is not None:
+        results.check_dir(a.out.parent, f"--out {a.out}")
+    params = load(a.params)
+    if a.from_front is not None and a.params is None:  # the front's own system
+        from arvcas.tuning import checkpoint as ck
+        from arvcas.tuning.front import resolve_front_path, system_params
+
+        params = system_params(ck.read_checkpoint(resolve_front_path(a.from_front)))
+    cfg = scenario.load_scenario(a.config if a.config is not None else params.default("scenario"))
+    gains = None
+    controller, seed = a.controller, a.seed
+    if a.from_front is not None:
+        from arvcas.tuning.front import check_provenance, member_gains
+
+        changed = check_provenance(a.from_front, params, a.allow_model_change, "--from-front")
+        controller_f, gains, seed_f, cfg_text = member_gains(a.from_front, a.index)
+        if controller is not None and controller != controller_f:
+            raise ValueError(f"--controller {controller} differs from the front's controller {controller_f}")
+        controller = controller_f
+        seed = seed_f if seed is None else seed
+        if a.config is None and cfg_text:
+            cfg = scenario.loads_scenario(cfg_text, f"{a.from_front} (study scenario)")
+    if controller is None:
+        raise ValueError("--controller: required (proposed, agsta, traditional, implicit, pid, or a plugin's: "
+                         "arvcas controllers)")
+    r = simulate(controller, gains=gains, seed=0 if seed is None else seed, params=params, cfg=cfg,
+                 opts=model_options(a.n_quad))
+    if a.from_front is not None and changed:
+        r.meta["model_change_allowed"] = changed
+        print(f"note: replayed under another model than the study's ({changed}), as allowed by --allow-model-change")
+    status = "ok" if r.ok else f"DIVERGED at t = {r.t_fail:g} s" + (
+        f": {r.meta['failure']}" if r.meta.get("failure") else "")
+    print(f"{controller}: seed {r.seed}, {r.t[-1]:g} s, {status}")
+    print(_metrics_table(r.chat, r.rmse, scenario.held_dofs(cfg)))
+    if (note := _drift_note(cfg, r.eta)) is not None:
+        print(note)
+    if a.out is not None and a.out.suffix == ".mat":
+        from arvcas.io.matfile import write_result_mat
+
+        print(f"wrote {write_result_mat(r, a.out)}")
+    elif a.out is not None:
+        print(f"wrote {results.write_result(r, a.out)}")
+    return 0 if r.ok else 1
+
+
+# ---- paper -------------------------------------------------------------------------------------
+
+
+def add_paper(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    p.add_argument("--seed", type=seed_arg, default=0, help="sensor-noise seed shared by the runs (default 0)")
+    add_figure_format(p, "Figures 5-11")
+
+
+def run_paper(a: argparse.Namespace) -> int:
+    from arvcas.experiments.paper import run_paper
+
+    out = run_paper(a.out, seed=a.seed, fmt=a.format or "png")
+    print((a.out / "table3.md").read_text())
+    # the job succeeded when every run completed; whether the paper's comparison reproduces is
+    # a finding, reported in table3.md, not an error
+    return 0 if all(r.ok for r in out["results"].values()) else 1
+
+
+def paper_outputs(a):
+    from arvcas.experiments.paper import output_files
+
+    return output_kinds([(f"--out {a.out}", p) for p in output_files(a.out, fmt=a.format or "png")], RESULT_FORMATS)

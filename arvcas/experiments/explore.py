@@ -44,7 +44,7 @@ __all__ = ["page_data", "page_html", "write_page", "member_selection", "explore_
 FORMAT = "arvcas-front-explorer"
 FORMAT_VERSION = 2  # 2: "objectives" (the columns of F, the axes), F of 2-4 objectives
 DEFAULT_SAMPLES = 300
-_TEMPLATES = Path(__file__).resolve().parents[1] / "io" / "templates"
+_TEMPLATES = Path(__file__).resolve().parent / "templates"
 _NAN = 65535  # the quantised code of a missing (non-finite) sample
 
 
@@ -205,7 +205,7 @@ def _front_data(path: Path, checked, members, samples: int, say) -> dict:
 def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_change: bool = False,
               say=None) -> dict:
     """Everything the page shows, as JSON-ready data (module docstring)."""
-    from arvcas import __version__
+    from arvcas._version import __version__
     from arvcas.controllers.gains import DOFS
     from arvcas.metrics.indices import norm_name
 

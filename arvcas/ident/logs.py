@@ -31,8 +31,6 @@ from the attitude's), in the stream's world frame: a z-up height becomes NED's z
 from __future__ import annotations
 
 import dataclasses
-import gzip
-import io
 import math
 import re
 from dataclasses import dataclass
@@ -44,13 +42,12 @@ import numpy as np
 from arvcas.system import config
 from arvcas.system.config import Choices, Count, Invalid, Unique, ge, gt, le, quantity, setting
 from arvcas.system.systemfile import COMMAND_UNITS
+from arvcas.ident.streams import LogError, Table, read_bag, read_csv
 
 __all__ = ["LogError", "Log", "JointTrajectory", "load_log", "load_logs", "MAPPING_SUFFIX", "SIGNALS",
            "euler_from_R", "R_from_euler", "WORLD_FRAMES", "BODY_FRAMES"]
 
 MAPPING_SUFFIX = ".log.toml"
-MAX_LOG_BYTES = 1 << 30  # one stream file (after decompression); a trial of an hour at 1 kHz is ~100 MB
-MAX_SAMPLES = 20_000_000  # rows of one stream
 MAX_GRID = 5_000_000  # samples of the common time base
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 # vectors in the source frame -> NED world / FRD body (each matrix is its own inverse)
@@ -69,10 +66,6 @@ _KINDS = {  # mapping key -> (number of columns, dimension of each column)
 # the autopilot messages whose output channels ``outputs`` names, and each channel's field
 _OUTPUT_FIELDS = {"RCOU": "C{}", "SERVO_OUTPUT_RAW": "servo{}_raw"}
 _ROLL_LIMIT_DEG = 90.0  # a vehicle whose median roll is beyond this is read in the wrong body frame
-
-
-class LogError(ValueError):
-    """One line naming the mapping or stream file, the key or column, and the reason."""
 
 
 # ---- the mapping file's schema (arvcas.system.config: each rule beside its field) ------------------------------
@@ -341,107 +334,6 @@ def euler_from_R(R: np.ndarray) -> np.ndarray:
 # ---- reading a stream ---------------------------------------------------------------------------------
 
 
-@dataclass
-class _Table:
-    where: str  # the file (and topic) for messages
-    time: np.ndarray
-    time_name: str
-    cols: dict[str, np.ndarray]
-
-
-def _read_csv(path: Path, names: list[str], time_col: str, mapping: str) -> _Table:
-    """The columns ``names`` (and the time) of a CSV log (``.gz``: gzip), streamed in blocks of whole lines
-    (:data:`CSV_BLOCK_BYTES`): what it costs is the columns read, not the file. Every row must have as many
-    fields as the header (a decimal comma shifts every column: refused naming the row); a corrupt gzip
-    file, more than :data:`MAX_LOG_BYTES` of text or :data:`MAX_SAMPLES` rows are one line."""
-    import zlib
-
-    from arvcas.io.files import check_input
-
-    check_input(path, "log file", LogError)
-    gz = path.suffix == ".gz"
-    if not gz and path.stat().st_size > MAX_LOG_BYTES:
-        raise LogError(f"{path}: more than {MAX_LOG_BYTES} bytes (arvcas.ident.logs.MAX_LOG_BYTES)")
-    try:
-        f = gzip.open(path, "rb") if gz else open(path, "rb")
-    except OSError as e:
-        raise LogError(f"{path}: cannot be read ({e.strerror or e})") from None
-    blocks, n_rows, line, total = [], 0, 2, 0  # line: the file line the next block starts at (the header: 1)
-    try:
-        with f:
-            head = f.readline(1 << 20)
-            header = [h.strip().strip('"') for h in _utf8(head, path, 1).lstrip("\ufeff").strip().split(",")]
-            if len(set(header)) != len(header):
-                dup = next(h for h in header if header.count(h) > 1)
-                raise LogError(f"{path}: header names column {dup!r} twice")
-            want = [time_col] + [n for n in names if n != time_col]
-            for n in want:
-                if n not in header:
-                    raise LogError(f"{path}: no column {n!r} (named in {mapping}){config.closest(n, header)}")
-            idx = [header.index(n) for n in want]
-            rest = b""
-            while True:
-                chunk = f.read(CSV_BLOCK_BYTES)
-                total += len(chunk)
-                if total > MAX_LOG_BYTES:
-                    raise LogError(f"{path}: more than {MAX_LOG_BYTES} bytes{' once decompressed' if gz else ''} "
-                                   f"(arvcas.ident.logs.MAX_LOG_BYTES)")
-                data = rest + chunk
-                if chunk:
-                    cut = data.rfind(b"\n") + 1
-                    data, rest = data[:cut], data[cut:]
-                if data:
-                    block, n_lines = _csv_block(data, path, line, len(header), idx)
-                    line += n_lines
-                    n_rows += block.shape[0]
-                    if n_rows > MAX_SAMPLES or n_rows * len(want) > MAX_CSV_VALUES:
-                        raise LogError(f"{path}: more than {min(MAX_SAMPLES, MAX_CSV_VALUES // len(want))} rows of "
-                                       f"the {len(want)} columns read (arvcas.ident.logs.MAX_SAMPLES, MAX_CSV_VALUES)")
-                    blocks.append(block)
-                if not chunk:
-                    break
-    except (EOFError, zlib.error, gzip.BadGzipFile) as e:
-        raise LogError(f"{path}: not a readable gzip file ({' '.join(str(e).split()) or type(e).__name__})") from None
-    except OSError as e:
-        raise LogError(f"{path}: {'not a readable gzip file' if gz else 'cannot be read'} "
-                       f"({' '.join(str(e).split())})") from None
-    data = np.concatenate(blocks) if blocks else np.zeros((0, len(want)))
-    if data.shape[0] < 2:
-        raise LogError(f"{path}: fewer than 2 rows of data")
-    cols = {n: data[:, i] for i, n in enumerate(want)}
-    return _Table(str(path), cols.pop(time_col), time_col, cols)
-
-
-CSV_BLOCK_BYTES = 8 << 20  # a CSV log is read this much at a time
-MAX_CSV_VALUES = 100_000_000  # numbers kept of one CSV stream (800 MB as float64): rows x the columns read
-
-
-def _utf8(raw: bytes, path: Path, line: int) -> str:
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise LogError(f"{path}: not UTF-8 text (row {line}, byte {e.start})") from None
-
-
-def _csv_block(data: bytes, path: Path, line: int, width: int, idx: list[int]) -> tuple[np.ndarray, int]:
-    """The columns ``idx`` of whole CSV lines ``data`` (file line ``line`` first); every line that is not blank
-    or a comment has ``width`` fields. Returns (rows, lines read)."""
-    lines = data.split(b"\n")
-    if lines and lines[-1] == b"":
-        lines.pop()
-    for k, ln in enumerate(lines):
-        n = ln.count(b",") + 1
-        if n != width and ln.strip() and not ln.lstrip().startswith(b"#"):
-            why = " (a decimal comma? fields are separated by commas and decimals take a point)" if n > width else ""
-            raise LogError(f"{path}: row {line + k}: {n} fields, the header has {width}{why}")
-    try:
-        rows = np.loadtxt(io.StringIO(_utf8(data, path, line)), delimiter=",", usecols=idx, ndmin=2, dtype=float)
-    except ValueError as e:
-        msg = " ".join(str(e).split())
-        raise LogError(f"{path}: a number could not be read in rows {line} to {line + len(lines) - 1} "
-                       f"({msg[:160]})") from None
-    return rows.reshape(-1, len(idx)), len(lines)
-
 
 def _check_quaternion_order(sm, q: np.ndarray, R: np.ndarray, acc, Cw, Cb, what: str) -> None:
     """The quaternion's component order, checked against the accelerometer of the same stream (``acc``; no
@@ -465,56 +357,6 @@ def _check_quaternion_order(sm, q: np.ndarray, R: np.ndarray, acc, Cw, Cb, what:
     if given > 20.0 and alt < 10.0:
         raise LogError(f"{what} = \"{sm.quaternion_order}\" looks wrong: the accelerometer's gravity direction is "
                        f"{given:.0f} deg from the attitude's (median); with \"{other}\" it is {alt:.0f} deg")
-
-
-def _field(msg: Any, path: str) -> float:
-    v = msg
-    for part in path.split("."):
-        m = re.fullmatch(r"([A-Za-z_]\w*)(?:\[(\d+)\])?", part)
-        if m is None or not hasattr(v, m.group(1)):
-            raise KeyError(path)
-        v = getattr(v, m.group(1))
-        if m.group(2) is not None:
-            v = v[int(m.group(2))]
-    if hasattr(v, "sec") and hasattr(v, "nanosec"):  # builtin_interfaces/Time
-        return float(v.sec) + 1e-9 * float(v.nanosec)
-    return float(v)
-
-
-def _read_bag(bag: Path, topic: str, names: list[str], time_field: str | None, mapping: str) -> _Table:
-    try:
-        from rosbags.highlevel import AnyReader
-    except ImportError:
-        raise LogError(f"{mapping}: reading ROS bags needs the rosbags package: pip install 'arvcas[bags]'") \
-            from None
-    where = f"{bag} topic {topic}"
-    t, rows = [], []
-    try:
-        with AnyReader([bag]) as reader:
-            conns = [c for c in reader.connections if c.topic == topic]
-            if not conns:
-                topics = sorted({c.topic for c in reader.connections})
-                raise LogError(f"{bag}: no topic {topic!r} (named in {mapping}){config.closest(topic, topics)}")
-            for conn, stamp, raw in reader.messages(connections=conns):
-                msg = reader.deserialize(raw, conn.msgtype)
-                try:
-                    t.append(stamp * 1e-9 if time_field is None else _field(msg, time_field))
-                    rows.append([_field(msg, n) for n in names])
-                except KeyError as e:
-                    raise LogError(f"{where}: message {conn.msgtype} has no field {e.args[0]!r}") from None
-                except (TypeError, ValueError, IndexError):
-                    raise LogError(f"{where}: a field of {names} is not a number") from None
-                if len(t) > MAX_SAMPLES:
-                    raise LogError(f"{where}: more than {MAX_SAMPLES} messages")
-    except LogError:
-        raise
-    except Exception as e:  # rosbags' own errors: unreadable metadata, storage, message types
-        raise LogError(f"{bag}: not a readable ROS bag ({type(e).__name__}: {' '.join(str(e).split())[:160]})") \
-            from None
-    if len(t) < 2:
-        raise LogError(f"{where}: fewer than 2 messages")
-    data = np.array(rows, dtype=float).reshape(len(rows), len(names))
-    return _Table(where, np.array(t, dtype=float), time_field or "log time", {n: data[:, i] for i, n in enumerate(names)})
 
 
 _MOTOR_FUNCTIONS = {**{33 + k: k + 1 for k in range(8)}, **{82 + k: k + 9 for k in range(4)}}  # SERVOn_FUNCTION
@@ -581,7 +423,7 @@ def _read_ardupilot(path: Path, m: LogMapping, info: LogInfo, where: str):
     return alog, segs[k]
 
 
-def _ardupilot_table(alog, sm: StreamMap, names: list[str], where: str) -> _Table:
+def _ardupilot_table(alog, sm: StreamMap, names: list[str], where: str) -> Table:
     from arvcas.ident import ardupilot
 
     try:
@@ -597,7 +439,7 @@ def _ardupilot_table(alog, sm: StreamMap, names: list[str], where: str) -> _Tabl
         raise LogError(f"{alog.path}: message {sm.message}{inst}: the boot clock restarts ({t[i + 1]:.3f} s after "
                        f"{t[i]:.3f} s): the autopilot rebooted; split the log at the reboot (one boot per log)")
     tf = "TimeUS" if alog.kind == "DataFlash" else "time_boot_ms or time_usec"
-    return _Table(f"{alog.path} message {sm.message}{inst}", t, tf, {n: cols[n] for n in names})
+    return Table(f"{alog.path} message {sm.message}{inst}", t, tf, {n: cols[n] for n in names})
 
 
 def _unit_factors(sm: SignalMap, n: int, dims, key: str, where: str) -> np.ndarray:
@@ -623,7 +465,7 @@ def _unit_factors(sm: SignalMap, n: int, dims, key: str, where: str) -> np.ndarr
     return np.array(out)
 
 
-def _check_time(tab: _Table, max_gap: float, scale: float) -> None:
+def _check_time(tab: Table, max_gap: float, scale: float) -> None:
     t = tab.time
     bad = np.flatnonzero(~np.isfinite(t))
     if bad.size:
@@ -636,7 +478,7 @@ def _check_time(tab: _Table, max_gap: float, scale: float) -> None:
                        f"({t[i + 1]:.9g} after {t[i]:.9g})")
 
 
-def _check_gaps(tab: _Table, t: np.ndarray, lo: float, hi: float, max_gap: float) -> None:
+def _check_gaps(tab: Table, t: np.ndarray, lo: float, hi: float, max_gap: float) -> None:
     k = np.flatnonzero((t[1:] >= lo) & (t[:-1] <= hi))
     if k.size:
         d = t[k + 1] - t[k]
@@ -646,7 +488,7 @@ def _check_gaps(tab: _Table, t: np.ndarray, lo: float, hi: float, max_gap: float
                            f"(allowed: {max_gap:g} s, [log] max_gap)")
 
 
-def _check_finite(tab: _Table, names: list[str]) -> None:
+def _check_finite(tab: Table, names: list[str]) -> None:
     for n in names:
         bad = np.flatnonzero(~np.isfinite(tab.cols[n]))
         if bad.size:
@@ -778,9 +620,9 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     for i, sm in enumerate(m.stream):
         names = _columns_of(sm)
         if sm.file is not None:
-            tab = _read_csv(base / sm.file, names, sm.time, where)
+            tab = read_csv(base / sm.file, names, sm.time, where)
         elif sm.topic is not None:
-            tab = _read_bag(bag, sm.topic, names, sm.time, where)
+            tab = read_bag(bag, sm.topic, names, sm.time, where)
         else:
             tab = _ardupilot_table(alog, sm, names, f"{where} stream[{i + 1}]")
         tab.time = tab.time * (1.0 if sm.message is not None else TIME_UNITS[sm.time_unit]) + sm.time_offset

@@ -26,6 +26,7 @@ import numpy as np
 
 from arvcas.ident import plant as plant_mod
 from arvcas.ident.logs import Log
+from arvcas.sim.trajectory import rest_to_rest
 
 __all__ = ["NOISE", "TRUTH_STEP_S", "QuinticMoves", "truth", "write_trial"]
 
@@ -56,9 +57,10 @@ class QuinticMoves:
         moving = ((t >= t0) & (t <= t1))[..., None]
         a, b = self.poses[k], self.poses[k + 1]
         d = b - a
-        q[:] = a + d * (10 * s**3 - 15 * s**4 + 6 * s**5)[..., None]
-        qd[:] = np.where(moving, d * ((30 * s**2 - 60 * s**3 + 30 * s**4) / T)[..., None], 0.0)
-        qdd[:] = np.where(moving, d * ((60 * s - 180 * s**2 + 120 * s**3) / T**2)[..., None], 0.0)
+        b, bd, bdd = rest_to_rest(s)
+        q[:] = a + d * b[..., None]
+        qd[:] = np.where(moving, d * (bd / T)[..., None], 0.0)
+        qdd[:] = np.where(moving, d * (bdd / T**2)[..., None], 0.0)
         return q, qd, qdd
 
 

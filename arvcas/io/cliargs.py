@@ -1,7 +1,9 @@
 """Command-line argument checks shared by the three command modules (:mod:`arvcas.cli`,
 :mod:`arvcas.tuning.cli`, :mod:`arvcas.experiments.cli`): argparse types that refuse a bad count, seed
 or duration at parse time, before any work, a memory estimate's refusal, the refusal of options that
-do not apply, and the ``--format`` option of a command that writes figures.
+do not apply, the ``--format`` option of a command that writes figures, the ``--system`` and
+``--n-quad`` options of a command that runs the model, and the files a command declares it will write
+(:func:`out_file`, each with the kind it will be written as).
 
 It lives in the I/O layer, below tuning and the experiments, so that every command module imports it
 and none imports another's module for it (docs/architecture.md: no import circles); it imports nothing
@@ -13,9 +15,11 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 __all__ = ["seed_arg", "count_arg", "seconds_arg", "check_memory", "MAX_SEED", "refuse", "FIGURE_FORMATS",
-           "add_figure_format", "figure_file"]
+           "add_figure_format", "figure_file", "model_options", "add_system_arg", "add_model_args", "output_kinds",
+           "out_file", "RESULT_FORMATS"]
 
 MAX_SEED = 2**63  # seeds are stored as int64 and fed to numpy's SeedSequence
 
@@ -96,3 +100,40 @@ def figure_file(path, fmt: str | None, what: str) -> str:
     from arvcas.io.style import figure_format
 
     return figure_format(path, fmt, what)
+
+
+def model_options(n_quad: int):
+    from arvcas.model.uvms import ModelOptions
+
+    return ModelOptions(n_quad=n_quad)
+
+
+def add_system_arg(p: argparse.ArgumentParser, default: str = "haidou1") -> None:
+    p.add_argument("--system", "--params", dest="params", metavar="NAME|FILE", type=Path, default=None,
+                   help=f"the system: a shipped one (arvcas systems) or a system file (default: {default})")
+
+
+def add_model_args(p: argparse.ArgumentParser) -> None:
+    add_system_arg(p)
+    p.add_argument("--n-quad", metavar="N", type=count_arg(1, 20, "--n-quad"), default=5,
+                   help="Gauss-Legendre points per link for the drag integral (default: 5)")
+
+
+def output_kinds(outs, formats: dict[str, str]) -> list:
+    """``(label, path)`` outputs with the kind (:mod:`arvcas.io.files`) each will be written as, by suffix:
+    ``formats`` maps ``h5`` or ``mat`` to the arvcas format written there (others: by suffix)."""
+    from arvcas.io.matfile import mat_kind
+
+    kinds = {"h5": formats.get("h5"), "mat": mat_kind(formats["mat"]) if "mat" in formats else None}
+    return [(lab, p, kinds.get(p.suffix.lower().lstrip("."))) for lab, p in outs]
+
+
+def out_file(dest: str, label: str | None = None, **formats: str):
+    def outs(a):
+        p = getattr(a, dest)
+        return [] if p is None else output_kinds([(label or f"--{dest.replace('_', '-')}", Path(p))], formats)
+
+    return outs
+
+
+RESULT_FORMATS = {"h5": "arvcas-result", "mat": "arvcas-result"}  # io.results.FORMAT, io.matfile's "arvcas-result"

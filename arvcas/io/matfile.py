@@ -32,7 +32,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from arvcas import __version__
+from arvcas._version import __version__
 from arvcas.controllers import gains as gains_mod
 from arvcas.system.params import SCHEMA as PARAM_SCHEMA
 

@@ -217,7 +217,7 @@ def save(fig, path, fmt: str) -> None:
     """Write ``fig`` to ``path`` in ``fmt`` (one of :data:`FORMATS`), reproducibly (module docstring)."""
     import matplotlib
 
-    from arvcas import __version__
+    from arvcas._version import __version__
 
     if fmt not in FORMATS:
         raise ValueError(f"figure format {fmt!r}: arvcas writes {', '.join(FORMATS)}")

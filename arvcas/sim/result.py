@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from arvcas import __version__
+from arvcas._version import __version__
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim import signals as signals_mod
 

@@ -28,7 +28,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from arvcas import __version__
+from arvcas._version import __version__
 from arvcas.build import calls, codegen
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller, provenance
@@ -98,6 +98,7 @@ class Run:
             raise SimulationError(f"options: expected arvcas.model.uvms.ModelOptions, got {type(self.options).__name__}")
         scenario.check_joint_limits(cfg, params)
         scenario.check_trajectory_limits(cfg, params)
+        schedule.check_table_memory(cfg, params.layout)
         _check_lag(cfg, params)
         return CompiledRun(with_law, cfg, params, self.options, tuple(self.accumulators))
 
@@ -192,7 +193,7 @@ class CompiledRun:
 
     def compiled_functions(self, trace: bool = False) -> list[ca.Function]:
         """Every compiled function a run calls: the run itself and the two that build its time table
-        (what a process without a compiler needs: :func:`arvcas.build.codegen.bundle`)."""
+        (what a process without a compiler needs: :func:`arvcas.build.shipping.bundle`)."""
         return [self.function(trace), *schedule.functions(self.cfg, self.opts, self.params.layout)]
 
     def artifact(self, trace: bool = False) -> dict:

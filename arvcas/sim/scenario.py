@@ -24,7 +24,7 @@ from arvcas.system.config import ge, gt, le, quantity
 __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
     "quintic", "has_arm_motion", "joint_trajectory", "payload_profile", "disturbance", "disturbance_tabulated", "noise_sequence",
-    "check_joint_limits", "check_trajectory_limits", "n_samples", "table_bytes", "ScenarioFile", "MAX_SUBSTEPS",
+    "check_joint_limits", "check_trajectory_limits", "n_samples", "ScenarioFile", "MAX_SUBSTEPS",
     "SENSORS", "sensor_set", "measured", "held_dofs",
 ]
 
@@ -664,15 +664,6 @@ def _check_motion_steps(cfg: ScenarioConfig, where: str) -> None:
                                     f"time.h_plant ({hp:g} s): the plant would not see it")
 
 
-def table_bytes(cfg: ScenarioConfig) -> int:
-    """Bytes of the run's time table (:func:`arvcas.sim.schedule.table`): a record of
-    ``schedule.RECORD_SIZE`` doubles at each of the ``2 h / h_plant + 1`` stage times of every sample,
-    about 8.6 MB for the 100 s paper run at h_plant = 0.05 s (36 MB at 0.01 s). Building it holds about twice that."""
-    from arvcas.sim import schedule  # schedule imports this module
-
-    return n_samples(cfg) * schedule.n_stages(cfg) * schedule.RECORD_SIZE * 8
-
-
 def _check_consistency(cfg: ScenarioConfig, where: str) -> None:
     r = cfg.time_h / cfg.time_h_plant
     if abs(r - round(r)) > 1e-9 or round(r) < 1:
@@ -686,8 +677,6 @@ def _check_consistency(cfg: ScenarioConfig, where: str) -> None:
     _check_current(cfg, where)
     if cfg.time_duration < cfg.time_h:
         raise ScenarioError(f"{where}: time.duration must be at least one sample time.h")
-    config.check_memory(table_bytes(cfg), f"the run's time table ({n_samples(cfg)} samples of "
-                        f"{cfg.substeps} plant steps)", where, "time.duration", ScenarioError)
 
 
 # ---- the sensor set (docs/sensors.md) ----------------------------------------------------------------

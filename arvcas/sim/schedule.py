@@ -34,6 +34,7 @@ from arvcas.build import calls, codegen
 from arvcas.model import manipulator, vehicle
 from arvcas.sim import scenario
 from arvcas.model.linalg import lu_nopivot, lu_pack, lu_unpack
+from arvcas.system import config
 from arvcas.system.params import default_layout, system_tag, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.uvms import ModelOptions
@@ -41,7 +42,7 @@ from arvcas.model.uvms import ModelOptions
 __all__ = [
     "Records", "records", "RECORD_FIELDS", "RECORD_SIZE", "ARM_FIELDS", "ARM_SIZE", "TIME_FIELDS", "TIME_SIZE",
     "Table", "record_slices", "unpack", "stage_times", "n_stages", "record_expr", "table", "functions", "digests",
-    "clear_cache", "REF_ROWS", "time_rows",
+    "clear_cache", "REF_ROWS", "time_rows", "table_bytes", "check_table_memory",
 ]
 
 
@@ -233,6 +234,23 @@ def time_rows(cfg: ScenarioConfig, layout=None) -> int:
     return n_stages(cfg) * records(layout).time_size + (REF_ROWS if cfg.has_trajectory else 0)
 
 
+def table_bytes(cfg: ScenarioConfig, layout=None) -> int:
+    """Bytes of the run's time table (:func:`table`) for a system's layout: a record of
+    ``records(layout).size`` doubles at each of the :func:`n_stages` stage times of every sample, about
+    8.6 MB for Haidou-1 in the 100 s paper run at h_plant = 0.05 s (36 MB at 0.01 s). Building it holds
+    about twice that."""
+    return scenario.n_samples(cfg) * n_stages(cfg) * records(layout).size * 8
+
+
+def check_table_memory(cfg: ScenarioConfig, layout=None) -> None:
+    """Refuse a scenario whose time table for this system would exceed the memory cap
+    (:data:`arvcas.system.config.MEMORY_CAP_BYTES`): one line naming the scenario file and ``time.duration``,
+    before anything is built."""
+    config.check_memory(table_bytes(cfg, layout), f"the run's time table ({scenario.n_samples(cfg)} samples of "
+                        f"{cfg.substeps} plant steps)", cfg.path or "scenario", "time.duration",
+                        scenario.ScenarioError)
+
+
 class Table(NamedTuple):
     """The run's time table as its two inputs: column k holds sample k's stage-time records.
 
@@ -268,6 +286,7 @@ def table(cfg: ScenarioConfig, p: np.ndarray, opts: ModelOptions = ModelOptions(
     p = np.ascontiguousarray(p, dtype=float).ravel()
     lay = layout or default_layout()
     R = records(lay)
+    check_table_memory(cfg, lay)
     key = (cfg.graph_key(), cfg.trajectory_values(), hashlib.sha256(p.tobytes()).hexdigest(), opts, lay.structure)
     with _FUNCS_LOCK:
         tab = _TABLES.get(key)

@@ -25,10 +25,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Trajectory", "min_jerk", "quintic_coefficients", "from_waypoints", "lawnmower", "approach",
+__all__ = ["Trajectory", "rest_to_rest", "min_jerk", "quintic_coefficients", "from_waypoints", "lawnmower", "approach",
            "SEGMENTS"]
 
 SEGMENTS = ("minimum_jerk", "quintic")
+
+
+def rest_to_rest(s):
+    """The rest-to-rest quintic (Flash & Hogan's minimum-jerk blend) at the normalised time ``s`` in [0, 1]:
+    ``(10 s^3 - 15 s^4 + 6 s^5, its first derivative in s, its second)``, from 0 to 1 with zero rate and
+    acceleration at both ends. Plain arithmetic on what it is given (a float, a NumPy array), so every
+    user computes the same bits; the compiled scenario's arm motion evaluates the same polynomial in
+    CasADi (:func:`arvcas.sim.scenario.quintic`)."""
+    return (10 * s**3 - 15 * s**4 + 6 * s**5, 30 * s**2 - 60 * s**3 + 30 * s**4, 60 * s - 180 * s**2 + 120 * s**3)
 
 
 def min_jerk(p0, p1, t0: float, t1: float, t):
@@ -38,8 +47,8 @@ def min_jerk(p0, p1, t0: float, t1: float, t):
     T = t1 - t0
     s = np.clip((np.asarray(t, float) - t0) / T, 0.0, 1.0)[:, None]
     d = p1 - p0
-    return (p0 + d * (10 * s**3 - 15 * s**4 + 6 * s**5), d * (30 * s**2 - 60 * s**3 + 30 * s**4) / T,
-            d * (60 * s - 180 * s**2 + 120 * s**3) / T**2)
+    b, bd, bdd = rest_to_rest(s)
+    return p0 + d * b, d * bd / T, d * bdd / T**2
 
 
 def quintic_coefficients(T: float, p0, v0, a0, p1, v1, a1) -> np.ndarray:

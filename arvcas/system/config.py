@@ -106,9 +106,9 @@ SI = "SI"  # accepted for every dimension, factor 1
 ANY_LENGTH = -1  # quantity(n=ANY_LENGTH): a vector whose length the caller checks (e.g. one per joint)
 
 # The largest table a scenario or a study may ask a run to hold, 2 GB: a request whose estimate is
-# larger is refused at load, before any work. The scenario's estimate is its time table
-# (arvcas.sim.scenario.table_bytes: 8.6 MB for the 100 s paper run at h_plant = 0.05 s, 36 MB at 0.01 s), a study's the
-# per-draw metrics of one generation (arvcas.tuning.study).
+# larger is refused before any work. A run's estimate is its time table for its system
+# (arvcas.sim.schedule.table_bytes: 8.6 MB for Haidou-1 in the 100 s paper run at h_plant = 0.05 s, 36 MB at
+# 0.01 s), a study's the per-draw metrics of one generation (arvcas.tuning.study).
 MEMORY_CAP_BYTES = 2_000_000_000
 
 

@@ -26,11 +26,8 @@ file and the element it came from.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import math
-import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from arvcas.system import config, systemfile, urdf
+from arvcas.system.rosfiles import ImportError_, rel_path, default_roots, expand, find_packages, read_max_thrust, read_tam
 
 __all__ = ["import_uuv", "check_options", "Imported", "ImportError_", "T_FLU_FRD", "find_packages", "expand", "read_tam",
            "UNDERWATER_PLUGINS", "THRUSTER_PLUGINS"]
@@ -48,19 +46,8 @@ UNDERWATER_PLUGINS = ("libuuv_underwater_object_ros_plugin.so", "libuuv_underwat
 THRUSTER_PLUGINS = ("libuuv_thruster_ros_plugin.so", "libuuv_thruster_plugin.so")
 PLUGIN_DENSITY = 1028.0  # UnderwaterObjectPlugin.cc's fluidDensity when <fluid_density> is absent
 SDF_GRAVITY = 9.8  # SDF's default world <gravity> 0 0 -9.8: uuv_simulator's worlds set none
-MAX_PACKAGE_SCAN = 20000  # directories looked at when indexing ROS packages for $(find ...)
-# Bounds of a xacro expansion (macros can expand exponentially: a macro calling another twice, 40 deep, is
-# 2^40 elements): elements evaluated, their nesting, and seconds. The RexROV 2 + Oberon 7 of
-# tests/data/uuv_rexrov2 evaluates 921 elements nested 10 deep in 0.5 s (measured), the RexROV 2 alone 417.
-MAX_XACRO_ELEMENTS = 20_000
-MAX_XACRO_DEPTH = 100
-MAX_XACRO_SECONDS = 30.0
 _DOF = "XYZKMN"
 _VEL = "uvwpqr"
-
-
-class ImportError_(ValueError):
-    """One-line error of an import (names the file and the element or option at fault)."""
 
 
 @dataclass(frozen=True)
@@ -77,178 +64,6 @@ class Imported:
     B_flu: np.ndarray
     vehicle_links: tuple[str, ...] = field(default=())
     arm_joints: tuple[str, ...] = field(default=())
-
-
-# ---- reading: xacro, packages ---------------------------------------------------------------------------
-
-
-def find_packages(roots: list[Path], error=ImportError_) -> dict[str, Path]:
-    """ROS package name -> directory, for every ``package.xml`` under ``roots`` (hidden directories skipped;
-    at most :data:`MAX_PACKAGE_SCAN` directories looked at)."""
-    found: dict[str, Path] = {}
-    seen = 0
-    for root in roots:
-        for d, dirs, files in os.walk(root):
-            seen += 1
-            if seen > MAX_PACKAGE_SCAN:
-                raise error(f"{root}: more than {MAX_PACKAGE_SCAN} directories while looking for ROS packages: "
-                            f"name the folders that hold them with --ros-path")
-            dirs[:] = sorted(x for x in dirs if not x.startswith("."))
-            if "package.xml" in files:
-                try:
-                    pxml = Path(d) / "package.xml"
-                    text = pxml.read_text(encoding="utf-8", errors="replace")
-                    urdf.refuse_dtd(text, str(pxml), ValueError)  # no entity is expanded
-                    name = (ET.fromstring(text).findtext("name") or "").strip()
-                except (ET.ParseError, OSError, ValueError):
-                    continue
-                if name and name not in found:
-                    found[name] = Path(d).resolve()
-    return found
-
-
-def _package_of(path: Path) -> Path | None:
-    for d in path.resolve().parents:
-        if (d / "package.xml").is_file():
-            return d
-    return None
-
-
-def _rel(path: Path) -> str:
-    """A file named as ROS does: its package's folder name and the path in it (else its name)."""
-    pkg = _package_of(path)
-    return path.name if pkg is None else f"{pkg.name}/{path.resolve().relative_to(pkg)}"
-
-
-def default_roots(path: Path) -> list[Path]:
-    """Where ``$(find pkg)`` looks by default: the folder holding the input's ROS package (a workspace's
-    ``src``), or the input's own folder."""
-    pkg = _package_of(path)
-    return [pkg.parent if pkg is not None else path.resolve().parent]
-
-
-def expand(path: Path, packages: dict[str, Path], args: dict[str, str], error=ImportError_) -> tuple[str, list[str]]:
-    """The URDF text of a xacro file (``$(find pkg)`` resolved in ``packages``, ``$(arg x)`` from ``args``) and
-    the files it included; a plain URDF is returned as read."""
-    from arvcas.io.files import read_text
-
-    text = read_text(path, "robot description", error)
-    if "xacro" not in text:
-        return text, []
-    try:
-        import xacro
-        from xacro import substitution_args as sa
-    except ImportError:
-        raise error(f"{path}: a xacro file: expanding it needs xacro: pip install 'arvcas[uuv]' (or give the "
-                    f"URDF that `xacro` writes)") from None
-
-    def find(pkg: str) -> str:
-        if pkg not in packages:
-            raise error(f"{path}: $(find {pkg}): no ROS package '{pkg}' under the --ros-path folders "
-                        f"(found: {', '.join(sorted(packages)[:12]) or 'none'}){config.closest(pkg, packages)}")
-        return str(packages[pkg])
-
-    old = sa._eval_find, sa._eval_dict.get("find")
-    sa._eval_find, sa._eval_dict["find"] = find, find
-    real_parse = xacro.parse
-
-    def parse_without_dtd(inp, filename=None):  # the file and every include: no DTD, no entity expanded
-        if inp is None:
-            with open(os.path.join(xacro.root_dir, filename), encoding="utf-8") as fh:
-                inp = fh.read()
-        elif hasattr(inp, "read"):
-            inp = inp.read()
-        if isinstance(inp, (str, bytes)):
-            urdf.refuse_dtd(inp, filename or str(path), error)
-        return real_parse(inp, filename)
-
-    xacro.parse = parse_without_dtd
-    xacro.all_includes = []
-    real_eval_all = xacro.eval_all
-    xacro.eval_all = _bounded(real_eval_all, path, error)
-    try:
-        xacro.init_stacks(None)
-        with contextlib.redirect_stderr(io.StringIO()):  # xacro's warnings (redefined symbols, ...)
-            doc = xacro.process_file(str(path.resolve()), mappings=dict(args), verbosity=0)
-        return doc.toxml(), list(xacro.all_includes)
-    except (ImportError_, error):
-        raise
-    except Exception as e:  # noqa: BLE001 (xacro's own message, one line)
-        raise error(f"{path}: xacro: {' '.join(str(e).split())}") from None
-    finally:
-        sa._eval_find, sa._eval_dict["find"] = old
-        xacro.parse = real_parse
-        xacro.eval_all = real_eval_all
-        xacro.init_stacks(None)
-
-
-def _bounded(eval_all, path: Path, error):
-    """xacro's ``eval_all`` (it evaluates one element and, recursively, what it expands to) counted: more than
-    :data:`MAX_XACRO_ELEMENTS` elements, a nesting deeper than :data:`MAX_XACRO_DEPTH` or more than
-    :data:`MAX_XACRO_SECONDS` stops the expansion with one line naming the file and the bound."""
-    import time
-
-    state = {"n": 0, "depth": 0, "t0": time.monotonic()}
-
-    def counted(node, macros, symbols):
-        state["n"] += 1
-        state["depth"] += 1
-        try:
-            if state["n"] > MAX_XACRO_ELEMENTS:
-                raise error(f"{path}: xacro: the expansion passed {MAX_XACRO_ELEMENTS:,} elements (a macro that "
-                            f"expands without bound?); refused (arvcas.system.uuv.MAX_XACRO_ELEMENTS)")
-            if state["depth"] > MAX_XACRO_DEPTH:
-                raise error(f"{path}: xacro: elements nested more than {MAX_XACRO_DEPTH} deep (a macro that "
-                            f"calls itself?); refused (arvcas.system.uuv.MAX_XACRO_DEPTH)")
-            if time.monotonic() - state["t0"] > MAX_XACRO_SECONDS:
-                raise error(f"{path}: xacro: the expansion took more than {MAX_XACRO_SECONDS:g} s after "
-                            f"{state['n']:,} elements; refused (arvcas.system.uuv.MAX_XACRO_SECONDS)")
-            return eval_all(node, macros, symbols)
-        finally:
-            state["depth"] -= 1
-
-    return counted
-
-
-def _yaml(path: Path, what: str, error) -> Any:
-    """A YAML file (uuv_simulator's configuration), parsed safely; one-line errors naming it."""
-    from arvcas.io.files import read_text
-
-    try:
-        import yaml
-    except ImportError:
-        raise error(f"{path}: reading YAML needs PyYAML: pip install 'arvcas[uuv]'") from None
-    try:
-        return yaml.safe_load(read_text(path, what, error))
-    except yaml.YAMLError as e:
-        raise error(f"{path}: malformed YAML: {' '.join(str(e).split())}") from None
-
-
-def read_tam(path: Path, error=ImportError_) -> np.ndarray:
-    """uuv_simulator's ``TAM.yaml`` (``tam:`` rows, the thruster manager's allocation matrix in its
-    ``base_link`` frame, FLU): a 6 x n array."""
-    doc = _yaml(path, "TAM file", error)
-    tam = doc.get("tam") if isinstance(doc, dict) else None
-    try:
-        A = np.array(tam, dtype=float)
-    except (TypeError, ValueError):
-        A = np.zeros(0)
-    if A.ndim != 2 or A.shape[0] != 6 or not np.isfinite(A).all():
-        raise error(f"{path}: tam: expected 6 rows of numbers, one column per thruster")
-    return A
-
-
-def read_max_thrust(path: Path, n: int, error=ImportError_) -> list[float]:
-    """``thruster_manager.max_thrust`` of a uuv_simulator ``thruster_manager.yaml`` (a number or one per
-    thruster): the manager clips each thrust to +- it."""
-    doc = _yaml(path, "thruster manager file", error)
-    tm = doc.get("thruster_manager", doc) if isinstance(doc, dict) else None
-    v = tm.get("max_thrust") if isinstance(tm, dict) else None
-    vals = v if isinstance(v, list) else [v] * n
-    if len(vals) != n or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                                 and x > 0 for x in vals):
-        raise error(f"{path}: thruster_manager.max_thrust: expected a positive number or {n} of them, got {v!r}")
-    return [float(x) for x in vals]
 
 
 # ---- geometry ---------------------------------------------------------------------------------------------
@@ -565,7 +380,7 @@ def import_uuv(description: str | Path, *, name: str | None = None, base_link: s
     for rp in roots:
         if not rp.is_dir():
             raise error(f"--ros-path {rp}: not a directory")
-    rel = _rel(path)
+    rel = rel_path(path)
     src = (f"{cite}, " if cite else "") + rel
     packages = find_packages(roots, error) if path.suffix == ".xacro" or ".xacro" in path.name else {}
     text, includes = expand(path, packages, xacro_args or {}, error)
@@ -756,7 +571,7 @@ def _thrust_limits(r: _Robot, max_thrust, manager, error) -> list[tuple[float, s
             vals, s = [max_thrust] * len(r.thrusters), "--max-thrust"
         elif manager is not None:
             vals = read_max_thrust(Path(manager), len(r.thrusters), error)
-            s = f"{_rel(Path(manager))}: thruster_manager.max_thrust (the thruster manager clips each thrust to +- it)"
+            s = f"{rel_path(Path(manager))}: thruster_manager.max_thrust (the thruster manager clips each thrust to +- it)"
         else:
             raise error(f"{r.where}: the thruster plugins give no thrustMin/thrustMax: give the thrust limit with "
                         f"--thruster-manager thruster_manager.yaml (its max_thrust) or --max-thrust N")

@@ -89,7 +89,7 @@ def versions() -> dict:
     import casadi
     import pymoo
 
-    from arvcas import __version__
+    from arvcas._version import __version__
 
     return {"arvcas": __version__, "pymoo": pymoo.__version__, "casadi": casadi.__version__,
             "numpy": np.__version__, "h5py": h5py.__version__, "python": platform.python_version()}

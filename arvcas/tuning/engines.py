@@ -8,7 +8,7 @@ in order; every run is independent of the others in its batch, so the generation
 therefore the front, are the same bit for bit as with the ``local`` engine: the workers run the
 client's own compiled code. The client ships it: the libraries of the run and of its time table, as
 bytes with their sha256 (:func:`ship_bundle`, scattered once to every worker), which a worker loads
-without a C compiler or a compile cache (:func:`arvcas.build.codegen.preload`; a worker on another
+without a C compiler or a compile cache (:func:`arvcas.build.shipping.preload`; a worker on another
 platform, or with other arvcas model code, refuses with a one-line error naming it). The engine still
 checks that every chunk reports the client's key. An error raised on a worker says which worker. A
 controller from a plugin file or module is loaded on each worker from the same file or module
@@ -66,9 +66,9 @@ def run_key(controller: str, cfg: ScenarioConfig, params: Params | None = None, 
 
 def ship_bundle(run) -> dict:
     """The compiled libraries a :class:`~arvcas.sim.run.CompiledRun` of metrics-only runs needs, as bytes."""
-    from arvcas.build import codegen
+    from arvcas.build import shipping
 
-    return codegen.bundle(run.compiled_functions(trace=False))
+    return shipping.bundle(run.compiled_functions(trace=False))
 
 
 def evaluate_rows(task: EvalTask, gains: np.ndarray, n_threads: int | None = None):
@@ -131,7 +131,7 @@ def _cores() -> int:
 
 def _chunk(task: EvalTask, gains: np.ndarray, n_threads: int, bundle: dict | None = None):
     """Dask task: one contiguous block of the population, on the client's shipped libraries."""
-    from arvcas.build import codegen
+    from arvcas.build import shipping
 
     try:
         from arvcas.io import plugins
@@ -139,10 +139,10 @@ def _chunk(task: EvalTask, gains: np.ndarray, n_threads: int, bundle: dict | Non
         for spec in task.plugins:
             plugins.load(spec, what="plugin")
         if bundle is not None:
-            codegen.preload(bundle)
+            shipping.preload(bundle)
         return evaluate_rows(task, gains, n_threads=n_threads)
     except Exception as e:  # noqa: BLE001 - say where it happened, in one line
-        here = codegen.process_name()
+        here = shipping.process_name()
         msg = " ".join(str(e).split()) or type(e).__name__
         raise EngineError(msg if msg.startswith(here) else f"{here}: {type(e).__name__}: {msg}") from None
 

@@ -1,0 +1,179 @@
+"""A log's stream read as a table (:class:`Table`: its time column and the columns named): a CSV file
+(``.gz``: gzip), streamed in blocks, or a ROS bag's topic (:mod:`rosbags`). Both are bounded (bytes, rows,
+values kept) and every fault is one :class:`LogError` line naming the file, the row or field and the
+reason. :mod:`arvcas.ident.logs` turns the tables into a :class:`~arvcas.ident.logs.Log`.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from arvcas.system import config
+
+__all__ = ["LogError", "Table", "read_csv", "read_bag", "MAX_LOG_BYTES", "MAX_SAMPLES", "CSV_BLOCK_BYTES",
+           "MAX_CSV_VALUES"]
+
+MAX_LOG_BYTES = 1 << 30  # one stream file (after decompression); a trial of an hour at 1 kHz is ~100 MB
+MAX_SAMPLES = 20_000_000  # rows of one stream
+
+
+class LogError(ValueError):
+    """One line naming the mapping or stream file, the key or column, and the reason."""
+
+@dataclass
+class Table:
+    where: str  # the file (and topic) for messages
+    time: np.ndarray
+    time_name: str
+    cols: dict[str, np.ndarray]
+
+
+def read_csv(path: Path, names: list[str], time_col: str, mapping: str) -> Table:
+    """The columns ``names`` (and the time) of a CSV log (``.gz``: gzip), streamed in blocks of whole lines
+    (:data:`CSV_BLOCK_BYTES`): what it costs is the columns read, not the file. Every row must have as many
+    fields as the header (a decimal comma shifts every column: refused naming the row); a corrupt gzip
+    file, more than :data:`MAX_LOG_BYTES` of text or :data:`MAX_SAMPLES` rows are one line."""
+    import zlib
+
+    from arvcas.io.files import check_input
+
+    check_input(path, "log file", LogError)
+    gz = path.suffix == ".gz"
+    if not gz and path.stat().st_size > MAX_LOG_BYTES:
+        raise LogError(f"{path}: more than {MAX_LOG_BYTES} bytes (arvcas.ident.streams.MAX_LOG_BYTES)")
+    try:
+        f = gzip.open(path, "rb") if gz else open(path, "rb")
+    except OSError as e:
+        raise LogError(f"{path}: cannot be read ({e.strerror or e})") from None
+    blocks, n_rows, line, total = [], 0, 2, 0  # line: the file line the next block starts at (the header: 1)
+    try:
+        with f:
+            head = f.readline(1 << 20)
+            header = [h.strip().strip('"') for h in _utf8(head, path, 1).lstrip("\ufeff").strip().split(",")]
+            if len(set(header)) != len(header):
+                dup = next(h for h in header if header.count(h) > 1)
+                raise LogError(f"{path}: header names column {dup!r} twice")
+            want = [time_col] + [n for n in names if n != time_col]
+            for n in want:
+                if n not in header:
+                    raise LogError(f"{path}: no column {n!r} (named in {mapping}){config.closest(n, header)}")
+            idx = [header.index(n) for n in want]
+            rest = b""
+            while True:
+                chunk = f.read(CSV_BLOCK_BYTES)
+                total += len(chunk)
+                if total > MAX_LOG_BYTES:
+                    raise LogError(f"{path}: more than {MAX_LOG_BYTES} bytes{' once decompressed' if gz else ''} "
+                                   f"(arvcas.ident.streams.MAX_LOG_BYTES)")
+                data = rest + chunk
+                if chunk:
+                    cut = data.rfind(b"\n") + 1
+                    data, rest = data[:cut], data[cut:]
+                if data:
+                    block, n_lines = _csv_block(data, path, line, len(header), idx)
+                    line += n_lines
+                    n_rows += block.shape[0]
+                    if n_rows > MAX_SAMPLES or n_rows * len(want) > MAX_CSV_VALUES:
+                        raise LogError(f"{path}: more than {min(MAX_SAMPLES, MAX_CSV_VALUES // len(want))} rows of "
+                                       f"the {len(want)} columns read (arvcas.ident.streams.MAX_SAMPLES, MAX_CSV_VALUES)")
+                    blocks.append(block)
+                if not chunk:
+                    break
+    except (EOFError, zlib.error, gzip.BadGzipFile) as e:
+        raise LogError(f"{path}: not a readable gzip file ({' '.join(str(e).split()) or type(e).__name__})") from None
+    except OSError as e:
+        raise LogError(f"{path}: {'not a readable gzip file' if gz else 'cannot be read'} "
+                       f"({' '.join(str(e).split())})") from None
+    data = np.concatenate(blocks) if blocks else np.zeros((0, len(want)))
+    if data.shape[0] < 2:
+        raise LogError(f"{path}: fewer than 2 rows of data")
+    cols = {n: data[:, i] for i, n in enumerate(want)}
+    return Table(str(path), cols.pop(time_col), time_col, cols)
+
+
+CSV_BLOCK_BYTES = 8 << 20  # a CSV log is read this much at a time
+MAX_CSV_VALUES = 100_000_000  # numbers kept of one CSV stream (800 MB as float64): rows x the columns read
+
+
+def _utf8(raw: bytes, path: Path, line: int) -> str:
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise LogError(f"{path}: not UTF-8 text (row {line}, byte {e.start})") from None
+
+
+def _csv_block(data: bytes, path: Path, line: int, width: int, idx: list[int]) -> tuple[np.ndarray, int]:
+    """The columns ``idx`` of whole CSV lines ``data`` (file line ``line`` first); every line that is not blank
+    or a comment has ``width`` fields. Returns (rows, lines read)."""
+    lines = data.split(b"\n")
+    if lines and lines[-1] == b"":
+        lines.pop()
+    for k, ln in enumerate(lines):
+        n = ln.count(b",") + 1
+        if n != width and ln.strip() and not ln.lstrip().startswith(b"#"):
+            why = " (a decimal comma? fields are separated by commas and decimals take a point)" if n > width else ""
+            raise LogError(f"{path}: row {line + k}: {n} fields, the header has {width}{why}")
+    try:
+        rows = np.loadtxt(io.StringIO(_utf8(data, path, line)), delimiter=",", usecols=idx, ndmin=2, dtype=float)
+    except ValueError as e:
+        msg = " ".join(str(e).split())
+        raise LogError(f"{path}: a number could not be read in rows {line} to {line + len(lines) - 1} "
+                       f"({msg[:160]})") from None
+    return rows.reshape(-1, len(idx)), len(lines)
+
+
+def _field(msg: Any, path: str) -> float:
+    v = msg
+    for part in path.split("."):
+        m = re.fullmatch(r"([A-Za-z_]\w*)(?:\[(\d+)\])?", part)
+        if m is None or not hasattr(v, m.group(1)):
+            raise KeyError(path)
+        v = getattr(v, m.group(1))
+        if m.group(2) is not None:
+            v = v[int(m.group(2))]
+    if hasattr(v, "sec") and hasattr(v, "nanosec"):  # builtin_interfaces/Time
+        return float(v.sec) + 1e-9 * float(v.nanosec)
+    return float(v)
+
+
+def read_bag(bag: Path, topic: str, names: list[str], time_field: str | None, mapping: str) -> Table:
+    try:
+        from rosbags.highlevel import AnyReader
+    except ImportError:
+        raise LogError(f"{mapping}: reading ROS bags needs the rosbags package: pip install 'arvcas[bags]'") \
+            from None
+    where = f"{bag} topic {topic}"
+    t, rows = [], []
+    try:
+        with AnyReader([bag]) as reader:
+            conns = [c for c in reader.connections if c.topic == topic]
+            if not conns:
+                topics = sorted({c.topic for c in reader.connections})
+                raise LogError(f"{bag}: no topic {topic!r} (named in {mapping}){config.closest(topic, topics)}")
+            for conn, stamp, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, conn.msgtype)
+                try:
+                    t.append(stamp * 1e-9 if time_field is None else _field(msg, time_field))
+                    rows.append([_field(msg, n) for n in names])
+                except KeyError as e:
+                    raise LogError(f"{where}: message {conn.msgtype} has no field {e.args[0]!r}") from None
+                except (TypeError, ValueError, IndexError):
+                    raise LogError(f"{where}: a field of {names} is not a number") from None
+                if len(t) > MAX_SAMPLES:
+                    raise LogError(f"{where}: more than {MAX_SAMPLES} messages")
+    except LogError:
+        raise
+    except Exception as e:  # rosbags' own errors: unreadable metadata, storage, message types
+        raise LogError(f"{bag}: not a readable ROS bag ({type(e).__name__}: {' '.join(str(e).split())[:160]})") \
+            from None
+    if len(t) < 2:
+        raise LogError(f"{where}: fewer than 2 messages")
+    data = np.array(rows, dtype=float).reshape(len(rows), len(names))
+    return Table(where, np.array(t, dtype=float), time_field or "log time", {n: data[:, i] for i, n in enumerate(names)})
