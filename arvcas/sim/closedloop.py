@@ -331,28 +331,28 @@ def _substep_quadrature(hp, xs, mom, recs, accel):
     return ca.vertcat(z[0:6] + ca.mtimes(Ja, o2), z[6:12] + w2)
 
 
-def _pchip(g, v, d, x, mode: str):
-    """The monotone cubic through ``(g_i, v_i)`` with slopes ``d_i`` at a column ``x`` (MX: the interval by
-    ``casadi.low``, ``"exact"`` for a uniform grid, ``"binary"`` otherwise; then one cubic)."""
-    i = ca.low(g, x, {"lookup_mode": mode})  # within [0, n - 2]
-    return thrusters.hermite(g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1], x)
+def _gather(g, v, d, i):
+    """``(g0, g1, v0, v1, d0, d1)``: the ends, values and slopes of the monotone cubic's intervals ``i``
+    (MX: the per-run tables indexed at run time)."""
+    return g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
 
 
-def _pchip_inverse(g, v, d, u, iterations: int = 8):
-    """The ``x`` at which the monotone cubic equals ``u`` (a column, MX): its interval by ``casadi.low`` on
-    the values, then Newton's method on that interval's cubic from the secant's guess, kept in the
-    interval (quadratic convergence from a guess within a few percent: 8 steps reach round-off)."""
-    return _pchip_newton(*_pchip_interval(g, v, d, u), u, iterations)
+def _map_interval(g, v, d, x, mode: str):
+    """The intervals of the monotone cubic through ``(g_i, v_i)`` that hold a column ``x`` (MX: ``casadi.low``,
+    ``"exact"`` for a uniform grid, one division and no search; ``"binary"`` otherwise), as :func:`_gather`;
+    the cubic itself is evaluated in SX (:func:`_thruster_functions`)."""
+    return _gather(g, v, d, ca.low(g, x, {"lookup_mode": mode}))  # within [0, n - 2]
 
 
 def _pchip_interval(g, v, d, u):
     """``(g0, g1, v0, v1, d0, d1)``: the interval of the monotone cubic's values that holds ``u`` (MX lookup)."""
-    i = ca.low(v, u, {"lookup_mode": "binary"})
-    return g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
+    return _gather(g, v, d, ca.low(v, u, {"lookup_mode": "binary"}))
 
 
 def _pchip_newton(g0, g1, v0, v1, d0, d1, u, iterations: int = 8):
-    """Newton's method for the ``x`` at which one interval's cubic equals ``u`` (:func:`_pchip_inverse`); MX or SX."""
+    """The ``x`` at which one interval's cubic equals ``u`` (the interval from :func:`_pchip_interval`): Newton's
+    method on that interval's cubic from the secant's guess, kept in the interval (quadratic convergence
+    from a guess within a few percent: 8 steps reach round-off); MX or SX."""
     h = g1 - g0
     t = ca.fmin(ca.fmax((u - v0) / (v1 - v0), 0), 1)
     for _ in range(iterations):
@@ -363,15 +363,22 @@ def _pchip_newton(g0, g1, v0, v1, d0, d1, u, iterations: int = 8):
     return g0 + t * h
 
 
-def _thruster_functions(spec: RunSpec):
-    """The SX parts of a sample's thruster dynamics (docs/model.md §9):
+IV = ("g0", "g1", "v0", "v1", "d0", "d1")  # an interval of a table map's cubic (:func:`_gather`)
 
-    ``cl_thr_lag(s0, u, y_tab, E, p) -> (s, command)``: each rotor state's target (a table map's from
-    ``y_tab``, the inverse looked up in MX; a quadratic map's here), the lag's closed form at every stage
-    offset of the sample (``s``: thruster-major, n_thr x n_stages) and the command sent;
-    ``cl_thr_wrench(T_tab, s, p) -> (W, T_end)``: each thruster's thrust at the stages (a table map's from
-    ``T_tab``, looked up in MX), the thrusters' body wrench at each stage (6 x n_stages, stage-major) and
-    the thrust at the sample's end.
+
+def _thruster_functions(spec: RunSpec):
+    """The SX parts of a sample's thruster dynamics (docs/model.md §9): everything but the table lookups,
+    which index the per-run tables at run time (MX, :func:`_thruster_step`: one division for a uniform
+    grid, :func:`_map_interval`; a search on the values for the inverse, :func:`_pchip_interval`).
+
+    ``cl_thr_lag(s0, u, ig0..id1, E, p) -> (s, command)``: each rotor state's target (a table map's by
+    Newton's method on the interval of its cubic that holds ``u``, ``ig0..id1`` per thruster, 0 for the
+    others; a quadratic map's in closed form), the lag's closed form at every stage offset of the sample
+    (``s``: thruster-major, n_thr x n_stages) and the command sent;
+    ``cl_thr_wrench(g0..d1, s, p) -> (W, T_end)``: each thruster's thrust at the stages (a table map's
+    cubic on the intervals ``g0..d1`` that hold ``s``, as ``s``), the thrusters' body wrench at each stage
+    (6 x n_stages, stage-major; with the thrust quadrature, the forcing's moments) and the thrust at the
+    sample's end.
     """
     cfg, lay = spec.cfg, spec.lay
     st = lay.structure
@@ -380,14 +387,18 @@ def _thruster_functions(spec: RunSpec):
     p_s = ca.SX.sym("p", len(lay))
     P = view(p_s, lay)
     maps = thrusters.thruster_maps(P)
-    s0, u, y_tab = ca.SX.sym("s0", n), ca.SX.sym("u", n), ca.SX.sym("y_tab", n)
+    s0, u = ca.SX.sym("s0", n), ca.SX.sym("u", n)
+    iu = [ca.SX.sym("i" + k, n) for k in IV]
     E = ca.SX.sym("E", thrusters.lag_constants(P, offs).shape[0])
+    y_tab = _pchip_newton(*iu, u)
     y = ca.vertcat(*[y_tab[i] if m.kind == "table" else thrusters.map_inverse(P, m, u[i]) for i, m in enumerate(maps)])
     S = thrusters.lag_states(P, s0, y, E, offs, cfg.time_h)
     cmd = ca.vertcat(*[thrusters.command_of(P, m, y[i]) for i, m in enumerate(maps)])
-    lag = ca.Function("cl_thr_lag", [s0, u, y_tab, E, p_s], [ca.vertcat(*[ca.vertcat(*row) for row in S]), cmd],
-                      ["s0", "u", "y_tab", "E", "p"], ["s", "command"])
-    s_all, T_tab = ca.SX.sym("s", n * m_off), ca.SX.sym("T_tab", n * m_off)
+    lag = ca.Function("cl_thr_lag", [s0, u, *iu, E, p_s], [ca.vertcat(*[ca.vertcat(*row) for row in S]), cmd],
+                      ["s0", "u", *("i" + k for k in IV), "E", "p"], ["s", "command"])
+    s_all = ca.SX.sym("s", n * m_off)
+    iv = [ca.SX.sym(k, n * m_off) for k in IV]
+    T_tab = thrusters.hermite(*iv, s_all)
     T = [[T_tab[i * m_off + j] if m.kind == "table" else thrusters.map_thrust(P, m, s_all[i * m_off + j])
           for j in range(m_off)] for i, m in enumerate(maps)]
     B = thrusters.B_T(P)
@@ -398,8 +409,8 @@ def _thruster_functions(spec: RunSpec):
         C = moment_weights(cfg)
         W = ca.vertcat(*[ca.vec(ca.mtimes(B, ca.mtimes(Tn, ca.DM(C[:, N_MOMENTS * i:N_MOMENTS * (i + 1)]))))
                          for i in range(cfg.substeps)])
-    wrench = ca.Function("cl_thr_wrench", [T_tab, s_all, p_s], [W, ca.vertcat(*[T[i][-1] for i in range(n)])],
-                         ["T_tab", "s", "p"], ["W", "T_end"])
+    wrench = ca.Function("cl_thr_wrench", [*iv, s_all, p_s], [W, ca.vertcat(*[T[i][-1] for i in range(n)])],
+                         [*IV, "s", "p"], ["W", "T_end"])
     return lag, wrench
 
 
@@ -417,33 +428,42 @@ def _table_grids(st, tabs):
     return maps, grids
 
 
-def _table_targets(st, grids, u):
-    """Each table-mapped thruster's rotor-state target ``F^-1(u_i)`` (MX; 0 for the others): the inverse of its
-    map's monotone cubic at the allocated thrust ``u`` (:func:`_pchip_inverse`), thrusters of one map together."""
+def _table_intervals(st, grids, x, size: int, lookup):
+    """The six interval columns (:data:`IV`) of each thruster's table map at its block of ``size`` entries of
+    ``x`` (MX, thruster-major; zeros for a thruster without a table): ``lookup(g, v, d, mode, x_map)`` gives
+    the intervals of one map's thrusters together."""
     maps = [st.thruster_map(d.map) for d in st.thruster_dynamics]
-    y_tab = [ca.MX(1, 1)] * st.n_thrusters
-    for name, (g, v, d, _) in grids.items():
+    cols = [[ca.MX.zeros(size, 1)] * st.n_thrusters for _ in IV]
+    for name, (g, v, d, mode) in grids.items():
         idx = [i for i, m in enumerate(maps) if m.name == name]
-        ys = _pchip_inverse(g, v, d, ca.vertcat(*[u[i] for i in idx]))  # thrust -> rotor state
-        for r, i in enumerate(idx):
-            y_tab[i] = ys[r]
-    return ca.vertcat(*y_tab)
+        got = lookup(g, v, d, mode, ca.vertcat(*[x[i * size:(i + 1) * size] for i in idx]))
+        for c, col in zip(got, cols):
+            for r, i in enumerate(idx):
+                col[i] = c[r * size:(r + 1) * size]
+    return [ca.vertcat(*col) for col in cols]
+
+
+def target_intervals(st, grids, u):
+    """The intervals (:data:`IV`) of each thruster's table map whose values hold its allocated thrust ``u``
+    (a search on the values: ``cl_thr_lag``'s Newton steps invert the cubic there)."""
+    return _table_intervals(st, grids, u, 1, lambda g, v, d, _, x: _pchip_interval(g, v, d, x))
+
+
+def stage_intervals(st, grids, s_all, m_off: int):
+    """The intervals (:data:`IV`) of each thruster's table map that hold its rotor states ``s_all`` (``m_off``
+    per thruster, thruster-major): ``cl_thr_wrench`` evaluates the cubic on them."""
+    return _table_intervals(st, grids, s_all, m_off, lambda g, v, d, mode, x: _map_interval(g, v, d, x, mode))
 
 
 def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, E, tabs, p):
-    """One sample of the thruster dynamics in MX: the inverse maps (table lookups and Newton), the lag, the
-    maps at every stage (table lookups), the wrenches. Returns ``(W (6 n_stages), s_end, T_end, command)``."""
+    """One sample of the thruster dynamics in MX: the intervals of the inverse maps (a search on the table's
+    values), the lag with the inverse's Newton steps (SX), the intervals at every stage (one division each on
+    a uniform grid), the maps' cubics and the wrenches (SX). Returns ``(W (6 n_stages), s_end, T_end, command)``."""
     st = spec.lay.structure
     n, m_off = st.n_thrusters, len(lag_offsets(spec.cfg))
-    maps, grids = _table_grids(st, tabs)
-    s_all, cmd = lag(s0, u, _table_targets(st, grids, u), E, p)
-    T_tab = [ca.MX.zeros(m_off, 1)] * n
-    for name, (g, v, d, mode) in grids.items():
-        idx = [i for i, m in enumerate(maps) if m.name == name]
-        Ts = _pchip(g, v, d, ca.vertcat(*[s_all[i * m_off:(i + 1) * m_off] for i in idx]), mode)
-        for r, i in enumerate(idx):
-            T_tab[i] = Ts[r * m_off:(r + 1) * m_off]
-    W, T_end = wrench(ca.vertcat(*T_tab), s_all, p)
+    _, grids = _table_grids(st, tabs)
+    s_all, cmd = lag(s0, u, *target_intervals(st, grids, u), E, p)
+    W, T_end = wrench(*stage_intervals(st, grids, s_all, m_off), s_all, p)
     s_end = ca.vertcat(*[s_all[(i + 1) * m_off - 1] for i in range(n)])
     return W, s_end, T_end, cmd
 
@@ -787,7 +807,7 @@ def command_functions(cfg: ScenarioConfig, layout, prefix: str = "") -> dict[str
     * ``thr_tab(p) -> tab``: each table map's rotor-state grid, thrust and slopes (the run's per-run
       constants, :func:`thruster_constants`), once per init;
     * ``command(u, tab, p) -> command``: the rotor-state target ``y = F^-1(u)`` (a table's cubic inverted in
-      MX, :func:`_pchip_inverse`; the quadratic law's in closed form) and ``command_of(y)``.
+      MX, :func:`_pchip_interval`, then :func:`_pchip_newton`; the quadratic law's in closed form) and ``command_of(y)``.
 
     Empty for a system without thruster dynamics (its commands are the thrust itself)."""
     st = layout.structure

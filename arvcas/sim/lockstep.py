@@ -64,8 +64,8 @@ def _main_function(name: str, spec: closedloop.RunSpec, parts: closedloop.StepPa
     """(mode, gains, unc, phase, ekf, water, p, Sf, u, s0, E, tab) -> (S0, K, the run's outputs, W, s_end, T_end).
 
     mode 0: the run's start (S0, K) and end (its outputs from the last loop state Sf); mode 1 (with
-    thruster dynamics): one sample of the thrusters for one run (:func:`closedloop._thruster_step`: table
-    lookups in MX, so not rewritten to lanes but called lane by lane) from the allocation's thrust u, the
+    thruster dynamics): one sample of the thrusters for one run (:func:`closedloop._thruster_step`: the
+    tables indexed at run time in MX, so not rewritten to lanes but called lane by lane) from the allocation's thrust u, the
     rotor states s0, the run's lag constants E and tables tab and p; the other outputs zero."""
     cfg, L, lay = spec.cfg, parts.layout, spec.lay
     ng = 6 * len(spec.law.columns())
