@@ -129,15 +129,15 @@ def _by_thruster(x, n, fill):
 
 
 def test_the_runs_map_and_inverse_are_scipys_pchip(blue):
-    """The T200 map as a sample evaluates it (each rotor state's interval indexed in MX, one division on the
-    uniform 4 us grid; the cubic in SX, ``cl_thr_wrench``) at every 0.01 us of the command range, and its
-    inverse (the interval searched on the values; Newton's steps in SX, ``cl_thr_lag``): against SciPy's
-    PchipInterpolator through the CSV and brentq. The cubic has the bits of the same formula evaluated
-    element by element in MX (how the committed results/bluerov2 fronts were computed)."""
+    """The T200 map as a lockstep sample evaluates it (each rotor state's interval indexed at run time, one
+    division on the uniform 4 us grid; the cubic in SX, ``cl_thr_wrench_iv``) at every 0.01 us of the command
+    range, and its inverse (the interval searched on the values; Newton's steps in SX, ``cl_thr_lag_iv``):
+    against SciPy's PchipInterpolator through the CSV and brentq. The cubic has the bits of the same formula
+    evaluated element by element in MX, as the scalar run evaluates it."""
     F, inv = _table()
     cfg = scenario.load_scenario(blue.params.default("scenario"))
     spec = closedloop.RunSpec("proposed", cfg, layout=blue.layout)
-    lag, wrench = closedloop._thruster_functions(spec)
+    _, _, lag, wrench = closedloop._thruster_functions(spec)  # the SX forms the lockstep run rewrites to lanes
     st = blue.layout.structure
     n, m_off = st.n_thrusters, len(closedloop.lag_offsets(cfg))
     p = ca.DM(blue.params.vector())

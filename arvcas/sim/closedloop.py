@@ -367,18 +367,23 @@ IV = ("g0", "g1", "v0", "v1", "d0", "d1")  # an interval of a table map's cubic 
 
 
 def _thruster_functions(spec: RunSpec):
-    """The SX parts of a sample's thruster dynamics (docs/model.md §9): everything but the table lookups,
-    which index the per-run tables at run time (MX, :func:`_thruster_step`: one division for a uniform
-    grid, :func:`_map_interval`; a search on the values for the inverse, :func:`_pchip_interval`).
+    """The SX parts of a sample's thruster dynamics (docs/model.md §9): ``(cl_thr_lag, cl_thr_wrench,
+    cl_thr_lag_iv, cl_thr_wrench_iv)``.
 
-    ``cl_thr_lag(s0, u, ig0..id1, E, p) -> (s, command)``: each rotor state's target (a table map's by
-    Newton's method on the interval of its cubic that holds ``u``, ``ig0..id1`` per thruster, 0 for the
-    others; a quadratic map's in closed form), the lag's closed form at every stage offset of the sample
-    (``s``: thruster-major, n_thr x n_stages) and the command sent;
-    ``cl_thr_wrench(g0..d1, s, p) -> (W, T_end)``: each thruster's thrust at the stages (a table map's
-    cubic on the intervals ``g0..d1`` that hold ``s``, as ``s``), the thrusters' body wrench at each stage
-    (6 x n_stages, stage-major; with the thrust quadrature, the forcing's moments) and the thrust at the
-    sample's end.
+    ``cl_thr_lag(s0, u, y_tab, E, p) -> (s, command)``: each rotor state's target (a table map's from
+    ``y_tab``, the inverse computed in MX; a quadratic map's here), the lag's closed form at every stage
+    offset of the sample (``s``: thruster-major, n_thr x n_stages) and the command sent;
+    ``cl_thr_wrench(T_tab, s, p) -> (W, T_end)``: each thruster's thrust at the stages (a table map's from
+    ``T_tab``, evaluated in MX), the thrusters' body wrench at each stage (6 x n_stages, stage-major; with
+    the thrust quadrature, the forcing's moments) and the thrust at the sample's end. The scalar run
+    evaluates the tables' cubics element by element in MX (:func:`_thruster_step`: loops over the
+    sample's 808 points that the compiler vectorises, faster there than the same operations as
+    straight-line SX).
+
+    The ``_iv`` forms take the tables' intervals instead (:data:`IV`: ``ig0..id1`` per thruster at ``u``,
+    ``g0..d1`` at each of ``s``, 0 for a thruster without a table) and evaluate the inverse's Newton steps
+    and the cubics themselves in SX, with the same operations: the lockstep run rewrites them to lanes
+    (:mod:`arvcas.sim.lockstep`), gathering the intervals in C.
     """
     cfg, lay = spec.cfg, spec.lay
     st = lay.structure
@@ -387,18 +392,14 @@ def _thruster_functions(spec: RunSpec):
     p_s = ca.SX.sym("p", len(lay))
     P = view(p_s, lay)
     maps = thrusters.thruster_maps(P)
-    s0, u = ca.SX.sym("s0", n), ca.SX.sym("u", n)
-    iu = [ca.SX.sym("i" + k, n) for k in IV]
+    s0, u, y_tab = ca.SX.sym("s0", n), ca.SX.sym("u", n), ca.SX.sym("y_tab", n)
     E = ca.SX.sym("E", thrusters.lag_constants(P, offs).shape[0])
-    y_tab = _pchip_newton(*iu, u)
     y = ca.vertcat(*[y_tab[i] if m.kind == "table" else thrusters.map_inverse(P, m, u[i]) for i, m in enumerate(maps)])
     S = thrusters.lag_states(P, s0, y, E, offs, cfg.time_h)
     cmd = ca.vertcat(*[thrusters.command_of(P, m, y[i]) for i, m in enumerate(maps)])
-    lag = ca.Function("cl_thr_lag", [s0, u, *iu, E, p_s], [ca.vertcat(*[ca.vertcat(*row) for row in S]), cmd],
-                      ["s0", "u", *("i" + k for k in IV), "E", "p"], ["s", "command"])
-    s_all = ca.SX.sym("s", n * m_off)
-    iv = [ca.SX.sym(k, n * m_off) for k in IV]
-    T_tab = thrusters.hermite(*iv, s_all)
+    lag = ca.Function("cl_thr_lag", [s0, u, y_tab, E, p_s], [ca.vertcat(*[ca.vertcat(*row) for row in S]), cmd],
+                      ["s0", "u", "y_tab", "E", "p"], ["s", "command"])
+    s_all, T_tab = ca.SX.sym("s", n * m_off), ca.SX.sym("T_tab", n * m_off)
     T = [[T_tab[i * m_off + j] if m.kind == "table" else thrusters.map_thrust(P, m, s_all[i * m_off + j])
           for j in range(m_off)] for i, m in enumerate(maps)]
     B = thrusters.B_T(P)
@@ -409,9 +410,15 @@ def _thruster_functions(spec: RunSpec):
         C = moment_weights(cfg)
         W = ca.vertcat(*[ca.vec(ca.mtimes(B, ca.mtimes(Tn, ca.DM(C[:, N_MOMENTS * i:N_MOMENTS * (i + 1)]))))
                          for i in range(cfg.substeps)])
-    wrench = ca.Function("cl_thr_wrench", [*iv, s_all, p_s], [W, ca.vertcat(*[T[i][-1] for i in range(n)])],
-                         [*IV, "s", "p"], ["W", "T_end"])
-    return lag, wrench
+    wrench = ca.Function("cl_thr_wrench", [T_tab, s_all, p_s], [W, ca.vertcat(*[T[i][-1] for i in range(n)])],
+                         ["T_tab", "s", "p"], ["W", "T_end"])
+    iu = [ca.SX.sym("i" + k, n) for k in IV]
+    lag_iv = ca.Function("cl_thr_lag_iv", [s0, u, *iu, E, p_s], lag(s0, u, _pchip_newton(*iu, u), E, p_s),
+                         ["s0", "u", *("i" + k for k in IV), "E", "p"], ["s", "command"])
+    iv = [ca.SX.sym(k, n * m_off) for k in IV]
+    wrench_iv = ca.Function("cl_thr_wrench_iv", [*iv, s_all, p_s], wrench(thrusters.hermite(*iv, s_all), s_all, p_s),
+                            [*IV, "s", "p"], ["W", "T_end"])
+    return lag, wrench, lag_iv, wrench_iv
 
 
 def _table_grids(st, tabs):
@@ -457,13 +464,13 @@ def stage_intervals(st, grids, s_all, m_off: int):
 
 def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, E, tabs, p):
     """One sample of the thruster dynamics in MX: the intervals of the inverse maps (a search on the table's
-    values), the lag with the inverse's Newton steps (SX), the intervals at every stage (one division each on
-    a uniform grid), the maps' cubics and the wrenches (SX). Returns ``(W (6 n_stages), s_end, T_end, command)``."""
+    values) and the inverse's Newton steps, the lag (SX), the intervals at every stage (one division each on
+    a uniform grid) and the maps' cubics element by element, the wrenches (SX). Returns ``(W (6 n_stages), s_end, T_end, command)``."""
     st = spec.lay.structure
     n, m_off = st.n_thrusters, len(lag_offsets(spec.cfg))
     _, grids = _table_grids(st, tabs)
-    s_all, cmd = lag(s0, u, *target_intervals(st, grids, u), E, p)
-    W, T_end = wrench(*stage_intervals(st, grids, s_all, m_off), s_all, p)
+    s_all, cmd = lag(s0, u, _pchip_newton(*target_intervals(st, grids, u), u), E, p)
+    W, T_end = wrench(thrusters.hermite(*stage_intervals(st, grids, s_all, m_off), s_all), s_all, p)
     s_end = ca.vertcat(*[s_all[(i + 1) * m_off - 1] for i in range(n)])
     return W, s_end, T_end, cmd
 
@@ -501,7 +508,7 @@ class StepParts(NamedTuple):
     pc_fn: ca.Function
     layout: Layout
     n_sub: int
-    thr: tuple | None  # (cl_thr_lag, cl_thr_wrench) with thruster dynamics (:func:`_thruster_step`), else None
+    thr: tuple | None  # (cl_thr_lag, cl_thr_wrench, their _iv forms) with thruster dynamics (:func:`_thruster_functions`), else None
 
 
 def _thr_const_sizes(spec: RunSpec) -> tuple[int, int] | None:
@@ -562,7 +569,7 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
     kslice = {name: slice(L.slices[name].start - i_const, L.slices[name].stop - i_const) for name in names}
     pm, cm, phm, pcm, wm = (Km[kslice[name]] for name in ("p", "consts", "phase_cs", "pc", "water"))
     if dyn:
-        lag, wrench = parts.thr
+        lag, wrench = parts.thr[:2]
         i_cmd = _trace_offset(spec, "command")
     hp = cfg.time_h_plant
     stride, size = tau_stride(spec), tau_size(spec)  # plant step i's slice of the thrusters' wrench vector

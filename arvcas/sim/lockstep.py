@@ -117,7 +117,7 @@ static long long int {pre}_low(double x, const double* grid, long long int ng, i
 def _thruster_c(spec: closedloop.RunSpec, parts: closedloop.StepParts, off: dict, pre: str) -> tuple[str, str, str]:
     """The thrusters' part of a sample in lanes (docs/model.md §9): ``(loop C, helper C, declarations)``.
 
-    ``cl_thr_lag`` and ``cl_thr_wrench`` rewritten to lanes; between them, lane by lane, each table
+    ``cl_thr_lag_iv`` and ``cl_thr_wrench_iv`` rewritten to lanes; between them, lane by lane, each table
     map's intervals gathered from the run's tables as the scalar run's MX lookups gather them
     (:func:`closedloop.target_intervals`, :func:`closedloop.stage_intervals`: the same search, the same
     numbers). p is shared by the batch, so every lane's tables and lag constants are ``k0``'s (the last
@@ -196,8 +196,8 @@ def loop_c(name: str, spec: closedloop.RunSpec, parts: closedloop.StepParts, mai
     c0, c1 = parts.ctrls
     pre = f"{name}_ln"
     _check_keep(parts.keep)
-    thr_lanes = [(parts.thr[0], f"{pre}_thr_lag", [False, False] + [False] * 6 + [True, True]),
-                 (parts.thr[1], f"{pre}_thr_wrench", [False] * 7 + [True])] if dyn else []
+    thr_lanes = [(parts.thr[2], f"{pre}_thr_lag", [False, False] + [False] * 6 + [True, True]),
+                 (parts.thr[3], f"{pre}_thr_wrench", [False] * 7 + [True])] if dyn else []
     fns = lanes.lane_functions([
         *thr_lanes,
         (c0, f"{pre}_ctrl0", [False, False, True, False, True, True]),
