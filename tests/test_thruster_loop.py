@@ -120,3 +120,48 @@ def test_committed_instantaneous_knee_reproduces_bit_for_bit(blue):
         np.testing.assert_array_equal(r.series[k], ref.series[k], err_msg=k)
     np.testing.assert_allclose(r.chat_delivered, metrics.chat(r.thrust @ np.array(
         ca.DM(thrusters.B_T(view(p)))).T), rtol=1e-12)  # instantaneous: eq. 42 on B sat(u)
+
+
+def _by_thruster(x, n, fill):
+    """The points ``x`` as columns of ``n`` (one per thruster), the last column padded with ``fill``."""
+    cols = -(-x.size // n)
+    return np.r_[x, np.full(cols * n - x.size, fill)].reshape(cols, n).T
+
+
+def test_the_runs_map_and_inverse_are_scipys_pchip(blue):
+    """The T200 map as a lockstep sample evaluates it (each rotor state's interval indexed at run time, one
+    division on the uniform 4 us grid; the cubic in SX, ``cl_thr_wrench_iv``) at every 0.01 us of the command
+    range, and its inverse (the interval searched on the values; Newton's steps in SX, ``cl_thr_lag_iv``):
+    against SciPy's PchipInterpolator through the CSV and brentq. The cubic has the bits of the same formula
+    evaluated element by element in MX, as the scalar run evaluates it."""
+    F, inv = _table()
+    cfg = scenario.load_scenario(blue.params.default("scenario"))
+    spec = closedloop.RunSpec("proposed", cfg, layout=blue.layout)
+    _, _, lag, wrench = closedloop._thruster_functions(spec)  # the SX forms the lockstep run rewrites to lanes
+    st = blue.layout.structure
+    n, m_off = st.n_thrusters, len(closedloop.lag_offsets(cfg))
+    p = ca.DM(blue.params.vector())
+    tab = closedloop.thruster_constants(view(blue.params), cfg)[1]
+    s_m, t_m, p_m, u_m = (ca.MX.sym(k, m) for k, m in (("s", n * m_off), ("tab", tab.shape[0]), ("p", p.shape[0]), ("u", n)))
+    _, grids = closedloop._table_grids(st, t_m)
+    iv = closedloop.stage_intervals(st, grids, s_m, m_off)
+    ends = [(i + 1) * m_off - 1 for i in range(n)]  # each thruster's state at the sample's end: T_end
+    mx = thrusters.hermite(*(c[ends] for c in iv), s_m[ends])
+    f = ca.Function("f", [s_m, t_m, p_m], [wrench(*iv, s_m, p_m)[1], mx])
+    x = np.linspace(-372.0, 372.0, 74401)
+    X = _by_thruster(x, n, 0.0)
+    S = np.zeros((n * m_off, X.shape[1]))
+    S[ends, :] = X
+    T_sx, T_mx = (np.array(a).T.ravel()[:x.size] for a in f.map(X.shape[1])(S, tab, p))
+    assert np.array_equal(T_sx, T_mx)
+    err = np.abs(T_sx - F(x))
+    assert err.max() <= 1e-13, err.max()  # N (2.1e-14 measured: round-off at 51 N)
+    # the inverse: the command sent for thrust u, back to its rotor state
+    E = ca.MX.sym("E", lag.size1_in("E"))
+    g = ca.Function("g", [u_m, t_m, p_m, E], [lag(ca.MX.zeros(n), u_m, *closedloop.target_intervals(st, grids, u_m), E, p_m)[1]])
+    u = np.linspace(float(F(-372.0)), float(F(372.0)), 2001)
+    u = u[u != 0]
+    U = _by_thruster(u, n, 1.0)
+    c = np.array(g.map(U.shape[1])(U, tab, p, np.ones(E.shape[0]))).T.ravel()[:u.size]
+    s = np.where(c > 1528, c - 1528, c - 1472)
+    assert np.abs(s - inv(u)).max() <= 1e-11, np.abs(s - inv(u)).max()  # us (2.8e-13 measured)

@@ -332,28 +332,28 @@ def _substep_quadrature(hp, xs, mom, recs, accel):
     return ca.vertcat(z[0:6] + ca.mtimes(Ja, o2), z[6:12] + w2)
 
 
-def _pchip(g, v, d, x, mode: str):
-    """The monotone cubic through ``(g_i, v_i)`` with slopes ``d_i`` at a column ``x`` (MX: the interval by
-    ``casadi.low``, ``"exact"`` for a uniform grid, ``"binary"`` otherwise; then one cubic)."""
-    i = ca.low(g, x, {"lookup_mode": mode})  # within [0, n - 2]
-    return thrusters.hermite(g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1], x)
+def _gather(g, v, d, i):
+    """``(g0, g1, v0, v1, d0, d1)``: the ends, values and slopes of the monotone cubic's intervals ``i``
+    (MX: the per-run tables indexed at run time)."""
+    return g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
 
 
-def _pchip_inverse(g, v, d, u, iterations: int = 8):
-    """The ``x`` at which the monotone cubic equals ``u`` (a column, MX): its interval by ``casadi.low`` on
-    the values, then Newton's method on that interval's cubic from the secant's guess, kept in the
-    interval (quadratic convergence from a guess within a few percent: 8 steps reach round-off)."""
-    return _pchip_newton(*_pchip_interval(g, v, d, u), u, iterations)
+def _map_interval(g, v, d, x, mode: str):
+    """The intervals of the monotone cubic through ``(g_i, v_i)`` that hold a column ``x`` (MX: ``casadi.low``,
+    ``"exact"`` for a uniform grid, one division and no search; ``"binary"`` otherwise), as :func:`_gather`;
+    the cubic itself is evaluated in SX (:func:`_thruster_functions`)."""
+    return _gather(g, v, d, ca.low(g, x, {"lookup_mode": mode}))  # within [0, n - 2]
 
 
 def _pchip_interval(g, v, d, u):
     """``(g0, g1, v0, v1, d0, d1)``: the interval of the monotone cubic's values that holds ``u`` (MX lookup)."""
-    i = ca.low(v, u, {"lookup_mode": "binary"})
-    return g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
+    return _gather(g, v, d, ca.low(v, u, {"lookup_mode": "binary"}))
 
 
 def _pchip_newton(g0, g1, v0, v1, d0, d1, u, iterations: int = 8):
-    """Newton's method for the ``x`` at which one interval's cubic equals ``u`` (:func:`_pchip_inverse`); MX or SX."""
+    """The ``x`` at which one interval's cubic equals ``u`` (the interval from :func:`_pchip_interval`): Newton's
+    method on that interval's cubic from the secant's guess, kept in the interval (quadratic convergence
+    from a guess within a few percent: 8 steps reach round-off); MX or SX."""
     h = g1 - g0
     t = ca.fmin(ca.fmax((u - v0) / (v1 - v0), 0), 1)
     for _ in range(iterations):
@@ -364,15 +364,27 @@ def _pchip_newton(g0, g1, v0, v1, d0, d1, u, iterations: int = 8):
     return g0 + t * h
 
 
+IV = ("g0", "g1", "v0", "v1", "d0", "d1")  # an interval of a table map's cubic (:func:`_gather`)
+
+
 def _thruster_functions(spec: RunSpec):
-    """The SX parts of a sample's thruster dynamics (docs/model.md §9):
+    """The SX parts of a sample's thruster dynamics (docs/model.md §9): ``(cl_thr_lag, cl_thr_wrench,
+    cl_thr_lag_iv, cl_thr_wrench_iv)``.
 
     ``cl_thr_lag(s0, u, y_tab, E, p) -> (s, command)``: each rotor state's target (a table map's from
-    ``y_tab``, the inverse looked up in MX; a quadratic map's here), the lag's closed form at every stage
+    ``y_tab``, the inverse computed in MX; a quadratic map's here), the lag's closed form at every stage
     offset of the sample (``s``: thruster-major, n_thr x n_stages) and the command sent;
     ``cl_thr_wrench(T_tab, s, p) -> (W, T_end)``: each thruster's thrust at the stages (a table map's from
-    ``T_tab``, looked up in MX), the thrusters' body wrench at each stage (6 x n_stages, stage-major) and
-    the thrust at the sample's end.
+    ``T_tab``, evaluated in MX), the thrusters' body wrench at each stage (6 x n_stages, stage-major; with
+    the thrust quadrature, the forcing's moments) and the thrust at the sample's end. The scalar run
+    evaluates the tables' cubics element by element in MX (:func:`_thruster_step`: loops over the
+    sample's 808 points that the compiler vectorises, faster there than the same operations as
+    straight-line SX).
+
+    The ``_iv`` forms take the tables' intervals instead (:data:`IV`: ``ig0..id1`` per thruster at ``u``,
+    ``g0..d1`` at each of ``s``, 0 for a thruster without a table) and evaluate the inverse's Newton steps
+    and the cubics themselves in SX, with the same operations: the lockstep run rewrites them to lanes
+    (:mod:`arvcas.sim.lockstep`), gathering the intervals in C.
     """
     cfg, lay = spec.cfg, spec.lay
     st = lay.structure
@@ -401,7 +413,13 @@ def _thruster_functions(spec: RunSpec):
                          for i in range(cfg.substeps)])
     wrench = ca.Function("cl_thr_wrench", [T_tab, s_all, p_s], [W, ca.vertcat(*[T[i][-1] for i in range(n)])],
                          ["T_tab", "s", "p"], ["W", "T_end"])
-    return lag, wrench
+    iu = [ca.SX.sym("i" + k, n) for k in IV]
+    lag_iv = ca.Function("cl_thr_lag_iv", [s0, u, *iu, E, p_s], lag(s0, u, _pchip_newton(*iu, u), E, p_s),
+                         ["s0", "u", *("i" + k for k in IV), "E", "p"], ["s", "command"])
+    iv = [ca.SX.sym(k, n * m_off) for k in IV]
+    wrench_iv = ca.Function("cl_thr_wrench_iv", [*iv, s_all, p_s], wrench(thrusters.hermite(*iv, s_all), s_all, p_s),
+                            [*IV, "s", "p"], ["W", "T_end"])
+    return lag, wrench, lag_iv, wrench_iv
 
 
 def _table_grids(st, tabs):
@@ -418,33 +436,42 @@ def _table_grids(st, tabs):
     return maps, grids
 
 
-def _table_targets(st, grids, u):
-    """Each table-mapped thruster's rotor-state target ``F^-1(u_i)`` (MX; 0 for the others): the inverse of its
-    map's monotone cubic at the allocated thrust ``u`` (:func:`_pchip_inverse`), thrusters of one map together."""
+def _table_intervals(st, grids, x, size: int, lookup):
+    """The six interval columns (:data:`IV`) of each thruster's table map at its block of ``size`` entries of
+    ``x`` (MX, thruster-major; zeros for a thruster without a table): ``lookup(g, v, d, mode, x_map)`` gives
+    the intervals of one map's thrusters together."""
     maps = [st.thruster_map(d.map) for d in st.thruster_dynamics]
-    y_tab = [ca.MX(1, 1)] * st.n_thrusters
-    for name, (g, v, d, _) in grids.items():
+    cols = [[ca.MX.zeros(size, 1)] * st.n_thrusters for _ in IV]
+    for name, (g, v, d, mode) in grids.items():
         idx = [i for i, m in enumerate(maps) if m.name == name]
-        ys = _pchip_inverse(g, v, d, ca.vertcat(*[u[i] for i in idx]))  # thrust -> rotor state
-        for r, i in enumerate(idx):
-            y_tab[i] = ys[r]
-    return ca.vertcat(*y_tab)
+        got = lookup(g, v, d, mode, ca.vertcat(*[x[i * size:(i + 1) * size] for i in idx]))
+        for c, col in zip(got, cols):
+            for r, i in enumerate(idx):
+                col[i] = c[r * size:(r + 1) * size]
+    return [ca.vertcat(*col) for col in cols]
+
+
+def target_intervals(st, grids, u):
+    """The intervals (:data:`IV`) of each thruster's table map whose values hold its allocated thrust ``u``
+    (a search on the values: ``cl_thr_lag``'s Newton steps invert the cubic there)."""
+    return _table_intervals(st, grids, u, 1, lambda g, v, d, _, x: _pchip_interval(g, v, d, x))
+
+
+def stage_intervals(st, grids, s_all, m_off: int):
+    """The intervals (:data:`IV`) of each thruster's table map that hold its rotor states ``s_all`` (``m_off``
+    per thruster, thruster-major): ``cl_thr_wrench`` evaluates the cubic on them."""
+    return _table_intervals(st, grids, s_all, m_off, lambda g, v, d, mode, x: _map_interval(g, v, d, x, mode))
 
 
 def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, E, tabs, p):
-    """One sample of the thruster dynamics in MX: the inverse maps (table lookups and Newton), the lag, the
-    maps at every stage (table lookups), the wrenches. Returns ``(W (6 n_stages), s_end, T_end, command)``."""
+    """One sample of the thruster dynamics in MX: the intervals of the inverse maps (a search on the table's
+    values) and the inverse's Newton steps, the lag (SX), the intervals at every stage (one division each on
+    a uniform grid) and the maps' cubics element by element, the wrenches (SX). Returns ``(W (6 n_stages), s_end, T_end, command)``."""
     st = spec.lay.structure
     n, m_off = st.n_thrusters, len(lag_offsets(spec.cfg))
-    maps, grids = _table_grids(st, tabs)
-    s_all, cmd = lag(s0, u, _table_targets(st, grids, u), E, p)
-    T_tab = [ca.MX.zeros(m_off, 1)] * n
-    for name, (g, v, d, mode) in grids.items():
-        idx = [i for i, m in enumerate(maps) if m.name == name]
-        Ts = _pchip(g, v, d, ca.vertcat(*[s_all[i * m_off:(i + 1) * m_off] for i in idx]), mode)
-        for r, i in enumerate(idx):
-            T_tab[i] = Ts[r * m_off:(r + 1) * m_off]
-    W, T_end = wrench(ca.vertcat(*T_tab), s_all, p)
+    _, grids = _table_grids(st, tabs)
+    s_all, cmd = lag(s0, u, _pchip_newton(*target_intervals(st, grids, u), u), E, p)
+    W, T_end = wrench(thrusters.hermite(*stage_intervals(st, grids, s_all, m_off), s_all), s_all, p)
     s_end = ca.vertcat(*[s_all[(i + 1) * m_off - 1] for i in range(n)])
     return W, s_end, T_end, cmd
 
@@ -482,7 +509,7 @@ class StepParts(NamedTuple):
     pc_fn: ca.Function
     layout: Layout
     n_sub: int
-    thr: tuple | None  # (cl_thr_lag, cl_thr_wrench) with thruster dynamics (:func:`_thruster_step`), else None
+    thr: tuple | None  # (cl_thr_lag, cl_thr_wrench, their _iv forms) with thruster dynamics (:func:`_thruster_functions`), else None
 
 
 def _thr_const_sizes(spec: RunSpec) -> tuple[int, int] | None:
@@ -557,7 +584,7 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
     kslice = {name: slice(L.slices[name].start - i_const, L.slices[name].stop - i_const) for name in names}
     pm, cm, phm, pcm, wm = (Km[kslice[name]] for name in ("p", "consts", "phase_cs", "pc", "water"))
     if dyn:
-        lag, wrench = parts.thr
+        lag, wrench = parts.thr[:2]
         i_cmd = _trace_offset(spec, "command")
     hp = cfg.time_h_plant
     stride, size = tau_stride(spec), tau_size(spec)  # plant step i's slice of the thrusters' wrench vector
@@ -807,7 +834,7 @@ def command_functions(cfg: ScenarioConfig, layout, prefix: str = "") -> dict[str
     * ``thr_tab(p) -> tab``: each table map's rotor-state grid, thrust and slopes (the run's per-run
       constants, :func:`thruster_constants`), once per init;
     * ``command(u, tab, p) -> command``: the rotor-state target ``y = F^-1(u)`` (a table's cubic inverted in
-      MX, :func:`_pchip_inverse`; the quadratic law's in closed form) and ``command_of(y)``.
+      MX, :func:`_pchip_interval`, then :func:`_pchip_newton`; the quadratic law's in closed form) and ``command_of(y)``.
 
     Empty for a system without thruster dynamics (its commands are the thrust itself)."""
     st = layout.structure

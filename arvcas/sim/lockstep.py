@@ -8,7 +8,9 @@ run that diverged). A lockstep run calls the same SX functions rewritten to W la
 loop written here in C, with the divergence branch as a per-lane select; the run's start (its first
 loop state and constants) and end (the metrics) are the scalar run's own MX expressions
 (:func:`~arvcas.sim.closedloop.run_start`, :func:`~arvcas.sim.closedloop.run_end`), compiled into the
-same library and called once per run. So every lane's outputs equal the scalar run's to the bit
+same library and called once per run. With thruster dynamics, the thrusters' SX functions (the lag and
+the maps' cubics) are rewritten to lanes too, and the table intervals between them are gathered lane by
+lane in C as the scalar run's MX lookups gather them. So every lane's outputs equal the scalar run's to the bit
 (tests/test_lockstep.py checks it over the controllers, the shipped systems and diverging runs).
 
 The runs of a batch are taken W at a time from a shared counter by every thread (the last group
@@ -61,38 +63,18 @@ class LockstepRun:
 
 
 def _main_function(name: str, spec: closedloop.RunSpec, parts: closedloop.StepParts) -> ca.Function:
-    """(mode, gains, unc, phase, ekf, water, p, Sf, u, s0, E, tab) -> (S0, K, the run's outputs, W, s_end, T_end).
-
-    mode 0: the run's start (S0, K) and end (its outputs from the last loop state Sf); mode 1 (with
-    thruster dynamics): one sample of the thrusters for one run (:func:`closedloop._thruster_step`: table
-    lookups in MX, so not rewritten to lanes but called lane by lane) from the allocation's thrust u, the
-    rotor states s0, the run's lag constants E and tables tab and p; the other outputs zero."""
+    """(mode, gains, unc, phase, ekf, water, p, Sf) -> (S0, K, the run's outputs): the run's start (S0, K)
+    and end (its outputs from the last loop state Sf), one run at a time; ``mode`` is unused (0)."""
     cfg, L, lay = spec.cfg, parts.layout, spec.lay
     ng = 6 * len(spec.law.columns())
     G, unc, phase = ca.MX.sym("gains", ng), ca.MX.sym("unc", 4), ca.MX.sym("phase", 6)
     ekf, water = ca.MX.sym("ekf", cfg.ekf_vector.size), ca.MX.sym("water", cfg.water_vector.size)
     p, Sf = ca.MX.sym("p", len(lay)), ca.MX.sym("Sf", L.slices["gains"].start)
-    sz = {k: L.slices[k].stop - L.slices[k].start if k in L.slices else 0 for k in ("thr", "thr_E", "thr_tab")}
-    u, s0 = ca.MX.sym("u", sz["thr"]), ca.MX.sym("s0", sz["thr"])
-    E, tab = ca.MX.sym("E", sz["thr_E"]), ca.MX.sym("tab", sz["thr_tab"])
-    ins = [G, unc, phase, ekf, water, p, Sf, u, s0, E, tab]
-    in_names = ["gains", "unc", "phase", "ekf", "water", "p", "Sf", "u", "s0", "E", "tab"]
     S0, K = closedloop.run_start(spec, L, parts.pc_fn, G, unc, phase, ekf, water, p)
     outs = [S0, K, *closedloop.run_end(L, Sf, scenario.n_samples(cfg) - 1)]
-    out_names = ["S0", "K", *closedloop.OUTPUTS, "W", "s_end", "T_end"]
     mode = ca.MX.sym("mode")
-    if parts.thr is None:
-        return ca.Function(name, [mode, *ins], outs + [ca.MX(0, 1)] * 3, ["mode", *in_names], out_names)
-    Wt, s_end, T_end, _ = closedloop._thruster_step(spec, *parts.thr, u, s0, E, tab, p)
-    thr = [Wt, s_end, T_end]
-
-    def zeros(xs):
-        return [ca.MX.zeros(x.sparsity()) for x in xs]
-
-    f_run = ca.Function(name + "_run", ins, outs + zeros(thr))
-    f_thr = ca.Function(name + "_thr", ins, zeros(outs) + thr)
-    sw = ca.Function.conditional(name + "_mode", [f_run], f_thr)  # mode 0: start and end; else the thrusters
-    return ca.Function(name, [mode, *ins], sw.call([mode, *ins]), ["mode", *in_names], out_names)
+    return ca.Function(name, [mode, G, unc, phase, ekf, water, p, Sf], outs,
+                       ["mode", "gains", "unc", "phase", "ekf", "water", "p", "Sf"], ["S0", "K", *closedloop.OUTPUTS])
 
 
 def _check_keep(keep: ca.Function) -> None:
@@ -101,6 +83,100 @@ def _check_keep(keep: ca.Function) -> None:
     C, S, xn, t = keep.sx_in()
     if not ca.is_equal(keep.call([C, S, xn, t])[0], ca.vertcat(xn, C), 1):
         raise AssertionError("lockstep: cl_keep is no longer vertcat(x_next, C); update the loop (arvcas.sim.lockstep)")
+
+
+_LOW = """
+static long long int {pre}_low(double x, const double* grid, long long int ng, int mode) {{
+  /* casadi_low of CasADi's runtime (casadi/core/runtime/casadi_low.hpp), modes 1 (exact) and 2 (binary),
+     copied: the interval the scalar run's MX lookup finds, so the same gathered numbers */
+  if (mode == 1) {{
+    double g0 = grid[0], dg = grid[ng - 1] - g0;
+    long long int ret = (long long int)((x - g0) * (ng - 1) / dg);
+    if (ret < 0) ret = 0;
+    if (ret > ng - 2) ret = ng - 2;
+    return ret;
+  }} else {{
+    long long int start = 0, stop = ng - 1, pivot;
+    if (ng < 2 || x < grid[1]) return 0;
+    if (x > grid[ng - 1]) return ng - 2;
+    for (;;) {{
+      pivot = (stop + start) / 2;
+      if (x < grid[pivot]) {{
+        if (pivot == stop) return pivot;
+        stop = pivot;
+      }} else {{
+        if (pivot == start) return pivot;
+        start = pivot;
+      }}
+    }}
+  }}
+}}
+"""
+
+
+def _thruster_c(spec: closedloop.RunSpec, parts: closedloop.StepParts, off: dict, pre: str) -> tuple[str, str, str]:
+    """The thrusters' part of a sample in lanes (docs/model.md §9): ``(loop C, helper C, declarations)``.
+
+    ``cl_thr_lag_iv`` and ``cl_thr_wrench_iv`` rewritten to lanes; between them, lane by lane, each table
+    map's intervals gathered from the run's tables as the scalar run's MX lookups gather them
+    (:func:`closedloop.target_intervals`, :func:`closedloop.stage_intervals`: the same search, the same
+    numbers). p is shared by the batch, so every lane's tables and lag constants are ``k0``'s (the last
+    started run's constants) and p is ``a[6]``."""
+    st = spec.lay.structure
+    n, m_off = st.n_thrusters, len(closedloop.lag_offsets(spec.cfg))
+    maps = [st.thruster_map(d.map) for d in st.thruster_dynamics]
+    blocks, k = [], 0
+    for m in st.thruster_maps:
+        if m.kind != "table":
+            continue
+        n_g = m.n - (m.zero[1] - m.zero[0])
+        idx = ", ".join(str(i) for i, mm in enumerate(maps) if mm.name == m.name)
+        blocks.append(f"""
+        {{  /* map {m.name}: thrusters {idx} */
+          static const int th[] = {{{idx}}};
+          const double *g = tab + {k}, *v = g + {n_g}, *d = v + {n_g};
+          for (int q = 0; q < (int)(sizeof th / sizeof th[0]); ++q) {{
+            const int i = th[q];
+            for (l = 0; l < W; ++l) {{  /* the target's interval: a search on the values */
+              const long long int x = {pre}_low(TAU[i * W + l], v, {n_g}, 2);
+              const double c6[6] = {{g[x], g[x + 1], v[x], v[x + 1], d[x], d[x + 1]}};
+              for (j = 0; j < 6; ++j) IU[(j * NT + i) * W + l] = c6[j];
+            }}
+          }}
+          {pre}_thr_lag(la, lr);
+          for (int q = 0; q < (int)(sizeof th / sizeof th[0]); ++q) {{
+            const int i = th[q];
+            for (int o = 0; o < MOFF; ++o)
+              for (l = 0; l < W; ++l) {{  /* the stage states' intervals */
+                const long long int x = {pre}_low(SS[(i * MOFF + o) * W + l], g, {n_g}, {1 if m.uniform else 2});
+                const double c6[6] = {{g[x], g[x + 1], v[x], v[x + 1], d[x], d[x + 1]}};
+                for (j = 0; j < 6; ++j) IV[(j * NT * MOFF + i * MOFF + o) * W + l] = c6[j];
+              }}
+          }}
+        }}""")
+        k += 3 * n_g
+    if len(blocks) > 1:  # the lag runs once, after every map's targets: split the blocks at the lag
+        raise NotImplementedError("lockstep: thruster dynamics with more than one table map")
+    if not blocks:  # no table map: the lag and the wrench alone (the intervals are unused)
+        blocks = [f"\n        {pre}_thr_lag(la, lr);"]
+    iu = ", ".join(f"IU + {j * n} * W" for j in range(6))
+    iv = ", ".join(f"IV + {j * n * m_off} * W" for j in range(6))
+    loop = f"""
+      {{  /* the thrusters in lanes: the lag (with the inverse's Newton steps), the maps' cubics and the wrenches */
+        const double* tab = k0 + {off['thr_tab']};
+        const double* la[10] = {{S + 12 * W, TAU, {iu}, k0 + {off['thr_E']}, a[6]}};
+        double* lr[2] = {{SS, CMD}};
+        const double* wa[8] = {{{iv}, SS, a[6]}};
+        double* wr[2] = {{WB, Sn + (12 + NT) * W}};
+        (void)tab;{"".join(blocks)}
+        {pre}_thr_wrench(wa, wr);
+        for (j = 0; j < NT; ++j)
+          for (l = 0; l < W; ++l) Sn[(12 + j) * W + l] = SS[((j + 1) * MOFF - 1) * W + l];  /* s at the sample's end */
+      }}"""
+    decl = (f"\n  enum {{ MOFF = {m_off} }};\n  double SS[NT * MOFF * W], CMD[NT * W], IU[6 * NT * W], IV[6 * NT * MOFF * W];"
+            "\n  for (j = 0; j < 6 * NT * W; ++j) IU[j] = 0;  /* a thruster without a table: unused, defined */"
+            "\n  for (j = 0; j < 6 * NT * MOFF * W; ++j) IV[j] = 0;")
+    return loop, _LOW.format(pre=pre), decl
 
 
 def loop_c(name: str, spec: closedloop.RunSpec, parts: closedloop.StepParts, main: ca.Function, W: int) -> str:
@@ -120,7 +196,10 @@ def loop_c(name: str, spec: closedloop.RunSpec, parts: closedloop.StepParts, mai
     c0, c1 = parts.ctrls
     pre = f"{name}_ln"
     _check_keep(parts.keep)
+    thr_lanes = [(parts.thr[2], f"{pre}_thr_lag", [False, False] + [False] * 6 + [True, True]),
+                 (parts.thr[3], f"{pre}_thr_wrench", [False] * 7 + [True])] if dyn else []
     fns = lanes.lane_functions([
+        *thr_lanes,
         (c0, f"{pre}_ctrl0", [False, False, True, False, True, True]),
         (c1, f"{pre}_ctrl", [False, False, True, False, True, True]),
         (parts.rk4, f"{pre}_rk4", [False, True, True, False, False, False, False, False, False, True]),
@@ -133,26 +212,14 @@ def loop_c(name: str, spec: closedloop.RunSpec, parts: closedloop.StepParts, mai
     t_sub = ", ".join(repr(float(i * cfg.time_h_plant)) for i in range(parts.n_sub))
     i_ok = L.slices["ok"].start
     n_out = len(closedloop.OUTPUTS)
-    sz_arg, sz_res = max(main.sz_arg(), 12), max(main.sz_res(), 5 + n_out)
+    sz_arg, sz_res = max(main.sz_arg(), 8), max(main.sz_res(), 2 + n_out)
     ntau = max(6, NT)
-    thr_c = f"""
-      for (l = 0; l < W; ++l) {{  /* the thrusters, lane by lane (scalar code: table lookups): the stage wrenches,
-                                    rotor states and thrust at the sample's end (the new state's first rows) */
-        for (j = 0; j < NT; ++j) {{ tu[j] = TAU[j * W + l]; ts0[j] = S[(12 + j) * W + l]; }}
-        for (j = 0; j < 12; ++j) arg[j] = 0;
-        for (j = 0; j < NO + 5; ++j) res[j] = 0;
-        arg[0] = &one; arg[6] = a[6]; arg[7] = 0; arg[8] = tu; arg[9] = ts0; arg[10] = k0 + {off.get('thr_E', 0)};
-        arg[11] = k0 + {off.get('thr_tab', 0)};
-        res[{2 + n_out}] = tw; res[{3 + n_out}] = tse; res[{4 + n_out}] = tte;
-        if ({name}(arg, res, iw, w, 0)) goto fail;
-        for (j = 0; j < NWB; ++j) WB[j * W + l] = tw[j];
-        for (j = 0; j < NT; ++j) {{ Sn[(12 + j) * W + l] = tse[j]; Sn[(12 + NT + j) * W + l] = tte[j]; }}
-      }}""" if dyn else ""
+    thr_c, thr_fns, thr_decl = _thruster_c(spec, parts, off, pre) if dyn else ("", "", "")
     # the thrusters' part's wrench vector (stage wrenches, or the forcing's moments with time.thrust_quadrature)
     # and where plant step i's input starts in it (closedloop.tau_stride)
     nwb = parts.thr[1].size1_out(0) if dyn else 0
     tau_i = f"WB + {closedloop.tau_stride(spec)} * i * W" if dyn else "TAU"
-    return lanes.header(W) + fns + f"""
+    return lanes.header(W) + fns + thr_fns + f"""
 /* arvcas: {n} samples of W = {W} runs in lockstep (arvcas.sim.lockstep) */
 CASADI_SYMBOL_EXPORT int {name}{ENTRY}(long long int n, long long int chunk, long long int* next, int* stop,
     long long int* failed, const double* const* a, const long long int* sa, double* const* r,
@@ -162,13 +229,13 @@ CASADI_SYMBOL_EXPORT int {name}{ENTRY}(long long int n, long long int chunk, lon
   static const double h = {h!r}, tsub[NSUB] = {{{t_sub}}};
   static const double zero = 0, one = 1;
   double SB[2][NS * W], K[NK * W + 1], X[2][12 * W], TAU[{ntau} * W], NZ[12 * W], OKV[W], SF[NS * W], s0[NS], k0[NK + 1];
-  double WB[NWB * W + 1], tu[NT + 1], ts0[NT + 1], tw[NWB + 1], tse[NT + 1], tte[NT + 1];
+  double WB[NWB * W + 1];
   double *S, *Sn;
   const double* arg[{sz_arg}];
   double* res[{sz_res}];
   long long int run[W], i0;
-  int l, m, j;
-  (void)chunk; (void)one; (void)tu; (void)ts0; (void)tw; (void)tse; (void)tte; (void)WB;
+  int l, m, j;{thr_decl}
+  (void)chunk; (void)one; (void)WB;
   /* ekf, water, p and the time table: shared by the batch (the thrusters' constants in K are p's) */
   if (sa[4] || sa[5] || sa[6] || sa[7] || sa[8]) return 2;
   for (;;) {{
@@ -180,8 +247,8 @@ CASADI_SYMBOL_EXPORT int {name}{ENTRY}(long long int n, long long int chunk, lon
     Sn = SB[1];
     for (l = 0; l < W; ++l) {{
       run[l] = i0 + (l < m ? l : m - 1);  /* a short last group: copies of its last run */
-      for (j = 0; j < 12; ++j) arg[j] = 0;
-      for (j = 0; j < NO + 5; ++j) res[j] = 0;
+      for (j = 0; j < 8; ++j) arg[j] = 0;
+      for (j = 0; j < NO + 2; ++j) res[j] = 0;
       arg[0] = &zero; arg[1] = a[0] + run[l] * sa[0]; arg[2] = a[2] + run[l] * sa[2]; arg[3] = a[3] + run[l] * sa[3];
       arg[4] = a[4]; arg[5] = a[5]; arg[6] = a[6];
       res[0] = s0; res[1] = k0;
@@ -233,8 +300,8 @@ CASADI_SYMBOL_EXPORT int {name}{ENTRY}(long long int n, long long int chunk, lon
     }}
     for (l = 0; l < m; ++l) {{
       for (j = 0; j < NS; ++j) s0[j] = S[j * W + l];
-      for (j = 0; j < 12; ++j) arg[j] = 0;
-      for (j = 0; j < NO + 5; ++j) res[j] = 0;
+      for (j = 0; j < 8; ++j) arg[j] = 0;
+      for (j = 0; j < NO + 2; ++j) res[j] = 0;
       arg[0] = &zero; arg[1] = a[0] + run[l] * sa[0]; arg[2] = a[2] + run[l] * sa[2]; arg[3] = a[3] + run[l] * sa[3];
       arg[4] = a[4]; arg[5] = a[5]; arg[6] = a[6]; arg[7] = s0;
       for (j = 0; j < NO; ++j) res[2 + j] = r[j] + run[l] * sr[j];
