@@ -15,7 +15,6 @@ import arvcas
 from arvcas import cli
 from arvcas.controllers import base
 from arvcas.sim import closedloop, scenario
-from arvcas.system.params import default_layout
 
 PLUGIN = '''\
 import casadi as ca
@@ -116,10 +115,11 @@ def test_any_step_return_is_accepted_as_the_right_shapes_or_refused_in_one_line(
 
 def test_every_built_in_law_passes_the_checks_unchanged():
     """The checks accept every law of the package as it is (their graph is built through them)."""
-    s = arvcas.load_system("haidou1")
-    cfg = scenario.load_scenario(s.params.default("scenario"))
     for name in base.names():
-        fns = closedloop.controller_functions(name, cfg, default_layout())
+        # ArduSub's law needs its vectored-6DOF frame of eight thrusters with command maps; the others run on Haidou-1
+        s = arvcas.load_system("bluerov2_heavy_alpha5" if name == "ardusub" else "haidou1")
+        cfg = scenario.load_scenario(s.params.default("scenario"))
+        fns = closedloop.controller_functions(name, cfg, s.params.layout)
         assert fns["step"].size_out("u") == (6, 1) or fns["step"].size_out("u")[0] > 0
 
 
