@@ -849,7 +849,14 @@ def main(argv: list[str] | None = None) -> int:
 
         cmd = COMMANDS[a._command]
         _apply_policies(cmd, a)
-        with report_progress(sys.stderr):  # a build of more than a second says so on standard error
+        from arvcas.sim.scenario import ScenarioWarning
+        from arvcas.system.params import PlausibilityWarning
+
+        # every invocation shows its files' warnings, even where the same text was shown earlier in this process
+        with warnings.catch_warnings(), report_progress(sys.stderr):  # a long build says so on standard error
+            warnings.showwarning = show
+            for w in (PlausibilityWarning, ScenarioWarning):
+                warnings.simplefilter("always", w)
             return cmd.run(a)
     except (ValueError, OSError) as e:
         msg = " ".join(str(e).split()) or type(e).__name__
