@@ -191,7 +191,7 @@ def test_thrust_of_pwm_is_the_systems_map():
     p = ca.SX.sym("p", len(lay))
     m = thrusters.thruster_maps(view(p, lay))[0]
     x = ca.SX.sym("x")
-    F = ca.Function("F", [x, p], [ardusub._pchip_power(*thrusters.map_table(view(p, lay), m))(x)])
+    F = ca.Function("F", [x, p], [thrusters.pchip_powers(*thrusters.map_table(view(p, lay), m))(x)])
     Pn = view(blue.params.vector(), lay)
     mn = thrusters.thruster_maps(Pn)[0]
     s = np.array([float(ca.evalf(thrusters.state_of(Pn, mn, c))) for c in np.linspace(1050, 1950, 451)])

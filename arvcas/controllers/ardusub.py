@@ -129,30 +129,6 @@ def _euler_to_body(eta, d_euler):
                       -sp * d_euler[1] + cp * ct * d_euler[2])
 
 
-def _pchip_power(g, v, d):
-    """The map's monotone cubic (:func:`arvcas.model.thrusters.map_table`) as one expression of ``x``: the first
-    interval's cubic plus, at each inner point, the jumps of the second- and third-order coefficients times the
-    truncated powers ``max(x - g_i, 0)^2, ^3`` (the cubic is C1, so nothing else jumps). Exactly the piecewise cubic
-    (beyond the ends, the end cubics, as :func:`arvcas.model.thrusters.map_thrust`), at about 8 operations per
-    point of the table for each thruster. Returns ``f(x)``."""
-    n = g.shape[0]
-    h = [g[i + 1] - g[i] for i in range(n - 1)]
-    m = [(v[i + 1] - v[i]) / h[i] for i in range(n - 1)]
-    c = [(3 * m[i] - 2 * d[i] - d[i + 1]) / h[i] for i in range(n - 1)]  # local coefficients of (x - g_i)^2
-    e = [(d[i] + d[i + 1] - 2 * m[i]) / h[i] ** 2 for i in range(n - 1)]  # and of (x - g_i)^3
-    jumps = [(g[i], c[i] - (c[i - 1] + 3 * e[i - 1] * h[i - 1]), e[i] - e[i - 1]) for i in range(1, n - 1)]
-
-    def f(x):
-        t = x - g[0]
-        out = v[0] + d[0] * t + c[0] * t * t + e[0] * t * t * t
-        for gi, dc, de in jumps:
-            r = ca.fmax(x - gi, 0)
-            out = out + (dc + de * r) * r * r
-        return out
-
-    return f
-
-
 def mixer(roll, pitch, yaw, throttle, forward=0, lateral=0):
     """AP_Motors6DOF's vectored-6DOF mix: the eight motor outputs (-1..1) in ArduSub's motor order."""
     F = params()["frame"]["vectored_6dof"]["factors"]
@@ -268,7 +244,7 @@ class ArduSub(Controller):
             c = ca.fmin(ca.fmax(mid + gain * sgn * ca.dot(w, motors), lo), hi)
             pwm.append(c)
             if m.name not in tables:  # one table (its slopes and jumps) per map, shared by its thrusters
-                tables[m.name] = _pchip_power(*thrusters.map_table(P, m))
+                tables[m.name] = thrusters.pchip_powers(*thrusters.map_table(P, m))
             u.append(tables[m.name](thrusters.state_of(P, m, c)))
         u = ca.vertcat(*u)
         ctx.out["pwm"] = ca.vertcat(*pwm)

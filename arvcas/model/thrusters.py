@@ -223,6 +223,31 @@ def _pchip_sx(g, v, d, x):
     return out
 
 
+def pchip_powers(g, v, d):
+    """The map's monotone cubic (:func:`map_table`) as one expression of ``x``: the first
+    interval's cubic plus, at each inner point, the jumps of the second- and third-order coefficients times the
+    truncated powers ``max(x - g_i, 0)^2, ^3`` (the cubic is C1, so nothing else jumps). Exactly the piecewise cubic
+    (beyond the ends, the end cubics, as :func:`map_thrust`), at about 8 operations per
+    point of the table for each thruster, where :func:`_pchip_sx` selects among every interval's cubic (the
+    controllers' form: ``ardusub``). Returns ``f(x)``."""
+    n = g.shape[0]
+    h = [g[i + 1] - g[i] for i in range(n - 1)]
+    m = [(v[i + 1] - v[i]) / h[i] for i in range(n - 1)]
+    c = [(3 * m[i] - 2 * d[i] - d[i + 1]) / h[i] for i in range(n - 1)]  # local coefficients of (x - g_i)^2
+    e = [(d[i] + d[i + 1] - 2 * m[i]) / h[i] ** 2 for i in range(n - 1)]  # and of (x - g_i)^3
+    jumps = [(g[i], c[i] - (c[i - 1] + 3 * e[i - 1] * h[i - 1]), e[i] - e[i - 1]) for i in range(1, n - 1)]
+
+    def f(x):
+        t = x - g[0]
+        out = v[0] + d[0] * t + c[0] * t * t + e[0] * t * t * t
+        for gi, dc, de in jumps:
+            r = ca.fmax(x - gi, 0)
+            out = out + (dc + de * r) * r * r
+        return out
+
+    return f
+
+
 def map_thrust(P, m, s):
     """Steady thrust F(s) (N) of map ``m`` at rotor states ``s`` (a column): a table's monotone cubic
     through its points (PCHIP, docs/model.md §9), or the rotor law ``k s |s|``."""
