@@ -153,7 +153,7 @@ def test_thrust_table_with_saturation_plateaus(tmp_path):
 
     gx, vx, dx = (ca.MX(ca.DM(np.array(ca.evalf(a)).ravel())) for a in thrusters.map_table(P, m))
     uu = ca.MX.sym("u", u.size)
-    inv = ca.Function("inv", [uu], [closedloop._pchip_inverse(gx, vx, dx, uu)])
+    inv = ca.Function("inv", [uu], [closedloop._pchip_newton(*closedloop._pchip_interval(gx, vx, dx, uu), uu)])
     np.testing.assert_allclose(np.array(inv(u)).ravel(), y, atol=1e-9)
 
 
@@ -339,7 +339,7 @@ def test_armless_log_validated_and_identified_end_to_end(tmp_path, capsys, cache
     trial = synthetic.write_trial(tmp_path / "logs", "rock", s, duration=8.0, seed=2)
     assert "joints" not in trial.read_text()
     out = tmp_path / "val"
-    assert cli.main(["validate", "--system", "bluerov2_heavy", str(trial), "--out", str(out), "--format", "svg"]) == 0
+    assert cli.main(["validate", "--system", "bluerov2_heavy", str(trial), "--out", str(out), "--figures", "--format", "svg"]) == 0
     assert json.loads((out / "validation.json").read_text())["system"] == "bluerov2_heavy"
     rmse = validate.validate_log(s, logs.load_log(trial)).metrics["rmse"]
     assert rmse["roll"] < 3 * synthetic.NOISE["attitude"] and rmse["pitch"] < 3 * synthetic.NOISE["attitude"], rmse

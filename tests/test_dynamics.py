@@ -178,7 +178,7 @@ def test_errors_are_one_line():
         (lambda: d(x, tau, params={"a": 1}), r"params: expected arvcas.system.params.Params, got dict"),
         (lambda: d(x, tau, n_threads=0), r"n_threads: expected a positive integer or None, got 0"),
         (lambda: d("abc", tau), r"x: expected numbers, got a str"),
-        (lambda: arvcas.dynamics("uvms_rhs", system="bluerov2"), r"neither a shipped system .*did you mean 'bluerov2_heavy_alpha5'"),
+        (lambda: arvcas.dynamics("uvms_rhs", system="bluerov2_hevy"), r"neither a shipped system .*did you mean 'bluerov2_heavy'"),
         (lambda: arvcas.dynamics("nope"), r"unknown function 'nope'; allowed: vehicle_rhs, arm_wrench, .*uvms_rhs_jac"),
     ]
     for call, msg in cases:

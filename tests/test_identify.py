@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -158,8 +159,7 @@ def test_log_plant_against_scipy_on_a_real_trial():
     from scipy.integrate import solve_ivp
 
     system = arvcas.load_system("hinsdale_bluerov2_alpha5")
-    path = arvcas.system.shipped()["hinsdale_bluerov2_alpha5"].parents[2] / "studies" / "validation" / \
-        "hinsdale2023" / "traj005-0.log.toml"
+    path = Path(__file__).resolve().parents[1] / "studies" / "validation" / "hinsdale2023" / "traj005-0.log.toml"
     lg = logs.load_log(path, system.n_joints)
     lg = lg.window(5.0, 9.0)  # the arm moves
     x0 = validate.initial_state(lg)

@@ -1150,8 +1150,8 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
         q, qd, qdd, pl, dist = stage(k, 0)
         tau_arm = None
         if truth is not None:
-            held = u_hold if delivered is None else np.asarray(delivered[k], dtype=float)
-            tau_arm = np.array(truth(x, held, tab.time[0:TS, k], tab.arm[0:AS, k], p, ph, water, tk)).ravel()
+            u_true = u_hold if delivered is None else np.asarray(delivered[k], dtype=float)
+            tau_arm = np.array(truth(x, u_true, tab.time[0:TS, k], tab.arm[0:AS, k], p, ph, water, tk)).ravel()
         u = np.array(controller.step([(x + noise[:, k])[i] for i, _, _ in measured(cfg)], tk, tau_arm))
         dg = controller.diagnostics()
         tau_v, y1 = np.array(dg["tau_cmd"]), np.array(dg["eta_ref"])
