@@ -2,7 +2,7 @@
 
 :func:`export_fmu` generates C for ``uvms_rhs`` with CasADi's :class:`casadi.CodeGenerator` (the same
 graph and options as the compile cache, :mod:`arvcas.build.codegen`), wraps it in the FMI 2.0 C
-interface (``templates/fmu_wrapper.c``; the standard's headers in ``templates/fmi2/``, 2-clause
+interface (``templates/fmu/wrapper.c.j2``; the standard's headers in ``templates/fmi2/``, 2-clause
 BSD), writes ``modelDescription.xml``, compiles ``binaries/<platform>/<modelIdentifier>.so`` with
 the cache's compiler flags and zips it all, sources included, to ``FILE.fmu`` (a temporary file in
 the same directory, then :func:`os.replace`).
@@ -31,7 +31,7 @@ import zipfile
 from importlib import resources
 from pathlib import Path
 
-from arvcas.build.text import xml_attr
+from arvcas.build.templating import render
 from arvcas.io import files
 
 import casadi as ca
@@ -248,10 +248,6 @@ def _check_inputs(inputs) -> None:
 # model description
 
 
-def _fmt(v: float) -> str:
-    return repr(float(v))
-
-
 def _dependencies(fn: ca.Function) -> list[list[int]]:
     """For each of the 12 derivatives, the 1-based indices of the states and inputs it depends on."""
     syms = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
@@ -266,83 +262,26 @@ def _dependencies(fn: ca.Function) -> list[list[int]]:
     return [sorted(d) for d in deps]
 
 
+_KEYS = ("initial", "unit", "display", "start", "min", "max", "derivative")  # a variable's optional attributes
+
+
 def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: str, P) -> str:
+    """``modelDescription.xml`` (``templates/fmu/modelDescription.xml.j2``)."""
     from arvcas._version import __version__
 
     bases = {v["unit"]: v.get("base") or _UNITS[v["unit"]] for v in V if v["unit"]}
     used = [u for u in _UNITS if u in bases] + [u for u in bases if u not in _UNITS]  # derived units last
-    L = ['<?xml version="1.0" encoding="UTF-8"?>']
-    stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     st = P.structure
     what = "Haidou-1 ARV with its 6-DOF manipulator (Ding et al. 2021)" if _is_haidou1(st) else \
         f"system {st.name}: {P.description or st.name} ({st.n_thrusters} thrusters, {st.n_joints} joints)"
     desc = (f"{what}, exactly coupled (arvcas uvms_rhs, "
             f"docs/model.md); inputs: {'body wrench tau' if inputs == 'wrench' else 'thruster commands u'}, "
             "q, qd, qdd, payload")
-    L.append(f'<fmiModelDescription fmiVersion="2.0" modelName="arvcas_uvms" guid={xml_attr(guid)} '
-             f'description={xml_attr(desc)} version={xml_attr(__version__)} '
-             f'generationTool={xml_attr("arvcas " + __version__)} generationDateAndTime="{stamp}" '
-             'variableNamingConvention="structured" numberOfEventIndicators="0">')
-    src = f'<SourceFiles><File name="{_WRAPPER_C}"/></SourceFiles>'
-    L.append(f'  <ModelExchange modelIdentifier="{MODEL_IDENTIFIER}" needsExecutionTool="false" '
-             'completedIntegratorStepNotNeeded="true" canBeInstantiatedOnlyOncePerProcess="false" '
-             'canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="true" '
-             f'canSerializeFMUstate="true" providesDirectionalDerivative="false">{src}</ModelExchange>')
-    L.append(f'  <CoSimulation modelIdentifier="{MODEL_IDENTIFIER}" needsExecutionTool="false" '
-             'canHandleVariableCommunicationStepSize="true" canInterpolateInputs="true" '
-             'maxOutputDerivativeOrder="0" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" '
-             'canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="true" '
-             f'canSerializeFMUstate="true" providesDirectionalDerivative="false">{src}</CoSimulation>')
-    L.append("  <UnitDefinitions>")
-    for u in used:
-        base = "".join(f" {k}={xml_attr(e)}" for k, e in bases[u].items())
-        disp = ""
-        if u in _DISPLAY:
-            dn, fac = _DISPLAY[u]
-            disp = f'<DisplayUnit name="{dn}" factor="{_fmt(fac)}"/>'
-        L.append(f"    <Unit name={xml_attr(u)}><BaseUnit{base}/>{disp}</Unit>")
-    L.append("  </UnitDefinitions>")
-    L.append('  <LogCategories><Category name="logStatusError" description="errors"/>'
-             '<Category name="logAll" description="everything"/></LogCategories>')
-    L.append('  <DefaultExperiment startTime="0.0" stopTime="100.0" tolerance="1e-08" stepSize="0.01"/>')
-    L.append("  <ModelVariables>")
-    for i, v in enumerate(V):
-        attrs = [f"name={xml_attr(v['name'])}", f'valueReference="{i}"',
-                 f"description={xml_attr(v['description'])}", f'causality="{v["causality"]}"',
-                 f'variability="{v["variability"]}"']
-        if v["initial"]:
-            attrs.append(f'initial="{v["initial"]}"')
-        real = []
-        if v["unit"]:
-            real.append(f"unit={xml_attr(v['unit'])}")
-        if v.get("display"):
-            real.append(f"displayUnit={xml_attr(v['display'])}")
-        if v["start"] is not None:
-            real.append(f'start="{_fmt(v["start"])}"')
-        for k in ("min", "max"):
-            if v.get(k) is not None:
-                real.append(f'{k}="{_fmt(v[k])}"')
-        if v.get("derivative"):
-            real.append(f'derivative="{v["derivative"]}"')
-        L.append(f'    <ScalarVariable {" ".join(attrs)}><Real {" ".join(real)}/></ScalarVariable>'
-                 f"<!-- {i + 1} -->")
-    L.append("  </ModelVariables>")
-    L.append("  <ModelStructure>")
-    L.append("    <Outputs>")
-    for i in range(12):
-        L.append(f'      <Unknown index="{i + 1}" dependencies="{i + 1}"/>')
-    L.append("    </Outputs>")
-    L.append("    <Derivatives>")
-    for i in range(12):
-        L.append(f'      <Unknown index="{13 + i}" dependencies="{" ".join(map(str, deps[i]))}"/>')
-    L.append("    </Derivatives>")
-    L.append("    <InitialUnknowns>")
-    for i in range(12):
-        L.append(f'      <Unknown index="{13 + i}"/>')
-    L.append("    </InitialUnknowns>")
-    L.append("  </ModelStructure>")
-    L.append("</fmiModelDescription>")
-    return "\n".join(L) + "\n"
+    return render("fmu/modelDescription.xml.j2", {
+        "guid": guid, "description": desc, "version": __version__, "wrapper_c": _WRAPPER_C,
+        "stamp": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "model_identifier": MODEL_IDENTIFIER,
+        "units": [{"name": u, "base": bases[u], "display": _DISPLAY.get(u)} for u in used],
+        "variables": [{**dict.fromkeys(_KEYS), **v} for v in V], "deps": deps}, FMUError)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -504,16 +443,12 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
         h.update(part.encode())
         h.update(b"\0")
     guid = "{" + str(uuid.UUID(bytes=h.digest()[:16])) + "}"
-    wrapper = (_templates() / "fmu_wrapper.c").read_text(encoding="utf-8")
     assert len(V) - lay["vr_p"] == len(P) and fn.nnz_in() == 12 + lay["n_u"] + len(P)
-    fields = {"@MODEL_C@": _MODEL_C, "@NP@": len(V) - lay["vr_p"], "@GUID@": guid, "@RHS@": fn.name(),
-              "@START@": start, "@IN@": "tau" if inputs == "wrench" else "u", "@NU@": lay["n_u"],
-              "@NIN@": lay["n_in"], "@NJ@": lay["n_joints"], "@VR_H@": lay["vr_h"], "@VR_P@": lay["vr_p"],
-              "@U_Q@": lay["q"], "@U_QD@": lay["qd"], "@U_QDD@": lay["qdd"], "@U_PAYLOAD@": lay["payload"],
-              "@CHECKS@": checks}
-    for k, v in fields.items():
-        wrapper = wrapper.replace(k, str(v))
-    assert not re.search(r"@[A-Z_]+@", wrapper), "an unfilled field in fmu_wrapper.c"
+    wrapper = render("fmu/wrapper.c.j2", {
+        "model_c": _MODEL_C, "np": len(V) - lay["vr_p"], "guid": guid, "rhs": fn.name(), "start": start,
+        "input": "tau" if inputs == "wrench" else "u", "nu": lay["n_u"], "nin": lay["n_in"], "nj": lay["n_joints"],
+        "vr_h": lay["vr_h"], "vr_p": lay["vr_p"], "u_q": lay["q"], "u_qd": lay["qd"], "u_qdd": lay["qdd"],
+        "u_payload": lay["payload"], "checks": checks}, FMUError)
     md = _model_description(V, deps, guid, inputs, P)
 
     files.remove_stale_temps(out.parent)  # those of killed exports (and of every other writer)
