@@ -201,7 +201,7 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
 
 
 def _export_controller_outputs(a: argparse.Namespace) -> list:
-    from arvcas.io.export_controller import default_prefix, files
+    from arvcas.export.controller import default_prefix, files
 
     d = _export_controller_design(a)
     if a.format == "ardusub-params":
@@ -213,7 +213,7 @@ def _export_controller_outputs(a: argparse.Namespace) -> list:
 
 
 def _run_export_controller(a: argparse.Namespace) -> int:
-    from arvcas.io.export_controller import export_controller
+    from arvcas.export.controller import export_controller
 
     d = _export_controller_design(a)
     if a.format == "ardusub-params":

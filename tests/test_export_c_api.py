@@ -131,7 +131,7 @@ def test_the_c_api_under_address_and_undefined_behaviour_sanitizers(exported):
 
 @pytest.fixture(scope="module")
 def binding(exported):
-    from arvcas.io.export_controller import load_binding
+    from arvcas.export.closeloop import load_binding
 
     name, law, out, params = exported
     r = subprocess.run(["make", "-C", str(out), f"lib{next(out.glob('*_params.h')).stem.removesuffix('_params')}.so"],

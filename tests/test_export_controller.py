@@ -26,7 +26,8 @@ import arvcas
 from arvcas import cli
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim import scenario
-from arvcas.io.export_controller import close_loop, default_prefix, files, load_binding
+from arvcas.export.closeloop import close_loop, load_binding
+from arvcas.export.controller import default_prefix, files
 from arvcas.system import load_system
 from arvcas.tuning.front import read_front
 
@@ -260,7 +261,7 @@ def test_close_loop_refuses_a_current_and_the_thrust_quadrature():
     each, before any work."""
     from types import SimpleNamespace
 
-    from arvcas.io.export_controller import ExportError
+    from arvcas.export.controller import ExportError
 
     blue = load_system("bluerov2_heavy_alpha5")
     cfg = scenario.load_scenario(blue.params.default("scenario"))

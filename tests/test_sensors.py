@@ -22,7 +22,8 @@ import pytest
 
 import arvcas
 from arvcas import cli
-from arvcas.io.export_controller import close_loop, default_prefix, load_binding
+from arvcas.export.closeloop import close_loop, load_binding
+from arvcas.export.controller import default_prefix
 from arvcas.sim import scenario
 from arvcas.sim.scenario import ScenarioError, loads_scenario
 from arvcas.system import load_system

@@ -146,7 +146,7 @@ def test_refused_without_thruster_dynamics_and_by_close_loop(runs):
     cfg = dataclasses.replace(scenario.load_scenario(), time_thrust_quadrature=3)
     with pytest.raises(SimulationError, match=r"time.thrust_quadrature: only for a system with thruster dynamics"):
         Run("proposed", scenario=cfg).compile()
-    from arvcas.io.export_controller import ExportError, close_loop
+    from arvcas.export.closeloop import ExportError, close_loop
 
     with pytest.raises(ExportError, match=r"time.thrust_quadrature"):
         close_loop(None, runs[0])

@@ -88,7 +88,7 @@ int main(int argc, char** argv) {
 def _bench_controller(s: Settings, log) -> dict:
     """``{system: {law: {"ns_per_step": stat, "instructions_per_step", "init_ns", "state_bytes", ...}}}``."""
     from arvcas.build import codegen
-    from arvcas.io.export_controller import default_prefix, export_controller
+    from arvcas.export.controller import default_prefix, export_controller
     from arvcas.sim import closedloop, scenario
     from arvcas.system import SHIPPED, load_system
 
