@@ -6,11 +6,11 @@ naming its template and this command. A template is the page's text with placeho
 
 ``{{FILE:PATH*K|SPEC}}``
     one value of a committed file, ``FILE`` relative to the repository's root. For a JSON or TOML file
-    ``PATH`` is a path of keys joined by ``/`` (keys such as ``plain_rk4_h_plant_0.0025`` hold dots). For an HDF5 file
-    (``.h5``) ``PATH`` is an object's path, ``/group/dataset``, or an attribute, ``/group@name`` (``/@name``
-    for the file's root); either may end in a NumPy index, ``[3]``, ``[-1]``, ``[0,2]``. ``*K`` scales a
-    number, ``SPEC`` is a Python format spec (``,.0f``, ``.2f``; none: the value as it is; ``.1e`` writes
-    the exponent without padding, ``3.8e-8``).
+    ``PATH`` is a path of keys joined by ``/`` (keys such as ``plain_rk4_h_plant_0.0025`` hold dots; an
+    integer indexes a list). For an HDF5 file (``.h5``) ``PATH`` is an object's path, ``/group/dataset``, or
+    an attribute, ``/group@name`` (``/@name`` for the file's root); either may end in a NumPy index,
+    ``[3]``, ``[-1]``, ``[0,2]``. ``*K`` scales a number, ``SPEC`` is a Python format spec (``,.0f``,
+    ``.2f``; none: the value as it is; ``.1e`` writes the exponent without padding, ``3.8e-8``).
 ``{{let NAME = FILE:PATH}}``, on a line of its own
     binds ``NAME`` to that value (a whole array when ``PATH`` names one); the line is not rendered.
     ``{{let NAME = FILE:re:REGEX}}`` binds the numbers of every match of ``REGEX`` (its groups, or the whole
@@ -155,9 +155,12 @@ def value(root: Path, file: str, path: str):
                               f"re-measure it at a clean commit")
     x = doc
     for k in keys:
-        if not isinstance(x, dict) or k not in x:
+        if isinstance(x, list) and re.fullmatch(r"-?\d+", k) and -len(x) <= int(k) < len(x):
+            x = x[int(k)]
+        elif isinstance(x, dict) and k in x:
+            x = x[k]
+        else:
             raise RenderError(f"{{{{{file}:{path}}}}}: no key {k!r} in {file}")
-        x = x[k]
     return x
 
 
@@ -250,7 +253,12 @@ def _format(x, spec: str, where: str) -> str:
 
 
 def render(template: str, root: Path = ROOT, source: str = "docs/README.in.md") -> str:
-    """The page's text: every placeholder of ``template`` (the text of ``source``) replaced by its value."""
+    """The page's text: its header naming ``source`` (the template), then :func:`body`."""
+    return header(source) + body(template, root)
+
+
+def body(template: str, root: Path = ROOT) -> str:
+    """``template`` with every placeholder replaced by its value and every ``let`` line removed."""
     names: dict = {}
 
     def let(m: re.Match) -> str:
@@ -284,7 +292,7 @@ def render(template: str, root: Path = ROOT, source: str = "docs/README.in.md") 
     if left:
         raise RenderError(f"{left.group(0)}: not a placeholder of the form {{{{FILE:PATH|SPEC}}}}, "
                           f"{{{{= EXPR|SPEC}}}} or a {{{{let NAME = ...}}}} line")
-    return header(source) + out
+    return out
 
 
 # ---- the pages --------------------------------------------------------------------------------------------

@@ -3,7 +3,9 @@
 Each generated page of ``results/`` is written by the script that measured it, from the JSON it saved beside
 it; this script renders every such page again from that JSON alone, so that editing a page's wording (in the
 script) and checking that the committed page is the script's rendering of the committed data need no
-re-measurement:
+re-measurement. A page may keep a note (what changed since its study ran) in a template beside it, ``X.note.in``,
+rendered by benchmarks/readme.py's placeholders and appended. ``python benchmarks/readme.py --check`` runs this
+check too:
 
     python benchmarks/render_results.py           # rewrite the pages below
     python benchmarks/render_results.py --check   # exit 1 naming each page that differs (tests/test_readme.py)
@@ -46,19 +48,39 @@ def _lockstep(doc: dict) -> str:
     return lockstep.markdown(doc)
 
 
-# (the page, the JSON it is rendered from, the renderer), paths relative to the checkout
+def _step_accuracy(doc: dict) -> str:
+    from benchmarks import step_accuracy
+    return step_accuracy.markdown(doc)
+
+
+def _note(template: str, root: Path = ROOT) -> str:
+    """The text of a note kept beside a generated page (what happened since its study ran), rendered from its
+    template by benchmarks/readme.py: every number in it from a committed file."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("arvcas_readme_renderer", ROOT / "benchmarks" / "readme.py")
+    readme = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(readme)
+    return readme.body((root / template).read_text(), root)
+
+
+# (the page, the JSON it is rendered from, the renderer[, a note's template appended to it]), paths relative to
+# the checkout
 PAGES = [
     ("results/bench.md", "results/bench.json", _bench_md),
     ("results/cost/README.md", "results/bench.json", _cost_readme),
     ("results/bluerov2_step/README.md", "results/bluerov2_step/bluerov2_step.json", _bluerov2_step),
     ("results/step/bluerov2_heavy_alpha5/thrusters.md", "results/step/bluerov2_heavy_alpha5/thrusters.json", _thrusters),
     ("results/lockstep/README.md", "results/lockstep/lockstep.json", _lockstep),
+    ("results/step/README.md", "results/step/step_accuracy.json", _step_accuracy, "results/step/README.note.in"),
+    ("results/step/bluerov2_heavy_alpha5/README.md", "results/step/bluerov2_heavy_alpha5/step_accuracy.json",
+     _step_accuracy, "results/step/bluerov2_heavy_alpha5/README.note.in"),
 ]
 
 
 def rendered(root: Path = ROOT) -> dict[str, str]:
-    """Every page's text as its script renders it from the committed JSON."""
-    return {page: fn(json.loads((root / src).read_text())) for page, src, fn in PAGES}
+    """Every page's text as its script renders it from the committed JSON (and its note, if it has one)."""
+    return {page: fn(json.loads((root / src).read_text())) + "".join("\n" + _note(n, root) for n in note)
+            for page, src, fn, *note in PAGES}
 
 
 def _write(path: Path, text: str) -> None:
