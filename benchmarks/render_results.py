@@ -1,7 +1,8 @@
 """Re-render the results' generated text from their committed data: nothing measured is touched.
 
 Each generated page of ``results/`` is written by the script that measured it, from the JSON it saved beside
-it; this script renders every such page again from that JSON alone, so that editing a page's wording (in the
+it, or by a script kept in its folder from that folder's committed result files (``results/ardusub/render.py``,
+``results/bluerov2/side_by_side.py``); this script renders every such page again from those files alone, so that editing a page's wording (in the
 script) and checking that the committed page is the script's rendering of the committed data need no
 re-measurement. A page may keep a note (what changed since its study ran) in a template beside it, ``X.note.in``,
 rendered by benchmarks/readme.py's placeholders and appended. ``python benchmarks/readme.py --check`` runs this
@@ -53,6 +54,17 @@ def _step_accuracy(doc: dict) -> str:
     return step_accuracy.markdown(doc)
 
 
+def _folder_script(path: str):
+    """A page written by a script kept in its results folder, from that folder's committed files."""
+    def fn(_doc) -> str:
+        import importlib.util
+        spec = importlib.util.spec_from_file_location("arvcas_results_" + Path(path).parent.name, ROOT / path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod.markdown()
+    return fn
+
+
 def _note(template: str, root: Path = ROOT) -> str:
     """The text of a note kept beside a generated page (what happened since its study ran), rendered from its
     template by benchmarks/readme.py: every number in it from a committed file."""
@@ -74,13 +86,16 @@ PAGES = [
     ("results/step/README.md", "results/step/step_accuracy.json", _step_accuracy, "results/step/README.note.in"),
     ("results/step/bluerov2_heavy_alpha5/README.md", "results/step/bluerov2_heavy_alpha5/step_accuracy.json",
      _step_accuracy, "results/step/bluerov2_heavy_alpha5/README.note.in"),
+    # scripts in their folder, reading that folder's committed fronts (no JSON: the renderer reads them)
+    ("results/ardusub/README.md", None, _folder_script("results/ardusub/render.py")),
+    ("results/bluerov2/side_by_side.md", None, _folder_script("results/bluerov2/side_by_side.py")),
 ]
 
 
 def rendered(root: Path = ROOT) -> dict[str, str]:
     """Every page's text as its script renders it from the committed JSON (and its note, if it has one)."""
-    return {page: fn(json.loads((root / src).read_text())) + "".join("\n" + _note(n, root) for n in note)
-            for page, src, fn, *note in PAGES}
+    return {page: fn(json.loads((root / src).read_text()) if src else None)
+            + "".join("\n" + _note(n, root) for n in note) for page, src, fn, *note in PAGES}
 
 
 def _write(path: Path, text: str) -> None:
