@@ -9,7 +9,8 @@ naming its template and this command. A template is the page's text with placeho
     ``PATH`` is a path of keys joined by ``/`` (keys such as ``plain_rk4_h_plant_0.0025`` hold dots; an
     integer indexes a list). For an HDF5 file (``.h5``) ``PATH`` is an object's path, ``/group/dataset``, or
     an attribute, ``/group@name`` (``/@name`` for the file's root); either may end in a NumPy index,
-    ``[3]``, ``[-1]``, ``[0,2]``. ``*K`` scales a number, ``SPEC`` is a Python format spec (``,.0f``,
+    ``[3]``, ``[-1]``, ``[0,2]``. For a CSV file (``arvcas front export``) ``PATH`` names a column, or several
+    with ``*`` (``chat.*``: rows x columns). ``*K`` scales a number, ``SPEC`` is a Python format spec (``,.0f``,
     ``.2f``; none: the value as it is; ``.1e`` writes the exponent without padding, ``3.8e-8``).
 ``{{let NAME = FILE:PATH}}``, on a line of its own
     binds ``NAME`` to that value (a whole array when ``PATH`` names one); the line is not rendered.
@@ -19,8 +20,8 @@ naming its template and this command. A template is the page's text with placeho
     ``{{let NAME = EXPR}}`` the value of an expression.
 ``{{= EXPR|SPEC}}``
     the value of an expression over bound names: numbers, ``+ - * / **``, comparisons, indexing (NumPy's,
-    a mask too: ``k1[t <= 30]``) and the functions ``min max mean sum abs sqrt len count all any argmin
-    argmax round diff`` (``min(a, 0)``, ``diff(a)``: along axis 0; ``min(a, b)``: of two numbers). Nothing else
+    a mask too: ``k1[t <= 30]``) and the functions ``min max mean sum abs sqrt log exp len count all any
+    argmin argmax round diff`` (``min(a, 0)``, ``diff(a)``: along axis 0; ``min(a, b)``: of two numbers). Nothing else
     is evaluated.
 
 A value measured on a tree with uncommitted changes (a section of ``results/bench.json`` whose
@@ -134,6 +135,30 @@ def _text_value(root: Path, file: str, pattern: str):
     return a.item() if a.ndim == 0 else a
 
 
+def _csv_value(f: Path, file: str, path: str):
+    """The column ``path`` of the CSV file ``f`` (``True``/``False`` as booleans, else numbers), or, for a
+    pattern with ``*`` (``chat.*``), every matching column in the file's order: rows x columns."""
+    import csv
+    import fnmatch
+
+    import numpy as np
+    with open(f, newline="") as fh:
+        rows = list(csv.reader(fh))
+    cols = [i for i, name in enumerate(rows[0]) if fnmatch.fnmatchcase(name, path)]
+    if not cols:
+        raise RenderError(f"{{{{{file}:{path}}}}}: no column {path!r} in {file}")
+
+    def cell(text: str):
+        if text in ("True", "False"):
+            return text == "True"
+        return float(text) if text else float("nan")
+    try:
+        a = np.array([[cell(r[i]) for i in cols] for r in rows[1:]])
+    except ValueError as e:
+        raise RenderError(f"{{{{{file}:{path}}}}}: not numbers ({e})") from None
+    return a[:, 0] if "*" not in path else a
+
+
 def value(root: Path, file: str, path: str):
     """The value at ``path`` in the committed file ``file`` below ``root``: keys joined by ``/`` in a JSON
     file, an object or attribute path in an HDF5 file."""
@@ -142,6 +167,8 @@ def value(root: Path, file: str, path: str):
         raise RenderError(f"{{{{{file}:{path}}}}}: no file {file}")
     if f.suffix == ".h5":
         return _h5_value(f, file, path)
+    if f.suffix == ".csv":
+        return _csv_value(f, file, path)
     if f.suffix == ".toml":
         import tomllib
         doc = tomllib.loads(f.read_text())
@@ -180,7 +207,7 @@ def _functions():
     return {"min": _reduce(np.min), "max": _reduce(np.max), "mean": _reduce(np.mean), "sum": _reduce(np.sum),
             "abs": np.abs, "sqrt": np.sqrt, "len": len, "count": lambda a: int(np.count_nonzero(a)),
             "all": _reduce(np.all), "any": _reduce(np.any), "argmin": np.argmin,
-            "argmax": np.argmax, "round": np.round, "diff": lambda a: np.diff(np.asarray(a), axis=0)}
+            "argmax": np.argmax, "round": np.round, "log": np.log, "exp": np.exp, "diff": lambda a: np.diff(np.asarray(a), axis=0)}
 
 
 _BIN = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
@@ -264,10 +291,10 @@ def body(template: str, root: Path = ROOT) -> str:
     def let(m: re.Match) -> str:
         name, rhs = m.group(1), m.group(2)
         t = _TEXT.fullmatch(rhs)
-        r = re.fullmatch(_REF, rhs)
+        r = re.fullmatch(r"([^:{}\s]+):(\S+)", rhs)
         if t:
             names[name] = _text_value(root, t.group(1), t.group(2))
-        elif r and re.search(r"\.(json|toml|h5)$", r.group(1)):
+        elif r and re.search(r"\.(json|toml|h5|csv)$", r.group(1)):
             names[name] = value(root, r.group(1), r.group(2))
         else:
             names[name] = evaluate(rhs, names)
