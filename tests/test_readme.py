@@ -92,12 +92,16 @@ def _tree(tmp_path: Path) -> Path:
         h["front"].attrs["n"] = 2
     (tmp_path / "results" / "x" / "m.json").write_text(json.dumps({"a": {"b": 0.000123}}))
     (tmp_path / "results" / "x" / "compare.txt").write_text("agsta   79   750.557\nproposed   69   779.59\n")
+    (tmp_path / "results" / "x" / "front.csv").write_text("member,knee,chat.x,chat.y\n0,False,1.5,2.5\n"
+                                                         "4,True,0.5,3.5\n")
     (tmp_path / "results" / "x" / "README.in.md").write_text(
         "# X\n{{let c = results/x/run.h5:/@chat}}\n"
         "{{let hv = results/x/compare.txt:re:^\\w+\\s+(\\d+)\\s+(\\S+)$}}\n"
+        "{{let knee = results/x/front.csv:knee}}\n{{let chat = results/x/front.csv:chat.*}}\n"
         "ratio {{= c[0] / c[1]|.2f}}, {{= count(c > 2)}} of {{= len(c)}}, F {{results/x/run.h5:/front/F[1,0]|.1f}}, "
         "n {{results/x/run.h5:/front@n}}, last t {{results/x/run.h5:/t[-1]}}, {{results/x/m.json:a/b|.1e}}, "
-        "HV {{= hv[1, 1]|.2f}} ({{= hv[0, 0]|.0f}} members), late {{= max(c[1:])|.1f}}\n")
+        "HV {{= hv[1, 1]|.2f}} ({{= hv[0, 0]|.0f}} members), late {{= max(c[1:])|.1f}}, "
+        "knee {{= chat[argmax(knee), 1]}}\n")
     return tmp_path
 
 
@@ -108,7 +112,7 @@ def test_results_page_renders_every_source(tmp_path):
     src = "results/x/README.in.md"
     text = r.render((root / src).read_text(), root, src)
     assert text == (r.header(src) + "# X\nratio 0.50, 2 of 3, F 3.0, n 2, last t 2.0, 1.2e-4, HV 779.59 (79 members), "
-                    "late 6.0\n")
+                    "late 6.0, knee 3.5\n")
     assert text.startswith("<!-- Rendered from results/x/README.in.md by `python benchmarks/readme.py`")
 
 
