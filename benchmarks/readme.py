@@ -127,8 +127,10 @@ def _text_value(root: Path, file: str, pattern: str):
         raise RenderError(f"{where}: not a regular expression ({e})") from None
     if not found:
         raise RenderError(f"{where}: no match in {file}")
+    def number(g: str) -> float:  # "1,234" and "50%" as numbers, "-" (a table's empty cell) as NaN
+        return float("nan") if g == "-" else float(g.replace(",", "").rstrip("%"))
     try:
-        vals = [[float(g.replace(",", "").rstrip("%")) for g in (m.groups() or (m.group(0),))] for m in found]
+        vals = [[number(g) for g in (m.groups() or (m.group(0),))] for m in found]
     except (AttributeError, ValueError):
         raise RenderError(f"{where}: matched {found[0].group(0)!r}, not numbers") from None
     a = np.squeeze(np.asarray(vals))
