@@ -19,10 +19,10 @@ naming its template and this command. A template is the page's text with placeho
     ``arvcas compare`` report), and
     ``{{let NAME = EXPR}}`` the value of an expression.
 ``{{= EXPR|SPEC}}``
-    the value of an expression over bound names: numbers, ``+ - * / **``, comparisons, indexing (NumPy's,
-    a mask too: ``k1[t <= 30]``) and the functions ``min max mean sum abs sqrt log exp len count all any
-    argmin argmax round diff`` (``min(a, 0)``, ``diff(a)``: along axis 0; ``min(a, b)``: of two numbers). Nothing else
-    is evaluated.
+    the value of an expression over bound names: numbers, ``+ - * / // % **``, comparisons, indexing (NumPy's,
+    a mask too: ``k1[t <= 30]``) and the functions ``min max mean median sum abs sqrt log exp len count all
+    any argmin argmax round sort diff`` (``min(a, 0)``, ``sort(a)``, ``diff(a)``: along axis 0; ``min(a, b)``:
+    of two numbers). Nothing else is evaluated.
 
 A value measured on a tree with uncommitted changes (a section of ``results/bench.json`` whose
 ``git_commit`` ends in ``+dirty``) is refused: no page quotes what the repository cannot reproduce.
@@ -127,8 +127,8 @@ def _text_value(root: Path, file: str, pattern: str):
         raise RenderError(f"{where}: not a regular expression ({e})") from None
     if not found:
         raise RenderError(f"{where}: no match in {file}")
-    def number(g: str) -> float:  # "1,234" and "50%" as numbers, "-" (a table's empty cell) as NaN
-        return float("nan") if g == "-" else float(g.replace(",", "").rstrip("%"))
+    def number(g: str) -> float:  # "1,234" and "50%" as numbers, "-" and "n/a" (a table's empty cell) as NaN
+        return float("nan") if g in ("-", "n/a") else float(g.replace(",", "").rstrip("%"))
     try:
         vals = [[number(g) for g in (m.groups() or (m.group(0),))] for m in found]
     except (AttributeError, ValueError):
@@ -207,13 +207,14 @@ def _functions():
             return fn(np.asarray([a, b]), axis=0)
         return f
     return {"min": _reduce(np.min), "max": _reduce(np.max), "mean": _reduce(np.mean), "sum": _reduce(np.sum),
+            "median": _reduce(np.median), "sort": lambda a: np.sort(np.asarray(a), axis=0),
             "abs": np.abs, "sqrt": np.sqrt, "len": len, "count": lambda a: int(np.count_nonzero(a)),
             "all": _reduce(np.all), "any": _reduce(np.any), "argmin": np.argmin,
             "argmax": np.argmax, "round": np.round, "log": np.log, "exp": np.exp, "diff": lambda a: np.diff(np.asarray(a), axis=0)}
 
 
 _BIN = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
-        ast.Pow: operator.pow, ast.BitAnd: operator.and_, ast.BitOr: operator.or_}
+        ast.Pow: operator.pow, ast.FloorDiv: operator.floordiv, ast.Mod: operator.mod, ast.BitAnd: operator.and_, ast.BitOr: operator.or_}
 _CMP = {ast.Lt: operator.lt, ast.LtE: operator.le, ast.Gt: operator.gt, ast.GtE: operator.ge,
         ast.Eq: operator.eq, ast.NotEq: operator.ne}
 
@@ -263,6 +264,8 @@ def evaluate(expr: str, names: dict):
 
     try:
         out = ev(tree)
+    except RenderError:
+        raise
     except (TypeError, ValueError, IndexError, ZeroDivisionError) as e:
         raise RenderError(f"{{{{= {expr}}}}}: {e}") from None
     return out.item() if isinstance(out, np.ndarray) and out.ndim == 0 else out
