@@ -260,6 +260,7 @@ def evaluate(expr: str, names: dict):
         if isinstance(n, ast.Tuple):
             return tuple(ev_index(e) for e in n.elts)
         v = ev(n)
+        v = np.asarray(v) if isinstance(v, list) else v
         return v if isinstance(v, np.ndarray) else int(v)
 
     try:
@@ -296,7 +297,7 @@ def body(template: str, root: Path = ROOT) -> str:
     def let(m: re.Match) -> str:
         name, rhs = m.group(1), m.group(2)
         t = _TEXT.fullmatch(rhs)
-        r = re.fullmatch(r"([^:{}\s]+):(\S+)", rhs)
+        r = re.fullmatch(r"([^:{}\s]+):(.+)", rhs)  # a key may hold spaces here ("proposed default")
         if t:
             names[name] = _text_value(root, t.group(1), t.group(2))
         elif r and re.search(r"\.(json|toml|h5|csv)$", r.group(1)):
