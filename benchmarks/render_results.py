@@ -54,6 +54,11 @@ def _step_accuracy(doc: dict) -> str:
     return step_accuracy.markdown(doc)
 
 
+def _validation(_doc) -> str:
+    from benchmarks import validation
+    return validation.summary_markdown(ROOT / "results" / "validation")
+
+
 def _folder_script(path: str):
     """A page written by a script kept in its results folder, from that folder's committed files."""
     def fn(_doc) -> str:
@@ -89,6 +94,8 @@ PAGES = [
     # scripts in their folder, reading that folder's committed fronts (no JSON: the renderer reads them)
     ("results/ardusub/README.md", None, _folder_script("results/ardusub/render.py")),
     ("results/bluerov2/side_by_side.md", None, _folder_script("results/bluerov2/side_by_side.py")),
+    # benchmarks/validation.py's summary, from the JSON files and identify.log of results/validation
+    ("results/validation/README.md", None, _validation),
 ]
 
 

@@ -214,6 +214,13 @@ def summary(out: Path) -> None:
     """results/validation/README.md from the JSON files the other parts wrote (no number typed by hand)."""
     from arvcas.io import files
 
+    text = summary_markdown(out)
+    files.write_text(out / "README.md", text)
+    print(text, end="")
+
+
+def summary_markdown(out: Path) -> str:
+    """The text of ``summary``'s README.md (benchmarks/render_results.py checks the committed page against it)."""
     a = json.loads((out / "sourced" / "validation.json").read_text())["trials"]
     b = json.loads((out / "identified" / "validation.json").read_text())["trials"]
     st = json.loads((out / "step.json").read_text())
@@ -262,8 +269,7 @@ def summary(out: Path) -> None:
               f"Hinsdale vehicle and arm with known parameters: {syn['coverage_all']:.1%} of {syn['n_intervals']} "
               f"95 % intervals cover the truth; `thrusters.T1.u_max` (thrusters off) is reported unidentifiable "
               f"(synthetic/README.md)."]
-    files.write_text(out / "README.md", "\n".join(lines) + "\n")
-    print("\n".join(lines))
+    return "\n".join(lines) + "\n"
 
 
 def _speed(out: Path) -> list[str]:
