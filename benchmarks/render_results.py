@@ -59,6 +59,11 @@ def _validation(_doc) -> str:
     return validation.summary_markdown(ROOT / "results" / "validation")
 
 
+def _intervals(_doc) -> str:
+    from benchmarks import intervals
+    return intervals.readme_markdown(ROOT / "results" / "validation" / "intervals")
+
+
 def _folder_script(path: str):
     """A page written by a script kept in its results folder, from that folder's committed files."""
     def fn(_doc) -> str:
@@ -96,6 +101,7 @@ PAGES = [
     ("results/bluerov2/side_by_side.md", None, _folder_script("results/bluerov2/side_by_side.py")),
     # benchmarks/validation.py's summary, from the JSON files and identify.log of results/validation
     ("results/validation/README.md", None, _validation),
+    ("results/validation/intervals/README.md", None, _intervals),
 ]
 
 
