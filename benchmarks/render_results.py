@@ -64,6 +64,32 @@ def _intervals(_doc) -> str:
     return intervals.readme_markdown(ROOT / "results" / "validation" / "intervals")
 
 
+def _report(module: str, reader: str, markdown: str, *paths: str):
+    """The report arvcas wrote beside its result file(s): ``module.markdown(module.reader(path), ...)``."""
+    def fn(_doc) -> str:
+        import importlib
+        mod = importlib.import_module(module)
+        return getattr(mod, markdown)(*(getattr(mod, reader)(ROOT / p) for p in paths))
+    return fn
+
+
+_MC = ("arvcas.experiments.montecarlo", "read_montecarlo")
+
+
+def _table3(_doc) -> str:
+    """results/paper/table3.md from the three runs; its time stamp is the last run's (when arvcas paper wrote
+    the table)."""
+    import h5py
+
+    from arvcas.experiments.paper import CONTROLLERS, table3_from_results
+    out = ROOT / "results" / "paper"
+    created = []
+    for c in CONTROLLERS:
+        with h5py.File(out / f"{c}.h5", "r") as h:
+            created.append(str(h.attrs["created"]))
+    return table3_from_results(out, created=max(created))
+
+
 def _folder_script(path: str):
     """A page written by a script kept in its results folder, from that folder's committed files."""
     def fn(_doc) -> str:
@@ -102,6 +128,23 @@ PAGES = [
     # benchmarks/validation.py's summary, from the JSON files and identify.log of results/validation
     ("results/validation/README.md", None, _validation),
     ("results/validation/intervals/README.md", None, _intervals),
+    # the reports arvcas wrote beside its result files (results/beyond/run.sh, arvcas paper), from those files
+    ("results/paper/table3.md", None, _table3),
+    # (not the robust fronts' pages: their pairwise dominance tests take minutes to re-render)
+    *((f"results/beyond/{d}/{c}.md", None, _report(*_MC, "summary_markdown", f"results/beyond/{d}/{c}.h5"))
+      for d, cs in (("mc", ("proposed", "agsta", "traditional", "implicit")), ("knee", ("proposed", "agsta")))
+      for c in cs),
+    *((f"results/beyond/{name}.md", None,
+       _report(*_MC, "compare_markdown", f"results/beyond/{a}.h5", f"results/beyond/{b}.h5"))
+      for name, a, b in (("mc/proposed_vs_agsta", "mc/proposed", "mc/agsta"),
+                         ("mc/implicit_vs_proposed", "mc/implicit", "mc/proposed"),
+                         ("mc/traditional_vs_proposed", "mc/traditional", "mc/proposed"),
+                         ("knee/proposed_vs_agsta", "knee/proposed", "knee/agsta"),
+                         ("knee/proposed_knee_vs_table2", "knee/proposed", "mc/proposed"),
+                         ("knee/agsta_knee_vs_table2", "knee/agsta", "mc/agsta"))),
+    *((f"results/beyond/{d}/sweep.md", None,
+       _report("arvcas.experiments.sweep", "read_sweep", "sweep_markdown", f"results/beyond/{d}/sweep.h5"))
+      for d in ("sweep", "sweep_noisefree")),
 ]
 
 
@@ -130,7 +173,7 @@ def main(argv=None) -> int:
         if a.check:
             if (ROOT / page).read_text() != text:
                 stale.append(page)
-        else:
+        elif (ROOT / page).read_text() != text:  # an unchanged page (and its folder's manifest) is left alone
             _write(ROOT / page, text)
     if stale:
         print("render_results: differ from their rendering (run python benchmarks/render_results.py): "
