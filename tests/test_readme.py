@@ -135,6 +135,17 @@ def test_check_fails_on_a_page_edited_by_hand(tmp_path):
         r.rendered(root)
 
 
+def test_check_command_names_each_page_that_differs(monkeypatch, capsys):
+    """``readme.py --check``: exit 1 and one line naming the pages (here two made stale), exit 0 when none is."""
+    r = _renderer()
+    monkeypatch.setattr(r, "stale", lambda root=r.ROOT: ["results/x/README.md", "results/y.md"])
+    assert r.main(["--check"]) == 1
+    err = capsys.readouterr().err
+    assert "results/x/README.md, results/y.md" in err and "python benchmarks/readme.py" in err
+    monkeypatch.setattr(r, "stale", lambda root=r.ROOT: [])
+    assert r.main(["--check"]) == 0
+
+
 def test_expressions_evaluate_only_their_language(tmp_path):
     r = _renderer()
     root = _tree(tmp_path)
