@@ -76,6 +76,14 @@ def _report(module: str, reader: str, markdown: str, *paths: str):
 _MC = ("arvcas.experiments.montecarlo", "read_montecarlo")
 
 
+def _knees(study: str):
+    """``knees.md`` of ``arvcas knees STUDY --out STUDY/knees``, from the knee files and the fronts."""
+    def fn(_doc) -> str:
+        from arvcas.experiments.knees import knees_markdown
+        return knees_markdown(ROOT / study, ROOT / study / "knees")
+    return fn
+
+
 def _table3(_doc) -> str:
     """results/paper/table3.md from the three runs; its time stamp is the last run's (when arvcas paper wrote
     the table)."""
@@ -130,6 +138,9 @@ PAGES = [
     ("results/validation/intervals/README.md", None, _intervals),
     # the reports arvcas wrote beside its result files (results/beyond/run.sh, arvcas paper), from those files
     ("results/paper/table3.md", None, _table3),
+    *((f"{d}/knees/knees.md", None, _knees(d)) for d in ("results/bluerov2", "results/bluerov2/t200",
+                                                         "results/bluerov2/t200_group_noise",
+                                                         "results/bluerov2_tracking")),
     # (not the robust fronts' pages: their pairwise dominance tests take minutes to re-render)
     *((f"results/beyond/{d}/{c}.md", None, _report(*_MC, "summary_markdown", f"results/beyond/{d}/{c}.h5"))
       for d, cs in (("mc", ("proposed", "agsta", "traditional", "implicit")), ("knee", ("proposed", "agsta")))
