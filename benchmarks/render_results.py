@@ -59,6 +59,11 @@ def _validation(_doc) -> str:
     return validation.summary_markdown(ROOT / "results" / "validation")
 
 
+def _synthetic(doc: dict) -> str:
+    from benchmarks import validation
+    return validation.synthetic_markdown(doc)
+
+
 def _intervals(_doc) -> str:
     from benchmarks import intervals
     return intervals.readme_markdown(ROOT / "results" / "validation" / "intervals")
@@ -136,6 +141,7 @@ PAGES = [
     # benchmarks/validation.py's summary, from the JSON files and identify.log of results/validation
     ("results/validation/README.md", None, _validation),
     ("results/validation/intervals/README.md", None, _intervals),
+    ("results/validation/synthetic/README.md", "results/validation/synthetic/synthetic.json", _synthetic),
     # the reports arvcas wrote beside its result files (results/beyond/run.sh, arvcas paper), from those files
     ("results/paper/table3.md", None, _table3),
     *((f"{d}/knees/knees.md", None, _knees(d)) for d in ("results/bluerov2", "results/bluerov2/t200",
