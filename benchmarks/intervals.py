@@ -175,6 +175,14 @@ def readme(out: Path) -> None:
     """README.md from the committed JSON files (nothing recomputed)."""
     from arvcas.io import files
 
+    text = readme_markdown(out)
+    files.write_text(out / "README.md", text)
+    print(text)
+
+
+def readme_markdown(out: Path) -> str:
+    """The text of ``readme``'s README.md (benchmarks/render_results.py checks the committed page against it)."""
+
     lines = ["# Intervals that mean something: Fisher against leave-one-trial-out", "",
              "Rendered by `python benchmarks/intervals.py --only readme` from the JSON files beside it "
              "(`python benchmarks/intervals.py` recomputes them). How to read the intervals: docs/identification.md.",
@@ -241,8 +249,7 @@ def readme(out: Path) -> None:
                       "experiment with vehicle.zB and hydro.K_p free) it does: the simulation error ends at zB = "
                       "-0.0177 m (truth -0.012) and K_p = 0 (truth -0.5, at its bound), the 25-step prediction error "
                       "at -0.0110 and -0.468.", ""]
-    files.write_text(out / "README.md", "\n".join(lines))
-    print("\n".join(lines))
+    return "\n".join(lines)
 
 
 PARTS = {"subset-A": lambda out: subset(out, "A"), "subset-B": lambda out: subset(out, "B"), "hinsdale": hinsdale, "synthetic": synthetic, "drift": drift, "readme": readme}

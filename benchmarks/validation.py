@@ -177,13 +177,24 @@ def synthetic(out: Path, seeds: int = SYN_SEEDS) -> None:
     import shutil
 
     shutil.rmtree(work, ignore_errors=True)
-    lines = [f"# Identification from synthetic trials of `{SYSTEM}` (known parameters)", "",
-             f"`python benchmarks/validation.py --only synthetic`: {seeds} noise seeds, each two passive trials of "
-             f"{SYN_DURATION:g} s (arm moving between random poses, vehicle released off its rest attitude) "
+    text = synthetic_markdown(doc)
+    files.write_text(d / "README.md", text)
+    print(text, end="")
+
+
+def synthetic_markdown(doc: dict) -> str:
+    """``synthetic/README.md`` from ``synthetic.json`` (benchmarks/render_results.py checks the committed page)."""
+    import arvcas
+
+    start = arvcas.load_system(doc["system"]).params
+    noise, per = doc["noise"], doc["per_parameter"]
+    lines = [f"# Identification from synthetic trials of `{doc['system']}` (known parameters)", "",
+             f"`python benchmarks/validation.py --only synthetic`: {doc['seeds']} noise seeds, each two passive trials "
+             f"of {doc['duration_s']:g} s (arm moving between random poses, vehicle released off its rest attitude) "
              f"simulated with the parameters below at a 0.0025 s RK4 step and written as logs with white sensor noise "
-             f"stated in their mapping files (motion capture {syn.NOISE['position'] * 1e3:g} mm and "
-             f"{math.degrees(syn.NOISE['attitude']):g} deg, gyro {syn.NOISE['rate']:g} rad/s, encoders "
-             f"{syn.NOISE['joint']:g} rad); the identification starts from the shipped values.", "",
+             f"stated in their mapping files (motion capture {noise['position'] * 1e3:g} mm and "
+             f"{math.degrees(noise['attitude']):g} deg, gyro {noise['rate']:g} rad/s, encoders "
+             f"{noise['joint']:g} rad); the identification starts from the shipped values.", "",
              "| parameter | start | truth | mean estimate | sd of estimates | mean stated sd | 95 % coverage | "
              "z mean, sd |", "|---|---|---|---|---|---|---|---|"]
     for n, v in per.items():
@@ -191,13 +202,12 @@ def synthetic(out: Path, seeds: int = SYN_SEEDS) -> None:
             lines.append(f"| {n} | {v['start']:.5g} | {v['truth']:.5g} | {v['mean']:.5g} | {v['sd_of_estimates']:.3g} | "
                          f"{v['mean_stated_sd']:.3g} | {v['coverage']:.0%} | {v['z_mean']:+.2f}, {v['z_sd']:.2f} |")
         else:
-            lines.append(f"| {n} | {model.params[n]:.5g} | {v['truth']:.5g} | reported unidentifiable in "
+            lines.append(f"| {n} | {start[n]:.5g} | {v['truth']:.5g} | reported unidentifiable in "
                          f"{v['of'] - v['identifiable_in']} of {v['of']} seeds | | | | |")
     lines += ["", f"All identifiable parameters together: {doc['coverage_all']:.1%} of {doc['n_intervals']} intervals "
                   f"cover the truth (95 % expected; the binomial 95 % range for this many is about "
                   f"{_binom_range(doc['n_intervals'])})."]
-    files.write_text(d / "README.md", "\n".join(lines) + "\n")
-    print("\n".join(lines))
+    return "\n".join(lines) + "\n"
 
 
 def _binom_range(n: int) -> str:
@@ -214,6 +224,13 @@ def summary(out: Path) -> None:
     """results/validation/README.md from the JSON files the other parts wrote (no number typed by hand)."""
     from arvcas.io import files
 
+    text = summary_markdown(out)
+    files.write_text(out / "README.md", text)
+    print(text, end="")
+
+
+def summary_markdown(out: Path) -> str:
+    """The text of ``summary``'s README.md (benchmarks/render_results.py checks the committed page against it)."""
     a = json.loads((out / "sourced" / "validation.json").read_text())["trials"]
     b = json.loads((out / "identified" / "validation.json").read_text())["trials"]
     st = json.loads((out / "step.json").read_text())
@@ -262,8 +279,7 @@ def summary(out: Path) -> None:
               f"Hinsdale vehicle and arm with known parameters: {syn['coverage_all']:.1%} of {syn['n_intervals']} "
               f"95 % intervals cover the truth; `thrusters.T1.u_max` (thrusters off) is reported unidentifiable "
               f"(synthetic/README.md)."]
-    files.write_text(out / "README.md", "\n".join(lines) + "\n")
-    print("\n".join(lines))
+    return "\n".join(lines) + "\n"
 
 
 def _speed(out: Path) -> list[str]:

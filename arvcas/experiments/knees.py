@@ -16,7 +16,7 @@ import numpy as np
 
 from arvcas.controllers.gains import DOFS
 
-__all__ = ["front_controllers", "replay_knees", "output_files"]
+__all__ = ["front_controllers", "replay_knees", "knees_markdown", "output_files"]
 
 
 def front_controllers(study_dir: str | Path) -> list[str]:
@@ -75,6 +75,26 @@ def replay_knees(study_dir: str | Path, out: str | Path, say=print, fmt: str = "
     style.write_figure(out / f"knees_thrust.{fmt}", _thrust_figure(runs), fmt)
     files.write_text(out / "knees.md", _table(rows, system, lo, hi))
     return {c: r for c, *_, r in rows}
+
+
+def knees_markdown(study_dir: str | Path, out: str | Path) -> str:
+    """The text of ``knees.md`` rebuilt from the files ``replay_knees`` wrote (``knee_<controller>.h5`` in
+    ``out``) and the study's fronts, without replaying: what checks a committed ``knees.md`` against its files."""
+    from arvcas.io import results
+    from arvcas.model import thrusters
+    from arvcas.system.params import view
+    from arvcas.tuning import checkpoint as ck
+    from arvcas.tuning.front import front_paths, read_front, system_params
+
+    rows, system = [], None
+    for path in front_paths(study_dir):
+        fr = read_front(path)
+        k = fr.knee()
+        system = system_params(ck.read_checkpoint(path))
+        r = results.read_result(Path(out) / f"knee_{fr.controller}.h5")
+        rows.append((fr.controller, k, fr.size, fr.F[k], r))
+    lo, hi = thrusters.envelope(view(system))
+    return _table(rows, system, lo, hi)
 
 
 def _thrust_figure(runs):

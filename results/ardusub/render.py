@@ -50,7 +50,8 @@ def dominated_share(A: np.ndarray, B: np.ndarray) -> float:
     return float(np.mean([np.any(np.all(A <= b, axis=1)) for b in B]))
 
 
-def main() -> None:
+def markdown() -> str:
+    """README.md's text, from the committed files of this folder (benchmarks/render_results.py checks it)."""
     fronts = {c: read_front(HERE / c / "front.h5") for c in LAWS}
     cks = {c: ck.read_checkpoint(resolve_front_path(HERE / c / "front.h5")) for c in LAWS}
     fa = fronts["ardusub"]
@@ -223,7 +224,11 @@ def main() -> None:
     w("")
     w("The rate D gains, FF, IMAX, filters, `PSC_ACCZ_P` and the PWM range are held at ArduSub's defaults; the")
     w("motors' `MOT_n_DIRECTION` depend on your wiring and propellers and are not exported.")
-    (HERE / "README.md").write_text("\n".join(L) + "\n")
+    return "\n".join(L) + "\n"
+
+
+def main() -> None:
+    (HERE / "README.md").write_text(markdown())
 
 
 if __name__ == "__main__":

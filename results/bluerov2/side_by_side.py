@@ -36,7 +36,8 @@ def _g(x, d=4):
     return "-" if x is None or not np.isfinite(x) else f"{x:.{d}g}"
 
 
-def main() -> str:
+def markdown() -> str:
+    """side_by_side.md's text, from the committed files (benchmarks/render_results.py checks it)."""
     from arvcas.io.results import read_result
     from arvcas.tuning import compare_fronts, read_front
     from arvcas.tuning.checkpoint import read_checkpoint
@@ -104,6 +105,6 @@ def main() -> str:
 
 
 if __name__ == "__main__":
-    text = main()
+    text = markdown()
     (HERE / "side_by_side.md").write_text(text)
     print(text)
