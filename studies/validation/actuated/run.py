@@ -139,6 +139,7 @@ def study(out: Path = OUT, work: Path | None = None) -> dict:
     tv = {n: float(truth.params[n]) for n in FREE}
     own = work is None
     work = Path(tempfile.mkdtemp(prefix="arvcas-actuated-")) if own else work
+    work.mkdir(parents=True, exist_ok=True)
     try:
         start = start_system(work, truth)
         cases = {}
