@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[3]
 OUT = ROOT / "results" / "validation" / "actuated"
 SYSTEM = "bluerov2"
 TRIALS = 3
-DURATION = 30.0  # s per trial
+DURATION = 20.0  # s per trial
 SEED = 0  # trial k's seed is SEED + k: its excitation, its heading, its noise
 DRIFT_N = (1.5, 2.0, 2.5)  # N: trial k's unmodelled heave force at its end (body z, down), ramping from zero
 # the parameters an owner of a six-thruster BlueROV2 would free (its mass is weighed, so held), and where the
