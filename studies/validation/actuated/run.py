@@ -131,7 +131,7 @@ def git_state() -> dict:
     return {"commit": run("rev-parse", "HEAD"), "clean": run("status", "--porcelain", "--", "arvcas", "studies") == ""}
 
 
-def study(out: Path = OUT, work: Path | None = None) -> dict:
+def study(out: Path = OUT, work: Path | None = None, jackknife: bool = True) -> dict:
     import arvcas
 
     t0 = time.perf_counter()
@@ -149,7 +149,7 @@ def study(out: Path = OUT, work: Path | None = None) -> dict:
         def one(key):
             drift, cost, h = jobs[key]
             fit = identify(start, paths[drift], work / "fits" / f"{'drift' if drift else 'clean'}-{key[1]}",
-                           cost=cost, horizon=h)
+                           cost=cost, horizon=h, jackknife=jackknife)
             print(f"{key[0]}, {key[1]}: {fit['status']}, {fit['iterations']} iterations, {fit['wall_s']:.0f} s",
                   flush=True)
             return fit
@@ -171,6 +171,7 @@ def study(out: Path = OUT, work: Path | None = None) -> dict:
     doc = {"system": SYSTEM, "trials": TRIALS, "duration_s": DURATION, "seed": SEED, "free": list(FREE),
            "truth": tv, "start_factor": START, "drift_force_N": list(DRIFT_N), "drift_depth_m": drifts,
            "noise": NOISE, "wrench_demand": list(WRENCH_DEMAND), "horizon": HORIZON, "max_iter": MAX_ITER,
+           "intervals": "fisher and leave-one-trial-out" if jackknife else "fisher",
            "cases": cases, "seconds": time.perf_counter() - t0, **git_state()}
     out.mkdir(parents=True, exist_ok=True)
     (out / "actuated.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
@@ -271,9 +272,11 @@ def main(argv=None) -> int:
     ap.add_argument("--only", choices=("study", "readme"), default=None)
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--work", type=Path, default=None, help="keep the trials and fits here (default: a temporary)")
+    ap.add_argument("--intervals", choices=("fisher", "jackknife"), default="jackknife",
+                    help="jackknife (default): also the leave-one-trial-out intervals, three refits per fit")
     a = ap.parse_args(argv)
     if a.only in (None, "study"):
-        study(a.out, a.work)
+        study(a.out, a.work, a.intervals == "jackknife")
     if a.only in (None, "readme"):
         print(readme(a.out))
     return 0
