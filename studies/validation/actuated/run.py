@@ -104,7 +104,8 @@ def identify(system: Path, paths: list[Path], out: Path, free=FREE, cost: str = 
         raise RuntimeError(f"arvcas {' '.join(argv)} failed ({r.returncode}):\n{r.stdout[-2000:]}\n{r.stderr[-2000:]}")
     doc = json.loads(out.with_suffix(".json").read_text())
     doc["wall_s"] = time.perf_counter() - t0
-    doc["command"] = "arvcas " + " ".join(a if not a.startswith(str(out.parent)) else Path(a).name for a in argv)
+    work = str(out.parent.parent) + "/"  # the paths as a user in the work folder writes them (no machine paths)
+    doc["command"] = "arvcas " + " ".join(a.replace(work, "").replace(str(out.parent) + "/", "") for a in argv)
     return doc
 
 
@@ -214,15 +215,19 @@ def readme(out: Path = OUT) -> str:
         f"{', '.join(f'{v:.2f}' for v in d['drift_depth_m'])} m by their end (against the same trial without "
         f"it).", "",
         f"**The fit.** `arvcas identify` from a start of the shipped values times "
-        f"{', '.join(f'{n.split(chr(46))[1]} x{f:.3g}' for n, f in d['start_factor'].items())}, "
-        f"every measured signal fitted with the noise the logs state, `--intervals jackknife` (Fisher and "
-        f"leave-one-trial-out 95 % intervals), at most {d['max_iter']} iterations; the costs: simulation error "
-        f"and the {d['horizon']}-step (0.5 s) prediction error.", ""]
+        f"{', '.join(f'{n.split(chr(46))[1]} x{f:.4g}' for n, f in d['start_factor'].items())}, "
+        f"every measured signal fitted with the noise the logs state, "
+        + ("`--intervals jackknife` (Fisher and leave-one-trial-out 95 % intervals)"
+           if d.get("intervals", "fisher and leave-one-trial-out") != "fisher" else
+           "Fisher 95 % intervals only (`--intervals fisher`: this run left out the leave-one-trial-out refits)")
+        + f", at most {d['max_iter']} iterations; the costs: simulation error and the {d['horizon']}-step "
+        f"(0.5 s) prediction error.", ""]
     for case, fits in d["cases"].items():
         for name, f in fits.items():
             lines += [f"## {case}, {name.replace('-', ' (horizon ')}{')' if f['horizon'] else ''} error", "",
-                      f"IPOPT: {f['status']}, {f['iterations']} iterations; {f['wall_s']:.0f} s with the "
-                      f"{d['trials']} leave-one-trial-out refits; s^2 = {f['s2']:.3g}.", "",
+                      f"IPOPT: {f['status']}, {f['iterations']} iterations; {f['wall_s']:.0f} s (the command, "
+                      f"with any leave-one-trial-out refits, four at once); residual variance factor s^2 = "
+                      f"{f['s2']:.3g} (1 when the model follows the data to the stated noise).", "",
                       "| parameter | truth | start | estimate | error | Fisher 95 % | covers | leave-one-out 95 % | "
                       "covers | flag |", "|---|---|---|---|---|---|---|---|---|---|"]
             for n, r in f["parameters"].items():
@@ -244,8 +249,8 @@ def _summary(d: dict) -> list[str]:
     names = list(d["cases"][next(iter(d["cases"]))])
     head = [f"{c}, {n}" for c in d["cases"] for n in names]
     out = ["## Which costs recover which parameters", "",
-           "Error of the estimate against the truth; **bold** where it is within 10 % of the truth and the "
-           "leave-one-trial-out interval covers it.", "",
+           "Error of the estimate against the truth; **bold** where it is within 10 % of the truth and its "
+           "interval covers it (the leave-one-trial-out interval where it was run, else the Fisher one).", "",
            "| parameter | " + " | ".join(head) + " |", "|---|" + "---|" * len(head)]
     for p in d["free"]:
         cells = []
@@ -253,7 +258,8 @@ def _summary(d: dict) -> list[str]:
             for n in names:
                 r = d["cases"][c][n]["parameters"][p]
                 s = f"{r['error_pct']:+.0f} %"
-                cells.append(f"**{s}**" if abs(r["error_pct"]) <= 10 and r["jackknife_covers"] else s)
+                ok = r["jackknife_covers"] if r["jackknife_covers"] is not None else r["fisher_covers"]
+                cells.append(f"**{s}**" if abs(r["error_pct"]) <= 10 and ok else s)
         out.append(f"| {p} | " + " | ".join(cells) + " |")
     cov = {}
     for c in d["cases"]:
@@ -263,7 +269,9 @@ def _summary(d: dict) -> list[str]:
                 v = [r[f"{kind}_covers"] for r in ps if r[f"{kind}_covers"] is not None]
                 cov[(c, n, kind)] = f"{sum(v)} of {len(v)}"
     out += ["", "Intervals that cover the truth:", "", "| case, cost | Fisher | leave-one-trial-out |", "|---|---|---|"]
-    out += [f"| {c}, {n} | {cov[(c, n, 'fisher')]} | {cov[(c, n, 'jackknife')]} |" for c in d["cases"] for n in names]
+    out += [f"| {c}, {n} | {cov[(c, n, 'fisher')]} | "
+            f"{cov[(c, n, 'jackknife')] if d.get('intervals') != 'fisher' else 'not run'} |"
+            for c in d["cases"] for n in names]
     return out + [""]
 
 
