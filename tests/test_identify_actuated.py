@@ -61,6 +61,7 @@ def fits(case):
     for cost, h in run.COSTS:
         fit = run.identify(start, paths[True], work / "fits" / cost, free=FREE, cost=cost, horizon=h,
                            jackknife=False, max_iter=60)
+        assert fit["cost"] == cost and fit["horizon"] == h and list(fit["parameters"]) == list(FREE)  # --json
         out[cost] = run.rows(fit, {n: float(truth.params[n]) for n in FREE})
     return out
 

@@ -136,6 +136,7 @@ def study(out: Path = OUT, work: Path | None = None, jackknife: bool = True) -> 
     import arvcas
 
     t0 = time.perf_counter()
+    state = git_state()  # the code that runs: its commit, and whether arvcas/ and studies/ are committed
     truth = arvcas.load_system(SYSTEM)
     tv = {n: float(truth.params[n]) for n in FREE}
     own = work is None
@@ -173,7 +174,7 @@ def study(out: Path = OUT, work: Path | None = None, jackknife: bool = True) -> 
            "truth": tv, "start_factor": START, "drift_force_N": list(DRIFT_N), "drift_depth_m": drifts,
            "noise": NOISE, "wrench_demand": list(WRENCH_DEMAND), "horizon": HORIZON, "max_iter": MAX_ITER,
            "intervals": "fisher and leave-one-trial-out" if jackknife else "fisher",
-           "cases": cases, "seconds": time.perf_counter() - t0, **git_state()}
+           "cases": cases, "seconds": time.perf_counter() - t0, **state}
     out.mkdir(parents=True, exist_ok=True)
     (out / "actuated.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     return doc
