@@ -59,7 +59,6 @@ SENSORS = ("mocap", "vehicle")
 # gravity, pitches or rolls it by up to about 30 deg against its metacentric moment), heave of about
 # 0.25 m/s, roll of about 10 deg, yaw of about 40 deg/s; each step's demand is a random fraction (0.3 .. 1)
 WRENCH_DEMAND = (8.0, 8.0, 20.0, 0.3, 0.3, 2.0)
-_DOF = ("surge", "sway", "heave", "roll", "pitch", "yaw")
 
 
 @dataclass(frozen=True)
@@ -115,7 +114,7 @@ def moves(system, duration: float, seed: int, hold: float = 1.0, move: float = 2
 
 @dataclass(frozen=True)
 class PwmExcitation:
-    """Thruster commands of a driven trial on a time base of :data:`_CMD_HZ`: ``C[k]`` (one column per thruster
+    """Thruster commands of a driven trial on a 50 Hz time base: ``C[k]`` (one column per thruster
     of ``names``, in the map's ``unit``) is sent from ``t[k]`` until ``t[k + 1]``; ``demand`` is the body wrench
     each row was allocated from (N, N m), ``dof`` the degree of freedom each row excites (-1 at rest)."""
 
