@@ -132,6 +132,7 @@ def synthetic(out: Path, seeds: int = SYN_SEEDS) -> None:
     from arvcas.ident import identify as ident
     from arvcas.ident import logs
     from arvcas.ident import synthetic as syn
+    from arvcas.ident.estimate import Z95
     from arvcas.io import files
     from arvcas.system import System
 
@@ -159,7 +160,7 @@ def synthetic(out: Path, seeds: int = SYN_SEEDS) -> None:
     sd = np.array([r["std"] for r in rows])
     ok = np.array([r["identifiable"] for r in rows])
     z = (vals - tv) / sd
-    cover = np.abs(z) <= ident.Z95
+    cover = np.abs(z) <= Z95
     per = {}
     for k, n in enumerate(SYN_FREE):
         if ok[:, k].all():

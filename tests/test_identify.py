@@ -21,6 +21,7 @@ import arvcas
 from arvcas.cli import main
 from arvcas.ident import identify as ident_mod
 from arvcas.ident import logs, plant, synthetic, validate
+from arvcas.ident.estimate import Z95
 from arvcas.system import System
 
 FREE = ("vehicle.zB", "vehicle.Ixx", "hydro.K_p", "hydro.M_q_absq")
@@ -79,7 +80,7 @@ def test_recovery_and_coverage(vehicle, tmp_path):
         assert 0.5 < est.s2 < 2.0  # the stated noise is the noise: s^2 near 1
         zs = (est.values - truth_v) / est.std
         z.append(zs)
-        cover.append(np.abs(zs) <= ident_mod.Z95)
+        cover.append(np.abs(zs) <= Z95)
     z, cover = np.array(z), np.array(cover)
     assert np.all(np.abs(z) < 5), z  # recovered, within a few standard errors
     assert cover.mean() >= 0.85, (cover.mean(), z)  # 80 intervals: 95 % expected, 85 % is 4 sd below

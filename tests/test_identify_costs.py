@@ -83,6 +83,7 @@ def test_jackknife_intervals_cover_the_truth(vehicle, tmp_path):
     (["--cost", "prediction", "--horizon", "0"], r"--horizon: expected a whole number of samples in \[1, "),
     (["--intervals", "bootstrap"], "--intervals: expected fisher or jackknife, got 'bootstrap'"),
     (["--intervals", "jackknife"], "--intervals jackknife: leave-one-trial-out needs at least 3 trials, got 1"),
+    (["--json", "report.txt"], "--json report.txt: the file must end in .json"),
 ])
 def test_identify_refuses_bad_costs_and_intervals_in_one_line(vehicle, tmp_path, capsys, args, match):
     model, truth = vehicle

@@ -27,6 +27,7 @@ import arvcas
 from arvcas.cli import main
 from arvcas.ident import identify as ident_mod
 from arvcas.ident import logs, physical, synthetic
+from arvcas.ident.estimate import identified_name, writable
 from arvcas.io import files
 from arvcas.system import System
 from arvcas.system.params import ParamsError, check_physical
@@ -260,14 +261,14 @@ def test_identified_file_loads_from_another_folder_with_a_long_name(tmp_path):
     ident = arvcas.load_system(out)
     assert ident.params["hydro.X_u"] == pytest.approx(1.5 * system.params["hydro.X_u"])
     assert len(ident.name) == 64 and ident.name.endswith("_identified") and ident.name.startswith("rrr")
-    assert ident_mod.identified_name(ident.name) == ident.name
+    assert identified_name(ident.name) == ident.name
     assert "../../sys/tables/mine.csv" in out.read_text(encoding="utf-8")
     with pytest.raises(ident_mod.IdentifyError, match="free: thrusters.T1.direction.x is an element of a unit"):
         ident_mod.identify(system, [], ("thrusters.T1.direction.x",))
     # a table file's points are not rewritten: refused before any work, naming the file
     with pytest.raises(ident_mod.IdentifyError, match="thrusters.map.t200_16v.thrust.3 comes from the thrust "
                                                       "table file 'tables/mine.csv'"):
-        ident_mod.writable(system, ("thrusters.map.t200_16v.thrust.3",))
+        writable(system, ("thrusters.map.t200_16v.thrust.3",))
 
 
 def test_identified_urdf_system_loads_from_another_folder(tmp_path):

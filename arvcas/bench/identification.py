@@ -112,7 +112,7 @@ def _bench_identification(s, log) -> dict:
         t0 = time.perf_counter()
         est = ident.identify(system, lgs, free, threads=2)
         wall = time.perf_counter() - t0
-        prob = ident._Problem(system, lgs, free, est.signals, {}, 1, plant.DEFAULT_BLOCK, 2)
+        prob = ident.Problem(system, lgs, free, est.signals, {}, 1, plant.DEFAULT_BLOCK, 2)
         z = np.concatenate([np.zeros(len(free))] + [validate.initial_state(x) for x in lgs])
         t_sens, t_plain = [], []
         for k in range(3):

@@ -388,10 +388,12 @@ def add_identify(p: argparse.ArgumentParser) -> None:
     p.add_argument("--intervals", default="fisher", metavar="fisher|jackknife",
                    help="fisher (default); jackknife: also leave-one-trial-out intervals, one refit per trial "
                         "(at least 3 trials)")
+    p.add_argument("--json", type=Path, default=None, metavar="FILE.json",
+                   help="also write the report's numbers (per parameter: estimate, intervals, flags) as JSON")
 
 
 def identify_outputs(a) -> list:
-    return [("--out", a.out)]
+    return [("--out", a.out)] + ([("--json", a.json)] if a.json is not None else [])
 
 
 def check_identify(a) -> None:
@@ -409,6 +411,8 @@ def check_identify(a) -> None:
         raise ValueError(f"--{e}") from None
     if a.intervals not in ("fisher", "jackknife"):
         raise ValueError(f"--intervals: expected fisher or jackknife, got {a.intervals!r}")
+    if a.json is not None and a.json.suffix.lower() != ".json":
+        raise ValueError(f"--json {a.json}: the file must end in .json")
     if a.intervals == "jackknife" and len(a.logs) < 3:
         raise ValueError(f"--intervals jackknife: leave-one-trial-out needs at least 3 trials, got {len(a.logs)}")
 
@@ -433,7 +437,8 @@ def _check_loads(out: Path, text: str) -> None:
 
 
 def run_identify(a) -> int:
-    from arvcas.ident.identify import identify, writable
+    from arvcas.ident.estimate import writable
+    from arvcas.ident.identify import identify
     from arvcas.io import files
 
     system = _system(a)
@@ -475,4 +480,8 @@ def run_identify(a) -> int:
     _check_loads(a.out, header + "#\n" + text)
     files.write_text(a.out, header + "#\n" + text)
     print(f"wrote {a.out}" + (" (interrupted: the best iterate)" if est.status == "interrupted" else ""))
+    if a.json is not None:
+        files.prepare_dir(a.json.parent if str(a.json.parent) else Path("."), "--json")
+        files.write_text(a.json, json.dumps(est.summary(), indent=1) + "\n")
+        print(f"wrote {a.json}")
     return 0 if est.status != "interrupted" else 130
