@@ -4,7 +4,7 @@ One controller sample k (t_k = k h) of :func:`step`:
 
 1. sensors: ``y_k = [eta; nu](t_k) + noise_k`` (noise is an input: a seeded sequence);
 2. EKF update on ``[eta; nu]`` (measuring both, or a scenario's sensor set: docs/sensors.md; its prediction
-   for k+1 ends the step);
+   for k+1 ends the step: :mod:`arvcas.sim.ekf`);
 3. the reference ``(y1, y2)`` of the adaptive tracking differentiator (eq. 12-13) and the errors
    ``e = eta_hat - y1``, ``e_dot = eta_dot_hat - y2``;
 4. the controller (an :class:`arvcas.controllers.Controller` object: its ``step`` from the
@@ -36,7 +36,7 @@ import numpy as np
 from arvcas.controllers import atd, gains as gains_mod
 from arvcas.controllers.base import Controller, call_law, get as get_controller
 from arvcas.model import manipulator, thrusters, vehicle, water as water_mod
-from arvcas.sim import accumulate, scenario, schedule, signals as signals_mod
+from arvcas.sim import accumulate, ekf as ekf_mod, scenario, schedule, signals as signals_mod
 from arvcas.system.params import Layout as ParamLayout, default_layout, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.spatial import J, J_dot, J_inv
@@ -45,10 +45,6 @@ from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
 __all__ = ["Layout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "nominal_inertia",
            "controller_memory", "controller_sample", "ControllerSample", "arm_truth", "controller_functions",
            "controller_diagnostics", "controller_sizes", "ControllerSizes", "controller_reads", "INPUTS"]
-
-_PSYM = [(i, j) for i in range(12) for j in range(i, 12)]  # the EKF covariance's upper triangle, row by row
-_PSYM_INDEX = {ij: k for k, ij in enumerate(_PSYM)}
-N_PSYM = len(_PSYM)
 
 # the run's inputs, in the order of the compiled function (everything else binds them by name)
 INPUTS: tuple[str, ...] = ("gains", "noise", "unc", "phase", "ekf", "water", "p", "sched_time", "sched_arm")
@@ -625,7 +621,7 @@ def controller_memory(law: Controller) -> list[tuple[str, int]]:
     """The fields of a controller's memory from sample to sample: the EKF prior (``xh``, the covariance's
     upper triangle ``Pc``), the ATD reference (``y1``, ``y2``, ``r0``) and the law's own state
     (``c_<name>``); in the loop state's order (:func:`state_layout`)."""
-    return [("xh", 12), ("Pc", N_PSYM), ("y1", 6), ("y2", 6), ("r0", 6), *[(f"c_{name}", n) for name, n in law.state]]
+    return [("xh", 12), ("Pc", ekf_mod.N_PSYM), ("y1", 6), ("y2", 6), ("r0", 6), *[(f"c_{name}", n) for name, n in law.state]]
 
 
 class ControllerSample:
@@ -658,16 +654,7 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
     G = {c: ca.vertcat(*[gains[d * k + j] for d in range(6)]) for j, c in enumerate(cols)}
     h = cfg.time_h
     # 2. EKF update (H = I, R = sensor covariance); the first sample starts from y_0 with P = R
-    if ekf.shape[0] == 14:  # per-axis sensor variances (the scenario's var_eta, var_nu)
-        r_meas = ekf[2:14]
-    else:
-        r_meas = ca.vertcat(ca.repmat(ekf[2], 3, 1), ca.repmat(ekf[3], 3, 1), ca.repmat(ekf[4], 6, 1))
-    rows = _sensor_rows(cfg, tk)  # None: the whole [eta; nu] at every sample
-    y0 = y if rows is None else ca.vertcat(*[y[i] if i in dict(rows) else 0 for i in range(12)])
-    xh = ca.if_else(first, y0, memory["xh"])
-    Pu = memory["Pc"]
-    Pc = [ca.if_else(first, r_meas[i] if i == j else 0, Pu[k]) for k, (i, j) in enumerate(_PSYM)]
-    xh, Pc = _ekf_update(xh, Pc, y, r_meas, rows)
+    xh, Pc = ekf_mod.measure(cfg, y, tk, first, memory["xh"], memory["Pc"], ekf)
     eta_hat, nu_hat = xh[0:6], xh[6:12]
     eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
 
@@ -679,8 +666,8 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
         r0 = ca.if_else(first, r0_first, memory["r0"])
         y1 = ca.if_else(first, eta_hat, memory["y1"])
         y2 = ca.if_else(first, ca.DM.zeros(6), memory["y2"])
-    e = held_only(cfg, eta_hat - y1)
-    e_dot = held_only(cfg, eta_dot_hat - y2)
+    e = ekf_mod.held_only(cfg, eta_hat - y1)
+    e_dot = ekf_mod.held_only(cfg, eta_dot_hat - y2)
 
     # 4. the controller: its state (initial values at the first sample), its step
     ctx = StepContext(t=tk, h=h, first=first, P=P, Mhat=Mhat, unc=unc, eta_d=eta_d, eta_hat=eta_hat,
@@ -698,7 +685,8 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
 
     if ref is None:
         y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
-    memory_next = {"xh": _ekf_f(xh, h), "Pc": _ekf_cov(xh, Pc, h, ekf[0], ekf[1]), "y1": y1n, "y2": y2n, "r0": r0,
+    xh_next, Pc_next = ekf_mod.predict(xh, Pc, h, ekf[0], ekf[1])
+    memory_next = {"xh": xh_next, "Pc": Pc_next, "y1": y1n, "y2": y2n, "r0": r0,
                    **{f"c_{name}": xc_next[name] for name, _ in law.state}}
     assert list(memory_next) == [name for name, _ in controller_memory(law)]
     return ControllerSample(ctx, tau_v, u_cmd, u_sat, memory_next)
@@ -929,7 +917,7 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
 
     # metrics (docs/model.md §6) and divergence of the controller part
     # a task's error is against the desired trajectory (docs/tasks.md); only on the DOFs it holds (docs/sensors.md)
-    e_true = held_only(cfg, eta - (y1 if ref is None else ref[0:6]))
+    e_true = ekf_mod.held_only(cfg, eta - (y1 if ref is None else ref[0:6]))
     chat_sum = L.get(S, "chat_sum") + ca.if_else(first, 0, ca.fabs(tau_v - L.get(S, "tau_prev")))
     # CHAT on the delivered wrench (what the water sees): the realised B sat(u) of each sample, or with
     # dynamics the rotors' wrench at each sample time (docs/model.md §6)
@@ -1026,79 +1014,6 @@ def arm_truth(spec: RunSpec) -> ca.Function:
                                     water, t)
     return ca.Function("arm_truth", [x, u_hold, rt, ra, p, phase, water, t], [tau_m + trim],
                        ["x", "u_hold", "rec_time", "rec_arm", "p", "phase", "water", "t"], ["tau_arm"])
-
-
-def _sym_get(Pu, i, j):
-    return Pu[_PSYM_INDEX[(i, j) if i <= j else (j, i)]]
-
-
-def _ekf_update(xh, Pu, y, r, rows=None):
-    """EKF measurement update with H = I and diagonal R = diag(r), as 12 sequential scalar updates.
-
-    Exactly the batch update ``K = P (P + R)^-1`` for uncorrelated measurement noise, at a fraction
-    of the cost of a 12x12 solve in the graph. ``Pu``: the covariance's upper triangle (a list in
-    ``_PSYM`` order); each scalar update ``P - P_i P_i' / s`` is symmetric, so only that triangle is
-    computed and P stays symmetric by construction. ``rows``: a sensor set's measured components as
-    ``(index, due)`` (``due`` 1 when the sensor has a fresh reading at this sample, else 0: its gain is
-    zero; None: every sample), or None for all twelve at every sample (docs/sensors.md).
-    Returns (xh, the updated triangle).
-    """
-    n = xh.shape[0]
-    Pu = list(Pu)
-    xh = [xh[a] for a in range(n)]
-    for i, due in ((i, None) for i in range(n)) if rows is None else rows:
-        col = [_sym_get(Pu, a, i) for a in range(n)]  # P[:, i] = P[i, :]
-        s = col[i] + r[i]
-        K = [c / s for c in col] if due is None else [due * c / s for c in col]
-        innov = y[i] - xh[i]
-        xh = [xh[a] + K[a] * innov for a in range(n)]
-        Pu = [Pu[k] - K[a] * col[b] for k, (a, b) in enumerate(_PSYM)]
-    return ca.vertcat(*xh), Pu
-
-
-def _sensor_rows(cfg: ScenarioConfig, tk):
-    """A sensor set's EKF rows ``(index in [eta; nu], due)`` (:func:`_ekf_update`): ``due`` is 1 at the samples
-    ``k = round(t_k / h)`` that are multiples of the sensor's ``every``, else 0 (``every`` 1: always 1, a
-    constant); None when the scenario names no sensor set (the whole [eta; nu] at every sample)."""
-    if scenario.sensor_set(cfg) is None:
-        return None
-    k = ca.floor(tk / cfg.time_h + 0.5)
-    return [(i, None if every == 1 else ca.fmod(k, every) == 0) for i, _, every in scenario.measured(cfg)]
-
-
-def held_only(cfg: ScenarioConfig, e):
-    """``e`` (6, per DOF) with the DOFs the task does not hold set to 0 (docs/sensors.md); ``e`` itself when it
-    holds all six."""
-    held = scenario.held_dofs(cfg)
-    return e if all(held) else ca.vertcat(*[e[d] if held[d] else 0 for d in range(6)])
-
-
-def _ekf_f(xh, h):
-    """Kinematic (constant-velocity) transition of docs/model.md §4: eta+ = eta + h J(eta) nu, nu+ = nu."""
-    return ca.vertcat(xh[0:6] + h * ca.mtimes(J(xh[0:6]), xh[6:12]), xh[6:12])
-
-
-def _ekf_cov(xh, Pu, h, q_eta, q_nu):
-    """P+ = F P F' + Q with F the AD Jacobian of the transition (docs/model.md §4), Q = diag(q_eta I6, q_nu I6).
-
-    ``Pu``: P's upper triangle (``_PSYM`` order); returns that of P+ as a column. F is kept sparse
-    (its structural zeros and ones are never multiplied: the velocity rows are the identity, the
-    pose block is I + h d(J nu)/d eta with only the attitude columns), and only the upper triangle of
-    the symmetric F P F' is formed, each entry a sparse row product ``(F P)[a, :] . F[b, :]``.
-    """
-    xs = ca.SX.sym("xs", 12)
-    F = ca.substitute(ca.jacobian(_ekf_f(xs, h), xs), xs, xh)
-    P = ca.SX(12, 12)
-    for a in range(12):
-        for b in range(12):
-            P[a, b] = _sym_get(Pu, a, b)
-    FP = ca.mtimes(F, P)
-    q = [q_eta] * 6 + [q_nu] * 6
-    out = []
-    for a, b in _PSYM:
-        v = ca.mtimes(FP[a, :], F[b, :].T)
-        out.append(v + q[a] if a == b else v)
-    return ca.vertcat(*out)
 
 
 def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
