@@ -149,11 +149,11 @@ def test_thrust_table_with_saturation_plateaus(tmp_path):
     u = np.linspace(-30.4, 30.4, 41)  # the allocation's range inverts through the strictly increasing part
     y = np.array(ca.evalf(thrusters.map_inverse(P, m, ca.DM(u)))).ravel()
     np.testing.assert_allclose(np.array(ca.evalf(thrusters.map_thrust(P, m, ca.DM(y)))).ravel(), u, atol=1e-9)
-    from arvcas.sim import closedloop  # the closed loop's own inverse (interval lookup in MX, then Newton)
+    from arvcas.model import thruster_tables as tt  # the closed loop's own inverse (interval lookup in MX, then Newton)
 
     gx, vx, dx = (ca.MX(ca.DM(np.array(ca.evalf(a)).ravel())) for a in thrusters.map_table(P, m))
     uu = ca.MX.sym("u", u.size)
-    inv = ca.Function("inv", [uu], [closedloop._pchip_newton(*closedloop._pchip_interval(gx, vx, dx, uu), uu)])
+    inv = ca.Function("inv", [uu], [tt.pchip_newton(*tt.pchip_interval(gx, vx, dx, uu), uu)])
     np.testing.assert_allclose(np.array(inv(u)).ravel(), y, atol=1e-9)
 
 

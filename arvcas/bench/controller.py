@@ -89,7 +89,7 @@ def _bench_controller(s: Settings, log) -> dict:
     """``{system: {law: {"ns_per_step": stat, "instructions_per_step", "init_ns", "state_bytes", ...}}}``."""
     from arvcas.build import codegen
     from arvcas.io.export_controller import default_prefix, export_controller
-    from arvcas.sim import closedloop, scenario
+    from arvcas.sim import closedloop, scenario, thrust_forcing
     from arvcas.system import SHIPPED, load_system
 
     quick = s.mode == "quick"
@@ -127,7 +127,7 @@ def _bench_controller(s: Settings, log) -> dict:
                 out[system][law] = {"ns_per_step": _stat(ns), "init_ns": val["init_ns"],
                                     "instructions_per_step": int(fn.n_instructions()),
                                     "state_bytes": int(val["state_bytes"]), "n_steps": steps, "run_samples": y.shape[0],
-                                    "command_map": bool(closedloop.command_functions(cfg, sysm.layout))}
+                                    "command_map": bool(thrust_forcing.command_functions(cfg, sysm.layout))}
                 log(f"controller: {system} / {law}: {statistics.median(ns):.0f} ns per step "
                     f"(min {min(ns):.0f}), state {int(val['state_bytes'])} bytes")
     return out

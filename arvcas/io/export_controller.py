@@ -45,8 +45,9 @@ from arvcas.build import export as ex
 from arvcas.build.text import c_comment, markdown
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import DOFS, Controller, get as get_controller
-from arvcas.sim.closedloop import (RunSpec, arm_truth, command_functions, controller_diagnostics, controller_functions,
-                                   controller_reads, controller_sizes)
+from arvcas.sim.closedloop import (RunSpec, arm_truth, controller_diagnostics, controller_functions, controller_reads,
+                                   controller_sizes)
+from arvcas.sim.thrust_forcing import command_functions
 from arvcas.sim.scenario import SENSOR_WHAT, ScenarioConfig, measured
 from arvcas.sim.scenario import COMPONENTS as Y_NAMES
 
@@ -997,7 +998,7 @@ class _Rotors:
         from scipy.interpolate import PchipInterpolator
 
         from arvcas.model import thrusters as thr
-        from arvcas.sim.closedloop import stage_offsets
+        from arvcas.sim.thrust_forcing import stage_offsets
         from arvcas.system.params import view
 
         lay = P.layout
