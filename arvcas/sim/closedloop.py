@@ -36,7 +36,7 @@ import numpy as np
 from arvcas.controllers import atd, gains as gains_mod
 from arvcas.controllers.base import Controller, call_law, get as get_controller
 from arvcas.model import manipulator, thrusters, vehicle, water as water_mod
-from arvcas.sim import accumulate, ekf as ekf_mod, scenario, schedule, signals as signals_mod, thrust_forcing
+from arvcas.sim import accumulate, ekf as ekf_mod, profiles, scenario, schedule, signals as signals_mod, thrust_forcing
 from arvcas.system.params import Layout as ParamLayout, default_layout, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.spatial import J, J_dot, J_inv
@@ -130,9 +130,9 @@ def _water(cfg: ScenarioConfig, P, water, t, eta, nu):
     """The water's terms at time ``t`` (docs/model.md §10): ``(current, tether wrench)`` with ``current`` the
     ``(nu_c, nu_c_dot)`` of :func:`arvcas.model.water.relative_current` (None without a current) and the
     tether's wrench in {b} (0 without one)."""
-    cur = scenario.current_at(cfg, water, t, eta[2])
+    cur = profiles.current_at(cfg, water, t, eta[2])
     current = None if cur is None else water_mod.relative_current(eta, nu, *cur)
-    teth = scenario.tether_of(cfg, water)
+    teth = profiles.tether_of(cfg, water)
     if teth is None:
         return current, 0
     v_c = cur[0] if cur is not None else ca.DM.zeros(3)
@@ -192,7 +192,7 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     def accel(ee, nn, j, rec, force):
         """nu_dot at stage j under the body wrench ``force`` of the thrusters (None: the forcing is taken out)."""
         tr = _trim(Ps, c_s[0], c_s[1], c_s[2], ee)
-        dist = scenario.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
+        dist = profiles.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
         f = dist if force is None else force + dist
         if not cfg.has_water:
             return coupled_terms_scheduled(Ps, ee, nn, f, rec, tr, opts)[0]
@@ -685,7 +685,7 @@ def _true_terms(cfg, opts, P, x, u_hold, R0, static, phase_cs, water=None, tk=No
     eta, nu = x[0:6], x[6:12]
     tau_real_held = ca.mtimes(thrusters.B_T(P), u_hold)
     trim = _trim(P, *static, eta)
-    tau_dist = scenario.disturbance_tabulated(cfg, R0["dist_sin"], R0["dist_cos"], phase_cs)
+    tau_dist = profiles.disturbance_tabulated(cfg, R0["dist_sin"], R0["dist_cos"], phase_cs)
     if cfg.has_water:
         current, tether = _water(cfg, P, water, tk, eta, nu)
         nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist + tether, R0, trim, opts,
