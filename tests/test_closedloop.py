@@ -212,3 +212,19 @@ def test_isa_flags_leave_every_output_bitwise_equal(cfg, monkeypatch):
             np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
         oks.append(float(out_fast[2].item()))
     assert oks == [1.0, 0.0]
+
+
+def test_controller_alone_refuses_a_signal_of_the_plants_truth(cfg):
+    """A law whose traced signal reads the plant's truth (here ``f_true``) cannot be exported: one line naming
+    the law and the missing quantity (a ValueError, which ``export-controller`` reports as its own error)."""
+    from arvcas.controllers.pid import PID
+    from arvcas.sim.signals import Signal
+
+    class PIDWithTruth(PID):
+        name = "pid_with_truth"
+        signals = PID.signals + (Signal("f_seen", 6, "N,N,N,N*m,N*m,N*m", "{n}", "x, y, z, phi, theta, psi",
+                                        "the true total disturbance", lambda c: c.f_true),)
+
+    with pytest.raises(ValueError, match=r"^controller pid_with_truth: a traced signal needs the plant's truth "
+                                         r"\('StepContext' object has no attribute 'f_true'\)"):
+        closedloop.controller_functions(PIDWithTruth(), cfg, load_params().layout)

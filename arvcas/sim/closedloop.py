@@ -512,7 +512,8 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
       ``diag`` the signals of :func:`controller_diagnostics`.
 
     Built with :func:`controller_sample`, as the run's sample: the same operations in the same order;
-    the terms of ``k`` alone are taken out (:func:`casadi.extract_parametric`), not changed.
+    the terms of ``k`` alone are taken out (:func:`casadi.extract_parametric`), not changed. A ValueError
+    (one line) for a scenario with a trajectory, or a law whose traced signals read the plant's truth.
     """
     law = get_controller(law)
     if cfg.has_trajectory:
@@ -542,8 +543,8 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
         try:
             diag = [sig.value(ctx) for sig in controller_diagnostics(law)]
         except (AttributeError, KeyError) as e:
-            raise ExportError(f"{WHAT}: controller {law.name}: a traced signal needs the plant's truth ({e}); "
-                              f"only signals of the controller's own quantities can be exported") from None
+            raise ValueError(f"controller {law.name}: a traced signal needs the plant's truth ({e}); "
+                             f"only signals of the controller's own quantities can be exported") from None
         outs = ca.cse([ca.vertcat(*cs.memory.values()), cs.u_sat, ca.vertcat(*diag)])
         whole, syms, vals = ca.extract_parametric(ca.vertcat(*outs), k, {"prefix": "kp_"})
         kp = ca.SX.sym("kp", 0) if not syms else ca.vertcat(*syms)
