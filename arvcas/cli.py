@@ -326,10 +326,10 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
         traj = lambda t: _quintic(t, q0, qg, 5.0, 20.0)  # noqa: E731
     else:
         from arvcas.model.manipulator import stow_pose
-        from arvcas.sim import scenario
+        from arvcas.sim import profiles
 
         ts = ca.SX.sym("t")
-        fq = ca.Function("q", [ts], list(scenario.joint_trajectory(cfg, stow_pose(view(p, params.layout)), ts)))
+        fq = ca.Function("q", [ts], list(profiles.joint_trajectory(cfg, stow_pose(view(p, params.layout)), ts)))
         traj = lambda t: [np.array(x).ravel() for x in fq(t)]  # noqa: E731
     rows = []
     for k in range(int(round(t_end / dt)) + 1):

@@ -100,7 +100,7 @@ def _plant_ode(cfg, opts=None, layout=None):
     from arvcas.model import manipulator, thrusters
     from arvcas.model.uvms import ModelOptions, uvms_xdot
     from arvcas.system.params import default_layout, view
-    from arvcas.sim import closedloop, scenario
+    from arvcas.sim import closedloop, profiles
 
     lay = layout or default_layout()
     st = lay.structure
@@ -111,8 +111,8 @@ def _plant_ode(cfg, opts=None, layout=None):
     u, tk, ph, w, p = par[0:nu_in], par[nu_in], par[nu_in + 1:nu_in + 7], par[nu_in + 7:nu_in + 7 + nw], par[nu_in + 7 + nw:]
     P = view(p, lay)
     t = tk + s
-    q, qd, qdd = scenario.joint_trajectory(cfg, manipulator.stow_pose(P), t)
-    pl = scenario.payload_profile(cfg, t)
+    q, qd, qdd = profiles.joint_trajectory(cfg, manipulator.stow_pose(P), t)
+    pl = profiles.payload_profile(cfg, t)
     extra = []
     if dyn:
         sr = x[12:]
@@ -130,7 +130,7 @@ def _plant_ode(cfg, opts=None, layout=None):
         wrench = u
     eta, nu = x[0:6], x[6:12]
     current, tether = closedloop._water(cfg, P, w, t, eta, nu) if cfg.has_water else (None, 0)
-    xdot = uvms_xdot(P, x[0:12], wrench + scenario.disturbance(cfg, t, ph) + tether, q, qd, qdd, pl, opts or ModelOptions(),
+    xdot = uvms_xdot(P, x[0:12], wrench + profiles.disturbance(cfg, t, ph) + tether, q, qd, qdd, pl, opts or ModelOptions(),
                      current=current)
     return x, s, par, ca.vertcat(xdot, *extra)
 

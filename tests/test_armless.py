@@ -21,7 +21,7 @@ import arvcas
 from arvcas import cli
 from arvcas.ident import logs, plant, validate
 from arvcas.model import thrusters
-from arvcas.sim import scenario
+from arvcas.sim import profiles, scenario
 from arvcas.system.params import ParamsError, load, view
 
 # ArduSub's factors (roll, pitch, yaw, throttle, forward, lateral) per motor, AP_Motors6DOF.cpp @0fd5fbf
@@ -149,11 +149,11 @@ def test_thrust_table_with_saturation_plateaus(tmp_path):
     u = np.linspace(-30.4, 30.4, 41)  # the allocation's range inverts through the strictly increasing part
     y = np.array(ca.evalf(thrusters.map_inverse(P, m, ca.DM(u)))).ravel()
     np.testing.assert_allclose(np.array(ca.evalf(thrusters.map_thrust(P, m, ca.DM(y)))).ravel(), u, atol=1e-9)
-    from arvcas.sim import closedloop  # the closed loop's own inverse (interval lookup in MX, then Newton)
+    from arvcas.model import thruster_tables as tt  # the closed loop's own inverse (interval lookup in MX, then Newton)
 
     gx, vx, dx = (ca.MX(ca.DM(np.array(ca.evalf(a)).ravel())) for a in thrusters.map_table(P, m))
     uu = ca.MX.sym("u", u.size)
-    inv = ca.Function("inv", [uu], [closedloop._pchip_newton(*closedloop._pchip_interval(gx, vx, dx, uu), uu)])
+    inv = ca.Function("inv", [uu], [tt.pchip_newton(*tt.pchip_interval(gx, vx, dx, uu), uu)])
     np.testing.assert_allclose(np.array(inv(u)).ravel(), y, atol=1e-9)
 
 
@@ -174,7 +174,7 @@ def test_plateau_refusals(tmp_path, kw, match):
 
 def test_scenario_without_arm():
     cfg = scenario.load_scenario(arvcas.load_system("bluerov2").params.default("scenario"))
-    assert not scenario.has_arm_motion(cfg)
+    assert not profiles.has_arm_motion(cfg)
     assert not re.search(r"^\[(arm|payload)", cfg.text, re.M)
     assert scenario.loads_scenario(cfg.to_toml()).to_toml() == cfg.to_toml()
     # a system with an arm under a scenario without one holds its stow pose, carries nothing
@@ -182,10 +182,10 @@ def test_scenario_without_arm():
     q0 = ca.DM([heavy.params[f"arm.stow.q{i}"] for i in range(1, 5)])
     scenario.check_joint_limits(cfg, heavy.params)
     for t in (0.0, 7.5, 60.0):
-        q, qd, qdd = scenario.joint_trajectory(cfg, q0, t)
+        q, qd, qdd = profiles.joint_trajectory(cfg, q0, t)
         np.testing.assert_array_equal(np.array(q), np.array(q0))
         assert float(ca.norm_inf(qd)) == float(ca.norm_inf(qdd)) == 0.0
-        assert float(scenario.payload_profile(cfg, t)) == 0.0
+        assert float(profiles.payload_profile(cfg, t)) == 0.0
 
 
 def test_task_without_arm():
@@ -198,7 +198,7 @@ def test_task_without_arm():
                 'start = { value = 2.0, unit = "s", source = "test" }\n'
                 'duration = { value = 20.0, unit = "s", source = "test" }\n')
     cfg = scenario.loads_scenario(base + approach, "task.toml")
-    assert cfg.trajectory_pattern == "approach" and not scenario.has_arm_motion(cfg)
+    assert cfg.trajectory_pattern == "approach" and not profiles.has_arm_motion(cfg)
     scenario.check_trajectory_limits(cfg, s.params)
     fast = scenario.loads_scenario(base + approach.replace("value = 20.0", "value = 0.5"), "task.toml")
     with pytest.raises(scenario.ScenarioError, match=r"thruster T\d .* of its limit"):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from arvcas.build import calls, codegen
-from arvcas.sim import closedloop, scenario, schedule
+from arvcas.sim import closedloop, profiles, scenario, schedule
 from arvcas.controllers import gains
 from arvcas import metrics
 from arvcas.system.params import load as load_params
@@ -29,7 +29,7 @@ def test_compiled_run_equals_vm(cfg):
     """The generated C of the whole run reproduces CasADi's VM on the same graph (docs/model.md §4)."""
     P = load_params()
     F = closedloop.build_run(closedloop.RunSpec("proposed", cfg), trace=False)
-    args = (gains.default_gains("proposed"), scenario.noise_sequence(cfg, 1), cfg.uncertainty,
+    args = (gains.default_gains("proposed"), profiles.noise_sequence(cfg, 1), cfg.uncertainty,
             np.array(cfg.disturbance_phase), cfg.ekf_vector, cfg.water_vector, P.vector(),
             *schedule.table(cfg, P.vector()))
     vm = calls.call(F, *args)
@@ -71,7 +71,7 @@ def test_same_seed_same_result(cfg, run_proposed):
 def test_ekf_reduces_measurement_error(run_proposed, cfg):
     """The EKF estimate is closer to the truth than the raw measurements (section 4.1)."""
     r = run_proposed
-    noise = scenario.noise_sequence(cfg, r.seed)[:6].T
+    noise = profiles.noise_sequence(cfg, r.seed)[:6].T
     raw = np.sqrt(np.mean(noise[10:] ** 2, axis=0))
     est = np.sqrt(np.mean((r.eta_hat - r.eta)[10:] ** 2, axis=0))
     assert (est < 0.5 * raw).all(), (est, raw)
@@ -205,10 +205,26 @@ def test_isa_flags_leave_every_output_bitwise_equal(cfg, monkeypatch):
         bad[names.index(f"{d}.mu2")] = 50.0  # diverges (test_divergence_is_reported_not_raised)
     oks = []
     for gs in (g, bad):
-        args = (gs, scenario.noise_sequence(cfg, 2), cfg.uncertainty, np.array(cfg.disturbance_phase),
+        args = (gs, profiles.noise_sequence(cfg, 2), cfg.uncertainty, np.array(cfg.disturbance_phase),
                 cfg.ekf_vector, cfg.water_vector, P.vector(), *schedule.table(cfg, P.vector()))
         out_fast, out_base = calls.call(fast, *args), calls.call(base, *args)
         for a, b in zip(out_fast, out_base):
             np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
         oks.append(float(out_fast[2].item()))
     assert oks == [1.0, 0.0]
+
+
+def test_controller_alone_refuses_a_signal_of_the_plants_truth(cfg):
+    """A law whose traced signal reads the plant's truth (here ``f_true``) cannot be exported: one line naming
+    the law and the missing quantity (a ValueError, which ``export-controller`` reports as its own error)."""
+    from arvcas.controllers.pid import PID
+    from arvcas.sim.signals import Signal
+
+    class PIDWithTruth(PID):
+        name = "pid_with_truth"
+        signals = PID.signals + (Signal("f_seen", 6, "N,N,N,N*m,N*m,N*m", "{n}", "x, y, z, phi, theta, psi",
+                                        "the true total disturbance", lambda c: c.f_true),)
+
+    with pytest.raises(ValueError, match=r"^controller pid_with_truth: a traced signal needs the plant's truth "
+                                         r"\('StepContext' object has no attribute 'f_true'\)"):
+        closedloop.controller_functions(PIDWithTruth(), cfg, load_params().layout)

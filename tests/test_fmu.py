@@ -3,7 +3,7 @@
 References are independent of the FMU's C wrapper: arvcas's own compiled ``uvms_rhs`` (the compile
 cache) driven by integrators written here (the same fixed-step schemes on the same input samples),
 and CasADi's CVODES on the SX graph. Inputs: the open-loop scenario of tests/test_integrator.py, i.e.
-the scenario's arm motion (``arvcas.sim.scenario.joint_trajectory``, ``payload_profile``, evaluated
+the scenario's arm motion (``arvcas.sim.profiles.joint_trajectory``, ``payload_profile``, evaluated
 numerically) and a fixed thrust profile that cancels the net buoyancy until the payload, plus
 sinusoids in every DOF.
 """
@@ -28,7 +28,7 @@ from arvcas.build.dynamics import compiled  # noqa: E402
 from arvcas.io import files  # noqa: E402
 
 from trust_helpers import bounded  # noqa: E402
-from arvcas.sim import scenario  # noqa: E402
+from arvcas.sim import profiles, scenario  # noqa: E402
 
 H = 0.01  # the FMU's default RK4 step (the scenario's former plant step, docs/model.md §4)
 T_END = 30.0  # arm reach 5-20 s, payload ramp 22-22.5 s, return from 25 s
@@ -54,8 +54,8 @@ def profile(params):
     cfg = scenario.load_scenario()
     t = ca.SX.sym("t")
     q0 = ca.DM([params[f"arm.stow.q{i}"] for i in range(1, 7)])
-    q, qd, qdd = scenario.joint_trajectory(cfg, q0, t)
-    pl = scenario.payload_profile(cfg, t)
+    q, qd, qdd = profiles.joint_trajectory(cfg, q0, t)
+    pl = profiles.payload_profile(cfg, t)
     net_buoyancy = params["vehicle.buoyancy_excess"] * params["env.g"]
     tau = ca.vertcat(5 * ca.sin(0.3 * t), 5 * ca.cos(0.2 * t), net_buoyancy * (1 - pl) + 3 * ca.sin(0.25 * t),
                      2 * ca.sin(0.4 * t), 3 * ca.sin(0.35 * t), 3 * ca.sin(0.15 * t))

@@ -12,7 +12,7 @@ from numpy.polynomial import Polynomial
 
 from arvcas.cli import _quintic
 from arvcas.ident.synthetic import QuinticMoves
-from arvcas.sim import scenario
+from arvcas.sim import profiles
 from arvcas.sim.trajectory import min_jerk, rest_to_rest
 
 S = np.linspace(0.0, 1.0, 1001)
@@ -29,7 +29,7 @@ def test_the_blend_is_the_minimum_jerk_polynomial():
 def test_the_compiled_scenarios_quintic_is_the_same_polynomial():
     t0, t1 = 2.0, 7.0
     t = t0 + (t1 - t0) * S[1:-1]
-    s, sd, sdd = (np.array(x.full()).ravel() for x in scenario.quintic(t, t0, t1))
+    s, sd, sdd = (np.array(x.full()).ravel() for x in profiles.quintic(t, t0, t1))
     b, bd, bdd = rest_to_rest(S[1:-1])
     np.testing.assert_allclose(s, b, atol=1e-14)
     np.testing.assert_allclose(sd, bd / (t1 - t0), atol=1e-14)

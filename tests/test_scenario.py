@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from arvcas.sim import scenario
+from arvcas.sim import profiles, scenario
 from arvcas.system.params import load as load_params
 from arvcas.sim.scenario import ScenarioError, default_scenario_path, load_scenario, loads_scenario
 
@@ -108,7 +108,7 @@ def test_quintic_trajectory(cfg):
     P = load_params()
     q0 = ca.DM([P[f"arm.stow.q{i}"] for i in range(1, 7)])
     t = ca.SX.sym("t")
-    f = ca.Function("traj", [t], list(scenario.joint_trajectory(cfg, q0, t)))
+    f = ca.Function("traj", [t], list(profiles.joint_trajectory(cfg, q0, t)))
     for tt, q_expect in ((0.0, q0), (5.0, q0), (20.0, ca.DM(cfg.arm_qg)), (24.0, ca.DM(cfg.arm_qg)), (40.0, q0), (90.0, q0)):
         q, qd, qdd = (np.array(v).ravel() for v in f(tt))
         np.testing.assert_allclose(q, np.array(q_expect).ravel(), atol=1e-12)
@@ -125,9 +125,9 @@ def test_quintic_trajectory(cfg):
 
 def test_payload_ramp_and_disturbance(cfg):
     t = ca.SX.sym("t")
-    pl = ca.Function("pl", [t], [scenario.payload_profile(cfg, t)])
+    pl = ca.Function("pl", [t], [profiles.payload_profile(cfg, t)])
     assert float(pl(21.9)) == 0 and float(pl(22.25)) == pytest.approx(0.5) and float(pl(23)) == 1
-    d = ca.Function("d", [t], [scenario.disturbance(cfg, t, ca.DM(cfg.disturbance_phase))])
+    d = ca.Function("d", [t], [profiles.disturbance(cfg, t, ca.DM(cfg.disturbance_phase))])
     for tt in (0.0, 13.7, 55.0):
         expect = [5 + 3 * math.sin(0.2 * tt + math.pi / 5), 5 + 4 * math.cos(0.3 * tt + math.pi / 6),
                   10 + 8 * math.cos(0.2 * tt), 25 + 16 * math.sin(0.2 * tt),
@@ -136,13 +136,13 @@ def test_payload_ramp_and_disturbance(cfg):
 
 
 def test_noise_sequence_seeded(cfg):
-    a, b, c = (scenario.noise_sequence(cfg, s) for s in (3, 3, 4))
+    a, b, c = (profiles.noise_sequence(cfg, s) for s in (3, 3, 4))
     assert a.shape == (12, 1001)
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
     np.testing.assert_allclose(a.var(axis=1), cfg.sensor_variances, rtol=0.15)
     with pytest.raises(ScenarioError, match="seed"):
-        scenario.noise_sequence(cfg, -1)
+        profiles.noise_sequence(cfg, -1)
 
 
 def test_joint_limit_check_names_the_joint(cfg):

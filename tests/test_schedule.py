@@ -2,7 +2,7 @@
 
 References are independent implementations, not the table itself: the recursive Newton-Euler
 ``arm_wrench`` (itself checked against Pinocchio in test_arm_pinocchio.py), CasADi's AD for the time
-derivatives, numpy.linalg for the LU, ``scenario.disturbance`` for eq. 41, and the record expression
+derivatives, numpy.linalg for the LU, ``profiles.disturbance`` for eq. 41, and the record expression
 evaluated in CasADi's VM at every stage time for the compiled, de-duplicated table.
 """
 
@@ -14,7 +14,7 @@ import pytest
 
 from arvcas.build import calls
 from arvcas.model import manipulator, vehicle
-from arvcas.sim import scenario, schedule
+from arvcas.sim import profiles, scenario, schedule
 from arvcas.model.linalg import lu_nopivot, lu_pack, lu_solve, lu_unpack, solve_nopivot
 from arvcas.system.params import SCHEMA, view
 from arvcas.model.uvms import ModelOptions, coupled_terms, coupled_terms_scheduled
@@ -79,8 +79,8 @@ def test_scheduled_coupled_terms_equal_direct(sym, params):
     tau = ca.SX.sym("tau", 6)
     rec = schedule.unpack(schedule.record_expr(cfg, t, P))
     opts = ModelOptions()
-    q, qd, qdd = scenario.joint_trajectory(cfg, manipulator.stow_pose(P), t)
-    pl = scenario.payload_profile(cfg, t)
+    q, qd, qdd = profiles.joint_trajectory(cfg, manipulator.stow_pose(P), t)
+    pl = profiles.payload_profile(cfg, t)
     trim = manipulator.trim_wrench(P, eta)
     direct = coupled_terms(P, eta, nu, tau, q, qd, qdd, pl, trim, opts)
     tab = coupled_terms_scheduled(P, eta, nu, tau, rec, trim, opts)
@@ -109,8 +109,8 @@ def test_tabulated_disturbance_equals_eq41():
     ph = np.array([0.3, -1.0, 2.0, 0.0, 0.7, -2.5])
     w = np.array(cfg.disturbance_freq)
     for tt in t:
-        a = np.array(scenario.disturbance(cfg, tt, ph)).ravel()
-        b = np.array(scenario.disturbance_tabulated(cfg, np.sin(w * tt), np.cos(w * tt),
+        a = np.array(profiles.disturbance(cfg, tt, ph)).ravel()
+        b = np.array(profiles.disturbance_tabulated(cfg, np.sin(w * tt), np.cos(w * tt),
                                                     np.concatenate([np.cos(ph), np.sin(ph)]))).ravel()
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-13 * max(1.0, np.abs(a).max()))
 

@@ -24,7 +24,7 @@ import arvcas
 from arvcas import cli
 from arvcas.export.closeloop import close_loop, load_binding
 from arvcas.export.controller import default_prefix
-from arvcas.sim import scenario
+from arvcas.sim import profiles, scenario
 from arvcas.sim.scenario import ScenarioError, loads_scenario
 from arvcas.system import load_system
 from arvcas.tuning import checkpoint as ck
@@ -154,7 +154,7 @@ def test_station_keeping_with_imu_and_depth(imu_depth_run):
     s, cfg, run, r = imu_depth_run
     assert r.ok
     assert np.all(r.rmse[0:2] == 0) and np.all(r.rmse[2:6] > 0)  # x, y are not held: no error counted
-    y = np.hstack([r.eta, r.nu]).T + scenario.noise_sequence(cfg, SEED)
+    y = np.hstack([r.eta, r.nu]).T + profiles.noise_sequence(cfg, SEED)
     sset = {i: every for i, _, every in scenario.measured(cfg)}
     ref = numpy_ekf(cfg, y, sset)
     worst = np.abs(ref - r.eta_hat).max()

@@ -17,7 +17,7 @@ import pytest
 import arvcas
 from arvcas.model import thrusters, vehicle
 from arvcas.system.params import ParamsError, view
-from arvcas.sim import scenario
+from arvcas.sim import profiles, scenario
 from arvcas.system import shipped
 
 SYSTEMS = ("haidou1", "bluerov2_heavy_alpha5", "hinsdale_bluerov2_alpha5", "bluerov2", "bluerov2_heavy")
@@ -270,8 +270,8 @@ def test_paper_scenario_as_waypoints_equals_its_reach_form(params):
 
     q0 = stow_pose(P)
     t = ca.SX.sym("t")
-    fa = ca.Function("a", [t], [*scenario.joint_trajectory(a, q0, t), scenario.payload_profile(a, t)])
-    fb = ca.Function("b", [t], [*scenario.joint_trajectory(b, q0, t), scenario.payload_profile(b, t)])
+    fa = ca.Function("a", [t], [*profiles.joint_trajectory(a, q0, t), profiles.payload_profile(a, t)])
+    fb = ca.Function("b", [t], [*profiles.joint_trajectory(b, q0, t), profiles.payload_profile(b, t)])
     for tt in np.linspace(0, 60, 1201):
         for x, y in zip(fa(tt), fb(tt)):
             np.testing.assert_allclose(np.array(y), np.array(x), rtol=0, atol=1e-15 * max(1.0, float(np.abs(np.asarray(x, dtype=float)).max())))
@@ -322,7 +322,7 @@ def test_bluerov2_run_compiled_equals_vm_and_signals_are_sized(systems):
     q_reach = r.q[-1]
     assert np.abs(q_reach - [s.params[f"arm.stow.q{i}"] for i in range(1, 5)]).max() > 0.1  # the arm moved
     vm = closedloop.build_run(closedloop.RunSpec(run.controller, cfg.graph_key(), run.opts, s.layout), trace=False)
-    ins = {"gains": run.default_gains(), "noise": scenario.noise_sequence(cfg, 1), "unc": cfg.uncertainty,
+    ins = {"gains": run.default_gains(), "noise": profiles.noise_sequence(cfg, 1), "unc": cfg.uncertainty,
            "phase": np.array(cfg.disturbance_phase), **run._shared()}
     out = vm.call({k: ca.DM(v) for k, v in ins.items()})
     np.testing.assert_allclose(np.array(out["chat"]).ravel(), r.chat, rtol=1e-12)

@@ -25,7 +25,7 @@ from scipy import integrate, optimize, signal
 import arvcas
 from arvcas.model import manipulator, thrusters, vehicle, water
 from arvcas.system.params import ParamsError, view
-from arvcas.sim import scenario
+from arvcas.sim import profiles, scenario
 
 DATA = Path(arvcas.__file__).parent / "data"
 KGF = 9.80665
@@ -287,7 +287,7 @@ def test_current_table_is_bilinear_and_held():
     w = cfg.water_vector
 
     def at(t, z):
-        v, dt, dz = scenario.current_at(cfg, w, t, z)
+        v, dt, dz = profiles.current_at(cfg, w, t, z)
         return _np(v), _np(dt), _np(dz)
 
     np.testing.assert_allclose(at(0, 0)[0], [0.1, 0.2, 0])

@@ -21,9 +21,9 @@ import pytest
 import arvcas
 from arvcas import metrics
 from arvcas.io.results import read_result
-from arvcas.model import thrusters
+from arvcas.model import thruster_tables, thrusters
 from arvcas.system.params import view
-from arvcas.sim import closedloop, scenario, schedule
+from arvcas.sim import scenario, schedule, thrust_forcing
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(arvcas.__file__).parent / "data"
@@ -136,15 +136,14 @@ def test_the_runs_map_and_inverse_are_scipys_pchip(blue):
     evaluated element by element in MX, as the scalar run evaluates it."""
     F, inv = _table()
     cfg = scenario.load_scenario(blue.params.default("scenario"))
-    spec = closedloop.RunSpec("proposed", cfg, layout=blue.layout)
-    _, _, lag, wrench = closedloop._thruster_functions(spec)  # the SX forms the lockstep run rewrites to lanes
+    _, _, lag, wrench = thrust_forcing.thruster_functions(cfg, blue.layout)  # the SX forms the lockstep run rewrites to lanes
     st = blue.layout.structure
-    n, m_off = st.n_thrusters, len(closedloop.lag_offsets(cfg))
+    n, m_off = st.n_thrusters, len(thrust_forcing.lag_offsets(cfg))
     p = ca.DM(blue.params.vector())
-    tab = closedloop.thruster_constants(view(blue.params), cfg)[1]
+    tab = thrust_forcing.thruster_constants(view(blue.params), cfg)[1]
     s_m, t_m, p_m, u_m = (ca.MX.sym(k, m) for k, m in (("s", n * m_off), ("tab", tab.shape[0]), ("p", p.shape[0]), ("u", n)))
-    _, grids = closedloop._table_grids(st, t_m)
-    iv = closedloop.stage_intervals(st, grids, s_m, m_off)
+    _, grids = thruster_tables.table_grids(st, t_m)
+    iv = thruster_tables.stage_intervals(st, grids, s_m, m_off)
     ends = [(i + 1) * m_off - 1 for i in range(n)]  # each thruster's state at the sample's end: T_end
     mx = thrusters.hermite(*(c[ends] for c in iv), s_m[ends])
     f = ca.Function("f", [s_m, t_m, p_m], [wrench(*iv, s_m, p_m)[1], mx])
@@ -158,7 +157,7 @@ def test_the_runs_map_and_inverse_are_scipys_pchip(blue):
     assert err.max() <= 1e-13, err.max()  # N (2.1e-14 measured: round-off at 51 N)
     # the inverse: the command sent for thrust u, back to its rotor state
     E = ca.MX.sym("E", lag.size1_in("E"))
-    g = ca.Function("g", [u_m, t_m, p_m, E], [lag(ca.MX.zeros(n), u_m, *closedloop.target_intervals(st, grids, u_m), E, p_m)[1]])
+    g = ca.Function("g", [u_m, t_m, p_m, E], [lag(ca.MX.zeros(n), u_m, *thruster_tables.target_intervals(st, grids, u_m), E, p_m)[1]])
     u = np.linspace(float(F(-372.0)), float(F(372.0)), 2001)
     u = u[u != 0]
     U = _by_thruster(u, n, 1.0)

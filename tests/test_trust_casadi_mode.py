@@ -22,7 +22,7 @@ def _numbers() -> dict[str, np.ndarray]:
     from arvcas.build import fmu
     from arvcas.model import manipulator
     from arvcas.system.params import view
-    from arvcas.sim import scenario
+    from arvcas.sim import profiles, scenario
 
     out = {}
     for name in ("haidou1", "bluerov2_heavy_alpha5"):
@@ -31,7 +31,7 @@ def _numbers() -> dict[str, np.ndarray]:
         out[f"{name} trim"] = np.array([float(v) for v in manipulator.trim_static(P)])
         cfg = scenario.load_scenario(s.params.default("scenario"))
         t = ca.SX.sym("t")
-        fq = ca.Function("q", [t], list(scenario.joint_trajectory(cfg, manipulator.stow_pose(P), t)))
+        fq = ca.Function("q", [t], list(profiles.joint_trajectory(cfg, manipulator.stow_pose(P), t)))
         out[f"{name} q(7 s)"] = np.concatenate([np.asarray(v, dtype=float).ravel() for v in fq(7.0)])
         out[f"{name} starts"] = np.array([v["start"] for v in fmu.variables(s.params)], dtype=float)
     r = arvcas.Run("pid").compile().simulate(seed=1)

@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 
 from arvcas.build import calls
-from arvcas.sim import closedloop, scenario, schedule, simulation
+from arvcas.sim import closedloop, profiles, scenario, schedule, simulation
 from arvcas.controllers import gains as gains_mod
 from arvcas.bench.common import BenchError, CONTROLLER, Settings, _stat, _time
 
@@ -56,7 +56,7 @@ def _step_instructions(spec: closedloop.RunSpec, trace: bool) -> dict:
 def _bench_closed_loop(s: Settings, cfg, P, log) -> dict:
     spec = closedloop.RunSpec(CONTROLLER, cfg)
     g = gains_mod.default_gains(CONTROLLER)
-    noise = scenario.noise_sequence(cfg, 0)
+    noise = profiles.noise_sequence(cfg, 0)
     p = P.vector()
     duration = cfg.time_duration
     n_samples = scenario.n_samples(cfg)

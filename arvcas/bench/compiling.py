@@ -13,7 +13,7 @@ from typing import Callable
 import casadi as ca
 
 from arvcas.build import calls, codegen
-from arvcas.sim import closedloop, scenario
+from arvcas.sim import closedloop, profiles
 from arvcas.controllers import gains as gains_mod
 from arvcas.model import uvms
 from arvcas.bench.closed_loop import _run_args, _step_instructions
@@ -106,7 +106,7 @@ def _bench_compile(s: Settings, cfg, P, driver: _Driver, work: Path, log) -> dic
 
     # opt-level sweep: compile time against speed (run function and uvms_rhs)
     g = gains_mod.default_gains(CONTROLLER)
-    args = _run_args(run_fn, g, scenario.noise_sequence(cfg, 0), cfg, P.vector())
+    args = _run_args(run_fn, g, profiles.noise_sequence(cfg, 0), cfg, P.vector())
     sets = _input_sets(uv, P.vector(), N_INPUT_SETS)
     data = work / "uvms_rhs_sweep.bin"
     _write_data(data, uv, sets)

@@ -89,7 +89,7 @@ def _bench_controller(s: Settings, log) -> dict:
     """``{system: {law: {"ns_per_step": stat, "instructions_per_step", "init_ns", "state_bytes", ...}}}``."""
     from arvcas.build import codegen
     from arvcas.export.controller import default_prefix, export_controller
-    from arvcas.sim import closedloop, scenario
+    from arvcas.sim import closedloop, profiles, scenario, thrust_forcing
     from arvcas.system import SHIPPED, load_system
 
     quick = s.mode == "quick"
@@ -101,7 +101,7 @@ def _bench_controller(s: Settings, log) -> dict:
             if sysm.params.default("scenario") is None or sysm.params.default("gains") is None:
                 continue  # a system for validation only (hinsdale_bluerov2_alpha5)
             cfg = scenario.load_scenario(sysm.params.default("scenario"))
-            y = (np.array(list(cfg.initial_eta0) + list(cfg.initial_nu0))[:, None] + scenario.noise_sequence(cfg, 0)).T
+            y = (np.array(list(cfg.initial_eta0) + list(cfg.initial_nu0))[:, None] + profiles.noise_sequence(cfg, 0)).T
             out[system] = {}
             for law in LAWS[:1] if quick else LAWS:
                 d = Path(tmp) / f"{system}_{law}"
@@ -127,7 +127,7 @@ def _bench_controller(s: Settings, log) -> dict:
                 out[system][law] = {"ns_per_step": _stat(ns), "init_ns": val["init_ns"],
                                     "instructions_per_step": int(fn.n_instructions()),
                                     "state_bytes": int(val["state_bytes"]), "n_steps": steps, "run_samples": y.shape[0],
-                                    "command_map": bool(closedloop.command_functions(cfg, sysm.layout))}
+                                    "command_map": bool(thrust_forcing.command_functions(cfg, sysm.layout))}
                 log(f"controller: {system} / {law}: {statistics.median(ns):.0f} ns per step "
                     f"(min {min(ns):.0f}), state {int(val['state_bytes'])} bytes")
     return out

@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from arvcas.build import calls, codegen
-from arvcas.sim import closedloop, lockstep, scenario, schedule
+from arvcas.sim import closedloop, lockstep, profiles, scenario, schedule
 from arvcas.sim.run import Run
 from arvcas.bench.closed_loop import _run_args, _step_instructions
 from arvcas.bench.common import BenchError, CONTROLLER, Settings, _stat, _temp_cache
@@ -181,7 +181,7 @@ def _bench_length(s: Settings, log) -> dict:
         fn, ls, _, _ = _prepare(run, level)
         g = run.default_gains()
         G = _batches(run, nb, ls.W)["running"]
-        args = _run_args(fn, g, scenario.noise_sequence(run.cfg, 0), run.cfg, sysm.params.vector(), layout=sysm.layout)
+        args = _run_args(fn, g, profiles.noise_sequence(run.cfg, 0), run.cfg, sysm.params.vector(), layout=sysm.layout)
         series = {"call": lambda: calls.call(fn, *args),
                   "one_run": lambda: run.batch(g[None, :], n_threads=1, lockstep=False),
                   "batch_scalar": lambda: run.batch(G, n_threads=1, lockstep=False),
@@ -367,7 +367,7 @@ def _bench_joints(s: Settings, work: Path, log) -> dict:
             table_functions_s = max(1e-6, first_s - builds["run"][0] - builds["lanes"][0] - table_s)
             g = run.default_gains()
             G = _batches(run, nb, ls.W)["running"]
-            args = _run_args(fn, g, scenario.noise_sequence(run.cfg, 0), run.cfg, sysm.params.vector(),
+            args = _run_args(fn, g, profiles.noise_sequence(run.cfg, 0), run.cfg, sysm.params.vector(),
                              layout=sysm.layout)
             series = {"call": lambda: calls.call(fn, *args),
                       "batch_lanes": lambda: run.batch(G, n_threads=1, lockstep=True)}

@@ -9,7 +9,7 @@ import dataclasses
 import time
 
 from arvcas.build import calls
-from arvcas.sim import closedloop, scenario
+from arvcas.sim import closedloop, profiles, scenario
 from arvcas.sim.run import Run
 from arvcas.bench.closed_loop import _run_args, _step_instructions
 from arvcas.bench.common import CONTROLLER, PLAIN_RK4, PLAIN_RK4_KEY, Settings, _stat
@@ -37,7 +37,7 @@ def _bench_systems(s: Settings, log) -> dict:
             run = Run(CONTROLLER, scenario=cfg_v, params=sv).compile()
             cfg = run.cfg
             f = run.function(trace=False)
-            args = _run_args(f, run.default_gains(), scenario.noise_sequence(cfg, 0), cfg, sv.params.vector(),
+            args = _run_args(f, run.default_gains(), profiles.noise_sequence(cfg, 0), cfg, sv.params.vector(),
                              layout=sv.layout)
             calls.call(f, *args)  # warm-up
             spec = closedloop.RunSpec(CONTROLLER, cfg.graph_key(), run.opts, sv.layout)

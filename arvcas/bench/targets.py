@@ -21,7 +21,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from arvcas.build import calls, codegen
-from arvcas.sim import closedloop, scenario, schedule, simulation
+from arvcas.sim import closedloop, profiles, scenario, schedule, simulation
 from arvcas.controllers import gains as gains_mod
 from arvcas.bench.closed_loop import _run_args, _step_instructions
 from arvcas.bench.common import BenchError, CONTROLLER, Settings, _stat, _time
@@ -36,13 +36,13 @@ import dataclasses, json
 import numpy as np
 from arvcas.controllers import gains as gains_mod
 from arvcas.system.params import load
-from arvcas.sim import scenario, schedule, simulation
+from arvcas.sim import profiles, scenario, schedule, simulation
 cfg = dataclasses.replace(scenario.load_scenario(), time_h_plant={hp!r})
 g = gains_mod.default_gains({controller!r})
 G = g[None, :] * np.random.default_rng(2024).uniform(0.95, 1.05, ({n}, g.size))
 simulation.compiled_run({controller!r}, None, cfg).function(False)
 schedule.table(cfg, load().vector())
-scenario.noise_sequence(cfg, 0)
+profiles.noise_sequence(cfg, 0)
 base = {hwm}
 simulation.simulate_batch({controller!r}, G, seed=0, cfg=cfg, n_threads={nt}, lockstep=False)
 print(json.dumps({{"base_mb": base, "peak_mb": {hwm}}}))
@@ -133,14 +133,14 @@ def _bench_targets(s: Settings, cfg, P, log) -> dict:
     for k, c in steps.items():
         log(f"targets: the run at h_plant = {c.time_h_plant:g} s (compiled, VM) ...")
         fn[k] = simulation.run_function(CONTROLLER, c, trace=False)
-        args[k] = _run_args(fn[k], g, scenario.noise_sequence(c, 0), c, p)
+        args[k] = _run_args(fn[k], g, profiles.noise_sequence(c, 0), c, p)
         calls.call(fn[k], *args[k])  # warm-up, time table
     isa = codegen.isa_flags()
     if isa:  # the yardstick of the instruction-set flags: the same run, built without them
         log(f"targets: the run at the default step built without {' '.join(isa)} (ARVCAS_ISA=baseline) ...")
         with _env(codegen.ISA_ENV, "baseline"):
             fn["baseline_isa"] = codegen.build(closedloop.build_run(closedloop.RunSpec(CONTROLLER, cfg), trace=False))
-        args["baseline_isa"] = _run_args(fn["baseline_isa"], g, scenario.noise_sequence(cfg, 0), cfg, p)
+        args["baseline_isa"] = _run_args(fn["baseline_isa"], g, profiles.noise_sequence(cfg, 0), cfg, p)
         same = all(np.array_equal(a.view(np.uint64), b.view(np.uint64))
                    for a, b in zip(calls.call(fn["baseline_isa"], *args["baseline_isa"]), calls.call(fn["default"], *args["default"])))
         if not same:
@@ -161,7 +161,7 @@ def _bench_targets(s: Settings, cfg, P, log) -> dict:
     for k, c in steps.items():
         spec = closedloop.RunSpec(CONTROLLER, c)
         f_vm = closedloop.build_run(spec, trace=False)
-        a_vm = _run_args(f_vm, g, scenario.noise_sequence(c, 0), c, p)
+        a_vm = _run_args(f_vm, g, profiles.noise_sequence(c, 0), c, p)
         t_vm = _time(lambda: calls.call(f_vm, *a_vm), s.reps_slow, warmup=0)
         ins = _step_instructions(spec, trace=False)
         log(f"targets: batch of {s.study_pop} at h_plant = {c.time_h_plant:g} s, 1 and 2 threads ...")

@@ -3,7 +3,7 @@
 The paper compares its controllers on one sensor-noise draw and one model-uncertainty draw. Here a
 master seed draws, for each run ``i`` independently,
 
-- a sensor-noise seed (the run's noise sequence is ``scenario.noise_sequence(cfg, seed_i)``);
+- a sensor-noise seed (the run's noise sequence is ``arvcas.sim.profiles.noise_sequence(cfg, seed_i)``);
 - the four nominal-model factors ``[C, D, g, arm]`` (docs/model.md §4), each uniform in ``[1 - spread, 1 + spread]``
   (default ``spread = 0.3``: the nominal model is wrong by up to 30 % either way, each term
   independently; the scenario file's fixed factors 1.4, 0.6, 0.7, 0.6 are one point partly outside

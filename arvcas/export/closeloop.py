@@ -51,7 +51,7 @@ class _Rotors:
         from scipy.interpolate import PchipInterpolator
 
         from arvcas.model import thrusters as thr
-        from arvcas.sim.closedloop import stage_offsets
+        from arvcas.sim.thrust_forcing import stage_offsets
         from arvcas.system.params import view
 
         lay = P.layout
@@ -115,7 +115,7 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
 
     ``controller``: a binding's ``Controller`` (:func:`load_binding`), initialised with the gains to
     compare; ``run``: the :class:`arvcas.sim.run.CompiledRun` whose scenario, system and time table
-    are used; ``seed``: the noise sequence (:func:`arvcas.sim.scenario.noise_sequence`), fed in as the
+    are used; ``seed``: the noise sequence (:func:`arvcas.sim.profiles.noise_sequence`), fed in as the
     measurement ``y = x + noise``; ``rhs(x, tau, q, qd, qdd, payload) -> xdot`` and ``thrust(u) ->
     tau``: the exported plant (default: ``arvcas.dynamics("uvms_rhs")`` and ``("thrust")`` of the
     run's system, the compiled C that ``arvcas export-c`` writes). The plant is integrated like the
@@ -145,7 +145,7 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     each (N + 1, width), and ``chat``, ``rmse`` (6) as the run computes them (eq. 42-43).
     """
     from arvcas.build.dynamics import dynamics
-    from arvcas.sim import scenario, schedule
+    from arvcas.sim import profiles, scenario, schedule
 
     cfg, P = run.cfg, run.params
     if cfg.time_thrust_quadrature:
@@ -176,7 +176,7 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     n = scenario.n_samples(cfg)
     N = n - 1
     hp, h = cfg.time_h_plant, cfg.time_h
-    noise = scenario.noise_sequence(cfg, seed)
+    noise = profiles.noise_sequence(cfg, seed)
     held = np.array(scenario.held_dofs(cfg), dtype=float)
     ph = np.array(cfg.disturbance_phase, dtype=float)
     cos_ph = np.array([math.cos(v) for v in ph])

@@ -46,10 +46,10 @@ from arvcas.build import export as ex
 from arvcas.build.templating import c_double, render
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import DOFS, Controller, get as get_controller
-from arvcas.sim.closedloop import (command_functions, controller_diagnostics, controller_functions, controller_reads,
-                                   controller_sizes)
+from arvcas.sim.closedloop import controller_diagnostics, controller_functions, controller_reads, controller_sizes
 from arvcas.sim.scenario import SENSOR_WHAT, ScenarioConfig, measured
 from arvcas.sim.scenario import COMPONENTS as Y_NAMES
+from arvcas.sim.thrust_forcing import command_functions
 
 __all__ = ["ExportError", "export_controller", "default_prefix", "files"]
 

@@ -214,7 +214,7 @@ def _pchip_np(g, v, d, x):
 
 def _pchip_sx(g, v, d, x):
     """The monotone cubic at a symbolic ``x``: every interval's cubic, selected (the closed loop looks the
-    interval up in MX instead, :func:`arvcas.sim.closedloop._map_interval`); beyond the ends, the end cubics."""
+    interval up in MX instead, :func:`arvcas.model.thruster_tables.map_interval`); beyond the ends, the end cubics."""
     n = g.shape[0]
     out = 0
     for i in range(n - 1):

@@ -4,7 +4,7 @@ One controller sample k (t_k = k h) of :func:`step`:
 
 1. sensors: ``y_k = [eta; nu](t_k) + noise_k`` (noise is an input: a seeded sequence);
 2. EKF update on ``[eta; nu]`` (measuring both, or a scenario's sensor set: docs/sensors.md; its prediction
-   for k+1 ends the step);
+   for k+1 ends the step: :mod:`arvcas.sim.ekf`);
 3. the reference ``(y1, y2)`` of the adaptive tracking differentiator (eq. 12-13) and the errors
    ``e = eta_hat - y1``, ``e_dot = eta_dot_hat - y2``;
 4. the controller (an :class:`arvcas.controllers.Controller` object: its ``step`` from the
@@ -36,7 +36,7 @@ import numpy as np
 from arvcas.controllers import atd, gains as gains_mod
 from arvcas.controllers.base import Controller, call_law, get as get_controller
 from arvcas.model import manipulator, thrusters, vehicle, water as water_mod
-from arvcas.sim import accumulate, scenario, schedule, signals as signals_mod
+from arvcas.sim import accumulate, ekf as ekf_mod, profiles, scenario, schedule, signals as signals_mod, thrust_forcing
 from arvcas.system.params import Layout as ParamLayout, default_layout, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.spatial import J, J_dot, J_inv
@@ -45,10 +45,6 @@ from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
 __all__ = ["Layout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "nominal_inertia",
            "controller_memory", "controller_sample", "ControllerSample", "arm_truth", "controller_functions",
            "controller_diagnostics", "controller_sizes", "ControllerSizes", "controller_reads", "INPUTS"]
-
-_PSYM = [(i, j) for i in range(12) for j in range(i, 12)]  # the EKF covariance's upper triangle, row by row
-_PSYM_INDEX = {ij: k for k, ij in enumerate(_PSYM)}
-N_PSYM = len(_PSYM)
 
 # the run's inputs, in the order of the compiled function (everything else binds them by name)
 INPUTS: tuple[str, ...] = ("gains", "noise", "unc", "phase", "ekf", "water", "p", "sched_time", "sched_arm")
@@ -78,7 +74,7 @@ def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int
     """The loop state: the plant (with the thrusters' rotor states and delivered thrust when they have
     dynamics), EKF and reference; the controller's own state; the metrics and status; then the run's
     constants (carried through the loop, never changed). ``thr_consts``: the sizes of the thruster
-    dynamics' per-run constants (:func:`thruster_constants`), None for instantaneous thrusters; ``n_acc``:
+    dynamics' per-run constants (:func:`arvcas.sim.thrust_forcing.thruster_constants`), None for instantaneous thrusters; ``n_acc``:
     the rows of the run's accumulators (:mod:`arvcas.sim.accumulate`; none: no slot)."""
     dyn = thr_consts is not None
     return Layout([
@@ -130,76 +126,13 @@ class RunSpec:
         return self.layout or default_layout()
 
 
-def stage_offsets(cfg: ScenarioConfig) -> list[float]:
-    """The times of a sample's RK4 stages after its start, ``j h_plant / 2`` (the last one is ``h``)."""
-    return [j * 0.5 * cfg.time_h_plant for j in range(schedule.n_stages(cfg))]
-
-
-def quadrature(cfg: ScenarioConfig) -> int | None:
-    """Gauss-Legendre nodes per half plant step for the thrusters' forcing (``time.thrust_quadrature``), or None."""
-    return cfg.time_thrust_quadrature or None
-
-
-def lag_offsets(cfg: ScenarioConfig) -> list[float]:
-    """The times after a sample's start at which the thrusters' rotor states and thrust are evaluated: RK4's
-    stage times (:func:`stage_offsets`), or with ``time.thrust_quadrature`` the Gauss-Legendre nodes of every
-    half plant step in order, then the sample's end (docs/model.md §9)."""
-    ng = quadrature(cfg)
-    if ng is None:
-        return stage_offsets(cfg)
-    gx = np.polynomial.legendre.leggauss(ng)[0]
-    hp = cfg.time_h_plant
-    out = [float(i * hp + j * 0.5 * hp + 0.25 * hp * (x + 1)) for i in range(cfg.substeps) for j in range(2) for x in gx]
-    return out + [stage_offsets(cfg)[-1]]
-
-
-N_MOMENTS = 12  # per plant step: (w(hp/2), w(hp), omega(hp/2), omega(hp)) x the three stage records' A
-
-
-def moment_weights(cfg: ScenarioConfig) -> np.ndarray:
-    """(nodes, 12 substeps) weights of the thrusters' forcing moments (:func:`_plant_substep_quadrature`).
-
-    Within plant step i (start a, length hp), ``A(t) = (M + M_arm(q(t)))^-1`` is the quadratic through its
-    values A_j at the stage times a, a + hp/2, a + hp (Lagrange basis l_j), so
-    ``w(tau) = int_a^tau A B F dt = sum_j A_j B int_a^tau l_j F dt`` and ``omega(tau) = int_a^tau w =
-    sum_j A_j B int_a^tau (tau - t) l_j F dt``; column ``12 i + 3 k + j`` holds node weights of
-    ``int l_j F`` for k = 0: w(a + hp/2), 1: w(a + hp), 2: omega(a + hp/2), 3: omega(a + hp)."""
-    ng, hp, n_sub = quadrature(cfg), cfg.time_h_plant, cfg.substeps
-    gx, gw = np.polynomial.legendre.leggauss(ng)
-    C = np.zeros((2 * ng * n_sub, N_MOMENTS * n_sub))
-    ts = (0.0, 0.5 * hp, hp)  # stage times, relative to a step's start
-    for i in range(n_sub):
-        for half in range(2):
-            for q in range(ng):
-                row = (2 * i + half) * ng + q
-                t = half * 0.5 * hp + 0.25 * hp * (gx[q] + 1)  # relative to the step's start
-                wq = 0.25 * hp * gw[q]
-                for j in range(3):
-                    lj = np.prod([(t - ts[m]) / (ts[j] - ts[m]) for m in range(3) if m != j])
-                    if half == 0:
-                        C[row, N_MOMENTS * i + j] = wq * lj
-                        C[row, N_MOMENTS * i + 6 + j] = wq * lj * (0.5 * hp - t)
-                    C[row, N_MOMENTS * i + 3 + j] = wq * lj
-                    C[row, N_MOMENTS * i + 9 + j] = wq * lj * (hp - t)
-    return C
-
-
-def thruster_constants(P, cfg: ScenarioConfig):
-    """Per-run constants of the thruster dynamics, from p: the lag's ``exp(-t / tau)`` at the stage offsets
-    (:func:`arvcas.model.thrusters.lag_constants`) and each table map's rotor-state grid, thrust and slopes
-    (:func:`arvcas.model.thrusters.map_table`). ``(E, tables)``."""
-    E = thrusters.lag_constants(P, lag_offsets(cfg))
-    tabs = [ca.vertcat(*thrusters.map_table(P, m)) for m in P.s.thruster_maps if m.kind == "table"]
-    return E, (ca.vertcat(*tabs) if tabs else ca.DM.zeros(0, 1))
-
-
 def _water(cfg: ScenarioConfig, P, water, t, eta, nu):
     """The water's terms at time ``t`` (docs/model.md §10): ``(current, tether wrench)`` with ``current`` the
     ``(nu_c, nu_c_dot)`` of :func:`arvcas.model.water.relative_current` (None without a current) and the
     tether's wrench in {b} (0 without one)."""
-    cur = scenario.current_at(cfg, water, t, eta[2])
+    cur = profiles.current_at(cfg, water, t, eta[2])
     current = None if cur is None else water_mod.relative_current(eta, nu, *cur)
-    teth = scenario.tether_of(cfg, water)
+    teth = profiles.tether_of(cfg, water)
     if teth is None:
         return current, 0
     v_c = cur[0] if cur is not None else ca.DM.zeros(3)
@@ -245,7 +178,7 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     cfg, opts, lay = spec.cfg, spec.opts, spec.lay
     hp = cfg.time_h_plant
     dyn = lay.structure.has_thruster_dynamics
-    xs, tr_s = ca.SX.sym("x", 12), ca.SX.sym("tau", tau_size(spec))
+    xs, tr_s = ca.SX.sym("x", 12), ca.SX.sym("tau", thrust_forcing.tau_size(cfg, lay.structure))
     p_s, c_s, ph_s = ca.SX.sym("p", len(lay)), ca.SX.sym("consts", 9), ca.SX.sym("phase_cs", 12)
     w_s, t_s = ca.SX.sym("water", cfg.water_vector.size), ca.SX.sym("t")
     R = schedule.records(lay)
@@ -259,7 +192,7 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     def accel(ee, nn, j, rec, force):
         """nu_dot at stage j under the body wrench ``force`` of the thrusters (None: the forcing is taken out)."""
         tr = _trim(Ps, c_s[0], c_s[1], c_s[2], ee)
-        dist = scenario.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
+        dist = profiles.disturbance_tabulated(cfg, rec["dist_sin"], rec["dist_cos"], ph_s)
         f = dist if force is None else force + dist
         if not cfg.has_water:
             return coupled_terms_scheduled(Ps, ee, nn, f, rec, tr, opts)[0]
@@ -271,14 +204,14 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
         thrust = tr_s[6 * j:6 * j + 6] if dyn else tr_s
         return ca.vertcat(ca.mtimes(J(ee), nn), accel(ee, nn, j, record(j), thrust))
 
-    if quadrature(cfg) is None:
+    if thrust_forcing.quadrature(cfg) is None:
         k_1 = f_plant(xs, 0)
         k_2 = f_plant(xs + 0.5 * hp * k_1, 1)
         k_3 = f_plant(xs + 0.5 * hp * k_2, 1)
         k_4 = f_plant(xs + hp * k_3, 2)
         x_next = ca.cse(xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4))
     else:
-        x_next = ca.cse(_substep_quadrature(hp, xs, tr_s, [record(j) for j in range(3)], accel))
+        x_next = ca.cse(thrust_forcing.substep_quadrature(hp, xs, tr_s, [record(j) for j in range(3)], accel))
     x_next, pc_syms, pc_vals = ca.extract_parametric(x_next, ca.vertcat(p_s, c_s, ph_s, w_s), {"prefix": "pc_"})
     pc_s = ca.vertcat(*pc_syms) if pc_syms else ca.SX(0, 1)
     rk4 = ca.Function("cl_rk4", [xs, recs_t, recs_a, tr_s, p_s, c_s, ph_s, pc_s, w_s, t_s], [x_next],
@@ -286,194 +219,6 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     pc_fn = ca.Function("cl_rk4_consts", [p_s, c_s, ph_s, w_s], [ca.vertcat(*pc_vals) if pc_vals else ca.SX(0, 1)],
                         ["p", "consts", "phase_cs", "water"], ["pc"])
     return rk4, pc_fn
-
-
-def tau_size(spec: RunSpec) -> int:
-    """The thrusters' input of one plant step: the held wrench (6), the wrench at its three stage times (18),
-    or with ``time.thrust_quadrature`` the forcing's moments (6 x 12, :func:`moment_weights`)."""
-    if not spec.lay.structure.has_thruster_dynamics:
-        return 6
-    return 6 * N_MOMENTS if quadrature(spec.cfg) is not None else 18
-
-
-def tau_stride(spec: RunSpec) -> int:
-    """Where plant step i's thrusters' input starts in the sample's wrench vector, divided by i: the stage
-    wrenches overlap (12: a step's last stage is the next one's first), the moments do not."""
-    return 6 * N_MOMENTS if quadrature(spec.cfg) is not None else 12
-
-
-def _substep_quadrature(hp, xs, mom, recs, accel):
-    """One plant step with the thrusters' forcing taken out of the RK4 stages (docs/model.md §9).
-
-    The forcing enters the velocities linearly, ``nu_dot = A(t) (B F(t) + R(eta, nu, t))`` with
-    ``A = (M + M_arm(q(t)))^-1`` known at the stage times (the time table's LU factors in ``recs``), so RK4
-    integrates ``z = nu - w(t)`` and ``zeta = eta - J(eta_a) omega(t)``: ``z_dot = A R(eta, z + w, t)``,
-    ``zeta_dot = J(eta) (z + w) - J(eta_a) w``, with ``w`` and ``omega`` from the moments ``mom`` (6 x 12, the
-    quadrature of the lag's closed form through the map: :func:`moment_weights`). ``accel(eta, nu, j, rec,
-    None)``: ``A R`` at stage j (:func:`_plant_substep`'s, without the thrusters' wrench)."""
-    from arvcas.model.linalg import lu_solve
-
-    def moment(k):  # sum_j A_j (B int l_j F): w(hp/2), w(hp), omega(hp/2), omega(hp)
-        return sum(lu_solve(*recs[j]["lu"], mom[6 * (3 * k + j):6 * (3 * k + j) + 6]) for j in range(3))
-
-    w1, w2, o1, o2 = (moment(k) for k in range(4))
-    Ja = J(xs[0:6])
-    zero = ca.SX.zeros(6)
-
-    def g(zz, j, w, om):
-        ee, nn = zz[0:6] + ca.mtimes(Ja, om), zz[6:12] + w
-        return ca.vertcat(ca.mtimes(J(ee), nn) - ca.mtimes(Ja, w), accel(ee, nn, j, recs[j], None))
-
-    k_1 = g(xs, 0, zero, zero)
-    k_2 = g(xs + 0.5 * hp * k_1, 1, w1, o1)
-    k_3 = g(xs + 0.5 * hp * k_2, 1, w1, o1)
-    k_4 = g(xs + hp * k_3, 2, w2, o2)
-    z = xs + hp / 6 * (k_1 + 2 * k_2 + 2 * k_3 + k_4)
-    return ca.vertcat(z[0:6] + ca.mtimes(Ja, o2), z[6:12] + w2)
-
-
-def _gather(g, v, d, i):
-    """``(g0, g1, v0, v1, d0, d1)``: the ends, values and slopes of the monotone cubic's intervals ``i``
-    (MX: the per-run tables indexed at run time)."""
-    return g[i], g[i + 1], v[i], v[i + 1], d[i], d[i + 1]
-
-
-def _map_interval(g, v, d, x, mode: str):
-    """The intervals of the monotone cubic through ``(g_i, v_i)`` that hold a column ``x`` (MX: ``casadi.low``,
-    ``"exact"`` for a uniform grid, one division and no search; ``"binary"`` otherwise), as :func:`_gather`;
-    the cubic itself is evaluated in SX (:func:`_thruster_functions`)."""
-    return _gather(g, v, d, ca.low(g, x, {"lookup_mode": mode}))  # within [0, n - 2]
-
-
-def _pchip_interval(g, v, d, u):
-    """``(g0, g1, v0, v1, d0, d1)``: the interval of the monotone cubic's values that holds ``u`` (MX lookup)."""
-    return _gather(g, v, d, ca.low(v, u, {"lookup_mode": "binary"}))
-
-
-def _pchip_newton(g0, g1, v0, v1, d0, d1, u, iterations: int = 8):
-    """The ``x`` at which one interval's cubic equals ``u`` (the interval from :func:`_pchip_interval`): Newton's
-    method on that interval's cubic from the secant's guess, kept in the interval (quadratic convergence
-    from a guess within a few percent: 8 steps reach round-off); MX or SX."""
-    h = g1 - g0
-    t = ca.fmin(ca.fmax((u - v0) / (v1 - v0), 0), 1)
-    for _ in range(iterations):
-        t2 = t * t
-        p = (2 * t * t2 - 3 * t2 + 1) * v0 + (t * t2 - 2 * t2 + t) * h * d0 + (3 * t2 - 2 * t * t2) * v1 + (t * t2 - t2) * h * d1
-        dp = (6 * t2 - 6 * t) * (v0 - v1) + (3 * t2 - 4 * t + 1) * h * d0 + (3 * t2 - 2 * t) * h * d1
-        t = ca.fmin(ca.fmax(t - (p - u) / ca.fmax(dp, 1e-12 * (v1 - v0)), 0), 1)
-    return g0 + t * h
-
-
-IV = ("g0", "g1", "v0", "v1", "d0", "d1")  # an interval of a table map's cubic (:func:`_gather`)
-
-
-def _thruster_functions(spec: RunSpec):
-    """The SX parts of a sample's thruster dynamics (docs/model.md §9): ``(cl_thr_lag, cl_thr_wrench,
-    cl_thr_lag_iv, cl_thr_wrench_iv)``.
-
-    ``cl_thr_lag(s0, u, y_tab, E, p) -> (s, command)``: each rotor state's target (a table map's from
-    ``y_tab``, the inverse computed in MX; a quadratic map's here), the lag's closed form at every stage
-    offset of the sample (``s``: thruster-major, n_thr x n_stages) and the command sent;
-    ``cl_thr_wrench(T_tab, s, p) -> (W, T_end)``: each thruster's thrust at the stages (a table map's from
-    ``T_tab``, evaluated in MX), the thrusters' body wrench at each stage (6 x n_stages, stage-major; with
-    the thrust quadrature, the forcing's moments) and the thrust at the sample's end. The scalar run
-    evaluates the tables' cubics element by element in MX (:func:`_thruster_step`: loops over the
-    sample's 808 points that the compiler vectorises, faster there than the same operations as
-    straight-line SX).
-
-    The ``_iv`` forms take the tables' intervals instead (:data:`IV`: ``ig0..id1`` per thruster at ``u``,
-    ``g0..d1`` at each of ``s``, 0 for a thruster without a table) and evaluate the inverse's Newton steps
-    and the cubics themselves in SX, with the same operations: the lockstep run rewrites them to lanes
-    (:mod:`arvcas.sim.lockstep`), gathering the intervals in C.
-    """
-    cfg, lay = spec.cfg, spec.lay
-    st = lay.structure
-    n, offs = st.n_thrusters, lag_offsets(spec.cfg)
-    m_off = len(offs)
-    p_s = ca.SX.sym("p", len(lay))
-    P = view(p_s, lay)
-    maps = thrusters.thruster_maps(P)
-    s0, u, y_tab = ca.SX.sym("s0", n), ca.SX.sym("u", n), ca.SX.sym("y_tab", n)
-    E = ca.SX.sym("E", thrusters.lag_constants(P, offs).shape[0])
-    y = ca.vertcat(*[y_tab[i] if m.kind == "table" else thrusters.map_inverse(P, m, u[i]) for i, m in enumerate(maps)])
-    S = thrusters.lag_states(P, s0, y, E, offs, cfg.time_h)
-    cmd = ca.vertcat(*[thrusters.command_of(P, m, y[i]) for i, m in enumerate(maps)])
-    lag = ca.Function("cl_thr_lag", [s0, u, y_tab, E, p_s], [ca.vertcat(*[ca.vertcat(*row) for row in S]), cmd],
-                      ["s0", "u", "y_tab", "E", "p"], ["s", "command"])
-    s_all, T_tab = ca.SX.sym("s", n * m_off), ca.SX.sym("T_tab", n * m_off)
-    T = [[T_tab[i * m_off + j] if m.kind == "table" else thrusters.map_thrust(P, m, s_all[i * m_off + j])
-          for j in range(m_off)] for i, m in enumerate(maps)]
-    B = thrusters.B_T(P)
-    if quadrature(cfg) is None:  # the wrench at every stage
-        W = ca.vertcat(*[ca.mtimes(B, ca.vertcat(*[T[i][j] for i in range(n)])) for j in range(m_off)])
-    else:  # per plant step, the forcing's 12 moments (6 x 12, column-major): B (T at the nodes) C
-        Tn = ca.vertcat(*[ca.horzcat(*T[i][:m_off - 1]) for i in range(n)])  # n x nodes (the sample's end left out)
-        C = moment_weights(cfg)
-        W = ca.vertcat(*[ca.vec(ca.mtimes(B, ca.mtimes(Tn, ca.DM(C[:, N_MOMENTS * i:N_MOMENTS * (i + 1)]))))
-                         for i in range(cfg.substeps)])
-    wrench = ca.Function("cl_thr_wrench", [T_tab, s_all, p_s], [W, ca.vertcat(*[T[i][-1] for i in range(n)])],
-                         ["T_tab", "s", "p"], ["W", "T_end"])
-    iu = [ca.SX.sym("i" + k, n) for k in IV]
-    lag_iv = ca.Function("cl_thr_lag_iv", [s0, u, *iu, E, p_s], lag(s0, u, _pchip_newton(*iu, u), E, p_s),
-                         ["s0", "u", *("i" + k for k in IV), "E", "p"], ["s", "command"])
-    iv = [ca.SX.sym(k, n * m_off) for k in IV]
-    wrench_iv = ca.Function("cl_thr_wrench_iv", [*iv, s_all, p_s], wrench(thrusters.hermite(*iv, s_all), s_all, p_s),
-                            [*IV, "s", "p"], ["W", "T_end"])
-    return lag, wrench, lag_iv, wrench_iv
-
-
-def _table_grids(st, tabs):
-    """The thrusters' maps (in thruster order) and each table map's ``(s grid, thrust, slopes, lookup mode)``
-    from the stacked per-run tables ``tabs`` (:func:`thruster_constants`), by map name."""
-    maps = [st.thruster_map(d.map) for d in st.thruster_dynamics]
-    grids, k = {}, 0
-    for m in st.thruster_maps:
-        if m.kind == "table":
-            n_g = m.n - (m.zero[1] - m.zero[0])
-            grids[m.name] = (tabs[k:k + n_g], tabs[k + n_g:k + 2 * n_g], tabs[k + 2 * n_g:k + 3 * n_g],
-                             "exact" if m.uniform else "binary")
-            k += 3 * n_g
-    return maps, grids
-
-
-def _table_intervals(st, grids, x, size: int, lookup):
-    """The six interval columns (:data:`IV`) of each thruster's table map at its block of ``size`` entries of
-    ``x`` (MX, thruster-major; zeros for a thruster without a table): ``lookup(g, v, d, mode, x_map)`` gives
-    the intervals of one map's thrusters together."""
-    maps = [st.thruster_map(d.map) for d in st.thruster_dynamics]
-    cols = [[ca.MX.zeros(size, 1)] * st.n_thrusters for _ in IV]
-    for name, (g, v, d, mode) in grids.items():
-        idx = [i for i, m in enumerate(maps) if m.name == name]
-        got = lookup(g, v, d, mode, ca.vertcat(*[x[i * size:(i + 1) * size] for i in idx]))
-        for c, col in zip(got, cols):
-            for r, i in enumerate(idx):
-                col[i] = c[r * size:(r + 1) * size]
-    return [ca.vertcat(*col) for col in cols]
-
-
-def target_intervals(st, grids, u):
-    """The intervals (:data:`IV`) of each thruster's table map whose values hold its allocated thrust ``u``
-    (a search on the values: ``cl_thr_lag``'s Newton steps invert the cubic there)."""
-    return _table_intervals(st, grids, u, 1, lambda g, v, d, _, x: _pchip_interval(g, v, d, x))
-
-
-def stage_intervals(st, grids, s_all, m_off: int):
-    """The intervals (:data:`IV`) of each thruster's table map that hold its rotor states ``s_all`` (``m_off``
-    per thruster, thruster-major): ``cl_thr_wrench`` evaluates the cubic on them."""
-    return _table_intervals(st, grids, s_all, m_off, lambda g, v, d, mode, x: _map_interval(g, v, d, x, mode))
-
-
-def _thruster_step(spec: RunSpec, lag: ca.Function, wrench: ca.Function, u, s0, E, tabs, p):
-    """One sample of the thruster dynamics in MX: the intervals of the inverse maps (a search on the table's
-    values) and the inverse's Newton steps, the lag (SX), the intervals at every stage (one division each on
-    a uniform grid) and the maps' cubics element by element, the wrenches (SX). Returns ``(W (6 n_stages), s_end, T_end, command)``."""
-    st = spec.lay.structure
-    n, m_off = st.n_thrusters, len(lag_offsets(spec.cfg))
-    _, grids = _table_grids(st, tabs)
-    s_all, cmd = lag(s0, u, _pchip_newton(*target_intervals(st, grids, u), u), E, p)
-    W, T_end = wrench(thrusters.hermite(*stage_intervals(st, grids, s_all, m_off), s_all), s_all, p)
-    s_end = ca.vertcat(*[s_all[(i + 1) * m_off - 1] for i in range(n)])
-    return W, s_end, T_end, cmd
 
 
 def build_step(spec: RunSpec, trace: bool = True, first: bool = False) -> tuple[ca.Function, Layout, ca.Function]:
@@ -509,16 +254,7 @@ class StepParts(NamedTuple):
     pc_fn: ca.Function
     layout: Layout
     n_sub: int
-    thr: tuple | None  # (cl_thr_lag, cl_thr_wrench, their _iv forms) with thruster dynamics (:func:`_thruster_functions`), else None
-
-
-def _thr_const_sizes(spec: RunSpec) -> tuple[int, int] | None:
-    """Sizes of the thruster dynamics' per-run constants (E, tables), None without dynamics."""
-    if not spec.lay.structure.has_thruster_dynamics:
-        return None
-    P = view(ca.SX.sym("p", len(spec.lay)), spec.lay)
-    E, tabs = thruster_constants(P, spec.cfg)
-    return E.shape[0], tabs.shape[0]
+    thr: tuple | None  # (cl_thr_lag, cl_thr_wrench, their _iv forms) with thruster dynamics (:func:`arvcas.sim.thrust_forcing.thruster_functions`), else None
 
 
 def check_law(law: Controller, cfg: ScenarioConfig, lay) -> None:
@@ -544,7 +280,7 @@ def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     n_thr = lay.structure.n_thrusters
     dyn = lay.structure.has_thruster_dynamics
     L = state_layout(law, ng, n_thr, pc_fn.size1_out(0), len(lay), cfg.ekf_vector.size, cfg.water_vector.size,
-                     _thr_const_sizes(spec), n_accumulated(spec))
+                     thrust_forcing.constant_sizes(cfg, lay), n_accumulated(spec))
     i_x1, i_ok, i_const = L.slices["x"].stop, L.slices["ok"].start, L.slices["gains"].start  # constants follow t_fail
     Sd, Kc = ca.SX.sym("S", i_const), ca.SX.sym("K", L.size - i_const)
     S = ca.vertcat(Sd, Kc)
@@ -560,7 +296,7 @@ def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     keep = ca.Function("cl_keep", [Cs, Ss, xn, tks], [ca.vertcat(xn, Cs)])
     Sfail = ca.vertcat(Ss[:i_ok], 0, ca.if_else(L.get(Ss, "ok"), tks, L.get(Ss, "t_fail")))
     freeze = ca.Function("cl_freeze", [Cs, Ss, xn, tks], [Sfail])
-    thr = _thruster_functions(spec) if dyn else None
+    thr = thrust_forcing.thruster_functions(cfg, lay) if dyn else None
     return StepParts(ctrls, rk4, ok_fn, keep, freeze, pc_fn, L, cfg.substeps, thr)
 
 
@@ -587,15 +323,17 @@ def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.F
         lag, wrench = parts.thr[:2]
         i_cmd = _trace_offset(spec, "command")
     hp = cfg.time_h_plant
-    stride, size = tau_stride(spec), tau_size(spec)  # plant step i's slice of the thrusters' wrench vector
+    # plant step i's slice of the thrusters' wrench vector
+    stride, size = thrust_forcing.tau_stride(cfg), thrust_forcing.tau_size(cfg, lay.structure)
     steps = []
     for first, ctrl in zip(firsts, ctrls):
         res = ctrl(Sm, Km, tkm, nm, sch_t[0:TS], sch_a[0:AS], *([sch_t[ns * TS:]] if cfg.has_trajectory else []))
         Cm, thrust_out = res[0], res[1]
         outs = list(res[2:])
         if dyn:  # thrust_out: the allocation's thrust per thruster; the lag gives the stage wrenches
-            W, s_end, T_end, cmd = _thruster_step(spec, lag, wrench, thrust_out, Sm[L.slices["thr"]],
-                                                  Km[kslice["thr_E"]], Km[kslice["thr_tab"]], pm)
+            W, s_end, T_end, cmd = thrust_forcing.thruster_step(cfg, lay.structure, lag, wrench, thrust_out,
+                                                                Sm[L.slices["thr"]], Km[kslice["thr_E"]],
+                                                                Km[kslice["thr_tab"]], pm)
             Cm = ca.vertcat(s_end, T_end, Cm)
             if trace:  # the command rows of the trace: the command sent (known once the map is inverted)
                 tr = outs[0]
@@ -625,7 +363,7 @@ def controller_memory(law: Controller) -> list[tuple[str, int]]:
     """The fields of a controller's memory from sample to sample: the EKF prior (``xh``, the covariance's
     upper triangle ``Pc``), the ATD reference (``y1``, ``y2``, ``r0``) and the law's own state
     (``c_<name>``); in the loop state's order (:func:`state_layout`)."""
-    return [("xh", 12), ("Pc", N_PSYM), ("y1", 6), ("y2", 6), ("r0", 6), *[(f"c_{name}", n) for name, n in law.state]]
+    return [("xh", 12), ("Pc", ekf_mod.N_PSYM), ("y1", 6), ("y2", 6), ("r0", 6), *[(f"c_{name}", n) for name, n in law.state]]
 
 
 class ControllerSample:
@@ -643,7 +381,7 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
     """One sample of the controller, from the measurement to the thrust: steps 2-5 of the module docstring.
 
     The one definition of the controller: the run's sample (:func:`_controller_part`) and the exported
-    controller (:mod:`arvcas.io.export_controller`) both build their graphs with it, so they perform
+    controller (:mod:`arvcas.export.controller`) both build their graphs with it, so they perform
     the same operations in the same order. ``y``: the measurement ``[eta; nu] + noise`` (12);
     ``tk``: t_k (s); ``first``: 1 at sample 0 (a constant: its branches fold away), when the EKF
     starts from ``y`` and the reference and the law's state start; ``memory``: the controller's memory
@@ -658,16 +396,7 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
     G = {c: ca.vertcat(*[gains[d * k + j] for d in range(6)]) for j, c in enumerate(cols)}
     h = cfg.time_h
     # 2. EKF update (H = I, R = sensor covariance); the first sample starts from y_0 with P = R
-    if ekf.shape[0] == 14:  # per-axis sensor variances (the scenario's var_eta, var_nu)
-        r_meas = ekf[2:14]
-    else:
-        r_meas = ca.vertcat(ca.repmat(ekf[2], 3, 1), ca.repmat(ekf[3], 3, 1), ca.repmat(ekf[4], 6, 1))
-    rows = _sensor_rows(cfg, tk)  # None: the whole [eta; nu] at every sample
-    y0 = y if rows is None else ca.vertcat(*[y[i] if i in dict(rows) else 0 for i in range(12)])
-    xh = ca.if_else(first, y0, memory["xh"])
-    Pu = memory["Pc"]
-    Pc = [ca.if_else(first, r_meas[i] if i == j else 0, Pu[k]) for k, (i, j) in enumerate(_PSYM)]
-    xh, Pc = _ekf_update(xh, Pc, y, r_meas, rows)
+    xh, Pc = ekf_mod.measure(cfg, y, tk, first, memory["xh"], memory["Pc"], ekf)
     eta_hat, nu_hat = xh[0:6], xh[6:12]
     eta_dot_hat = ca.mtimes(J(eta_hat), nu_hat)
 
@@ -679,8 +408,8 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
         r0 = ca.if_else(first, r0_first, memory["r0"])
         y1 = ca.if_else(first, eta_hat, memory["y1"])
         y2 = ca.if_else(first, ca.DM.zeros(6), memory["y2"])
-    e = held_only(cfg, eta_hat - y1)
-    e_dot = held_only(cfg, eta_dot_hat - y2)
+    e = ekf_mod.held_only(cfg, eta_hat - y1)
+    e_dot = ekf_mod.held_only(cfg, eta_dot_hat - y2)
 
     # 4. the controller: its state (initial values at the first sample), its step
     ctx = StepContext(t=tk, h=h, first=first, P=P, Mhat=Mhat, unc=unc, eta_d=eta_d, eta_hat=eta_hat,
@@ -698,7 +427,8 @@ def controller_sample(law: Controller, cfg: ScenarioConfig, P, y, tk, first, mem
 
     if ref is None:
         y1n, y2n = atd.atd_step(y1, y2, eta_d, r0, h0, h)
-    memory_next = {"xh": _ekf_f(xh, h), "Pc": _ekf_cov(xh, Pc, h, ekf[0], ekf[1]), "y1": y1n, "y2": y2n, "r0": r0,
+    xh_next, Pc_next = ekf_mod.predict(xh, Pc, h, ekf[0], ekf[1])
+    memory_next = {"xh": xh_next, "Pc": Pc_next, "y1": y1n, "y2": y2n, "r0": r0,
                    **{f"c_{name}": xc_next[name] for name, _ in law.state}}
     assert list(memory_next) == [name for name, _ in controller_memory(law)]
     return ControllerSample(ctx, tau_v, u_cmd, u_sat, memory_next)
@@ -718,7 +448,7 @@ def _task_reference(cfg: ScenarioConfig, ref, eta_hat, first, memory: dict, h):
     return pd, (pd + z1, vd + z2), r0, h0, z1n, z2n
 
 
-# ---- the controller alone (arvcas export-controller: arvcas.io.export_controller) ------------------------
+# ---- the controller alone (arvcas export-controller: arvcas.export.controller) ------------------------
 
 _BY_NAME = {s.name: s for s in signals_mod.COMMON}
 _DIAG_COMMON = (
@@ -782,7 +512,8 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
       ``diag`` the signals of :func:`controller_diagnostics`.
 
     Built with :func:`controller_sample`, as the run's sample: the same operations in the same order;
-    the terms of ``k`` alone are taken out (:func:`casadi.extract_parametric`), not changed.
+    the terms of ``k`` alone are taken out (:func:`casadi.extract_parametric`), not changed. A ValueError
+    (one line) for a scenario with a trajectory, or a law whose traced signals read the plant's truth.
     """
     law = get_controller(law)
     if cfg.has_trajectory:
@@ -812,8 +543,8 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
         try:
             diag = [sig.value(ctx) for sig in controller_diagnostics(law)]
         except (AttributeError, KeyError) as e:
-            raise ExportError(f"{WHAT}: controller {law.name}: a traced signal needs the plant's truth ({e}); "
-                              f"only signals of the controller's own quantities can be exported") from None
+            raise ValueError(f"controller {law.name}: a traced signal needs the plant's truth ({e}); "
+                             f"only signals of the controller's own quantities can be exported") from None
         outs = ca.cse([ca.vertcat(*cs.memory.values()), cs.u_sat, ca.vertcat(*diag)])
         whole, syms, vals = ca.extract_parametric(ca.vertcat(*outs), k, {"prefix": "kp_"})
         kp = ca.SX.sym("kp", 0) if not syms else ca.vertcat(*syms)
@@ -824,48 +555,6 @@ def controller_functions(law, cfg: ScenarioConfig, layout, prefix: str = "") -> 
         fns["step" + tag] = ca.Function(prefix + "step" + tag, [mem, k, kp, y, t, tau_arm], parts,
                                         ["mem", "k", "kp" + tag, "y", "t", "tau_arm"], ["mem_next", "u", "diag"])
     return fns
-
-
-def command_functions(cfg: ScenarioConfig, layout, prefix: str = "") -> dict[str, ca.Function]:
-    """The thruster command map of the controller (docs/model.md §9), for ``arvcas export-controller``: the
-    command each thruster is sent for its saturated thrust, in the map's unit (PWM µs, normalised, rad/s),
-    computed as the run computes its ``command`` (:func:`_thruster_step`: the same helpers, the same order).
-
-    * ``thr_tab(p) -> tab``: each table map's rotor-state grid, thrust and slopes (the run's per-run
-      constants, :func:`thruster_constants`), once per init;
-    * ``command(u, tab, p) -> command``: the rotor-state target ``y = F^-1(u)`` (a table's cubic inverted in
-      MX, :func:`_pchip_interval`, then :func:`_pchip_newton`; the quadratic law's in closed form) and ``command_of(y)``.
-
-    Empty for a system without thruster dynamics (its commands are the thrust itself)."""
-    st = layout.structure
-    if not st.has_thruster_dynamics:
-        return {}
-    n = st.n_thrusters
-    p = ca.SX.sym("p", len(layout))
-    P = view(p, layout)
-    tab = thruster_constants(P, cfg)[1]
-    maps = thrusters.thruster_maps(P)
-    u_s, y_tab = ca.SX.sym("u", n), ca.SX.sym("y_tab", n)
-    y = [y_tab[i] if m.kind == "table" else thrusters.map_inverse(P, m, u_s[i]) for i, m in enumerate(maps)]
-    cmd_sx = ca.Function(prefix + "command_of", [u_s, y_tab, p],
-                         [ca.vertcat(*[thrusters.command_of(P, m, y[i]) for i, m in enumerate(maps)])])
-    # a table's inverse: the interval looked up in MX, Newton's method in SX (scalar code: the same operations
-    # as the run's MX ones, element by element; tests/test_export_controller.py checks the bits)
-    um, tm, pm = ca.MX.sym("u", n), ca.MX.sym("tab", tab.shape[0]), ca.MX.sym("p", len(layout))
-    maps_s = [st.thruster_map(d.map) for d in st.thruster_dynamics]
-    _, grids = _table_grids(st, tm)
-    y_tab = [ca.MX(1, 1)] * n
-    for name, (g, v, d, _) in grids.items():
-        idx = [i for i, m in enumerate(maps_s) if m.name == name]
-        iv = [ca.SX.sym(k, len(idx)) for k in ("g0", "g1", "v0", "v1", "d0", "d1", "u")]
-        newton = ca.Function(f"{prefix}newton_{name}", iv, [_pchip_newton(*iv)])
-        uu = ca.vertcat(*[um[i] for i in idx])
-        ys = newton(*_pchip_interval(g, v, d, uu), uu)
-        for r, i in enumerate(idx):
-            y_tab[i] = ys[r]
-    return {"thr_tab": ca.Function(prefix + "thr_tab", [p], [tab], ["p"], ["tab"]),
-            "command": ca.Function(prefix + "command", [um, tm, pm], [cmd_sx(um, ca.vertcat(*y_tab), pm)],
-                                   ["u", "tab", "p"], ["command"])}
 
 
 def controller_reads(fns: dict[str, ca.Function], name: str) -> bool:
@@ -929,7 +618,7 @@ def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: b
 
     # metrics (docs/model.md §6) and divergence of the controller part
     # a task's error is against the desired trajectory (docs/tasks.md); only on the DOFs it holds (docs/sensors.md)
-    e_true = held_only(cfg, eta - (y1 if ref is None else ref[0:6]))
+    e_true = ekf_mod.held_only(cfg, eta - (y1 if ref is None else ref[0:6]))
     chat_sum = L.get(S, "chat_sum") + ca.if_else(first, 0, ca.fabs(tau_v - L.get(S, "tau_prev")))
     # CHAT on the delivered wrench (what the water sees): the realised B sat(u) of each sample, or with
     # dynamics the rotors' wrench at each sample time (docs/model.md §6)
@@ -997,7 +686,7 @@ def _true_terms(cfg, opts, P, x, u_hold, R0, static, phase_cs, water=None, tk=No
     eta, nu = x[0:6], x[6:12]
     tau_real_held = ca.mtimes(thrusters.B_T(P), u_hold)
     trim = _trim(P, *static, eta)
-    tau_dist = scenario.disturbance_tabulated(cfg, R0["dist_sin"], R0["dist_cos"], phase_cs)
+    tau_dist = profiles.disturbance_tabulated(cfg, R0["dist_sin"], R0["dist_cos"], phase_cs)
     if cfg.has_water:
         current, tether = _water(cfg, P, water, tk, eta, nu)
         nud_true, tau_m_true = coupled_terms_scheduled(P, eta, nu, tau_real_held + tau_dist + tether, R0, trim, opts,
@@ -1026,79 +715,6 @@ def arm_truth(spec: RunSpec) -> ca.Function:
                                     water, t)
     return ca.Function("arm_truth", [x, u_hold, rt, ra, p, phase, water, t], [tau_m + trim],
                        ["x", "u_hold", "rec_time", "rec_arm", "p", "phase", "water", "t"], ["tau_arm"])
-
-
-def _sym_get(Pu, i, j):
-    return Pu[_PSYM_INDEX[(i, j) if i <= j else (j, i)]]
-
-
-def _ekf_update(xh, Pu, y, r, rows=None):
-    """EKF measurement update with H = I and diagonal R = diag(r), as 12 sequential scalar updates.
-
-    Exactly the batch update ``K = P (P + R)^-1`` for uncorrelated measurement noise, at a fraction
-    of the cost of a 12x12 solve in the graph. ``Pu``: the covariance's upper triangle (a list in
-    ``_PSYM`` order); each scalar update ``P - P_i P_i' / s`` is symmetric, so only that triangle is
-    computed and P stays symmetric by construction. ``rows``: a sensor set's measured components as
-    ``(index, due)`` (``due`` 1 when the sensor has a fresh reading at this sample, else 0: its gain is
-    zero; None: every sample), or None for all twelve at every sample (docs/sensors.md).
-    Returns (xh, the updated triangle).
-    """
-    n = xh.shape[0]
-    Pu = list(Pu)
-    xh = [xh[a] for a in range(n)]
-    for i, due in ((i, None) for i in range(n)) if rows is None else rows:
-        col = [_sym_get(Pu, a, i) for a in range(n)]  # P[:, i] = P[i, :]
-        s = col[i] + r[i]
-        K = [c / s for c in col] if due is None else [due * c / s for c in col]
-        innov = y[i] - xh[i]
-        xh = [xh[a] + K[a] * innov for a in range(n)]
-        Pu = [Pu[k] - K[a] * col[b] for k, (a, b) in enumerate(_PSYM)]
-    return ca.vertcat(*xh), Pu
-
-
-def _sensor_rows(cfg: ScenarioConfig, tk):
-    """A sensor set's EKF rows ``(index in [eta; nu], due)`` (:func:`_ekf_update`): ``due`` is 1 at the samples
-    ``k = round(t_k / h)`` that are multiples of the sensor's ``every``, else 0 (``every`` 1: always 1, a
-    constant); None when the scenario names no sensor set (the whole [eta; nu] at every sample)."""
-    if scenario.sensor_set(cfg) is None:
-        return None
-    k = ca.floor(tk / cfg.time_h + 0.5)
-    return [(i, None if every == 1 else ca.fmod(k, every) == 0) for i, _, every in scenario.measured(cfg)]
-
-
-def held_only(cfg: ScenarioConfig, e):
-    """``e`` (6, per DOF) with the DOFs the task does not hold set to 0 (docs/sensors.md); ``e`` itself when it
-    holds all six."""
-    held = scenario.held_dofs(cfg)
-    return e if all(held) else ca.vertcat(*[e[d] if held[d] else 0 for d in range(6)])
-
-
-def _ekf_f(xh, h):
-    """Kinematic (constant-velocity) transition of docs/model.md §4: eta+ = eta + h J(eta) nu, nu+ = nu."""
-    return ca.vertcat(xh[0:6] + h * ca.mtimes(J(xh[0:6]), xh[6:12]), xh[6:12])
-
-
-def _ekf_cov(xh, Pu, h, q_eta, q_nu):
-    """P+ = F P F' + Q with F the AD Jacobian of the transition (docs/model.md §4), Q = diag(q_eta I6, q_nu I6).
-
-    ``Pu``: P's upper triangle (``_PSYM`` order); returns that of P+ as a column. F is kept sparse
-    (its structural zeros and ones are never multiplied: the velocity rows are the identity, the
-    pose block is I + h d(J nu)/d eta with only the attitude columns), and only the upper triangle of
-    the symmetric F P F' is formed, each entry a sparse row product ``(F P)[a, :] . F[b, :]``.
-    """
-    xs = ca.SX.sym("xs", 12)
-    F = ca.substitute(ca.jacobian(_ekf_f(xs, h), xs), xs, xh)
-    P = ca.SX(12, 12)
-    for a in range(12):
-        for b in range(12):
-            P[a, b] = _sym_get(Pu, a, b)
-    FP = ca.mtimes(F, P)
-    q = [q_eta] * 6 + [q_nu] * 6
-    out = []
-    for a, b in _PSYM:
-        v = ca.mtimes(FP[a, :], F[b, :].T)
-        out.append(v + q[a] if a == b else v)
-    return ca.vertcat(*out)
 
 
 def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
@@ -1156,7 +772,7 @@ def run_start(spec: RunSpec, L: Layout, pc_fn: ca.Function, G, unc, phase, ekf, 
     S0 = ca.vertcat(x0, ca.MX.zeros(i_ok - 12), ca.MX(1), ca.MX(-1))
     K = ca.vertcat(G, unc, phase_cs, ekf, water, p, consts, pc_fn(p, consts, phase_cs, water))
     if spec.lay.structure.has_thruster_dynamics:
-        K = ca.vertcat(K, *_thr_consts_fn(spec)(p))
+        K = ca.vertcat(K, *thrust_forcing.constants_function(spec.cfg, spec.lay)(p))
     assert S0.shape[0] + K.shape[0] == L.size
     return S0, K
 
@@ -1205,11 +821,6 @@ def _chain(name: str, funcs) -> ca.Function:
             lst.append(v)
     return ca.Function(name, [S, K] + [ca.horzcat(*v) for v in per_in], [s] + [ca.horzcat(*v) for v in per_out],
                        f0.name_in(), f0.name_out())
-
-
-def _thr_consts_fn(spec: RunSpec) -> ca.Function:
-    p = ca.SX.sym("p", len(spec.lay))
-    return ca.Function("thruster_constants", [p], list(thruster_constants(view(p, spec.lay), spec.cfg)))
 
 
 def _consts_fn(opts: ModelOptions, layout: ParamLayout | None = None) -> ca.Function:

@@ -27,7 +27,7 @@ import casadi as ca
 import numpy as np
 
 from arvcas.build import calls, codegen, lanes
-from arvcas.sim import closedloop, scenario, schedule
+from arvcas.sim import closedloop, scenario, schedule, thrust_forcing
 
 __all__ = ["LockstepRun", "build", "ENTRY"]
 
@@ -119,11 +119,11 @@ def _thruster_c(spec: closedloop.RunSpec, parts: closedloop.StepParts, off: dict
 
     ``cl_thr_lag_iv`` and ``cl_thr_wrench_iv`` rewritten to lanes; between them, lane by lane, each table
     map's intervals gathered from the run's tables as the scalar run's MX lookups gather them
-    (:func:`closedloop.target_intervals`, :func:`closedloop.stage_intervals`: the same search, the same
+    (:func:`arvcas.model.thruster_tables.target_intervals`, :func:`~arvcas.model.thruster_tables.stage_intervals`: the same search, the same
     numbers). p is shared by the batch, so every lane's tables and lag constants are ``k0``'s (the last
     started run's constants) and p is ``a[6]``."""
     st = spec.lay.structure
-    n, m_off = st.n_thrusters, len(closedloop.lag_offsets(spec.cfg))
+    n, m_off = st.n_thrusters, len(thrust_forcing.lag_offsets(spec.cfg))
     maps = [st.thruster_map(d.map) for d in st.thruster_dynamics]
     blocks, k = [], 0
     for m in st.thruster_maps:
@@ -216,9 +216,9 @@ def loop_c(name: str, spec: closedloop.RunSpec, parts: closedloop.StepParts, mai
     ntau = max(6, NT)
     thr_c, thr_fns, thr_decl = _thruster_c(spec, parts, off, pre) if dyn else ("", "", "")
     # the thrusters' part's wrench vector (stage wrenches, or the forcing's moments with time.thrust_quadrature)
-    # and where plant step i's input starts in it (closedloop.tau_stride)
+    # and where plant step i's input starts in it (thrust_forcing.tau_stride)
     nwb = parts.thr[1].size1_out(0) if dyn else 0
-    tau_i = f"WB + {closedloop.tau_stride(spec)} * i * W" if dyn else "TAU"
+    tau_i = f"WB + {thrust_forcing.tau_stride(spec.cfg)} * i * W" if dyn else "TAU"
     return lanes.header(W) + fns + thr_fns + f"""
 /* arvcas: {n} samples of W = {W} runs in lockstep (arvcas.sim.lockstep) */
 CASADI_SYMBOL_EXPORT int {name}{ENTRY}(long long int n, long long int chunk, long long int* next, int* stop,

@@ -34,7 +34,7 @@ from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller, provenance
 from arvcas.model.uvms import ModelOptions
 from arvcas.system.params import Params, default_layout, system_tag
-from arvcas.sim import accumulate, closedloop, scenario, schedule, signals as signals_mod
+from arvcas.sim import accumulate, closedloop, profiles, scenario, schedule, signals as signals_mod
 from arvcas.sim.result import Result
 from arvcas.sim.scenario import ScenarioConfig
 
@@ -247,7 +247,7 @@ class CompiledRun:
         if isinstance(noise_scale, bool) or not (isinstance(noise_scale, (int, float)) and np.isfinite(noise_scale)
                                                  and noise_scale >= 0):
             raise SimulationError(f"noise_scale: must be a finite number >= 0, got {noise_scale!r}")
-        noise = scenario.noise_sequence(self.cfg, seed) * float(noise_scale)
+        noise = profiles.noise_sequence(self.cfg, seed) * float(noise_scale)
         unc, ph = self._unc_phase(uncertainty, phase)
         fn = self.function(trace=True)
         out = calls.call_named(fn, {"gains": g, "noise": noise, "unc": unc, "phase": ph, **self._shared()})
@@ -319,7 +319,7 @@ class CompiledRun:
         g = self._gains(gains, batch=True)
         self._check_batch_memory("batch", g)
         unc, ph = self._unc_phase(uncertainty, phase)
-        noise = scenario.noise_sequence(self.cfg, seed)
+        noise = profiles.noise_sequence(self.cfg, seed)
         chat, rmse, ok, t_fail = self._evaluate(g.shape[0], {"gains": g.T, "noise": noise, "unc": unc, "phase": ph},
                                                 {"gains"}, n_threads, chat, lockstep)
         return (chat, rmse, ok, t_fail) if return_status else (chat, rmse)
@@ -366,7 +366,7 @@ class CompiledRun:
         U = rows(uncertainty, unc0, 4, "uncertainty")
         _nonnegative_factors(U)
         PH = rows(phase, ph0, 6, "phase")
-        first = scenario.noise_sequence(self.cfg, int(seeds[0]))  # every draw's noise block has its shape
+        first = profiles.noise_sequence(self.cfg, int(seeds[0]))  # every draw's noise block has its shape
         k = first.shape[1]
         # bounded before allocating: n noise blocks, the per-run inputs, the outputs (and their copies)
         calls.check_memory(f"many: {n} runs", n * (first.nbytes + 8 * (G.shape[1] + 4 + 6) + _OUT_BYTES),
@@ -374,7 +374,7 @@ class CompiledRun:
         noise = np.empty((first.shape[0], n * k), order="F")  # as call_named reads it: no copy
         noise[:, :k] = first
         for i in range(1, n):
-            noise[:, i * k:(i + 1) * k] = scenario.noise_sequence(self.cfg, int(seeds[i]))
+            noise[:, i * k:(i + 1) * k] = profiles.noise_sequence(self.cfg, int(seeds[i]))
         return self._evaluate(n, {"gains": G.T, "noise": noise, "unc": U.T, "phase": PH.T},
                               {"gains", "noise", "unc", "phase"}, n_threads, chat, lockstep)
 
@@ -388,7 +388,7 @@ class CompiledRun:
         if n > MAX_RUNS:
             raise SimulationError(f"runs: {n} in one call is more than the {MAX_RUNS} allowed; split the batch")
         self._check_batch_memory("outputs", g)
-        out = calls.call_named(self.function(trace=False), {"gains": g.T, "noise": scenario.noise_sequence(self.cfg, seed),
+        out = calls.call_named(self.function(trace=False), {"gains": g.T, "noise": profiles.noise_sequence(self.cfg, seed),
                                                             "unc": unc, "phase": ph, **self._shared()},
                                n=n, per_run={"gains"}, n_threads=_n_threads(n_threads))
         return {k: (v.ravel().copy() if v.shape[0] == 1 else v.T.copy()) for k, v in out.items()}

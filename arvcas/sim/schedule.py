@@ -32,7 +32,7 @@ import numpy as np
 
 from arvcas.build import calls, codegen
 from arvcas.model import manipulator, vehicle
-from arvcas.sim import scenario
+from arvcas.sim import profiles, scenario
 from arvcas.model.linalg import lu_nopivot, lu_pack, lu_unpack
 from arvcas.system import config
 from arvcas.system.params import default_layout, system_tag, view
@@ -134,9 +134,9 @@ def stage_times(cfg: ScenarioConfig) -> np.ndarray:
 
 
 def _time_expr(cfg: ScenarioConfig, t, P):
-    q, qd, qdd = scenario.joint_trajectory(cfg, manipulator.stow_pose(P), t)
+    q, qd, qdd = profiles.joint_trajectory(cfg, manipulator.stow_pose(P), t)
     w = ca.DM(cfg.disturbance_freq)
-    return ca.densify(ca.vertcat(q, scenario.payload_profile(cfg, t), qd, qdd, ca.sin(w * t), ca.cos(w * t)))
+    return ca.densify(ca.vertcat(q, profiles.payload_profile(cfg, t), qd, qdd, ca.sin(w * t), ca.cos(w * t)))
 
 
 def _arm_expr(P, q, qd, qdd, payload):

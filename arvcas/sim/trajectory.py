@@ -36,7 +36,7 @@ def rest_to_rest(s):
     ``(10 s^3 - 15 s^4 + 6 s^5, its first derivative in s, its second)``, from 0 to 1 with zero rate and
     acceleration at both ends. Plain arithmetic on what it is given (a float, a NumPy array), so every
     user computes the same bits; the compiled scenario's arm motion evaluates the same polynomial in
-    CasADi (:func:`arvcas.sim.scenario.quintic`)."""
+    CasADi (:func:`arvcas.sim.profiles.quintic`)."""
     return (10 * s**3 - 15 * s**4 + 6 * s**5, 30 * s**2 - 60 * s**3 + 30 * s**4, 60 * s - 180 * s**2 + 120 * s**3)
 
 
