@@ -30,8 +30,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from arvcas.io.cliargs import (RESULT_FORMATS, add_model_args, add_system_arg, model_options, out_file,
-                                refuse)
+from arvcas.io.cliargs import (RESULT_FORMATS, add_model_args, add_system_arg, default_system_text, model_options,
+                                out_file, refuse)
+from arvcas.system import DEFAULT
 
 __all__ = ["main", "TABLE", "COMMANDS", "Command"]
 
@@ -65,7 +66,7 @@ def _add_export_c(p: argparse.ArgumentParser) -> None:
     p.add_argument("dir", type=Path, help="output directory (created if its parent exists)")
     p.add_argument("--prefix", default=None,
                    help="prefix of every C symbol; the library is lib<prefix without its last _>.so "
-                        "(default: arvcas_<system>_, e.g. arvcas_haidou1_)")
+                        f"(default: arvcas_<system>_, e.g. arvcas_{DEFAULT}_)")
     add_model_args(p)
 
 
@@ -137,12 +138,12 @@ def _add_export_controller(p: argparse.ArgumentParser) -> None:
                         "export's README and header record it)")
     p.add_argument("--prefix", default=None,
                    help="prefix of every C symbol; the library is lib<prefix without its last _>.so "
-                        "(default: arvcas_<system>_<controller>_, e.g. arvcas_haidou1_proposed_)")
+                        f"(default: arvcas_<system>_<controller>_, e.g. arvcas_{DEFAULT}_proposed_)")
     p.add_argument("--format", choices=("c", "ardusub-params"), default="c",
                    help="c: the C library (default); ardusub-params: the ardusub controller's gains as an ArduSub "
                         ".param file (QGroundControl, MAVProxy) in DIR, values outside ArduSub's ranges refused "
                         "(docs/ardusub.md)")
-    add_system_arg(p, "the front's, else haidou1")
+    add_system_arg(p, f"the front's, else {default_system_text()}")
 
 
 def _check_export_controller(a: argparse.Namespace) -> None:
@@ -273,64 +274,34 @@ def _run_cache(a: argparse.Namespace) -> int:
 
 # ---- demo --------------------------------------------------------------------------------------
 
-_Q0_DEG = (90.0, 90.0, -90.0, 0.0, 90.0, 0.0)
-_QG_DEG = (60.0, 60.0, -60.0, 0.0, 60.0, 0.0)
-
-
-def _quintic(t: float, q0, qg, t0: float, t1: float):
-    """Rest-to-rest quintic from q0 (t <= t0) to qg (t >= t1): (q, qd, qdd), elementwise."""
-    from arvcas.sim.trajectory import rest_to_rest
-
-    T = t1 - t0
-    s = min(max((t - t0) / T, 0.0), 1.0)
-    pos, vel, acc = rest_to_rest(s)
-    vel, acc = vel / T, acc / T**2
-    q = [a + (b - a) * pos for a, b in zip(q0, qg)]
-    qd = [(b - a) * vel for a, b in zip(q0, qg)]
-    qdd = [(b - a) * acc for a, b in zip(q0, qg)]
-    return q, qd, qdd
-
-
 def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 25.0, dt: float = 1.0):
-    """Coupling wrench tau_m (N, N m; in {b} about the COB) along the demo arm motion.
-
-    Haidou-1: the arm moves from q0 = [90, 90, -90, 0, 90, 0] deg to qg = [60, 60, -60, 0, 60, 0] deg by
-    a quintic over 5..20 s; another system: the arm motion of its default scenario. The vehicle is at
-    rest and level, payload 0. Returns rows (t, Fx..Mz).
+    """Coupling wrench tau_m (N, N m; in {b} about the COB) along the arm motion of the system's default
+    scenario (Haidou-1's: from the stowed pose [90, 90, -90, 0, 90, 0] deg to qg = [60, 60, -60, 0, 60, 0] deg
+    by a quintic over 5..20 s). The vehicle is at rest and level, payload 0. Returns rows (t, Fx..Mz).
     """
     import casadi as ca
     import numpy as np
 
     from arvcas.build.dynamics import compiled
-    from arvcas.system.params import default_layout, load, view
+    from arvcas.model.manipulator import stow_pose
+    from arvcas.sim import scenario
+    from arvcas.system.params import load, view
 
     params = load(params_path)
     if params.structure.n_joints == 0:
         raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) has no arm: there is no coupling "
                          f"wrench to show")
     p = params.vector()
-    cfg = None
-    if params.structure != default_layout().structure:
-        from arvcas.sim import scenario
-
-        if params.default("scenario") is None:
-            raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) names no default scenario "
-                             f"([defaults] scenario): the demo follows its arm motion")
-        cfg = scenario.load_scenario(params.default("scenario"))
-        scenario.check_joint_limits(cfg, params)
+    if params.default("scenario") is None:
+        raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) names no default scenario "
+                         f"([defaults] scenario): the demo follows its arm motion")
+    cfg = scenario.load_scenario(params.default("scenario"))
+    scenario.check_joint_limits(cfg, params)
     f = compiled("arm_wrench", model_options(n_quad), system=params)
     z6 = np.zeros(6)
-    if params.structure == default_layout().structure:
-        q0 = [math.radians(v) for v in _Q0_DEG]
-        qg = [math.radians(v) for v in _QG_DEG]
-        traj = lambda t: _quintic(t, q0, qg, 5.0, 20.0)  # noqa: E731
-    else:
-        from arvcas.model.manipulator import stow_pose
-        from arvcas.sim import scenario
-
-        ts = ca.SX.sym("t")
-        fq = ca.Function("q", [ts], list(scenario.joint_trajectory(cfg, stow_pose(view(p, params.layout)), ts)))
-        traj = lambda t: [np.array(x).ravel() for x in fq(t)]  # noqa: E731
+    ts = ca.SX.sym("t")
+    fq = ca.Function("q", [ts], list(scenario.joint_trajectory(cfg, stow_pose(view(p, params.layout)), ts)))
+    traj = lambda t: [np.array(x).ravel() for x in fq(t)]  # noqa: E731
     rows = []
     for k in range(int(round(t_end / dt)) + 1):
         t = k * dt
@@ -350,11 +321,8 @@ def _run_demo(a: argparse.Namespace) -> int:
     rows = demo_table(a.params, a.n_quad)
     params = load(a.params)
     print("coupling wrench tau_m of the arm on the vehicle ({b}, about the COB), vehicle at rest and level,")
-    if a.params is None or params.structure.name == "haidou1":
-        print("arm q0 = [90 90 -90 0 90 0] deg -> qg = [60 60 -60 0 60 0] deg by a quintic over 5..20 s, payload 0")
-    else:
-        print(f"{params.structure.name}: the arm motion of its default scenario ({params.default('scenario').name}), "
-              f"payload 0")
+    print(f"{params.structure.name}: the arm motion of its default scenario ({params.default('scenario').name}), "
+          f"payload 0")
     cols = ("t [s]", "Fx [N]", "Fy [N]", "Fz [N]", "Mx [N m]", "My [N m]", "Mz [N m]")
     print("".join(f"{c:>12}" for c in cols))
     for r in rows:
@@ -381,8 +349,7 @@ def _run_systems(a: argparse.Namespace) -> int:
 
 
 def _add_params(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--system", "--params", dest="params", default=None, metavar="NAME|FILE",
-                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
+    add_system_arg(p, type=str)
     p.add_argument("--match", default=None, metavar="TEXT",
                    help="only the parameters whose name contains TEXT (e.g. hydro. or thrusters.T1.)")
 

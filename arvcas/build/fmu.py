@@ -104,7 +104,6 @@ class FMUError(ValueError):
     """The FMU cannot be written (one line naming the argument and what is allowed)."""
 
 
-_HAIDOU1_THRUSTERS = ("stern-left", "stern-right", "side 1", "side 2", "vertical 1", "vertical 2")
 VR_U = 24  # the first input's value reference (after the 12 states and their 12 derivatives)
 
 
@@ -185,16 +184,13 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
         for k in range(lay["n_in"]):
             add(f"tau[{k + 1}]", "input", "continuous", "N" if k < 3 else "N.m",
                 f"body wrench at the COB in {{b}}: {'XYZKMN'[k]} ({'force' if k < 3 else 'moment'})", start=0.0)
-    elif st.thrusters is None:  # Haidou-1's parametric layout
-        for k in range(lay["n_in"]):
-            add(f"u[{k + 1}]", "input", "continuous", "N",
-                f"thrust command of the {_HAIDOU1_THRUSTERS[k]} thruster (saturated to [thrusters.u_min, "
-                "thrusters.u_max])", start=0.0)
     else:
-        for k, t in enumerate(st.thrusters):
+        from arvcas.model.thrusters import limit_prefixes
+
+        pre = limit_prefixes(st) * st.n_thrusters if st.thrusters is None else limit_prefixes(st)
+        for k, (t, lim) in enumerate(zip(st.thruster_names(), pre)):
             add(f"u[{k + 1}]", "input", "continuous", "N",
-                f"thrust command of thruster {t} (saturated to [thrusters.{t}.u_min, thrusters.{t}.u_max])",
-                start=0.0)
+                f"thrust command of thruster {t} (saturated to [{lim}u_min, {lim}u_max])", start=0.0)
     nj = lay["n_joints"]
     q0 = [P[f"arm.stow.q{j}"] for j in range(1, nj + 1)]
     for vec, unit, what, starts in (("q", "rad", "joint angle", q0), ("qd", "rad/s", "joint rate", [0.0] * nj),
@@ -274,8 +270,7 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
     L = ['<?xml version="1.0" encoding="UTF-8"?>']
     stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     st = P.structure
-    what = "Haidou-1 ARV with its 6-DOF manipulator (Ding et al. 2021)" if _is_haidou1(st) else \
-        f"system {st.name}: {P.description or st.name} ({st.n_thrusters} thrusters, {st.n_joints} joints)"
+    what = f"system {st.name}: {P.description or st.name} ({st.n_thrusters} thrusters, {st.n_joints} joints)"
     desc = (f"{what}, exactly coupled (arvcas uvms_rhs, "
             f"docs/model.md); inputs: {'body wrench tau' if inputs == 'wrench' else 'thruster commands u'}, "
             "q, qd, qdd, payload")
@@ -347,10 +342,6 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
 
 # ---------------------------------------------------------------------------------------------
 # C
-
-
-def _is_haidou1(st) -> bool:
-    return st.name == "haidou1" and st.thrusters is None and st.n_joints == 6
 
 
 def _rhs_function(opts, inputs: str, P) -> ca.Function:

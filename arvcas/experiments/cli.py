@@ -12,8 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from arvcas.io.cliargs import (RESULT_FORMATS, add_figure_format, add_model_args, model_options, output_kinds, refuse,
-                               seed_arg)
+from arvcas.io.cliargs import (RESULT_FORMATS, add_figure_format, add_model_args, add_system_arg, model_options,
+                               output_kinds, refuse, seed_arg)
 
 __all__ = ["add_sweep", "check_sweep", "run_sweep", "sweep_outputs", "add_montecarlo", "check_montecarlo",
            "run_montecarlo", "montecarlo_outputs", "add_robust", "check_robust", "run_robust", "robust_outputs",
@@ -90,8 +90,7 @@ def add_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--noise-scale", type=float, default=None, metavar="X",
                    help="multiply the sensor noise by X (0: perfect measurements, the EKF unchanged; default 1)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
-    p.add_argument("--system", "--params", dest="params", type=Path, default=None, metavar="NAME|FILE",
-                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
+    add_system_arg(p)
     p.add_argument("--check", type=Path, default=None, metavar="FILE.h5",
                    help="re-run a stored sweep from its file alone and compare bit for bit (no other option)")
     _add_format(p)
@@ -177,8 +176,7 @@ def add_montecarlo(p: argparse.ArgumentParser) -> None:
     p.add_argument("--spread", type=float, default=None,
                    help="half-width of the nominal-model factors' uniform draw around 1 (default 0.3: +-30 %%)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
-    p.add_argument("--system", "--params", dest="params", type=Path, default=None, metavar="NAME|FILE",
-                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
+    add_system_arg(p)
     p.add_argument("--from-front", type=Path, default=None, metavar="FRONT",
                    help="use the gains of a tuning front member (with --index)")
     p.add_argument("--index", default=None, help="front member: an integer, or 'knee'")

@@ -12,12 +12,11 @@ from importlib import resources
 from pathlib import Path
 
 from arvcas.system import params as params_mod
-from arvcas.system.params import Params, ParamsError
+from arvcas.system.params import DEFAULT, Params, ParamsError
 
 __all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT"]
 
 SHIPPED = ("haidou1", "bluerov2_heavy_alpha5", "hinsdale_bluerov2_alpha5", "bluerov2", "bluerov2_heavy")
-DEFAULT = "haidou1"
 
 
 @dataclass(frozen=True)
@@ -66,7 +65,7 @@ def shipped() -> dict[str, Path]:
 
 
 def load_system(name_or_path: str | Path | None = None) -> System:
-    """A shipped system by name (``arvcas systems``) or a system file by path (default: Haidou-1).
+    """A shipped system by name (``arvcas systems``) or a system file by path (default: :data:`DEFAULT`).
 
     A one-line :class:`arvcas.system.params.ParamsError` for an unknown name (with the closest shipped one)
     and for every fault of the file (:func:`arvcas.system.params.load`).
@@ -86,7 +85,8 @@ def load_system(name_or_path: str | Path | None = None) -> System:
 
 
 def resolve(system) -> System:
-    """``system`` as a :class:`System`: None (Haidou-1), a name, a path, a System or a Params."""
+    """``system`` as a :class:`System`: None (the default system, :data:`DEFAULT`), a name, a path, a System or
+    a Params."""
     if isinstance(system, System):
         return system
     if isinstance(system, Params):
