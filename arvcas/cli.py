@@ -73,14 +73,14 @@ def _add_export_c(p: argparse.ArgumentParser) -> None:
 def _export_c_outputs(a: argparse.Namespace) -> list:
     from arvcas.build.export import KIND, default_prefix, files
 
-    return [(f"DIR {a.dir}", a.dir / n, KIND, a.dir) for n in files(a.prefix or default_prefix(a.params))]
+    return [(f"DIR {a.dir}", a.dir / n, KIND, a.dir) for n in files(a.prefix or default_prefix(a.system))]
 
 
 def _run_export_c(a: argparse.Namespace) -> int:
     from arvcas.build.export import export_c
     from arvcas.system.params import load
 
-    paths = export_c(a.dir, opts=model_options(a.n_quad), params=load(a.params), prefix=a.prefix, force=a.force)
+    paths = export_c(a.dir, opts=model_options(a.n_quad), system=load(a.system), prefix=a.prefix, force=a.force)
     for path in paths:
         print(path)
     print(f"build with: make -C {a.dir}")
@@ -98,10 +98,10 @@ def _run_export_ardusub_params(a: argparse.Namespace, d: dict) -> int:
     if d["controller"] != "ardusub":
         raise ValueError(f"--format ardusub-params: the controller is {d['controller']}, not ardusub (tune the ardusub "
                          "controller; other laws export as a C library)")
-    gains = d["gains"] if d["gains"] is not None else default_gains("ardusub", d["params"])
+    gains = d["gains"] if d["gains"] is not None else default_gains("ardusub", d["system"])
     ap.param_values(gains)  # a value outside ArduSub's ranges: refused before anything is written
     a.dir.mkdir(exist_ok=True)
-    system = d["params"].structure.name
+    system = d["system"].structure.name
     path = ap.write_param_file(a.dir / ap.default_name(system), gains, system=system,
                                front=str(a.front) if a.front is not None else "none (ArduSub's defaults)",
                                member=str(a.member) if a.member is not None else "none",
@@ -167,7 +167,7 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
     from arvcas.system.params import load
     from arvcas.sim import scenario
 
-    params = load(a.params)
+    params = load(a.system)
     design = {"controller": a.controller, "gains": None, "gains_source": None}
     cfg_text = None
     if a.front is not None:
@@ -175,7 +175,7 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
         from arvcas.tuning.front import check_provenance, member_index, read_front, resolve_front_path, system_params
 
         path = resolve_front_path(a.front)
-        if a.params is None:  # the front's own system
+        if a.system is None:  # the front's own system
             params = system_params(ck.read_checkpoint(path))
         changed = check_provenance(path, params, a.allow_model_change, "--front")
         fr = read_front(path)
@@ -196,7 +196,7 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
         cfg = scenario.load_scenario(params.default("scenario"))
     else:
         cfg = None  # export_controller names what is missing
-    design.update(params=params, cfg=cfg)
+    design.update(system=params, cfg=cfg)
     a._design = design
     return design
 
@@ -208,9 +208,9 @@ def _export_controller_outputs(a: argparse.Namespace) -> list:
     if a.format == "ardusub-params":
         from arvcas.io.ardusub_params import default_name
 
-        return [(f"DIR {a.dir}", a.dir / default_name(d["params"].structure.name), "export-controller", a.dir)]
+        return [(f"DIR {a.dir}", a.dir / default_name(d["system"].structure.name), "export-controller", a.dir)]
     return [(f"DIR {a.dir}", a.dir / n, "export-controller", a.dir)
-            for n in files(a.prefix or default_prefix(d["params"], d["controller"]))]
+            for n in files(a.prefix or default_prefix(d["system"], d["controller"]))]
 
 
 def _run_export_controller(a: argparse.Namespace) -> int:
@@ -219,7 +219,7 @@ def _run_export_controller(a: argparse.Namespace) -> int:
     d = _export_controller_design(a)
     if a.format == "ardusub-params":
         return _run_export_ardusub_params(a, d)
-    paths = export_controller(a.dir, d["controller"], gains=d["gains"], params=d["params"], scenario=d["cfg"],
+    paths = export_controller(a.dir, d["controller"], gains=d["gains"], system=d["system"], scenario=d["cfg"],
                               prefix=a.prefix, gains_source=d["gains_source"], force=a.force)
     for path in paths:
         print(path)
@@ -243,7 +243,7 @@ def _add_export_fmu(p: argparse.ArgumentParser) -> None:
 def _run_export_fmu(a: argparse.Namespace) -> int:
     from arvcas.build.fmu import export_fmu
 
-    print(export_fmu(a.file, params=a.params, opts=model_options(a.n_quad), force=a.force, inputs=a.inputs))
+    print(export_fmu(a.file, system=a.system, opts=model_options(a.n_quad), force=a.force, inputs=a.inputs))
     return 0
 
 
@@ -318,8 +318,8 @@ def _add_demo(p: argparse.ArgumentParser) -> None:
 def _run_demo(a: argparse.Namespace) -> int:
     from arvcas.system.params import load
 
-    rows = demo_table(a.params, a.n_quad)
-    params = load(a.params)
+    rows = demo_table(a.system, a.n_quad)
+    params = load(a.system)
     print("coupling wrench tau_m of the arm on the vehicle ({b}, about the COB), vehicle at rest and level,")
     print(f"{params.structure.name}: the arm motion of its default scenario ({params.default('scenario').name}), "
           f"payload 0")
@@ -360,7 +360,7 @@ def _run_params(a: argparse.Namespace) -> int:
     from arvcas.build.units import si_unit
     from arvcas.system import load_system
 
-    s = load_system(a.params)
+    s = load_system(a.system)
     P = s.params
     names = [n for n in P.names() if a.match is None or a.match in n]
     if not names:
@@ -574,14 +574,14 @@ def _table() -> tuple[Command, ...]:
 
     return (
         Command("export-c", "write the plant functions as a C library with Makefile, example and README",
-                _add_export_c, _run_export_c, inputs=(("params", "system"),), outputs=_export_c_outputs),
+                _add_export_c, _run_export_c, inputs=(("system", "system"),), outputs=_export_c_outputs),
         Command("export-controller", "write the controller of a run (EKF, reference, law, allocation) with a front "
                 "member's or the default gains as a C library with header, Makefile, ctypes binding and examples",
                 _add_export_controller, _run_export_controller,
-                inputs=(("config", "file"), ("params", "system"), ("front", "front")),
+                inputs=(("config", "file"), ("system", "system"), ("front", "front")),
                 outputs=_export_controller_outputs, check=_check_export_controller, plugins=True),
         Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
-                _add_export_fmu, _run_export_fmu, inputs=(("params", "system"),), outputs=out_file("file", "FILE.fmu")),
+                _add_export_fmu, _run_export_fmu, inputs=(("system", "system"),), outputs=out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
         Command("params", "list every parameter of a system: name (what identify --free takes), SI value, unit, "
                           "source", _add_params, _run_params),
@@ -598,9 +598,9 @@ def _table() -> tuple[Command, ...]:
                 x.add_knees, x.run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=x.knees_outputs,
                 plugins=True),
         Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
-                _add_demo, _run_demo, inputs=(("params", "system"),)),
+                _add_demo, _run_demo, inputs=(("system", "system"),)),
         Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
-                x.add_simulate, x.run_simulate, inputs=(("config", "file"), ("params", "system"), ("from_front", "front")),
+                x.add_simulate, x.run_simulate, inputs=(("config", "file"), ("system", "system"), ("from_front", "front")),
                 outputs=out_file("out", **RESULT_FORMATS), check=x.check_simulate, plugins=True),
         Command("paper", "the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
                 x.add_paper, x.run_paper, outputs=x.paper_outputs),
@@ -629,7 +629,7 @@ def _table() -> tuple[Command, ...]:
                 outputs=x.compare_outputs, check=x.check_compare, plugins=True),
         Command("sweep", "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 "
                 "(table, plot)", x.add_sweep, x.run_sweep,
-                inputs=(("config", "file"), ("params", "system"), ("check", "file")),
+                inputs=(("config", "file"), ("system", "system"), ("check", "file")),
                 outputs=x.sweep_outputs, check=x.check_sweep, plugins=True),
         Command("validate", "simulate a system open loop and k steps ahead over logged trials (*.log.toml) and "
                 "compare: RMSE, NRMSE, R^2, FIT percent, residual tests per signal", v.add_validate, v.run_validate,
@@ -639,7 +639,7 @@ def _table() -> tuple[Command, ...]:
                 inputs=(("system", "system"),), outputs=v.identify_outputs, check=v.check_identify),
         Command("montecarlo", "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance "
                 "phases: CIs, failure rate", x.add_montecarlo, x.run_montecarlo,
-                inputs=(("config", "file"), ("params", "system"), ("from_front", "front"), ("check", "file")),
+                inputs=(("config", "file"), ("system", "system"), ("from_front", "front"), ("check", "file")),
                 outputs=x.montecarlo_outputs, check=x.check_montecarlo, plugins=True),
     )
 

@@ -186,7 +186,7 @@ def test_build_files_use_the_cache_flags(exported, made, monkeypatch, tmp_path, 
     assert f"target_compile_options({lib} PRIVATE {' '.join(cflags)})" in cm
     # read from codegen at export time, not copied: a changed FIXED_FLAGS shows up in both files
     monkeypatch.setattr(codegen, "FIXED_FLAGS", (*codegen.FIXED_FLAGS, "-fno-trapping-math"))
-    export_c(tmp_path / "other", params=system.params)
+    export_c(tmp_path / "other", system=system.params)
     assert "-fno-trapping-math" in (tmp_path / "other" / "Makefile").read_text()
     assert "-fno-trapping-math" in (tmp_path / "other" / "CMakeLists.txt").read_text()
 

@@ -318,7 +318,7 @@ def test_waypoints_outside_the_limits_or_of_the_wrong_size_are_refused(params, s
         scenario.check_joint_limits(b, params)
     with pytest.raises(scenario.ScenarioError, match=r"6 joint angles, but system 'bluerov2_heavy_alpha5' has 4"):
         arvcas.Run("pid", scenario=scenario.loads_scenario(_paper_waypoint_text(), "w"),
-                   params="bluerov2_heavy_alpha5").compile()
+                   system="bluerov2_heavy_alpha5").compile()
 
 
 # ---- the BlueROV2 closed loop ---------------------------------------------------------------------------
@@ -335,7 +335,7 @@ def test_bluerov2_run_compiled_equals_vm_and_signals_are_sized(systems):
     s = systems["bluerov2_heavy_alpha5"]
     cfg = scenario.load_scenario(s.params.default("scenario"))
     cfg = replace(cfg, time_duration=20.0)
-    run = arvcas.Run("proposed", scenario=cfg, params=s).compile()
+    run = arvcas.Run("proposed", scenario=cfg, system=s).compile()
     r = run.simulate(seed=1)
     assert r.ok and r.thrust.shape == (201, 8) and r.q.shape == (201, 4)
     np.testing.assert_allclose(metrics.chat(r.tau_cmd), r.chat, rtol=1e-12)

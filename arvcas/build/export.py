@@ -41,6 +41,7 @@ import casadi as ca
 import numpy as np
 
 from arvcas.build.text import build_word, c_comment, c_comment_lines, c_string, markdown
+from arvcas.system.loader import UNSET, renamed_system
 from arvcas.system.params import DEFAULT
 
 __all__ = ["ExportError", "export_c", "example_inputs", "files", "default_prefix", "MANIFEST", "DEFAULT_PREFIX",
@@ -780,13 +781,14 @@ def _readme(fns, opts, P, inputs, prefix: str) -> str:
 # ---------------------------------------------------------------------------------------------
 
 
-def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, force: bool = False) -> list[Path]:
+def export_c(out_dir, opts=None, system=None, *, prefix: str | None = None, force: bool = False,
+             params=UNSET) -> list[Path]:
     """Write the C library, headers, build files, examples and README into ``out_dir``.
 
-    ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``params``: the
-    system, a :class:`arvcas.system.params.Params` (or a :class:`arvcas.system.System`): its layout sizes the
-    functions (``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``) and its numbers are the defaults
-    in ``<lib>_params.h`` (default: Haidou-1); ``prefix``: of every symbol (a C identifier ending in
+    ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``system``: a
+    :class:`arvcas.system.params.Params` (or a :class:`arvcas.system.System`; ``params=``, its old name, still
+    works): its layout sizes the functions (``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``) and its
+    numbers are the defaults in ``<lib>_params.h`` (default: the default system); ``prefix``: of every symbol (a C identifier ending in
     ``_``; the library is ``lib<prefix without the last _>.so``; default :func:`default_prefix`,
     ``arvcas_<system>_``). ``out_dir`` is created if its parent exists. A file there
     that the manifest does not list with its current sha256 is refused unless ``force``. Returns the
@@ -797,6 +799,7 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, forc
     from arvcas.system.params import Params, load
     from arvcas.system import System
 
+    params = renamed_system(system, params, "export_c")
     P = load() if params is None else params
     if isinstance(P, System):
         P = P.params

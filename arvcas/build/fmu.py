@@ -33,6 +33,7 @@ from pathlib import Path
 
 from arvcas.build.text import xml_attr
 from arvcas.io import files
+from arvcas.system.loader import UNSET, renamed_system
 
 import casadi as ca
 
@@ -107,12 +108,12 @@ class FMUError(ValueError):
 VR_U = 24  # the first input's value reference (after the 12 states and their 12 derivatives)
 
 
-def layout(params=None, inputs: str = "wrench") -> dict[str, int]:
-    """Value references of the FMU of the system ``params``: the sizes ``n_in`` (the first inputs: 6
+def layout(system=None, inputs: str = "wrench", *, params=UNSET) -> dict[str, int]:
+    """Value references of the FMU of the system ``system`` (``params=``: its old name): the sizes ``n_in`` (the first inputs: 6
     for the wrench, n_thrusters for the thrusters), ``n_joints``, ``n_u`` (every input), the offsets
     of ``q``, ``qd``, ``qdd`` and ``payload`` within the inputs, and ``vr_h``, ``vr_p`` (Haidou-1:
     25 inputs, h_rk4 at 49, the parameters from 50)."""
-    P = _check_params(params)
+    P = _check_params(renamed_system(system, params, "layout"))
     _check_inputs(inputs)
     st = P.structure
     n_in = 6 if inputs == "wrench" else st.n_thrusters
@@ -150,17 +151,17 @@ def _parameter_unit(P, name: str) -> tuple[str | None, str, dict | None]:
 # variables
 
 
-def variables(params=None, inputs: str = "wrench") -> list[dict]:
+def variables(system=None, inputs: str = "wrench", *, params=UNSET) -> list[dict]:
     """The FMU's ScalarVariables in order (value reference = index): name, causality, unit, start, ...
 
-    ``params`` is the system (its Params, a system file or None for Haidou-1): it sizes the inputs
+    ``system`` (its Params, a system file or None for the default system; ``params=``: its old name) sizes the inputs
     (:func:`layout`) and gives the parameters' start values; the states' start values are the
     ``eta0``, ``nu0`` of the system's default scenario (Haidou-1: ``data/scenario.toml``), the
     joints' the stowed pose ``arm.stow``.
     """
     from arvcas.sim.scenario import load_scenario
 
-    P = _check_params(params)
+    P = _check_params(renamed_system(system, params, "variables"))
     lay = layout(P, inputs)
     st = P.structure
     cfg = load_scenario(P.default("scenario"))
@@ -455,13 +456,13 @@ def _check_path(path, force: bool) -> Path:
     return p
 
 
-def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = "wrench") -> Path:
+def export_fmu(path, system=None, opts=None, force: bool = False, inputs: str = "wrench", *, params=UNSET) -> Path:
     """Write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm to ``path``.
 
     ``path`` must end in ``.fmu``; an existing file is replaced only if arvcas recorded it as an FMU it
     wrote (the directory's manifest, :mod:`arvcas.io.files`; nothing inside the file is trusted), or
-    with ``force=True``. ``params``, the system (its :class:`arvcas.system.params.Params` or
-    :class:`arvcas.system.System`, a system file, or None for Haidou-1), sizes the FMU (:func:`layout`)
+    with ``force=True``. ``system`` (its :class:`arvcas.system.params.Params` or :class:`arvcas.system.System`,
+    a system file, or None for the default system; ``params=``: its old name) sizes the FMU (:func:`layout`)
     and sets the parameters' start values; every one stays settable in the FMU. ``opts`` is
     an :class:`arvcas.model.uvms.ModelOptions` (n_quad of the link drag). ``inputs``: ``"wrench"``
     (the body wrench ``tau``, 6) or ``"thrusters"`` (the n_thrusters thrust commands ``u``, realised as
@@ -475,7 +476,7 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
         raise FMUError(f"force: expected True or False, got {force!r}")
     _check_inputs(inputs)
     opts = ModelOptions.checked(opts, error=FMUError)
-    P = _check_params(params)
+    P = _check_params(renamed_system(system, params, "export_fmu"))
     out = _check_path(path, force)
     platform, suffix = _platform()
 

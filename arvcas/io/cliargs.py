@@ -118,7 +118,7 @@ def default_system_text() -> str:
 def add_system_arg(p: argparse.ArgumentParser, default: str | None = None, type=Path) -> None:
     """``--system NAME|FILE`` (old spelling ``--params``); ``default``: what the help says is used without it
     (default: :func:`default_system_text`)."""
-    p.add_argument("--system", "--params", dest="params", metavar="NAME|FILE", type=type, default=None,
+    p.add_argument("--system", "--params", dest="system", metavar="NAME|FILE", type=type, default=None,
                    help=f"the system: a shipped one (arvcas systems) or a system file "
                         f"(default: {default or default_system_text()})")
 

@@ -7,6 +7,7 @@ systems are the files named in :data:`SHIPPED` under ``arvcas/data/``; ``arvcas 
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -14,7 +15,7 @@ from pathlib import Path
 from arvcas.system import params as params_mod
 from arvcas.system.params import DEFAULT, Params, ParamsError
 
-__all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT"]
+__all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT", "UNSET", "renamed_system"]
 
 SHIPPED = ("haidou1", "bluerov2_heavy_alpha5", "hinsdale_bluerov2_alpha5", "bluerov2", "bluerov2_heavy")
 
@@ -82,6 +83,28 @@ def load_system(name_or_path: str | Path | None = None) -> System:
         raise ParamsError(f"system {name_or_path!r}: neither a shipped system ({', '.join(ships)}) nor a "
                           f"system file{closest(name_or_path, ships, 0.3)}")
     return System(params_mod.load(p))
+
+
+class _Unset:
+    def __repr__(self) -> str:
+        return "UNSET"
+
+
+UNSET = _Unset()
+"""The default of a deprecated ``params=`` keyword: not given (None is a value: the default system)."""
+
+
+def renamed_system(system, params, where: str):
+    """The system of a call that may still use the old keyword ``params=`` (renamed ``system=``; kept one
+    release): ``params`` if given, with a :class:`DeprecationWarning` naming the new keyword; both given is a
+    one-line :class:`TypeError`."""
+    if params is UNSET:
+        return system
+    if system is not None:
+        raise TypeError(f"{where}: system= and params= (its old name) both given; give system= only")
+    warnings.warn(f"{where}: the keyword params= is now system= (params= will be removed)", DeprecationWarning,
+                  stacklevel=3)
+    return params
 
 
 def resolve(system) -> System:
