@@ -512,6 +512,10 @@ def _run_controllers(a: argparse.Namespace) -> int:
         own = c.own_source_files()
         where = p.describe() if p is not None else (f"python: {type(c).__module__}" if own else "arvcas")
         print(f"{n:16} {len(c.gains):9d}  {where:40}  {c.description}")
+    als = base.aliases()
+    if als:
+        print("aliases (accepted wherever a controller is named; files keep the name): "
+              + ", ".join(f"{k} = {v}" for k, v in als.items()))
     for f in failed:
         print(f"warning: {f}", file=sys.stderr)
     return 0
@@ -745,10 +749,24 @@ def _load_plugins(a: argparse.Namespace) -> list[tuple[str, Path]]:
     return out
 
 
+def _canonical_controllers(a: argparse.Namespace) -> None:
+    """A law named by an alias (``agsta_reso_decay`` for ``proposed``, ...) is given its registered name, once,
+    before the command's check: what a command writes and compares names the law by that name."""
+    from arvcas.controllers.base import canonical
+
+    for k in ("controller", "controllers"):
+        v = getattr(a, k, None)
+        if isinstance(v, str):
+            setattr(a, k, canonical(v))
+        elif isinstance(v, list):
+            setattr(a, k, [canonical(x) for x in v])
+
+
 def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
     from arvcas.io import files
 
     inputs = _inputs(cmd, a) + _load_plugins(a)
+    _canonical_controllers(a)
     if cmd.check is not None:
         cmd.check(a)
     if cmd.outputs is not None:

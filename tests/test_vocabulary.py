@@ -6,6 +6,7 @@ before any build."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 import warnings
 
 import pytest
@@ -68,3 +69,63 @@ def test_the_loop_states_layout_is_not_the_parameter_layout():
     assert closedloop.StateLayout is not arvcas.system.params.Layout
     with pytest.warns(DeprecationWarning, match="closedloop.Layout is now StateLayout"):
         assert closedloop.Layout is closedloop.StateLayout
+
+
+# ---- controllers named by what they are (the paper's names stay the registered ones) -----------------
+
+ALIASES = {"agsta_reso_decay": "proposed", "agsta_reso_updown": "traditional", "agsta_nominal": "agsta"}
+
+
+def test_each_law_has_a_name_that_says_what_it_is_and_resolves_to_the_papers():
+    from arvcas.controllers import base, gains
+    from arvcas.io.export_controller import default_prefix
+
+    assert {a: base.aliases()[a] for a in ALIASES} == ALIASES
+    for alias, name in ALIASES.items():
+        assert base.get(alias) is base.get(name) and base.canonical(alias) == name
+        assert gains.check_controller(alias) == name
+        assert (gains.default_gains(alias) == gains.default_gains(name)).all()
+        assert default_prefix(None, alias) == default_prefix(None, name) == f"arvcas_{DEFAULT}_{name}_"
+    assert base.canonical("pid") == "pid" and base.canonical("nope") == "nope"
+    assert "agsta_reso_decay" not in base.names() and "agsta_reso_decay" in base.accepted()
+    assert base.get("implicit").name == "implicit"  # a subclass of proposed does not inherit its alias
+
+
+def test_an_alias_cannot_take_another_laws_name():
+    from arvcas.controllers import base
+    from arvcas.controllers.pid import PID
+
+    class Clash(PID):
+        name = "clash_pid"
+        aliases = ("agsta_reso_decay",)
+
+    with pytest.raises(base.ControllerError, match="alias 'agsta_reso_decay' already names controller 'proposed'"):
+        base.register(Clash())
+    assert "clash_pid" not in base.names()
+
+    class Renamed(PID):
+        name = "renamed_pid"
+        aliases = ("also_pid",)
+
+    try:
+        base.register(Renamed())
+        assert base.get("also_pid").name == "renamed_pid"
+    finally:
+        base.unregister("renamed_pid")
+    assert "also_pid" not in base.aliases()
+
+
+def test_the_command_line_and_study_files_take_an_alias(tmp_path, capsys):
+    from arvcas import cli
+    from arvcas.tuning.study import loads_study
+
+    assert cli.main(["controllers"]) == 0
+    assert "agsta_reso_decay = proposed" in capsys.readouterr().out
+    src = Path(__file__).resolve().parents[1] / "studies"
+    text = (src / "quick.toml").read_text()
+    assert 'controllers = "proposed"' in text
+    study = loads_study(text.replace('controllers = "proposed"', 'controllers = "agsta_reso_decay"'), "alias", src)
+    assert study.controllers == ("proposed",)
+    with pytest.raises(ValueError, match="named twice"):
+        loads_study(text.replace('controllers = "proposed"', 'controllers = ["proposed", "agsta_reso_decay"]'),
+                    "alias", src)
