@@ -7,7 +7,7 @@ BSD), writes ``modelDescription.xml``, compiles ``binaries/<platform>/<modelIden
 the cache's compiler flags and zips it all, sources included, to ``FILE.fmu`` (a temporary file in
 the same directory, then :func:`os.replace`).
 
-The FMU is sized by its system (``params``: Haidou-1 by default; any system file): states ``eta``
+The FMU is sized by its system (``system``: the default system, Haidou-1, if none; any system file): states ``eta``
 (pose in {n}) and ``nu`` (velocity in {b} at the COB), which are also its outputs; inputs the body
 wrench ``tau`` at the COB in {b} (or, with ``inputs="thrusters"``, the ``n_thrusters`` thrust
 commands ``u``, realised as ``B_T sat(u)``), the ``n_joints`` joint positions, velocities and

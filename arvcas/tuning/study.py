@@ -25,7 +25,7 @@ Layout (see ``studies/*.toml`` for commented examples)::
                    (one value per objective), chat? ("commanded": eq. 42 on the command, the paper's, the
                    default; "delivered": on the thrusters' delivered wrench), constraints? (["peak_thrust <=
                    0.8 * limit", ...]), settling_band? ([m, rad] of settling_time)
-    [evaluation]   system? (a shipped system's name or a system file; default Haidou-1), scenario? (path,
+    [evaluation]   system? (a shipped system's name or a system file; default: the default system, haidou1), scenario? (path,
                    relative to the study file; default the system's), [[evaluation.draws]] noise_seed,
                    uncertainty? ([C, D, g, arm] factors), phase_deg? (6 disturbance phases, deg)
     [engine]       name = "local" | "dask", threads?, scheduler?, workers?, timeout_s?
@@ -288,12 +288,12 @@ class Study:
     scenario_path: str | None = None  # as written in the file (None: the system's default scenario)
     text: str = dataclasses.field(repr=False, default="")
     path: str = ""
-    system: str | None = None  # evaluation.system as written (None: Haidou-1)
+    system: str | None = None  # evaluation.system as written (None: the default system)
     params: object = dataclasses.field(repr=False, compare=False, default=None)  # the system's Params
     plugins: tuple[str, ...] = ()  # study.plugins as written (loaded when the file was read)
 
     def system_params(self):
-        """The parameters the study's runs use (its system's; Haidou-1's by default)."""
+        """The parameters the study's runs use (its system's; the default system's by default)."""
         if self.params is not None:
             return self.params
         from arvcas.system.params import load
