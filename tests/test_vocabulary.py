@@ -129,3 +129,14 @@ def test_the_command_line_and_study_files_take_an_alias(tmp_path, capsys):
     with pytest.raises(ValueError, match="named twice"):
         loads_study(text.replace('controllers = "proposed"', 'controllers = ["proposed", "agsta_reso_decay"]'),
                     "alias", src)
+
+
+def test_a_command_is_given_the_registered_name_of_an_alias():
+    from arvcas import cli
+
+    a = argparse.Namespace(controller="agsta_nominal", controllers=["agsta_reso_updown", "pid"])
+    cli._canonical_controllers(a)
+    assert (a.controller, a.controllers) == ("agsta", ["traditional", "pid"])
+    b = argparse.Namespace(controller=None)
+    cli._canonical_controllers(b)
+    assert b.controller is None
