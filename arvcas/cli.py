@@ -30,8 +30,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from arvcas.io.cliargs import (RESULT_FORMATS, add_model_args, add_system_arg, model_options, out_file,
-                                refuse)
+from arvcas.io.cliargs import (RESULT_FORMATS, add_model_args, add_system_arg, default_system_text, model_options,
+                                out_file, refuse)
+from arvcas.system import DEFAULT
 
 __all__ = ["main", "TABLE", "COMMANDS", "Command"]
 
@@ -65,21 +66,21 @@ def _add_export_c(p: argparse.ArgumentParser) -> None:
     p.add_argument("dir", type=Path, help="output directory (created if its parent exists)")
     p.add_argument("--prefix", default=None,
                    help="prefix of every C symbol; the library is lib<prefix without its last _>.so "
-                        "(default: arvcas_<system>_, e.g. arvcas_haidou1_)")
+                        f"(default: arvcas_<system>_, e.g. arvcas_{DEFAULT}_)")
     add_model_args(p)
 
 
 def _export_c_outputs(a: argparse.Namespace) -> list:
     from arvcas.build.export import KIND, default_prefix, files
 
-    return [(f"DIR {a.dir}", a.dir / n, KIND, a.dir) for n in files(a.prefix or default_prefix(a.params))]
+    return [(f"DIR {a.dir}", a.dir / n, KIND, a.dir) for n in files(a.prefix or default_prefix(a.system))]
 
 
 def _run_export_c(a: argparse.Namespace) -> int:
     from arvcas.build.export import export_c
     from arvcas.system.params import load
 
-    paths = export_c(a.dir, opts=model_options(a.n_quad), params=load(a.params), prefix=a.prefix, force=a.force)
+    paths = export_c(a.dir, opts=model_options(a.n_quad), system=load(a.system), prefix=a.prefix, force=a.force)
     for path in paths:
         print(path)
     print(f"build with: make -C {a.dir}")
@@ -97,10 +98,10 @@ def _run_export_ardusub_params(a: argparse.Namespace, d: dict) -> int:
     if d["controller"] != "ardusub":
         raise ValueError(f"--format ardusub-params: the controller is {d['controller']}, not ardusub (tune the ardusub "
                          "controller; other laws export as a C library)")
-    gains = d["gains"] if d["gains"] is not None else default_gains("ardusub", d["params"])
+    gains = d["gains"] if d["gains"] is not None else default_gains("ardusub", d["system"])
     ap.param_values(gains)  # a value outside ArduSub's ranges: refused before anything is written
     a.dir.mkdir(exist_ok=True)
-    system = d["params"].structure.name
+    system = d["system"].structure.name
     path = ap.write_param_file(a.dir / ap.default_name(system), gains, system=system,
                                front=str(a.front) if a.front is not None else "none (ArduSub's defaults)",
                                member=str(a.member) if a.member is not None else "none",
@@ -137,12 +138,12 @@ def _add_export_controller(p: argparse.ArgumentParser) -> None:
                         "export's README and header record it)")
     p.add_argument("--prefix", default=None,
                    help="prefix of every C symbol; the library is lib<prefix without its last _>.so "
-                        "(default: arvcas_<system>_<controller>_, e.g. arvcas_haidou1_proposed_)")
+                        f"(default: arvcas_<system>_<controller>_, e.g. arvcas_{DEFAULT}_proposed_)")
     p.add_argument("--format", choices=("c", "ardusub-params"), default="c",
                    help="c: the C library (default); ardusub-params: the ardusub controller's gains as an ArduSub "
                         ".param file (QGroundControl, MAVProxy) in DIR, values outside ArduSub's ranges refused "
                         "(docs/ardusub.md)")
-    add_system_arg(p, "the front's, else haidou1")
+    add_system_arg(p, f"the front's, else {default_system_text()}")
 
 
 def _check_export_controller(a: argparse.Namespace) -> None:
@@ -166,7 +167,7 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
     from arvcas.system.params import load
     from arvcas.sim import scenario
 
-    params = load(a.params)
+    params = load(a.system)
     design = {"controller": a.controller, "gains": None, "gains_source": None}
     cfg_text = None
     if a.front is not None:
@@ -174,7 +175,7 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
         from arvcas.tuning.front import check_provenance, member_index, read_front, resolve_front_path, system_params
 
         path = resolve_front_path(a.front)
-        if a.params is None:  # the front's own system
+        if a.system is None:  # the front's own system
             params = system_params(ck.read_checkpoint(path))
         changed = check_provenance(path, params, a.allow_model_change, "--front")
         fr = read_front(path)
@@ -195,7 +196,7 @@ def _export_controller_design(a: argparse.Namespace) -> dict:
         cfg = scenario.load_scenario(params.default("scenario"))
     else:
         cfg = None  # export_controller names what is missing
-    design.update(params=params, cfg=cfg)
+    design.update(system=params, cfg=cfg)
     a._design = design
     return design
 
@@ -207,9 +208,9 @@ def _export_controller_outputs(a: argparse.Namespace) -> list:
     if a.format == "ardusub-params":
         from arvcas.io.ardusub_params import default_name
 
-        return [(f"DIR {a.dir}", a.dir / default_name(d["params"].structure.name), "export-controller", a.dir)]
+        return [(f"DIR {a.dir}", a.dir / default_name(d["system"].structure.name), "export-controller", a.dir)]
     return [(f"DIR {a.dir}", a.dir / n, "export-controller", a.dir)
-            for n in files(a.prefix or default_prefix(d["params"], d["controller"]))]
+            for n in files(a.prefix or default_prefix(d["system"], d["controller"]))]
 
 
 def _run_export_controller(a: argparse.Namespace) -> int:
@@ -218,7 +219,7 @@ def _run_export_controller(a: argparse.Namespace) -> int:
     d = _export_controller_design(a)
     if a.format == "ardusub-params":
         return _run_export_ardusub_params(a, d)
-    paths = export_controller(a.dir, d["controller"], gains=d["gains"], params=d["params"], scenario=d["cfg"],
+    paths = export_controller(a.dir, d["controller"], gains=d["gains"], system=d["system"], scenario=d["cfg"],
                               prefix=a.prefix, gains_source=d["gains_source"], force=a.force)
     for path in paths:
         print(path)
@@ -242,7 +243,7 @@ def _add_export_fmu(p: argparse.ArgumentParser) -> None:
 def _run_export_fmu(a: argparse.Namespace) -> int:
     from arvcas.build.fmu import export_fmu
 
-    print(export_fmu(a.file, params=a.params, opts=model_options(a.n_quad), force=a.force, inputs=a.inputs))
+    print(export_fmu(a.file, system=a.system, opts=model_options(a.n_quad), force=a.force, inputs=a.inputs))
     return 0
 
 
@@ -273,64 +274,34 @@ def _run_cache(a: argparse.Namespace) -> int:
 
 # ---- demo --------------------------------------------------------------------------------------
 
-_Q0_DEG = (90.0, 90.0, -90.0, 0.0, 90.0, 0.0)
-_QG_DEG = (60.0, 60.0, -60.0, 0.0, 60.0, 0.0)
-
-
-def _quintic(t: float, q0, qg, t0: float, t1: float):
-    """Rest-to-rest quintic from q0 (t <= t0) to qg (t >= t1): (q, qd, qdd), elementwise."""
-    from arvcas.sim.trajectory import rest_to_rest
-
-    T = t1 - t0
-    s = min(max((t - t0) / T, 0.0), 1.0)
-    pos, vel, acc = rest_to_rest(s)
-    vel, acc = vel / T, acc / T**2
-    q = [a + (b - a) * pos for a, b in zip(q0, qg)]
-    qd = [(b - a) * vel for a, b in zip(q0, qg)]
-    qdd = [(b - a) * acc for a, b in zip(q0, qg)]
-    return q, qd, qdd
-
-
 def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 25.0, dt: float = 1.0):
-    """Coupling wrench tau_m (N, N m; in {b} about the COB) along the demo arm motion.
-
-    Haidou-1: the arm moves from q0 = [90, 90, -90, 0, 90, 0] deg to qg = [60, 60, -60, 0, 60, 0] deg by
-    a quintic over 5..20 s; another system: the arm motion of its default scenario. The vehicle is at
-    rest and level, payload 0. Returns rows (t, Fx..Mz).
+    """Coupling wrench tau_m (N, N m; in {b} about the COB) along the arm motion of the system's default
+    scenario (Haidou-1's: from the stowed pose [90, 90, -90, 0, 90, 0] deg to qg = [60, 60, -60, 0, 60, 0] deg
+    by a quintic over 5..20 s). The vehicle is at rest and level, payload 0. Returns rows (t, Fx..Mz).
     """
     import casadi as ca
     import numpy as np
 
     from arvcas.build.dynamics import compiled
-    from arvcas.system.params import default_layout, load, view
+    from arvcas.model.manipulator import stow_pose
+    from arvcas.sim import profiles, scenario
+    from arvcas.system.params import load, view
 
     params = load(params_path)
     if params.structure.n_joints == 0:
         raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) has no arm: there is no coupling "
                          f"wrench to show")
     p = params.vector()
-    cfg = None
-    if params.structure != default_layout().structure:
-        from arvcas.sim import scenario
-
-        if params.default("scenario") is None:
-            raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) names no default scenario "
-                             f"([defaults] scenario): the demo follows its arm motion")
-        cfg = scenario.load_scenario(params.default("scenario"))
-        scenario.check_joint_limits(cfg, params)
+    if params.default("scenario") is None:
+        raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) names no default scenario "
+                         f"([defaults] scenario): the demo follows its arm motion")
+    cfg = scenario.load_scenario(params.default("scenario"))
+    scenario.check_joint_limits(cfg, params)
     f = compiled("arm_wrench", model_options(n_quad), system=params)
     z6 = np.zeros(6)
-    if params.structure == default_layout().structure:
-        q0 = [math.radians(v) for v in _Q0_DEG]
-        qg = [math.radians(v) for v in _QG_DEG]
-        traj = lambda t: _quintic(t, q0, qg, 5.0, 20.0)  # noqa: E731
-    else:
-        from arvcas.model.manipulator import stow_pose
-        from arvcas.sim import profiles
-
-        ts = ca.SX.sym("t")
-        fq = ca.Function("q", [ts], list(profiles.joint_trajectory(cfg, stow_pose(view(p, params.layout)), ts)))
-        traj = lambda t: [np.array(x).ravel() for x in fq(t)]  # noqa: E731
+    ts = ca.SX.sym("t")
+    fq = ca.Function("q", [ts], list(profiles.joint_trajectory(cfg, stow_pose(view(p, params.layout)), ts)))
+    traj = lambda t: [np.array(x).ravel() for x in fq(t)]  # noqa: E731
     rows = []
     for k in range(int(round(t_end / dt)) + 1):
         t = k * dt
@@ -347,14 +318,11 @@ def _add_demo(p: argparse.ArgumentParser) -> None:
 def _run_demo(a: argparse.Namespace) -> int:
     from arvcas.system.params import load
 
-    rows = demo_table(a.params, a.n_quad)
-    params = load(a.params)
+    rows = demo_table(a.system, a.n_quad)
+    params = load(a.system)
     print("coupling wrench tau_m of the arm on the vehicle ({b}, about the COB), vehicle at rest and level,")
-    if a.params is None or params.structure.name == "haidou1":
-        print("arm q0 = [90 90 -90 0 90 0] deg -> qg = [60 60 -60 0 60 0] deg by a quintic over 5..20 s, payload 0")
-    else:
-        print(f"{params.structure.name}: the arm motion of its default scenario ({params.default('scenario').name}), "
-              f"payload 0")
+    print(f"{params.structure.name}: the arm motion of its default scenario ({params.default('scenario').name}), "
+          f"payload 0")
     cols = ("t [s]", "Fx [N]", "Fy [N]", "Fz [N]", "Mx [N m]", "My [N m]", "Mz [N m]")
     print("".join(f"{c:>12}" for c in cols))
     for r in rows:
@@ -381,8 +349,7 @@ def _run_systems(a: argparse.Namespace) -> int:
 
 
 def _add_params(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--system", "--params", dest="params", default=None, metavar="NAME|FILE",
-                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
+    add_system_arg(p, type=str)
     p.add_argument("--match", default=None, metavar="TEXT",
                    help="only the parameters whose name contains TEXT (e.g. hydro. or thrusters.T1.)")
 
@@ -393,7 +360,7 @@ def _run_params(a: argparse.Namespace) -> int:
     from arvcas.build.units import si_unit
     from arvcas.system import load_system
 
-    s = load_system(a.params)
+    s = load_system(a.system)
     P = s.params
     names = [n for n in P.names() if a.match is None or a.match in n]
     if not names:
@@ -545,6 +512,10 @@ def _run_controllers(a: argparse.Namespace) -> int:
         own = c.own_source_files()
         where = p.describe() if p is not None else (f"python: {type(c).__module__}" if own else "arvcas")
         print(f"{n:16} {len(c.gains):9d}  {where:40}  {c.description}")
+    als = base.aliases()
+    if als:
+        print("aliases (accepted wherever a controller is named; files keep the name): "
+              + ", ".join(f"{k} = {v}" for k, v in als.items()))
     for f in failed:
         print(f"warning: {f}", file=sys.stderr)
     return 0
@@ -607,14 +578,14 @@ def _table() -> tuple[Command, ...]:
 
     return (
         Command("export-c", "write the plant functions as a C library with Makefile, example and README",
-                _add_export_c, _run_export_c, inputs=(("params", "system"),), outputs=_export_c_outputs),
+                _add_export_c, _run_export_c, inputs=(("system", "system"),), outputs=_export_c_outputs),
         Command("export-controller", "write the controller of a run (EKF, reference, law, allocation) with a front "
                 "member's or the default gains as a C library with header, Makefile, ctypes binding and examples",
                 _add_export_controller, _run_export_controller,
-                inputs=(("config", "file"), ("params", "system"), ("front", "front")),
+                inputs=(("config", "file"), ("system", "system"), ("front", "front")),
                 outputs=_export_controller_outputs, check=_check_export_controller, plugins=True),
         Command("export-fmu", "write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm",
-                _add_export_fmu, _run_export_fmu, inputs=(("params", "system"),), outputs=out_file("file", "FILE.fmu")),
+                _add_export_fmu, _run_export_fmu, inputs=(("system", "system"),), outputs=out_file("file", "FILE.fmu")),
         Command("cache", "show the build cache directory and its compiled libraries", _add_cache, _run_cache),
         Command("params", "list every parameter of a system: name (what identify --free takes), SI value, unit, "
                           "source", _add_params, _run_params),
@@ -631,9 +602,9 @@ def _table() -> tuple[Command, ...]:
                 x.add_knees, x.run_knees, inputs=(("study_dir", "front", "study directory"),), outputs=x.knees_outputs,
                 plugins=True),
         Command("demo", "print the arm's coupling wrench on the vehicle along a simple arm motion",
-                _add_demo, _run_demo, inputs=(("params", "system"),)),
+                _add_demo, _run_demo, inputs=(("system", "system"),)),
         Command("simulate", "run the station-keeping experiment once and print CHAT/RMSE per DOF",
-                x.add_simulate, x.run_simulate, inputs=(("config", "file"), ("params", "system"), ("from_front", "front")),
+                x.add_simulate, x.run_simulate, inputs=(("config", "file"), ("system", "system"), ("from_front", "front")),
                 outputs=out_file("out", **RESULT_FORMATS), check=x.check_simulate, plugins=True),
         Command("paper", "the paper's experiment end to end: three controllers, Table 3, Figures 5-11",
                 x.add_paper, x.run_paper, outputs=x.paper_outputs),
@@ -662,7 +633,7 @@ def _table() -> tuple[Command, ...]:
                 outputs=x.compare_outputs, check=x.check_compare, plugins=True),
         Command("sweep", "every controller at several controller sampling periods: CHAT, RMSE, zigzag of k1 "
                 "(table, plot)", x.add_sweep, x.run_sweep,
-                inputs=(("config", "file"), ("params", "system"), ("check", "file")),
+                inputs=(("config", "file"), ("system", "system"), ("check", "file")),
                 outputs=x.sweep_outputs, check=x.check_sweep, plugins=True),
         Command("validate", "simulate a system open loop and k steps ahead over logged trials (*.log.toml) and "
                 "compare: RMSE, NRMSE, R^2, FIT percent, residual tests per signal", v.add_validate, v.run_validate,
@@ -672,7 +643,7 @@ def _table() -> tuple[Command, ...]:
                 inputs=(("system", "system"),), outputs=v.identify_outputs, check=v.check_identify),
         Command("montecarlo", "Monte Carlo over noise seeds, nominal-model factors (+-30 percent) and disturbance "
                 "phases: CIs, failure rate", x.add_montecarlo, x.run_montecarlo,
-                inputs=(("config", "file"), ("params", "system"), ("from_front", "front"), ("check", "file")),
+                inputs=(("config", "file"), ("system", "system"), ("from_front", "front"), ("check", "file")),
                 outputs=x.montecarlo_outputs, check=x.check_montecarlo, plugins=True),
     )
 
@@ -778,10 +749,24 @@ def _load_plugins(a: argparse.Namespace) -> list[tuple[str, Path]]:
     return out
 
 
+def _canonical_controllers(a: argparse.Namespace) -> None:
+    """A law named by an alias (``agsta_reso_decay`` for ``proposed``, ...) is given its registered name, once,
+    before the command's check: what a command writes and compares names the law by that name."""
+    from arvcas.controllers.base import canonical
+
+    for k in ("controller", "controllers"):
+        v = getattr(a, k, None)
+        if isinstance(v, str):
+            setattr(a, k, canonical(v))
+        elif isinstance(v, list):
+            setattr(a, k, [canonical(x) for x in v])
+
+
 def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
     from arvcas.io import files
 
     inputs = _inputs(cmd, a) + _load_plugins(a)
+    _canonical_controllers(a)
     if cmd.check is not None:
         cmd.check(a)
     if cmd.outputs is not None:

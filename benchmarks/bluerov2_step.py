@@ -403,7 +403,7 @@ def study(quick: bool = False, log=print) -> dict:
     traced = {}
     for label, sysm, cfg, g, draw in runs:
         seed, unc, ph = draw if draw is not None else (0, None, None)
-        r = arvcas.Run("proposed", scenario=cfg, params=sysm).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
+        r = arvcas.Run("proposed", scenario=cfg, system=sysm).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
         traced[label] = r
         X = np.hstack([r.eta, r.nu])
         from arvcas.system.params import layout_for

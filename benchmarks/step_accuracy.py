@@ -349,7 +349,7 @@ def _run_and_reference(sysm, cfg, c, g, seed, unc, ph, tol):
     reference states), over the samples before a failure."""
     import arvcas
 
-    r = arvcas.Run(controller=c, scenario=cfg, params=sysm).compile().simulate(gains=g, seed=seed, uncertainty=unc,
+    r = arvcas.Run(controller=c, scenario=cfg, system=sysm).compile().simulate(gains=g, seed=seed, uncertainty=unc,
                                                                                 phase=ph)
     n = min(_valid(r, cfg.time_h), scenario_n(cfg)) - 1
     X = np.hstack([r.eta, r.nu])[:n + 1]
@@ -416,7 +416,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
         cfg = dataclasses.replace(cfg0, time_h_plant=hp)
         log(f"h_plant = {hp}: compiling and running")
         t_c = time.perf_counter()
-        runs = {c: arvcas.Run(controller=c, scenario=cfg, params=sysm).compile() for c in ctrls}
+        runs = {c: arvcas.Run(controller=c, scenario=cfg, system=sysm).compile() for c in ctrls}
         rec = {"traced": {}, "compile_and_first_call_s": None}
         for label, c, g, seed, unc, ph in traced:
             r = runs[c].simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
@@ -475,7 +475,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
         hf = BASE / 2
         cfg_f = dataclasses.replace(cfg0, time_h_plant=hf)
         log(f"base check: h_plant = {hf}")
-        runs_f = {c: arvcas.Run(controller=c, scenario=cfg_f, params=sysm).compile() for c in ctrls}
+        runs_f = {c: arvcas.Run(controller=c, scenario=cfg_f, system=sysm).compile() for c in ctrls}
         bgroups = []
         for c in ctrls:
             for hp_, rr_ in ((hf, runs_f[c]), (BASE, compiled[BASE][c])):
@@ -496,7 +496,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
     # reference self-check: the first traced run at the base step, CVODES at tol and tol / 10
     label0 = traced[0][0]
     cfg_b = dataclasses.replace(cfg0, time_h_plant=BASE)
-    r0 = arvcas.Run(controller=traced[0][1], scenario=cfg_b, params=sysm).compile().simulate()
+    r0 = arvcas.Run(controller=traced[0][1], scenario=cfg_b, system=sysm).compile().simulate()
     taus0 = plant_inputs(pv, r0, lay)
     X0 = np.hstack([r0.eta, r0.nu])[0]
     n0 = min(_valid(r0, cfg_b.time_h), scenario_n(cfg_b)) - 1
@@ -653,7 +653,7 @@ def finer_steps(res: dict, system: str, n_worst: int = 12, divisors=(20, 40), to
         met, groups, tbatch = {}, [], {}
         for hh in [BASE, *hs]:
             cfg = dataclasses.replace(cfg_b, time_h_plant=hh)
-            runs = {c: arvcas.Run(controller=c, scenario=cfg, params=sysm).compile() for c in ctrls}
+            runs = {c: arvcas.Run(controller=c, scenario=cfg, system=sysm).compile() for c in ctrls}
             for c in ctrls:
                 met[(f"{c} default (batch)", hh)] = runs[c].batch(runs[c].default_gains(), seed=0, n_threads=1,
                                                                   return_status=True)[0:3]

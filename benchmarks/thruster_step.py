@@ -53,7 +53,7 @@ def main(quadrature: bool = False, res: dict | None = None) -> dict:
         """(state error against CVODES over the run, with CVODES' time; the metrics) of law c at scenario cfg."""
         seed, unc, ph = draw if draw is not None else (0, None, None)
         t0 = time.time()
-        r = arvcas.Run(c, scenario=cfg, params=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
+        r = arvcas.Run(c, scenario=cfg, system=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
         X = np.hstack([r.eta, r.nu])
         ref = sa.cvodes_states(cfg, pv, X[0], sa.plant_inputs(pv, r, blue.layout), r.phase, tol=1e-14,
                                layout=blue.layout)
@@ -63,7 +63,7 @@ def main(quadrature: bool = False, res: dict | None = None) -> dict:
 
     def metrics_only(c, cfg, g, draw):
         seed, unc, ph = draw if draw is not None else (0, None, None)
-        r = arvcas.Run(c, scenario=cfg, params=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
+        r = arvcas.Run(c, scenario=cfg, system=blue).compile().simulate(gains=g, seed=seed, uncertainty=unc, phase=ph)
         return np.r_[r.chat, r.chat_delivered, r.rmse]
 
     for label, c, g, draw in cases:

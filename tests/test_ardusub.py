@@ -168,7 +168,7 @@ def test_closed_loop_holds_depth_and_attitude():
     cfg = dataclasses.replace(cfg, time_duration=60.0, current_velocity=(0.0, 0.0, 0.0),
                               disturbance_amplitude=(0.0,) * 6, arm_waypoint=cfg.arm_waypoint[:1], payload_event=(),
                               limits_e_position=100.0)
-    r = Run("ardusub", scenario=cfg, params=blue).compile().simulate(seed=0)
+    r = Run("ardusub", scenario=cfg, system=blue).compile().simulate(seed=0)
     assert r.ok
     late = r.eta[int(30 / cfg.time_h):]
     assert np.abs(late[:, 2]).max() < 0.01 and abs(late[:, 2].mean()) < 0.003  # depth: within 1 cm, no offset

@@ -314,7 +314,7 @@ def test_station_keeping_cli_and_api(name, tmp_path, capsys, cache):
     printed = capsys.readouterr().out
     assert rc == 0 and "DIVERGED" not in printed and "theta" in printed
     r = results.read_result(out)
-    ref = simulate("pid", seed=0, params=s.params, cfg=scenario.load_scenario(cfg_path))
+    ref = simulate("pid", seed=0, system=s.params, cfg=scenario.load_scenario(cfg_path))
     np.testing.assert_array_equal(r.eta, ref.eta)
     assert ref.ok and np.all(np.abs(ref.e[:, :3]) < 0.1) and np.all(np.abs(ref.e[:, 3:]) < 0.3)
     B = _B(s)

@@ -151,8 +151,8 @@ def test_joint_targets_outside_limits_refused(cfg):
 
 
 def test_params_type_checked():
-    with pytest.raises(SimulationError, match="params: expected"):
-        simulate("proposed", params={"env.rho": 1.0})
+    with pytest.raises(SimulationError, match="system: expected"):
+        simulate("proposed", system={"env.rho": 1.0})
 
 
 def test_divergence_is_reported_not_raised(cfg):

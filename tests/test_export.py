@@ -186,7 +186,7 @@ def test_build_files_use_the_cache_flags(exported, made, monkeypatch, tmp_path, 
     assert f"target_compile_options({lib} PRIVATE {' '.join(cflags)})" in cm
     # read from codegen at export time, not copied: a changed FIXED_FLAGS shows up in both files
     monkeypatch.setattr(codegen, "FIXED_FLAGS", (*codegen.FIXED_FLAGS, "-fno-trapping-math"))
-    export_c(tmp_path / "other", params=system.params)
+    export_c(tmp_path / "other", system=system.params)
     assert "-fno-trapping-math" in (tmp_path / "other" / "Makefile").read_text()
     assert "-fno-trapping-math" in (tmp_path / "other" / "CMakeLists.txt").read_text()
 
@@ -224,11 +224,14 @@ def test_header_documents_every_argument(exported, plant, system, prefix):
     text = (exported / f"{lib}.h").read_text()
     assert "THREAD SAFETY" in text and "reentrant" in text and "own arg, res, iw and w" in text
     nj, nt = system.n_joints, system.n_thrusters
-    if system.name == "haidou1":
-        assert text.startswith(f"/* {lib}.h: the arvcas plant functions of the Haidou-1 ARV and its manipulator")
-    else:
-        assert f"{nt} thrusters, {nj} joints" in text and f"q[{nj}], u[{nt}], p[{len(system.params)}]" in text
-        assert "u[6]" not in text and "q1..q6" not in text and "12 x 6, column-major: d xdot_i / d q_j" not in text
+    # one text for every system: its name, its file's description, its sizes
+    assert text.startswith(f"/* {lib}.h: the arvcas plant functions of the system {system.name}, in C:\n"
+                           f" * {system.description}\n")
+    assert f"{nt} thrusters, {nj} joints" in text and f"q[{nj}], u[{nt}], p[{len(system.params)}]" in text
+    if nj != 6:
+        assert "q1..q6" not in text and "12 x 6, column-major: d xdot_i / d q_j" not in text
+    if nt != 6:
+        assert "u[6]" not in text
     for name in NAMES:
         f = plant[name]
         full = prefix + name
@@ -245,8 +248,8 @@ def test_header_documents_every_argument(exported, plant, system, prefix):
         meaning = {r[2]: r[4] for r in rows}
         if "q" in meaning:
             assert f"q1..q{nj} (rad)" in meaning["q"], name
-        if "u" in meaning and system.structure.thrusters is not None:
-            assert ", ".join(system.structure.thrusters) in meaning["u"], name
+        if "u" in meaning:
+            assert ", ".join(system.structure.thruster_names()) in meaning["u"], name
         sz = {k: int(re.search(rf"#define {full.upper()}_{k} (\d+)", text).group(1)) for k in ("SZ_ARG", "SZ_RES")}
         assert sz["SZ_ARG"] >= f.n_in() and sz["SZ_RES"] >= f.n_out(), name
 

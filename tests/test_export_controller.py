@@ -78,7 +78,7 @@ def case(request, tmp_path_factory):
     out = d / "out"
     _run(["make", "-C", str(out)])
     mod, ctl = load_binding(out)
-    run = arvcas.Run(law, scenario=cfg, params=s.params).compile()
+    run = arvcas.Run(law, scenario=cfg, system=s.params).compile()
     return name, law, out, mod, ctl, run, run.simulate(seed=SEED)
 
 

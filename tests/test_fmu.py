@@ -336,7 +336,7 @@ def test_thruster_inputs_params_and_options(tmp_path, params):
 
     opts = ModelOptions(n_quad=3)
     P = params.replace({"env.rho": 0.0, "arm.link2.mass": 30.0})
-    path = fmu_mod.export_fmu(tmp_path / "thr.fmu", params=P, opts=opts, inputs="thrusters")
+    path = fmu_mod.export_fmu(tmp_path / "thr.fmu", system=P, opts=opts, inputs="thrusters")
     assert validate_fmu(str(path)) == []
     md = fmpy.read_model_description(str(path))
     names = [f"u[{i}]" for i in range(1, 7)] + INPUTS[6:]
@@ -663,7 +663,7 @@ def test_bluerov2_simulate_fmu_matches_arvcas_integration(bluerov2_fmu, bluerov2
 def test_bluerov2_thruster_inputs(tmp_path, bluerov2):
     """inputs="thrusters" on the BlueROV2: its eight thrusters by name, derivatives = uvms_rhs at
     tau = thrust(u) = B_T sat(u) of the system."""
-    path = fmu_mod.export_fmu(tmp_path / "thr_b.fmu", params=BLUEROV2, inputs="thrusters")
+    path = fmu_mod.export_fmu(tmp_path / "thr_b.fmu", system=BLUEROV2, inputs="thrusters")
     assert validate_fmu(str(path)) == []
     md = fmpy.read_model_description(str(path))
     names, nt, nj = _input_names(bluerov2, "u"), bluerov2.n_thrusters, bluerov2.n_joints

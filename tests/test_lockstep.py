@@ -86,11 +86,11 @@ def _short_run(system: str, law: str, duration: float = 3.0, limit: float | None
     if system == "hinsdale_bluerov2_alpha5":
         scen = dataclasses.replace(load_scenario(SYSTEMS / "bluerov2_heavy_alpha5.scenario.toml"),
                                    time_thrust_quadrature=None)
-    r = Run(controller=law, params=system, scenario=scen).compile()
+    r = Run(controller=law, system=system, scenario=scen).compile()
     cfg = dataclasses.replace(r.cfg, time_duration=duration)
     if limit is not None:  # tracking-error bounds that some members cross (a stop by the error bound)
         cfg = dataclasses.replace(cfg, limits_e_position=limit, limits_e_attitude=limit)
-    return Run(controller=law, params=system, scenario=cfg).compile()
+    return Run(controller=law, system=system, scenario=cfg).compile()
 
 
 SYSTEMS = Path(closedloop.__file__).resolve().parents[1] / "data"

@@ -1,5 +1,6 @@
 """One rest-to-rest quintic (arvcas.sim.trajectory.rest_to_rest) behind every NumPy and Python user: the
-vehicle's minimum-jerk segments, the synthetic trials' arm moves and the command line's demo. Checked against
+vehicle's minimum-jerk segments and the synthetic trials' arm moves (the command line's demo follows the
+compiled scenario's arm motion, checked in tests/test_export.py). Checked against
 NumPy's polynomial class (an independent evaluation of 10 s^3 - 15 s^4 + 6 s^5 and its derivatives), against
 the compiled scenario's CasADi form, and bit for bit against the formulas each user wrote before it was
 shared (so no committed number moves)."""
@@ -10,7 +11,6 @@ import numpy as np
 import pytest
 from numpy.polynomial import Polynomial
 
-from arvcas.cli import _quintic
 from arvcas.ident.synthetic import QuinticMoves
 from arvcas.sim import profiles
 from arvcas.sim.trajectory import min_jerk, rest_to_rest
@@ -62,16 +62,6 @@ def _moves_before(times, poses, t):
     return q, qd, qdd
 
 
-def _demo_before(t, q0, qg, t0, t1):
-    T = t1 - t0
-    s = min(max((t - t0) / T, 0.0), 1.0)
-    pos = 10 * s**3 - 15 * s**4 + 6 * s**5
-    vel = (30 * s**2 - 60 * s**3 + 30 * s**4) / T
-    acc = (60 * s - 180 * s**2 + 120 * s**3) / T**2
-    return ([a + (b - a) * pos for a, b in zip(q0, qg)], [(b - a) * vel for a, b in zip(q0, qg)],
-            [(b - a) * acc for a, b in zip(q0, qg)])
-
-
 @pytest.mark.parametrize("seed", range(5))
 def test_every_user_computes_the_same_bits_as_before(seed):
     rng = np.random.default_rng(seed)
@@ -83,5 +73,3 @@ def test_every_user_computes_the_same_bits_as_before(seed):
     times, poses = np.cumsum(rng.uniform(0.5, 3, 5)), rng.normal(size=(5, 6))
     for got, want in zip(QuinticMoves(times, poses)(t), _moves_before(times, poses, t)):
         assert got.tobytes() == want.tobytes()
-    for tk in t[::25]:
-        assert _quintic(float(tk), list(p0), list(p1), t0, t1) == _demo_before(float(tk), list(p0), list(p1), t0, t1)

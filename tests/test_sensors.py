@@ -144,7 +144,7 @@ def numpy_ekf(cfg, y, sset):
 @pytest.fixture(scope="module")
 def imu_depth_run():
     s, cfg = _cfg()
-    run = arvcas.Run("pid", scenario=cfg, params=s.params).compile()
+    run = arvcas.Run("pid", scenario=cfg, system=s.params).compile()
     return s, cfg, run, run.simulate(seed=SEED)
 
 

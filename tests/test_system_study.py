@@ -155,7 +155,7 @@ def test_explore_page_holds_every_front_and_the_members_own_responses(study_dir,
     i = f["knee"]
     controller, gains, seed, cfg_text = arvcas.tuning.member_gains(study_dir / "out" / "proposed", i)
     s = arvcas.load_system("bluerov2_heavy_alpha5")
-    r = arvcas.simulate(controller, gains=gains, seed=seed, params=s.params,
+    r = arvcas.simulate(controller, gains=gains, seed=seed, system=s.params,
                         cfg=scenario.loads_scenario(cfg_text))
     keep = np.rint(np.asarray(f["t"]) / r.h).astype(int)
     for key, ref in (("e", (r.eta - r.eta_ref)[keep]), ("u", np.asarray(r.thrust)[keep])):

@@ -75,6 +75,26 @@ def test_vehicle_properties(systems, name):
         np.testing.assert_allclose(g0[3:], 0, atol=1e-12 * W)
 
 
+def test_parametric_allocation_is_the_thruster_list_form_of_its_geometry(systems):
+    """The parametric layout (Appendix B, Haidou-1's) gives the matrix a thruster list gives for the same
+    positions and directions, column [d; r x d]: computed here by NumPy's cross product on the file's
+    numbers, bit for bit. (The parametric form is kept: its stern angles are parameters, and its hydrodynamic
+    terms in ds need them.)"""
+    h = systems["haidou1"]
+    assert h.structure.thrusters is None
+    g = h.params
+    B = _np(thrusters.B_T(view(g.vector(), h.layout)))
+    k = {n: g[f"thrusters.{n}"] for n in ("delta_sL", "delta_sR", "x_stn", "y_stn", "z_stn", "x_bow", "y_bow",
+                                           "x_hB", "x_hS")}
+    pos = [(k["x_stn"], -k["y_stn"], k["z_stn"]), (k["x_stn"], k["y_stn"], k["z_stn"]), (k["x_hB"], 0, 0),
+           (k["x_hS"], 0, 0), (k["x_bow"], -k["y_bow"], 0), (k["x_bow"], k["y_bow"], 0)]
+    dirs = [(np.cos(k["delta_sL"]), 0, -np.sin(k["delta_sL"])), (np.cos(k["delta_sR"]), 0, -np.sin(k["delta_sR"])),
+            (0, 1, 0), (0, 1, 0), (0, 0, 1), (0, 0, 1)]
+    ref = np.array([np.r_[d, np.cross(r, d)] for r, d in zip(pos, dirs)]).T
+    assert (B == ref).all()
+    assert h.structure.thruster_names()[0] == "T1 stern left"
+
+
 def test_bluerov2_damping_is_diagonal_linear_plus_quadratic(systems):
     """The SNAME names give the usual ROV damping: D(nu) nu = -diag(X_u + X_u|u| |u|, ...) nu."""
     b = systems["bluerov2_heavy_alpha5"]
@@ -298,7 +318,7 @@ def test_waypoints_outside_the_limits_or_of_the_wrong_size_are_refused(params, s
         scenario.check_joint_limits(b, params)
     with pytest.raises(scenario.ScenarioError, match=r"6 joint angles, but system 'bluerov2_heavy_alpha5' has 4"):
         arvcas.Run("pid", scenario=scenario.loads_scenario(_paper_waypoint_text(), "w"),
-                   params="bluerov2_heavy_alpha5").compile()
+                   system="bluerov2_heavy_alpha5").compile()
 
 
 # ---- the BlueROV2 closed loop ---------------------------------------------------------------------------
@@ -315,7 +335,7 @@ def test_bluerov2_run_compiled_equals_vm_and_signals_are_sized(systems):
     s = systems["bluerov2_heavy_alpha5"]
     cfg = scenario.load_scenario(s.params.default("scenario"))
     cfg = replace(cfg, time_duration=20.0)
-    run = arvcas.Run("proposed", scenario=cfg, params=s).compile()
+    run = arvcas.Run("proposed", scenario=cfg, system=s).compile()
     r = run.simulate(seed=1)
     assert r.ok and r.thrust.shape == (201, 8) and r.q.shape == (201, 4)
     np.testing.assert_allclose(metrics.chat(r.tau_cmd), r.chat, rtol=1e-12)

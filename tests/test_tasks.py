@@ -164,7 +164,7 @@ def test_a_trajectory_beyond_the_thrusters_is_refused_before_any_work():
                                             r"\S+ for \d+ % of its limit at t = [\d.]+ s \(segment 1 of 1"):
         scenario.check_trajectory_limits(fast, params)
     with pytest.raises(ScenarioError, match="waypoint"):
-        arvcas.Run("pid", scenario=fast, params=params).compile()
+        arvcas.Run("pid", scenario=fast, system=params).compile()
     scenario.check_trajectory_limits(task(), params)  # the 0.21 m approach in 14 s
 
 

@@ -47,8 +47,8 @@ def runs(blue):
     """3 s of the shipped scenario at h_plant = 0.01 s: with quadrature (5 nodes, the shipped setting) and without."""
     cfg = dataclasses.replace(scenario.load_scenario(blue.params.default("scenario")), time_duration=3.0,
                               time_h_plant=0.01, time_thrust_quadrature=None)
-    quad = Run("proposed", scenario=dataclasses.replace(cfg, time_thrust_quadrature=5), params=blue).compile()
-    plain = Run("proposed", scenario=cfg, params=blue).compile()
+    quad = Run("proposed", scenario=dataclasses.replace(cfg, time_thrust_quadrature=5), system=blue).compile()
+    plain = Run("proposed", scenario=cfg, system=blue).compile()
     return quad, quad.simulate(seed=4), plain, plain.simulate(seed=4)
 
 
@@ -100,7 +100,7 @@ def test_asymmetric_lag_with_rate_limit_against_cvodes(asymmetric):
                               time_thrust_quadrature=None)
     pv, n, errs = s.params.vector(), 20, {}
     for name, c in (("quadrature", dataclasses.replace(cfg, time_thrust_quadrature=5)), ("rk4", cfg)):
-        r = Run("proposed", scenario=c, params=s).compile().simulate(seed=4)
+        r = Run("proposed", scenario=c, system=s).compile().simulate(seed=4)
         X = np.hstack([r.eta, r.nu])
         ref = sa.cvodes_states(c, pv, X[0], sa.plant_inputs(pv, r, s.layout), r.phase, tol=1e-14, n_samples=n,
                                layout=s.layout)

@@ -39,7 +39,7 @@ def short(blue):
     cfg = scenario.load_scenario(blue.params.default("scenario"))
     assert cfg.current == "constant" and cfg.has_tether and cfg.per_axis_sensors
     cfg = dataclasses.replace(cfg, time_duration=3.0)
-    run = arvcas.Run("proposed", scenario=cfg, params=blue).compile()
+    run = arvcas.Run("proposed", scenario=cfg, system=blue).compile()
     return cfg, run, run.simulate(seed=4)
 
 
@@ -112,7 +112,7 @@ def test_committed_instantaneous_knee_reproduces_bit_for_bit(blue):
     p = blue.params.instantaneous()
     assert ref.meta["param_names"] == p.names()
     p = p.replace(dict(zip(p.names(), ref.params_vector)))
-    r = arvcas.Run("proposed", scenario=cfg, params=p).compile().simulate(
+    r = arvcas.Run("proposed", scenario=cfg, system=p).compile().simulate(
         seed=ref.seed, gains=ref.gains, uncertainty=ref.uncertainty, phase=ref.phase)
     np.testing.assert_array_equal(r.chat, ref.chat)
     np.testing.assert_array_equal(r.rmse, ref.rmse)

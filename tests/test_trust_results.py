@@ -52,7 +52,7 @@ def test_a_neutrally_buoyant_arm_has_a_finite_trim(tmp_path):
     f = arvcas.dynamics("uvms_rhs", system=path)
     xdot = f(np.zeros(12), np.zeros(6), np.zeros(4), np.zeros(4), np.zeros(4), 0.0)
     assert np.isfinite(xdot).all()
-    r = arvcas.Run("pid", params=str(path)).compile().simulate(seed=0)
+    r = arvcas.Run("pid", system=str(path)).compile().simulate(seed=0)
     assert r.ok or r.t_fail > 0, r  # every run "diverged at t = 0" with NaN accelerations
     assert np.isfinite(r.chat).all() and np.isfinite(r.eta).all()
 
@@ -73,7 +73,7 @@ def test_seeds_are_exact_in_mat_files(tmp_path):
     from arvcas.io.matfile import write_result_mat
 
     seed = 2**53 + 1  # float(seed) == 2**53
-    r = arvcas.simulate("pid", seed=seed, params=arvcas.load_system("bluerov2_heavy_alpha5").params)
+    r = arvcas.simulate("pid", seed=seed, system=arvcas.load_system("bluerov2_heavy_alpha5").params)
     m = loadmat(write_result_mat(r, tmp_path / "r.mat"), simplify_cells=True)
     assert int(m["seed"]) == seed
     names = list(m["param_names"])  # the BlueROV2's, not Haidou-1's
@@ -115,5 +115,5 @@ def test_a_run_that_stops_names_why(capsys):
     from arvcas.system.params import load
 
     P = load().replace({"env.rho": 1e300})  # no finite motion: Params.replace skips the physical checks
-    r = arvcas.Run("pid", params=P).compile().simulate(seed=0)
+    r = arvcas.Run("pid", system=P).compile().simulate(seed=0)
     assert not r.ok and "not finite" in r.meta["failure"] and "not finite" in repr(r)

@@ -67,7 +67,7 @@ def _bench_closed_loop(s: Settings, cfg, P, log) -> dict:
     a_m, a_t = _run_args(f_m, g, noise, cfg, p), _run_args(f_t, g, noise, cfg, p)
     t_m = _time(lambda: calls.call(f_m, *a_m), s.reps)
     t_t = _time(lambda: calls.call(f_t, *a_t), s.reps)
-    t_sim = _time(lambda: simulation.simulate(CONTROLLER, seed=0, cfg=cfg, params=P), s.reps)
+    t_sim = _time(lambda: simulation.simulate(CONTROLLER, seed=0, cfg=cfg, system=P), s.reps)
     # a run that builds its time table first (the first run of a new scenario or parameter set)
     t_table = _stat([_table_cold(cfg, p) for _ in range(s.reps)])
     t_cold = _time(lambda: (schedule.clear_cache(), calls.call(f_m, *_run_args(f_m, g, noise, cfg, p))), s.reps)
@@ -90,8 +90,8 @@ def _bench_closed_loop(s: Settings, cfg, P, log) -> dict:
     G[0] = g
     batch = {}
     for nt in (1, 2):
-        simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, params=P, n_threads=nt, lockstep=False)  # warm-up (thread buffers allocated)
-        st = _time(lambda: simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, params=P, n_threads=nt,
+        simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, system=P, n_threads=nt, lockstep=False)  # warm-up (thread buffers allocated)
+        st = _time(lambda: simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=cfg, system=P, n_threads=nt,
                                                        lockstep=False),
                    s.reps_slow, warmup=0)
         batch[f"wall_s_{nt}"] = st

@@ -106,7 +106,7 @@ def _bench_controller(s: Settings, log) -> dict:
             for law in LAWS[:1] if quick else LAWS:
                 d = Path(tmp) / f"{system}_{law}"
                 log(f"controller: {system} / {law} ...")
-                export_controller(d, law, params=sysm, scenario=cfg)
+                export_controller(d, law, system=sysm, scenario=cfg)
                 prefix = default_prefix(system, law)
                 lib = prefix.rstrip("_")
                 subprocess.run(["make", "-s", "-C", str(d), f"lib{lib}.so"], check=True, capture_output=True)

@@ -172,11 +172,11 @@ def _bench_length(s: Settings, log) -> dict:
     from arvcas.system import load_system
 
     sysm = load_system(SYSTEM)
-    cfg0 = Run(CONTROLLER, params=sysm).compile().cfg
+    cfg0 = Run(CONTROLLER, system=sysm).compile().cfg
     nb, level = LENGTH_BATCH[s.mode], _level(s)
     rows = []
     for L in LENGTHS[s.mode]:
-        run = Run(CONTROLLER, scenario=dataclasses.replace(cfg0, time_duration=L), params=sysm).compile()
+        run = Run(CONTROLLER, scenario=dataclasses.replace(cfg0, time_duration=L), system=sysm).compile()
         log(f"cost: run length {L:g} s: compiling (or loading) its libraries ...")
         fn, ls, _, _ = _prepare(run, level)
         g = run.default_gains()
@@ -228,8 +228,8 @@ def _bench_batch(s: Settings, log) -> dict:
     from arvcas.system import load_system
 
     sysm = load_system(SYSTEM)
-    cfg0 = Run(CONTROLLER, params=sysm).compile().cfg
-    run = Run(CONTROLLER, scenario=dataclasses.replace(cfg0, time_duration=BATCH_LENGTH), params=sysm).compile()
+    cfg0 = Run(CONTROLLER, system=sysm).compile().cfg
+    run = Run(CONTROLLER, scenario=dataclasses.replace(cfg0, time_duration=BATCH_LENGTH), system=sysm).compile()
     _, ls, _, _ = _prepare(run, _level(s))
     sizes = BATCH_SIZES[s.mode]
     G_all = _batches(run, max(sizes), ls.W)["running"]
@@ -338,7 +338,7 @@ def _bench_joints(s: Settings, work: Path, log) -> dict:
         sysm = load_system(ps)
         if sysm.n_joints != n:
             raise BenchError(f"cost: {ps}: {sysm.n_joints} joints, expected {n}")
-        run = Run(CONTROLLER, scenario=scenario.load_scenario(pc), params=sysm).compile()
+        run = Run(CONTROLLER, scenario=scenario.load_scenario(pc), system=sysm).compile()
         log(f"cost: {n} joints: compiling the run and the lockstep run cold ...")
         builds = {"run": [], "run_cc": [], "lanes": [], "lanes_cc": []}
 

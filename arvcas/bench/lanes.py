@@ -82,10 +82,10 @@ def _bench_batches(s: Settings, log) -> dict:
 def _lane_runs(s: Settings, name: str, sysm):
     """The system's run at its default scenario and, with thruster dynamics (not --quick), by plain RK4 at the
     step shipped before the quadrature (:data:`arvcas.bench.common.PLAIN_RK4`)."""
-    run = Run(CONTROLLER, params=sysm).compile()
+    run = Run(CONTROLLER, system=sysm).compile()
     yield name, run
     if sysm.structure.has_thruster_dynamics and s.mode != "quick":
-        yield f"{name}{PLAIN_RK4_KEY}", Run(CONTROLLER, params=sysm, scenario=dataclasses.replace(run.cfg, **PLAIN_RK4)).compile()
+        yield f"{name}{PLAIN_RK4_KEY}", Run(CONTROLLER, system=sysm, scenario=dataclasses.replace(run.cfg, **PLAIN_RK4)).compile()
 
 
 def _bench_lane_run(s: Settings, name: str, run, log) -> dict:

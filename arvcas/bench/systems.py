@@ -34,7 +34,7 @@ def _bench_systems(s: Settings, log) -> dict:
                          (f"{name}{PLAIN_RK4_KEY}", sysm, dataclasses.replace(cfg0, **PLAIN_RK4))]
         for key, sv, cfg_v in variants:
             log(f"systems: {key} ...")
-            run = Run(CONTROLLER, scenario=cfg_v, params=sv).compile()
+            run = Run(CONTROLLER, scenario=cfg_v, system=sv).compile()
             cfg = run.cfg
             f = run.function(trace=False)
             args = _run_args(f, run.default_gains(), profiles.noise_sequence(cfg, 0), cfg, sv.params.vector(),

@@ -167,11 +167,11 @@ def _bench_targets(s: Settings, cfg, P, log) -> dict:
         log(f"targets: batch of {s.study_pop} at h_plant = {c.time_h_plant:g} s, 1 and 2 threads ...")
         bt = {1: [], 2: []}
         for nt in (1, 2):
-            simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, params=P, n_threads=nt, lockstep=False)  # warm-up
+            simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, system=P, n_threads=nt, lockstep=False)  # warm-up
         for _ in range(2 * s.reps_slow):
             for nt in (1, 2):
                 t0 = time.perf_counter()
-                simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, params=P, n_threads=nt, lockstep=False)
+                simulation.simulate_batch(CONTROLLER, G, seed=0, cfg=c, system=P, n_threads=nt, lockstep=False)
                 bt[nt].append(time.perf_counter() - t0)
         paired = [a / b for a, b in zip(bt[1], bt[2])]  # each round: 1 then 2 threads, back to back
         run_s = _stat(t[k])

@@ -66,7 +66,7 @@ def compiled(name: str, opts=None, system=None) -> ca.Function:
     """The public plant function ``name`` (see :data:`arvcas.model.uvms.PUBLIC_FUNCTIONS`), compiled to C.
 
     ``opts`` is an :class:`arvcas.model.uvms.ModelOptions` (default: ``ModelOptions()``); ``system`` a
-    name, a system file or an :class:`arvcas.system.System` (default Haidou-1): the inputs are sized by
+    name, a system file or an :class:`arvcas.system.System` (default: the default system, :data:`arvcas.system.DEFAULT`): the inputs are sized by
     it (``q[n_joints]``, ``u[n_thrusters]``, ``p``: ``system.params.vector()``). Memoized per process by
     ``(name, opts, structure)``; the library comes from the build cache when it is there.
     """
@@ -199,7 +199,7 @@ class Dynamics:
         f = _compiled(name, opts, params)
         self.name = name
         self.opts = opts
-        self.params = params  # another system's (None: Haidou-1's packaged parameters)
+        self.params = params  # another system's (None: the default system's packaged parameters)
         self._f = f
         self.function = f  # the compiled casadi.Function (codegen.artifact_of(d.function)["path"]: its library)
         self.input_names = tuple(f.name_in())
@@ -447,7 +447,7 @@ def dynamics(name: str, system=None, *, opts=None) -> Dynamics:
     """The plant function or Jacobian ``name`` as a NumPy function (see the module docstring).
 
     ``name``: one of ``vehicle_rhs``, ``arm_wrench``, ``uvms_rhs``, ``allocate``, ``thrust``,
-    ``vehicle_rhs_jac``, ``uvms_rhs_jac``. ``system``: ``None`` (the Haidou-1 ARV of the packaged
+    ``vehicle_rhs_jac``, ``uvms_rhs_jac``. ``system``: ``None`` (the default system, Haidou-1, with its packaged
     parameters), a shipped system's name, a system file, a System or Params: inputs are sized by it and
     ``p`` defaults to its parameters. ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default
     ``ModelOptions()``).

@@ -4,7 +4,7 @@ DIR receives sources only (nothing here runs a compiler; :mod:`arvcas.build.code
 arvcas itself):
 
 * ``<lib>.c``: CasADi's generated code of the seven functions (:data:`arvcas.build.dynamics.NAMES`),
-  renamed ``<prefix><name>`` (default prefix ``arvcas_<system>_``, e.g. ``arvcas_haidou1_``); CasADi's
+  renamed ``<prefix><name>`` (default prefix ``arvcas_<system>_``: :data:`DEFAULT_PREFIX` for the default system); CasADi's
   helpers are prefixed too, so every global symbol of the library starts with the prefix and two
   exports (of one system or of two) link into one program.
 * ``<lib>.h``: the documented header: per function the order, size, unit and frame of every argument
@@ -41,11 +41,13 @@ import numpy as np
 
 from arvcas.build.templating import ident, render
 from arvcas.build.text import build_word, c_comment, c_comment_lines
+from arvcas.system.loader import UNSET, renamed_system
+from arvcas.system.params import DEFAULT
 
 __all__ = ["ExportError", "export_c", "example_inputs", "files", "default_prefix", "MANIFEST", "DEFAULT_PREFIX",
            "check_out_dir", "check_prefix", "check_replaceable", "write_package", "KIND"]
 
-DEFAULT_PREFIX = "arvcas_haidou1_"  # the default system's: default_prefix("haidou1")
+DEFAULT_PREFIX = f"arvcas_{DEFAULT}_"  # the default system's: default_prefix(DEFAULT)
 MANIFEST = "arvcas-export.json"
 MANIFEST_FORMAT = 1
 
@@ -67,7 +69,6 @@ _GLOSSARY = {
     "payload": "payload fraction in [0, 1]: scales payload.mass and payload.volume at the tool point",
     "p": "parameter vector, SI units; order, names and defaults in the _params.h header",
     "tau_m": "wrench of the arm on the vehicle in {b} about the COB: [Fx, Fy, Fz (N); Mx, My, Mz (N m)]",
-    "u": "thrust per thruster (N): stern-left, stern-right, two side, two vertical",
     "dxdot_dx": "d xdot / d x, 12 x 12, column-major: d xdot_i / d x_j at [i + 12 j]",
     "dxdot_dtau": "d xdot / d tau, 12 x 6, column-major: d xdot_i / d tau_j at [i + 12 j]",
     "dxdot_dq": "d xdot / d q, 12 x 6, column-major: d xdot_i / d q_j at [i + 12 j]",
@@ -75,27 +76,18 @@ _GLOSSARY = {
 
 
 def _glossary(P) -> dict[str, str]:
-    """:data:`_GLOSSARY` for the system of ``P``: joint and thruster counts and the thrusters' names
-    (Haidou-1's text exactly as before)."""
+    """:data:`_GLOSSARY` for the system of ``P``: joint and thruster counts and the thrusters' names."""
     st = P.structure
     g = dict(_GLOSSARY)
-    if _is_haidou1(st):
-        return g
     nj = st.n_joints
     g["q"] = f"joint angles q1..q{nj} (rad)" if nj > 1 else ("joint angle q1 (rad)" if nj else "no joints (empty)")
-    if st.thrusters is not None:
-        g["u"] = f"thrust per thruster (N): {', '.join(st.thrusters)}"
+    g["u"] = f"thrust per thruster (N): {', '.join(st.thruster_names())}"
     g["dxdot_dq"] = f"d xdot / d q, 12 x {nj}, column-major: d xdot_i / d q_j at [i + 12 j]"
     return g
 
 
-def _is_haidou1(st) -> bool:
-    """The structure of Haidou-1, whose exports keep their text from before systems were data."""
-    return st.name == "haidou1" and st.thrusters is None and st.n_joints == 6
-
-
 def default_prefix(system=None) -> str:
-    """``arvcas_<system name>_``, the default symbol prefix of a system's export (``arvcas_haidou1_``).
+    """``arvcas_<system name>_``, the default symbol prefix of a system's export (:data:`DEFAULT_PREFIX`).
 
     ``system``: anything :func:`arvcas.system.resolve` takes (a name, a file, a System, a Params).
     Characters of the name that cannot be in a C identifier become ``_``.
@@ -132,21 +124,21 @@ def _cycled(values, n: int) -> np.ndarray:
 def example_inputs(system=None) -> dict[str, np.ndarray]:
     """The fixed state of the examples, by input name (SI units; ``p`` is the default vector).
 
-    ``system`` (default Haidou-1; anything :func:`arvcas.system.resolve` takes) sizes ``q``, ``qd``,
-    ``qdd`` (n_joints) and ``u`` (n_thrusters): Haidou-1's six values each, repeated or cut.
+    ``system`` (default: the default system; anything :func:`arvcas.system.resolve` takes) sizes ``q``,
+    ``qd``, ``qdd`` (n_joints) and ``u`` (n_thrusters): six values each, repeated or cut.
     """
     from arvcas.system import resolve
 
     st = resolve(system).structure
-    inputs = _haidou1_inputs()
-    if st.n_joints != 6 or st.n_thrusters != 6:
-        for k in ("q", "qd", "qdd"):
-            inputs[k] = _cycled(inputs[k], st.n_joints)
-        inputs["u"] = _cycled(inputs["u"], st.n_thrusters)
+    inputs = _six_inputs()
+    for k in ("q", "qd", "qdd"):
+        inputs[k] = _cycled(inputs[k], st.n_joints)
+    inputs["u"] = _cycled(inputs["u"], st.n_thrusters)
     return inputs
 
 
-def _haidou1_inputs() -> dict[str, np.ndarray]:
+def _six_inputs() -> dict[str, np.ndarray]:
+    """The examples' state, six values per joint and thruster vector (Haidou-1's sizes, where they were chosen)."""
     eta = [1.0, -0.5, 2.0, 0.05, -0.03, 0.2]
     nu = [0.3, 0.05, -0.02, 0.01, 0.02, -0.03]
     return {
@@ -330,7 +322,7 @@ def _values(fns: dict[str, ca.Function], c_text: str, prefix: str, opts, P, inpu
                           "outs": [(f.name_out(i), f.numel_out(i)) for i in range(f.n_out())]})
     return {"lib": prefix.rstrip("_"), "guard": f"{prefix.rstrip('_').upper()}_H", "prefix": prefix,
             "version": __version__, "casadi_version": ca.__version__, "opts": opts, "path": P.path,
-            "haidou1": _is_haidou1(st), "system": st.name, "description": P.description or st.name,
+            "system": st.name, "description": P.description or st.name,
             "description_lines": c_comment_lines(P.description) if P.description else [],
             "n_thrusters": st.n_thrusters, "n_joints": st.n_joints, "arm": st.arm, "n_p": len(P),
             "library_decls": library_decls, "functions": functions, "inputs": inputs, "manifest": MANIFEST,
@@ -392,13 +384,14 @@ def build_files(prefix: str) -> dict[str, str]:
 # ---------------------------------------------------------------------------------------------
 
 
-def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, force: bool = False) -> list[Path]:
+def export_c(out_dir, opts=None, system=None, *, prefix: str | None = None, force: bool = False,
+             params=UNSET) -> list[Path]:
     """Write the C library, headers, build files, examples and README into ``out_dir``.
 
-    ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``params``: the
-    system, a :class:`arvcas.system.params.Params` (or a :class:`arvcas.system.System`): its layout sizes the
-    functions (``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``) and its numbers are the defaults
-    in ``<lib>_params.h`` (default: Haidou-1); ``prefix``: of every symbol (a C identifier ending in
+    ``opts``: :class:`arvcas.model.uvms.ModelOptions` (default ``ModelOptions()``); ``system``: a
+    :class:`arvcas.system.params.Params` (or a :class:`arvcas.system.System`; ``params=``, its old name, still
+    works): its layout sizes the functions (``q[n_joints]``, ``u[n_thrusters]``, ``p[n_params]``) and its
+    numbers are the defaults in ``<lib>_params.h`` (default: the default system); ``prefix``: of every symbol (a C identifier ending in
     ``_``; the library is ``lib<prefix without the last _>.so``; default :func:`default_prefix`,
     ``arvcas_<system>_``). ``out_dir`` is created if its parent exists. A file there
     that the manifest does not list with its current sha256 is refused unless ``force``. Returns the
@@ -409,6 +402,7 @@ def export_c(out_dir, opts=None, params=None, *, prefix: str | None = None, forc
     from arvcas.system.params import Params, load
     from arvcas.system import System
 
+    params = renamed_system(system, params, "export_c")
     P = load() if params is None else params
     if isinstance(P, System):
         P = P.params

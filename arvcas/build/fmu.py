@@ -7,7 +7,7 @@ BSD), writes ``modelDescription.xml``, compiles ``binaries/<platform>/<modelIden
 the cache's compiler flags and zips it all, sources included, to ``FILE.fmu`` (a temporary file in
 the same directory, then :func:`os.replace`).
 
-The FMU is sized by its system (``params``: Haidou-1 by default; any system file): states ``eta``
+The FMU is sized by its system (``system``: the default system, Haidou-1, if none; any system file): states ``eta``
 (pose in {n}) and ``nu`` (velocity in {b} at the COB), which are also its outputs; inputs the body
 wrench ``tau`` at the COB in {b} (or, with ``inputs="thrusters"``, the ``n_thrusters`` thrust
 commands ``u``, realised as ``B_T sat(u)``), the ``n_joints`` joint positions, velocities and
@@ -33,6 +33,7 @@ from pathlib import Path
 
 from arvcas.build.templating import render
 from arvcas.io import files
+from arvcas.system.loader import UNSET, renamed_system
 
 import casadi as ca
 
@@ -104,16 +105,15 @@ class FMUError(ValueError):
     """The FMU cannot be written (one line naming the argument and what is allowed)."""
 
 
-_HAIDOU1_THRUSTERS = ("stern-left", "stern-right", "side 1", "side 2", "vertical 1", "vertical 2")
 VR_U = 24  # the first input's value reference (after the 12 states and their 12 derivatives)
 
 
-def layout(params=None, inputs: str = "wrench") -> dict[str, int]:
-    """Value references of the FMU of the system ``params``: the sizes ``n_in`` (the first inputs: 6
+def layout(system=None, inputs: str = "wrench", *, params=UNSET) -> dict[str, int]:
+    """Value references of the FMU of the system ``system`` (``params=``: its old name): the sizes ``n_in`` (the first inputs: 6
     for the wrench, n_thrusters for the thrusters), ``n_joints``, ``n_u`` (every input), the offsets
     of ``q``, ``qd``, ``qdd`` and ``payload`` within the inputs, and ``vr_h``, ``vr_p`` (Haidou-1:
     25 inputs, h_rk4 at 49, the parameters from 50)."""
-    P = _check_params(params)
+    P = _check_params(renamed_system(system, params, "layout"))
     _check_inputs(inputs)
     st = P.structure
     n_in = 6 if inputs == "wrench" else st.n_thrusters
@@ -151,17 +151,17 @@ def _parameter_unit(P, name: str) -> tuple[str | None, str, dict | None]:
 # variables
 
 
-def variables(params=None, inputs: str = "wrench") -> list[dict]:
+def variables(system=None, inputs: str = "wrench", *, params=UNSET) -> list[dict]:
     """The FMU's ScalarVariables in order (value reference = index): name, causality, unit, start, ...
 
-    ``params`` is the system (its Params, a system file or None for Haidou-1): it sizes the inputs
+    ``system`` (its Params, a system file or None for the default system; ``params=``: its old name) sizes the inputs
     (:func:`layout`) and gives the parameters' start values; the states' start values are the
     ``eta0``, ``nu0`` of the system's default scenario (Haidou-1: ``data/scenario.toml``), the
     joints' the stowed pose ``arm.stow``.
     """
     from arvcas.sim.scenario import load_scenario
 
-    P = _check_params(params)
+    P = _check_params(renamed_system(system, params, "variables"))
     lay = layout(P, inputs)
     st = P.structure
     cfg = load_scenario(P.default("scenario"))
@@ -185,16 +185,13 @@ def variables(params=None, inputs: str = "wrench") -> list[dict]:
         for k in range(lay["n_in"]):
             add(f"tau[{k + 1}]", "input", "continuous", "N" if k < 3 else "N.m",
                 f"body wrench at the COB in {{b}}: {'XYZKMN'[k]} ({'force' if k < 3 else 'moment'})", start=0.0)
-    elif st.thrusters is None:  # Haidou-1's parametric layout
-        for k in range(lay["n_in"]):
-            add(f"u[{k + 1}]", "input", "continuous", "N",
-                f"thrust command of the {_HAIDOU1_THRUSTERS[k]} thruster (saturated to [thrusters.u_min, "
-                "thrusters.u_max])", start=0.0)
     else:
-        for k, t in enumerate(st.thrusters):
+        from arvcas.model.thrusters import limit_prefixes
+
+        pre = limit_prefixes(st) * st.n_thrusters if st.thrusters is None else limit_prefixes(st)
+        for k, (t, lim) in enumerate(zip(st.thruster_names(), pre)):
             add(f"u[{k + 1}]", "input", "continuous", "N",
-                f"thrust command of thruster {t} (saturated to [thrusters.{t}.u_min, thrusters.{t}.u_max])",
-                start=0.0)
+                f"thrust command of thruster {t} (saturated to [{lim}u_min, {lim}u_max])", start=0.0)
     nj = lay["n_joints"]
     q0 = [P[f"arm.stow.q{j}"] for j in range(1, nj + 1)]
     for vec, unit, what, starts in (("q", "rad", "joint angle", q0), ("qd", "rad/s", "joint rate", [0.0] * nj),
@@ -272,8 +269,7 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
     bases = {v["unit"]: v.get("base") or _UNITS[v["unit"]] for v in V if v["unit"]}
     used = [u for u in _UNITS if u in bases] + [u for u in bases if u not in _UNITS]  # derived units last
     st = P.structure
-    what = "Haidou-1 ARV with its 6-DOF manipulator (Ding et al. 2021)" if _is_haidou1(st) else \
-        f"system {st.name}: {P.description or st.name} ({st.n_thrusters} thrusters, {st.n_joints} joints)"
+    what = f"system {st.name}: {P.description or st.name} ({st.n_thrusters} thrusters, {st.n_joints} joints)"
     desc = (f"{what}, exactly coupled (arvcas uvms_rhs, "
             f"docs/model.md); inputs: {'body wrench tau' if inputs == 'wrench' else 'thruster commands u'}, "
             "q, qd, qdd, payload")
@@ -286,10 +282,6 @@ def _model_description(V: list[dict], deps: list[list[int]], guid: str, inputs: 
 
 # ---------------------------------------------------------------------------------------------
 # C
-
-
-def _is_haidou1(st) -> bool:
-    return st.name == "haidou1" and st.thrusters is None and st.n_joints == 6
 
 
 def _rhs_function(opts, inputs: str, P) -> ca.Function:
@@ -403,13 +395,13 @@ def _check_path(path, force: bool) -> Path:
     return p
 
 
-def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = "wrench") -> Path:
+def export_fmu(path, system=None, opts=None, force: bool = False, inputs: str = "wrench", *, params=UNSET) -> Path:
     """Write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm to ``path``.
 
     ``path`` must end in ``.fmu``; an existing file is replaced only if arvcas recorded it as an FMU it
     wrote (the directory's manifest, :mod:`arvcas.io.files`; nothing inside the file is trusted), or
-    with ``force=True``. ``params``, the system (its :class:`arvcas.system.params.Params` or
-    :class:`arvcas.system.System`, a system file, or None for Haidou-1), sizes the FMU (:func:`layout`)
+    with ``force=True``. ``system`` (its :class:`arvcas.system.params.Params` or :class:`arvcas.system.System`,
+    a system file, or None for the default system; ``params=``: its old name) sizes the FMU (:func:`layout`)
     and sets the parameters' start values; every one stays settable in the FMU. ``opts`` is
     an :class:`arvcas.model.uvms.ModelOptions` (n_quad of the link drag). ``inputs``: ``"wrench"``
     (the body wrench ``tau``, 6) or ``"thrusters"`` (the n_thrusters thrust commands ``u``, realised as
@@ -423,7 +415,7 @@ def export_fmu(path, params=None, opts=None, force: bool = False, inputs: str = 
         raise FMUError(f"force: expected True or False, got {force!r}")
     _check_inputs(inputs)
     opts = ModelOptions.checked(opts, error=FMUError)
-    P = _check_params(params)
+    P = _check_params(renamed_system(system, params, "export_fmu"))
     out = _check_path(path, force)
     platform, suffix = _platform()
 

@@ -14,7 +14,9 @@ A controller of your own: subclass :class:`Controller`, declare ``name``, ``gain
 a study's ``plugins``, an entry point of the group ``arvcas.controllers``: docs/plugins.md).
 """
 
-from arvcas.controllers.base import Controller, ControllerError, Gain, available, get, names, register, unregister
+from arvcas.controllers.base import (Controller, ControllerError, Gain, accepted, aliases, available, canonical, get,
+                                     names, register, unregister)
 from arvcas.controllers import proposed, agsta, traditional, implicit, pid, ardusub  # noqa: F401,E402  (registers them)
 
-__all__ = ["Controller", "ControllerError", "Gain", "available", "get", "names", "register", "unregister"]
+__all__ = ["Controller", "ControllerError", "Gain", "available", "get", "names", "register", "unregister", "aliases",
+           "canonical", "accepted"]

@@ -10,7 +10,8 @@ __all__ = ["AGSTA"]
 
 
 class AGSTA(SlidingModeController):
-    name = "agsta"
+    name = "agsta"  # the paper's name (files, directories and compiled functions keep it)
+    aliases = ("agsta_nominal",)  # what it is: the original AGSTA, nominal-model compensation, the gain only grows
     label = "AGSTA"
     color = "tab:red"
     description = "original AGSTA with nominal-model compensation (the paper's baseline)"

@@ -34,7 +34,7 @@ from typing import Any, Callable
 from arvcas.io import plugins
 
 __all__ = ["Gain", "Controller", "ControllerError", "call_law", "register", "get", "names", "available", "unregister", "adopt",
-           "origin", "provenance", "describe_provenance", "GROUP"]
+           "origin", "provenance", "describe_provenance", "GROUP", "aliases", "canonical", "accepted"]
 
 DOFS = ("x", "y", "z", "phi", "theta", "psi")
 
@@ -63,6 +63,9 @@ class Controller:
     and implement :meth:`initial` and :meth:`step`; instances are stateless descriptions."""
 
     name: str = ""
+    # other names of this law, accepted wherever a law is named and resolved to ``name`` (which files, directories
+    # and compiled functions keep); a class's own, not inherited (a subclass is another law)
+    aliases: tuple[str, ...] = ()
     label: str = ""  # the name in figures and tables (default: name)
     color: str = ""  # its matplotlib colour in figures (default: the colour cycle)
     description: str = ""
@@ -229,6 +232,7 @@ def call_law(law: Controller, method: str, *args):
 
 
 _REGISTRY: dict[str, Controller] = {}
+_ALIASES: dict[str, str] = {}  # alias -> the registered name it stands for
 _ORIGIN: dict[str, object] = {}  # name -> the plugin (arvcas.io.plugins.Plugin) that registered it
 _LOCK = threading.Lock()
 GROUP = "arvcas.controllers"  # the entry-point group of controllers (docs/plugins.md)
@@ -253,15 +257,35 @@ def _validate(c: Controller) -> None:
         check_signals(COMMON + tuple(c.signals))
     except ValueError as e:
         raise ControllerError(f"controller {c.name}: {e}") from None
+    als = _own_aliases(c)
+    if not all(isinstance(a, str) and a.isidentifier() and a != c.name for a in als) or len(set(als)) != len(als):
+        raise ControllerError(f"controller {c.name}: aliases must be distinct identifiers other than its name, got "
+                              f"{als!r}")
+
+
+def _own_aliases(c: Controller) -> tuple[str, ...]:
+    """The aliases ``c``'s own class declares (a subclass does not inherit its parent's: it is another law)."""
+    return tuple(type(c).__dict__.get("aliases", ()))
 
 
 def register(c: Controller, replace: bool = False) -> Controller:
-    """Add ``c`` to the registry (``replace=True`` to redefine a name); returns it."""
+    """Add ``c`` to the registry (``replace=True`` to redefine a name), with its :attr:`Controller.aliases`;
+    returns it. A name or alias already standing for another law is refused."""
     _validate(c)
     origin = plugins.current()  # a plugin's code registering (its import, or the registry adopting it)
     with _LOCK:
         if c.name in _REGISTRY and not replace and _REGISTRY[c.name] is not c:
             raise ControllerError(f"register: a controller named {c.name!r} exists (pass replace=True to redefine it)")
+        if c.name in _ALIASES:
+            raise ControllerError(f"register: {c.name!r} is an alias of controller {_ALIASES[c.name]!r}")
+        for a in _own_aliases(c):
+            taken = a if a in _REGISTRY else _ALIASES.get(a, c.name)
+            if taken != c.name:
+                raise ControllerError(f"register: controller {c.name}: its alias {a!r} already names controller "
+                                      f"{taken!r}")
+        for a in [a for a, n in _ALIASES.items() if n == c.name]:
+            del _ALIASES[a]
+        _ALIASES.update({a: c.name for a in _own_aliases(c)})
         _REGISTRY[c.name] = c
         if origin is not None:
             _ORIGIN[c.name] = origin
@@ -274,6 +298,28 @@ def unregister(name: str) -> None:
     with _LOCK:
         _REGISTRY.pop(name, None)
         _ORIGIN.pop(name, None)
+        for a in [a for a, n in _ALIASES.items() if n == name]:
+            del _ALIASES[a]
+
+
+def aliases() -> dict[str, str]:
+    """Alias -> the registered controller name it stands for."""
+    with _LOCK:
+        return dict(_ALIASES)
+
+
+def canonical(name):
+    """The registered name an alias stands for; anything else unchanged (a name, an unknown name, a Controller)."""
+    if not isinstance(name, str):
+        return name
+    with _LOCK:
+        return _ALIASES.get(name, name)
+
+
+def accepted() -> tuple[str, ...]:
+    """Every name a law may be given by: the registered names, then the aliases."""
+    with _LOCK:
+        return tuple(_REGISTRY) + tuple(_ALIASES)
 
 
 def names() -> tuple[str, ...]:
@@ -295,6 +341,7 @@ def get(name) -> Controller:
     for among the entry points of the group ``arvcas.controllers`` (those of that name first, then all)."""
     if isinstance(name, Controller):
         return name
+    name = canonical(name)
     with _LOCK:
         c = _REGISTRY.get(name) if isinstance(name, str) else None
     if c is None and isinstance(name, str):
@@ -307,7 +354,7 @@ def get(name) -> Controller:
     if c is None:
         with _LOCK:
             known = list(_REGISTRY)
-        close = difflib.get_close_matches(str(name), known, n=1)
+        close = difflib.get_close_matches(str(name), known + list(_ALIASES), n=1)
         hint = f" (did you mean '{close[0]}'?)" if close else ""
         broken = f"; plugins that failed to load: {' | '.join(failed)}" if isinstance(name, str) and failed else ""
         raise ControllerError(f"controller: unknown '{name}'{hint} (allowed: {', '.join(known)}; a controller of "

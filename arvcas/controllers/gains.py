@@ -8,8 +8,7 @@ any registered controller.
 
 from __future__ import annotations
 
-import tomllib
-from importlib import resources
+import functools
 
 import numpy as np
 
@@ -29,20 +28,24 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _table(path=None) -> dict:
-    """A gain table (default: Haidou-1's ``data/gains.toml``), read once per process."""
-    key = str(path) if path is not None else ""
+def _table(path) -> dict:
+    """A gain table (a system's ``[defaults] gains``), read once per process."""
+    key = str(path)
     t = _TABLES.get(key)
     if t is None:
-        if path is None:
-            with resources.files("arvcas").joinpath("data/gains.toml").open("rb") as f:
-                t = tomllib.load(f)
-        else:
-            from arvcas.system import tomlfile
+        from arvcas.system import tomlfile
 
-            t = tomlfile.parse(tomlfile.read_text(path, GainError, "gain table"), str(path), GainError)
+        t = tomlfile.parse(tomlfile.read_text(path, GainError, "gain table"), key, GainError)
         _TABLES[key] = t
     return t
+
+
+@functools.lru_cache(maxsize=1)
+def _default_system():
+    """The default system (:data:`arvcas.system.DEFAULT`), loaded once per process."""
+    from arvcas.system import load_system
+
+    return load_system()
 
 
 _TABLES: dict[str, dict] = {}
@@ -81,7 +84,7 @@ def gain_units(controller) -> list[str]:
 def default_gains(controller, system=None) -> np.ndarray:
     """The system's default gains as the flat vector (DOF by DOF, x to psi, in the column order).
 
-    ``system``: None (Haidou-1), a name, a file, a System or Params: its gain table is the file its
+    ``system``: None (the default system), a name, a file, a System or Params: its gain table is the file its
     ``[defaults] gains`` names. A controller may carry its own defaults (``defaults``: column -> 6
     values, or a flat vector) instead of a block of the gain table.
     """
@@ -92,17 +95,14 @@ def default_gains(controller, system=None) -> np.ndarray:
         if g.shape != (n_gains(c),):
             raise GainError(f"controller {c.name}: defaults has {g.size} values, expected {n_gains(c)}")
         return g.copy()
-    path = None
-    if system is not None:
-        from arvcas.system.params import default_layout
-        from arvcas.system import resolve
+    from arvcas.system import resolve
 
-        sysm = resolve(system)
-        path = sysm.params.default("gains")
-        if path is None and sysm.structure != default_layout().structure:  # Haidou-1's gains would fit nothing
-            raise GainError(f"system '{sysm.name}' ({sysm.path}) names no gain table ([defaults] gains, "
-                            f"docs/system-file.md): give controller {c.name} its gains, or the system a gain table")
-    where = str(path) if path is not None else "arvcas/data/gains.toml"
+    sysm = _default_system() if system is None else resolve(system)
+    path = sysm.params.default("gains")
+    if path is None:
+        raise GainError(f"system '{sysm.name}' ({sysm.path}) names no gain table ([defaults] gains, "
+                        f"docs/system-file.md): give controller {c.name} its gains, or the system a gain table")
+    where = str(path)
     block = _table(path).get(c.defaults_block)
     if block is None:
         raise GainError(f"controller {c.name}: the gain table {where} has no block "

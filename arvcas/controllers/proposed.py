@@ -14,7 +14,8 @@ PROPOSED_GAINS = (G_SURFACE, *G_GSTA, G_ADAPT["l"], G_ADAPT["r"], G_ADAPT["k1_0"
 
 
 class Proposed(SlidingModeController):
-    name = "proposed"
+    name = "proposed"  # the paper's name (files, directories and compiled functions keep it)
+    aliases = ("agsta_reso_decay",)  # what it is: AGSTA, RESO compensation, the gain's clamped exponential decay
     label = "Proposed"
     color = "tab:blue"
     description = "modified AGSTA (eq. 19) with the ATD reference and the RESO (eq. 14-16, 20)"

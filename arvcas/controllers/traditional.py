@@ -10,7 +10,8 @@ __all__ = ["Traditional"]
 
 
 class Traditional(Proposed):
-    name = "traditional"
+    name = "traditional"  # the paper's name (files, directories and compiled functions keep it)
+    aliases = ("agsta_reso_updown",)  # what it is: AGSTA, RESO, the gain stepping up and down by l (the zigzag)
     label = "Traditional law"
     color = "tab:orange"
     description = "the proposed controller with the traditional decreasing law of Fig. 10"

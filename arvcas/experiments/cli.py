@@ -12,8 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from arvcas.io.cliargs import (RESULT_FORMATS, add_figure_format, add_model_args, model_options, output_kinds, refuse,
-                               seed_arg)
+from arvcas.io.cliargs import (RESULT_FORMATS, add_figure_format, add_model_args, add_system_arg, model_options,
+                               output_kinds, refuse, seed_arg)
 
 __all__ = ["add_sweep", "check_sweep", "run_sweep", "sweep_outputs", "add_montecarlo", "check_montecarlo",
            "run_montecarlo", "montecarlo_outputs", "add_robust", "check_robust", "run_robust", "robust_outputs",
@@ -90,8 +90,7 @@ def add_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--noise-scale", type=float, default=None, metavar="X",
                    help="multiply the sensor noise by X (0: perfect measurements, the EKF unchanged; default 1)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
-    p.add_argument("--system", "--params", dest="params", type=Path, default=None, metavar="NAME|FILE",
-                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
+    add_system_arg(p)
     p.add_argument("--check", type=Path, default=None, metavar="FILE.h5",
                    help="re-run a stored sweep from its file alone and compare bit for bit (no other option)")
     _add_format(p)
@@ -154,9 +153,9 @@ def run_sweep(a: argparse.Namespace) -> int:
         _new, diff = reproduce_sweep(a.check)
         return _report_check(a.check, diff, "chat, rmse, ok, t_fail, zigzag measures, k1 series")
     _io.prepare_dir(a.out, f"--out {a.out}")
-    params = load(a.params)
+    params = load(a.system)
     cfg = scenario.load_scenario(a.config if a.config is not None else params.default("scenario"))
-    sw = run_sweep(a.h, a.controllers or CONTROLLERS, a.seeds or [0], cfg=cfg, params=params,
+    sw = run_sweep(a.h, a.controllers or CONTROLLERS, a.seeds or [0], cfg=cfg, system=params,
                    noise_scale=1.0 if a.noise_scale is None else a.noise_scale, progress=_say)
     files = write_sweep_dir(sw, a.out, a.format or "png")
     print(sweep_markdown(sw).split("\n## ", 1)[0])
@@ -177,8 +176,7 @@ def add_montecarlo(p: argparse.ArgumentParser) -> None:
     p.add_argument("--spread", type=float, default=None,
                    help="half-width of the nominal-model factors' uniform draw around 1 (default 0.3: +-30 %%)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE", help="scenario file (default: packaged)")
-    p.add_argument("--system", "--params", dest="params", type=Path, default=None, metavar="NAME|FILE",
-                   help="the system: a shipped one (arvcas systems) or a system file (default: haidou1)")
+    add_system_arg(p)
     p.add_argument("--from-front", type=Path, default=None, metavar="FRONT",
                    help="use the gains of a tuning front member (with --index)")
     p.add_argument("--index", default=None, help="front member: an integer, or 'knee'")
@@ -245,7 +243,7 @@ def run_montecarlo(a: argparse.Namespace) -> int:
         print(draws_toml(draw(a.runs, seed, spread)), end="")
         return 0
     out = _io.target(a.out, f"--out {a.out}")
-    params = load(a.params)
+    params = load(a.system)
     cfg = scenario.load_scenario(a.config if a.config is not None else params.default("scenario"))
     changed = None
     controller, gains, source, front_path = a.controller, None, None, None
@@ -264,7 +262,7 @@ def run_montecarlo(a: argparse.Namespace) -> int:
             cfg = scenario.loads_scenario(cfg_text, f"{a.from_front} (study scenario)")
     if controller is None:
         raise ValueError("--controller: required (proposed, agsta, traditional, implicit)")
-    mc = run_montecarlo(controller, a.runs, seed, gains=gains, spread=spread, cfg=cfg, params=params,
+    mc = run_montecarlo(controller, a.runs, seed, gains=gains, spread=spread, cfg=cfg, system=params,
                         gains_source=source, progress=_say)
     if front_path is not None:
         mc.meta["front_path"] = front_path
@@ -564,8 +562,8 @@ def run_simulate(a: argparse.Namespace) -> int:
 
     if a.out is not None:
         results.check_dir(a.out.parent, f"--out {a.out}")
-    params = load(a.params)
-    if a.from_front is not None and a.params is None:  # the front's own system
+    params = load(a.system)
+    if a.from_front is not None and a.system is None:  # the front's own system
         from arvcas.tuning import checkpoint as ck
         from arvcas.tuning.front import resolve_front_path, system_params
 
@@ -587,7 +585,7 @@ def run_simulate(a: argparse.Namespace) -> int:
     if controller is None:
         raise ValueError("--controller: required (proposed, agsta, traditional, implicit, pid, or a plugin's: "
                          "arvcas controllers)")
-    r = simulate(controller, gains=gains, seed=0 if seed is None else seed, params=params, cfg=cfg,
+    r = simulate(controller, gains=gains, seed=0 if seed is None else seed, system=params, cfg=cfg,
                  opts=model_options(a.n_quad))
     if a.from_front is not None and changed:
         r.meta["model_change_allowed"] = changed

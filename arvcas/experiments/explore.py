@@ -38,6 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+from arvcas.system import DEFAULT
+
 __all__ = ["page_data", "page_html", "write_page", "member_selection", "explore_fronts", "DEFAULT_SAMPLES",
            "FORMAT", "FORMAT_VERSION"]
 
@@ -189,7 +191,7 @@ def _front_data(path: Path, checked, members, samples: int, say) -> dict:
         "path": str(path), "controller": fr.controller, "label": controller_label(fr.controller),
         "color": controller_color(fr.controller), "study": fr.study_name, "status": fr.status, "n_gen": fr.n_gen,
         "n_eval": fr.n_eval, "hv": fr.hv, "reference_point": fr.reference_point.tolist(), "knee": knee,
-        "system": fr.system or "haidou1", "draws": int(fr.draw_seeds.size), "seed": seed,
+        "system": fr.system or DEFAULT, "draws": int(fr.draw_seeds.size), "seed": seed,
         "gain_names": list(fr.names), "F": fr.F.tolist(), "gains": _rounded(fr.gains),
         "chat": _rounded(fr.chat.mean(axis=0)), "rmse": _rounded(fr.rmse.mean(axis=0)),
         "population": fr.population_F[feas].tolist(),
@@ -207,7 +209,7 @@ def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_
     """Everything the page shows, as JSON-ready data (module docstring)."""
     from arvcas._version import __version__
     from arvcas.controllers.gains import DOFS
-    from arvcas.metrics.indices import norm_name
+    from arvcas.metrics.indices import defaults_name, norm_name
 
     say = say or (lambda msg: None)
     if samples < 2:
@@ -222,22 +224,23 @@ def page_data(paths, members="all", samples: int = DEFAULT_SAMPLES, allow_model_
     if len(sets) > 1:
         raise ValueError("front explore: the fronts have different objectives (" + "; ".join(
             f"{', '.join(o)} in {p}" for o, p in sets.items()) + "); one page shows fronts of one set of objectives")
-    systems = sorted({ch[0].system or "haidou1" for ch in checked})
+    systems = sorted({ch[0].system for ch in checked})  # as fronts record it: "" is the default system
     if len(systems) > 1:
-        raise ValueError(f"front explore: the fronts are of different systems ({', '.join(systems)}); their objectives "
+        raise ValueError(f"front explore: the fronts are of different systems ({', '.join(s or DEFAULT for s in systems)}); their objectives "
                          "are normalised differently and cannot share one plot")
-    system = systems[0]
+    recorded_system = systems[0]
+    system = recorded_system or DEFAULT
     fronts = [_front_data(p, ch, members, samples, say) for p, ch in zip(paths, checked)]
     recorded = sorted({ch[1].normalisation for ch in checked if ch[1].normalisation})  # fronts since it is recorded
     if len(recorded) > 1:
         raise ValueError(f"front explore: the fronts' objectives are normalised differently ({'; '.join(recorded)}) "
                          f"and cannot share one plot")
-    norm = recorded[0] if recorded else norm_name("" if system == "haidou1" else system)
+    norm = recorded[0] if recorded else norm_name(recorded_system)
     objectives = _objectives(checked[0][0].objectives, fronts, norm)
     return {
         "format": FORMAT, "format_version": FORMAT_VERSION, "arvcas_version": __version__, "system": system,
         "title": f"Fronts of {', '.join(dict.fromkeys(f['study'] for f in fronts))} ({system})",
-        "normalisation": norm, "defaults_name": "Table 2" if system == "haidou1" else "default gains",
+        "normalisation": norm, "defaults_name": defaults_name(recorded_system),
         "dofs": list(DOFS), "dof_units": ["m", "m", "m", "rad", "rad", "rad"], "objectives": objectives,
         "fronts": fronts,
     }

@@ -57,7 +57,7 @@ def replay_knees(study_dir: str | Path, out: str | Path, say=print, fmt: str = "
         system = params
         controller, gains, seed, cfg_text = member_gains(path, k)
         cfg = loads_scenario(cfg_text, f"{path} (study scenario)")
-        r = simulate(controller, gains=gains, seed=seed, params=params, cfg=cfg)
+        r = simulate(controller, gains=gains, seed=seed, system=params, cfg=cfg)
         if not (np.array_equal(r.chat, fr.chat[0, k]) and np.array_equal(r.rmse, fr.rmse[0, k])):
             raise RuntimeError(f"{path}: the knee's replay does not reproduce its stored CHAT/RMSE "
                                f"(max difference {np.abs(r.chat - fr.chat[0, k]).max():.3g}); the model changed?")

@@ -43,6 +43,7 @@ from arvcas.build import codegen
 from arvcas.controllers import gains as gains_mod
 from arvcas.metrics import indices as metrics
 from arvcas.sim import scenario
+from arvcas.system.loader import UNSET, renamed_system
 from arvcas.system.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
 from arvcas.io import style
 from arvcas.io.results import ResultsError
@@ -162,14 +163,15 @@ class MonteCarlo:
 
 
 def run_montecarlo(controller: str, runs: int, seed: int = 0, gains=None, spread: float = 0.3,
-                   cfg: ScenarioConfig | None = None, params: Params | None = None, n_quad: int = 5,
+                   cfg: ScenarioConfig | None = None, system: Params | None = None, n_quad: int = 5,
                    n_threads: int | None = None, gains_source: str | None = None,
-                   progress: Callable[[str], None] | None = None) -> MonteCarlo:
+                   progress: Callable[[str], None] | None = None, *, params=UNSET) -> MonteCarlo:
     """Draw ``runs`` (noise seed, factors, phases) from ``seed`` and run them as compiled batches.
 
-    ``gains`` defaults to the system's default gains (Haidou-1: Table 2). Diverged runs are results
-    (``ok = False``), not errors.
+    ``system``: its Params (default: the default system; ``params=``: its old name). ``gains`` defaults to
+    the system's default gains (Haidou-1: Table 2). Diverged runs are results (``ok = False``), not errors.
     """
+    params = renamed_system(system, params, "run_montecarlo")
     gains_mod.check_controller(controller)
     d = draw(runs, seed, spread)
     cfg = cfg if cfg is not None else scenario.load_scenario()
@@ -187,7 +189,7 @@ def run_montecarlo(controller: str, runs: int, seed: int = 0, gains=None, spread
         if progress:
             progress(f"{controller}: runs {a}..{b - 1} of {n}")
         c_, r_, o_, t_ = simulate_many(controller, g, d.noise_seed[a:b], uncertainty=d.factors[a:b],
-                                       phase=d.phase[a:b], params=params, cfg=cfg, n_threads=n_threads, opts=opts)
+                                       phase=d.phase[a:b], system=params, cfg=cfg, n_threads=n_threads, opts=opts)
         chat[a:b], rmse[a:b], ok[a:b], t_fail[a:b] = c_, r_, o_, t_
     sysref = _io.system_ref(params)
     src = gains_source if gains_source is not None else (metrics.defaults_name(sysref) if gains is None else "given")
@@ -303,7 +305,7 @@ def reproduce(path, n_threads: int | None = None) -> tuple[MonteCarlo, list[str]
     old = read_montecarlo(path)
     cfg, params = _io.stored_inputs(path, old.config_text, old.params_vector, ResultsError, old.meta.get("system", ""))
     new = run_montecarlo(old.controller, old.runs, old.draws.master_seed, gains=old.gains, spread=old.draws.spread,
-                         cfg=cfg, params=params, n_quad=old.n_quad, n_threads=n_threads, gains_source=old.gains_source)
+                         cfg=cfg, system=params, n_quad=old.n_quad, n_threads=n_threads, gains_source=old.gains_source)
     diff = []
     if not new.draws.same_as(old.draws):
         diff.append("draws")

@@ -190,7 +190,7 @@ def robust_front(path, runs: int, seed: int = 0, spread: float = 0.3, n_threads:
             progress(f"{c}: {fr.size} members + {metrics.defaults_name(fr.system)} x {d.runs} draws: "
                      f"runs {a}..{b - 1} of {n}")
         c_, r_, o_, _t = simulate_many(c, rows_g[a:b], rows_s[a:b], uncertainty=rows_u[a:b], phase=rows_p[a:b],
-                                       params=params, cfg=cfg, n_threads=n_threads)
+                                       system=params, cfg=cfg, n_threads=n_threads)
         chat[a:b], rmse[a:b], ok[a:b] = c_, r_, o_
     chat, rmse, ok = chat.reshape(m, d.runs, 6), rmse.reshape(m, d.runs, 6), ok.reshape(m, d.runs)
     return RobustFront(

@@ -38,6 +38,7 @@ from arvcas.io import style
 from arvcas.io.plots import controller_color
 from arvcas.metrics import indices as metrics
 from arvcas.sim import scenario
+from arvcas.system.loader import UNSET, renamed_system
 from arvcas.system.params import SCHEMA as PARAM_SCHEMA, Params, load as load_params
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.sim.simulation import simulate
@@ -123,14 +124,16 @@ def _check_h(cfg: ScenarioConfig, h: float) -> ScenarioConfig:
 
 
 def run_sweep(hs: Sequence[float], controllers: Sequence[str] = CONTROLLERS, seeds: Sequence[int] = (0,),
-              cfg: ScenarioConfig | None = None, params: Params | None = None, gains: dict | None = None,
-              noise_scale: float = 1.0, progress: Callable[[str], None] | None = None) -> Sweep:
+              cfg: ScenarioConfig | None = None, system: Params | None = None, gains: dict | None = None,
+              noise_scale: float = 1.0, progress: Callable[[str], None] | None = None, *, params=UNSET) -> Sweep:
     """Run every controller at every ``h`` for every noise seed (compiled, one build per controller
     and ``h``, cached on disk); the Table 2 gains unless ``gains[controller]`` is given.
 
     ``noise_scale`` multiplies the sensor noise (0: perfect measurements, the EKF unchanged), as in
-    :func:`arvcas.sim.simulation.simulate`: it separates discretisation chattering from noise.
+    :func:`arvcas.sim.simulation.simulate`: it separates discretisation chattering from noise. ``system``: its
+    Params (default: the default system; ``params=``: its old name).
     """
+    params = renamed_system(system, params, "run_sweep")
     say = progress or (lambda _m: None)
     cfg = cfg if cfg is not None else scenario.load_scenario()
     params = params if params is not None else load_params()
@@ -169,7 +172,7 @@ def run_sweep(hs: Sequence[float], controllers: Sequence[str] = CONTROLLERS, see
         for j, cf in enumerate(cfgs):
             say(f"{c} at h = {cf.time_h:g} s: {ns} seed(s)")
             for m, sd in enumerate(seeds):
-                r = simulate(c, gains=G[c], seed=sd, params=params, cfg=cf, noise_scale=noise_scale)
+                r = simulate(c, gains=G[c], seed=sd, system=params, cfg=cf, noise_scale=noise_scale)
                 ok[i, j, m] = r.ok
                 if r.ok:
                     chat[i, j, m], rmse[i, j, m] = r.chat, r.rmse
@@ -269,7 +272,7 @@ def reproduce_sweep(path) -> tuple[Sweep, list[str]]:
     old = read_sweep(path)
     _io.require_controllers(path, old.controllers, old.meta.get("controller_sources", ""))
     cfg, params = _io.stored_inputs(path, old.config_text, old.params_vector, ValueError, old.meta.get("system", ""))
-    new = run_sweep(old.hs, old.controllers, old.seeds, cfg=cfg, params=params, gains=old.gains,
+    new = run_sweep(old.hs, old.controllers, old.seeds, cfg=cfg, system=params, gains=old.gains,
                     noise_scale=old.noise_scale)
     diff = [k for k in _ARRAYS if not np.array_equal(getattr(new, k), getattr(old, k), equal_nan=k != "ok")]
     diff += [f"k1/{c}" for c in old.controllers

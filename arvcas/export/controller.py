@@ -50,6 +50,7 @@ from arvcas.sim.closedloop import controller_diagnostics, controller_functions, 
 from arvcas.sim.scenario import SENSOR_WHAT, ScenarioConfig, measured
 from arvcas.sim.scenario import COMPONENTS as Y_NAMES
 from arvcas.sim.thrust_forcing import command_functions
+from arvcas.system.loader import UNSET, renamed_system
 
 __all__ = ["ExportError", "export_controller", "default_prefix", "files"]
 
@@ -90,13 +91,14 @@ class _Design:
         return self.prefix.rstrip("_")
 
 
-def export_controller(out_dir, controller="proposed", gains=None, params=None, scenario=None, *, prefix=None,
-                      gains_source: str | None = None, force: bool = False) -> list[Path]:
+def export_controller(out_dir, controller="proposed", gains=None, system=None, scenario=None, *, prefix=None,
+                      gains_source: str | None = None, force: bool = False, params=UNSET) -> list[Path]:
     """Write the controller of a run as a C library with header, build files, binding and examples.
 
     ``controller``: a registered name or Controller; ``gains``: its flat gain vector (default: the
     system's defaults), with ``gains_source`` saying where it comes from (it goes into the header and
-    README); ``params``: the system (anything :func:`arvcas.system.resolve` takes; default Haidou-1);
+    README); ``system``: anything :func:`arvcas.system.resolve` takes (default: the default system; ``params=``:
+    its old name);
     ``scenario``: a ScenarioConfig or file (default: the system's): it gives the sampling period, the
     ATD's time and amplitude floor, and the default set point, nominal factors and EKF tuning;
     ``prefix``: of every symbol (default :func:`default_prefix`). A file in ``out_dir`` that the
@@ -105,6 +107,8 @@ def export_controller(out_dir, controller="proposed", gains=None, params=None, s
     """
     from arvcas.sim import scenario as scenario_mod
     from arvcas.system import resolve
+
+    params = renamed_system(system, params, "export_controller")
 
     law = get_controller(controller)
     P = resolve(params).params

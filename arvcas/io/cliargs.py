@@ -18,7 +18,7 @@ import math
 from pathlib import Path
 
 __all__ = ["seed_arg", "count_arg", "seconds_arg", "check_memory", "MAX_SEED", "refuse", "FIGURE_FORMATS",
-           "add_figure_format", "figure_file", "model_options", "add_system_arg", "add_model_args", "output_kinds",
+           "add_figure_format", "figure_file", "model_options", "add_system_arg", "default_system_text", "add_model_args", "output_kinds",
            "out_file", "RESULT_FORMATS"]
 
 MAX_SEED = 2**63  # seeds are stored as int64 and fed to numpy's SeedSequence
@@ -108,9 +108,19 @@ def model_options(n_quad: int):
     return ModelOptions(n_quad=n_quad)
 
 
-def add_system_arg(p: argparse.ArgumentParser, default: str = "haidou1") -> None:
-    p.add_argument("--system", "--params", dest="params", metavar="NAME|FILE", type=Path, default=None,
-                   help=f"the system: a shipped one (arvcas systems) or a system file (default: {default})")
+def default_system_text() -> str:
+    """How a help text names the default system: "the default system, <name>" (:data:`arvcas.system.DEFAULT`)."""
+    from arvcas.system import DEFAULT
+
+    return f"the default system, {DEFAULT}"
+
+
+def add_system_arg(p: argparse.ArgumentParser, default: str | None = None, type=Path) -> None:
+    """``--system NAME|FILE`` (old spelling ``--params``); ``default``: what the help says is used without it
+    (default: :func:`default_system_text`)."""
+    p.add_argument("--system", "--params", dest="system", metavar="NAME|FILE", type=type, default=None,
+                   help=f"the system: a shipped one (arvcas systems) or a system file "
+                        f"(default: {default or default_system_text()})")
 
 
 def add_model_args(p: argparse.ArgumentParser) -> None:

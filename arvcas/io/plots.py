@@ -37,7 +37,6 @@ from arvcas.controllers import gains as gains_mod
 from arvcas.io import style
 from arvcas.system.params import SCHEMA as PARAM_SCHEMA
 from arvcas.system.params import load as load_params
-from arvcas.system.systemfile import HAIDOU1_THRUSTERS
 
 __all__ = [
     "plot_states", "plot_errors", "plot_thrusts", "plot_sliding", "plot_gains", "plot_zigzag",
@@ -73,14 +72,19 @@ _HEIGHT = 6.0  # in, six-panel figures at page width
 
 def thruster_names(r) -> tuple[str, ...]:
     """The names of the run's thrusters in allocation order: from its system's parameters
-    (``thrusters.<name>.u_min``), else Haidou-1's six (a run of Haidou-1 records no parameter names)."""
+    (``thrusters.<name>.u_min``); a run that records no system is of the default system
+    (:data:`arvcas.system.DEFAULT`), whose names it takes; ``T1 .. Tn`` if the count differs."""
+    from arvcas.system import DEFAULT, load_system
+
     n = np.asarray(r.thrust).shape[1]
     names = [k.split(".")[1] for k in (r.meta.get("param_names") or ()) if k.startswith("thrusters.")
              and k.endswith(".u_min") and k.count(".") == 2]
     if len(names) == n:
         return tuple(names)
-    if n == len(HAIDOU1_THRUSTERS):
-        return HAIDOU1_THRUSTERS
+    if not r.meta.get("system"):
+        names = list(load_system(DEFAULT).structure.thruster_names())
+        if len(names) == n:
+            return tuple(names)
     return tuple(f"T{j + 1}" for j in range(n))
 
 

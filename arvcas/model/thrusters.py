@@ -1,7 +1,8 @@
 """Thruster allocation and asymmetric saturation (paper eq. 2, Appendix B, section 4.1; docs/system-file.md).
 
-Two layouts: Haidou-1's parametric one (Appendix B) and a list of thrusters, each with its position,
-unit direction and limits: column ``[d; r x d]`` of B. Allocation is ``B^-1 tau`` for six thrusters and
+Two layouts, chosen by the system file's ``[thrusters]`` table (docs/system-file.md): the parametric one of
+the paper's Appendix B (keys ``delta_sL`` ... ``x_hS``, Haidou-1's) and a list of thrusters
+(``[[thrusters.unit]]``), each with its position, unit direction and limits: column ``[d; r x d]`` of B. Allocation is ``B^-1 tau`` for six thrusters and
 the minimum-norm ``B' (B B')^-1 tau`` for more; then each thrust is clipped to its own limits.
 """
 
@@ -22,14 +23,18 @@ def B_T(P):
             d = ca.vertcat(*[P[f"thrusters.{n}.direction.{c}"] for c in "xyz"])
             cols.append(ca.vertcat(d, ca.cross(r, d)))
         return ca.horzcat(*cols)
-    return _B_haidou1(P)
+    return _B_parametric(P)
 
 
-def _B_haidou1(P):
-    """Thruster configuration matrix of Appendix B: tau_v = B_T u_T.
+def _B_parametric(P):
+    """Thruster configuration matrix of the parametric layout (Appendix B): tau_v = B_T u_T.
 
     Columns: stern-left, stern-right (rotatable, at delta_sL/delta_sR), two side (sway) thrusters,
-    two vertical thrusters.
+    two vertical thrusters. The same numbers, bit for bit, as a thruster list with the positions
+    (x_stn, -+y_stn, z_stn), (x_hB, 0, 0), (x_hS, 0, 0), (x_bow, -+y_bow, 0) and the directions
+    (cos delta, 0, -sin delta), (0, 1, 0), (0, 0, 1) (tests/test_systems.py); kept as its own form, chosen
+    by the file's keys, because the stern angles are parameters here (the hydrodynamic terms in ``ds`` read
+    them; studies vary them) and the committed results' graphs are this form's.
     """
     dL, dR = P["thrusters.delta_sL"], P["thrusters.delta_sR"]
     x_stn, y_stn, z_stn = P["thrusters.x_stn"], P["thrusters.y_stn"], P["thrusters.z_stn"]
@@ -67,14 +72,14 @@ def allocate(P, tau):
 
 
 def limit_prefixes(structure) -> list[str]:
-    """The key prefixes of the thrust limits: one pair for Haidou-1's layout, one per listed thruster."""
+    """The key prefixes of the thrust limits: one pair for the parametric layout, one per listed thruster."""
     if structure.thrusters is None:
         return ["thrusters."]
     return [f"thrusters.{n}." for n in structure.thrusters]
 
 
 def limits(P):
-    """(u_min, u_max): per thruster columns, or Haidou-1's common scalars."""
+    """(u_min, u_max): per thruster columns, or the parametric layout's common scalars."""
     pre = limit_prefixes(P.s)
     if len(pre) == 1:
         return P[pre[0] + "u_min"], P[pre[0] + "u_max"]

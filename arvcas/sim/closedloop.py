@@ -42,7 +42,7 @@ from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.spatial import J, J_dot, J_inv
 from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
 
-__all__ = ["Layout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "nominal_inertia",
+__all__ = ["StateLayout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "nominal_inertia",
            "controller_memory", "controller_sample", "ControllerSample", "arm_truth", "controller_functions",
            "controller_diagnostics", "controller_sizes", "ControllerSizes", "controller_reads", "INPUTS"]
 
@@ -51,8 +51,9 @@ INPUTS: tuple[str, ...] = ("gains", "noise", "unc", "phase", "ekf", "water", "p"
 OUTPUTS: tuple[str, ...] = ("chat", "rmse", "ok", "t_fail", "chat_delivered")
 
 
-class Layout:
-    """Named slices of a flat column vector (the loop state and the run's constants)."""
+class StateLayout:
+    """Named slices of a flat column vector (the loop state and the run's constants); not the parameter
+    vector's layout, :class:`arvcas.system.params.Layout`."""
 
     def __init__(self, spec):
         self.slices: dict[str, slice] = {}
@@ -69,15 +70,24 @@ class Layout:
         return ca.vertcat(*[values[name] for name in self.slices])
 
 
+def __getattr__(name: str):
+    if name == "Layout":  # its old name, kept one release (two classes were named Layout)
+        import warnings
+
+        warnings.warn("arvcas.sim.closedloop.Layout is now StateLayout", DeprecationWarning, stacklevel=2)
+        return StateLayout
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int, n_ekf: int = 5,
-                 n_water: int = 0, thr_consts: tuple[int, int] | None = None, n_acc: int = 0) -> Layout:
+                 n_water: int = 0, thr_consts: tuple[int, int] | None = None, n_acc: int = 0) -> StateLayout:
     """The loop state: the plant (with the thrusters' rotor states and delivered thrust when they have
     dynamics), EKF and reference; the controller's own state; the metrics and status; then the run's
     constants (carried through the loop, never changed). ``thr_consts``: the sizes of the thruster
     dynamics' per-run constants (:func:`arvcas.sim.thrust_forcing.thruster_constants`), None for instantaneous thrusters; ``n_acc``:
     the rows of the run's accumulators (:mod:`arvcas.sim.accumulate`; none: no slot)."""
     dyn = thr_consts is not None
-    return Layout([
+    return StateLayout([
         ("x", 12),  # true plant state [eta; nu]
         *([("thr", n_thr), ("thr_T", n_thr)] if dyn else []),  # rotor states and their thrust at t_k
         # the controller's memory: EKF prior for this sample (covariance: upper triangle, row by row),
@@ -221,7 +231,7 @@ def _plant_substep(spec: RunSpec) -> tuple[ca.Function, ca.Function]:
     return rk4, pc_fn
 
 
-def build_step(spec: RunSpec, trace: bool = True, first: bool = False) -> tuple[ca.Function, Layout, ca.Function]:
+def build_step(spec: RunSpec, trace: bool = True, first: bool = False) -> tuple[ca.Function, StateLayout, ca.Function]:
     """One controller sample: (S, K, t_k, noise_k, sched_time_k, sched_arm_k) -> (S_next[, trace_k]).
 
     ``S`` is the loop state (the fields of the layout before ``gains``), ``K`` the run's constants
@@ -252,7 +262,7 @@ class StepParts(NamedTuple):
     keep: ca.Function  # (C, S, x_next, t) -> the new state
     freeze: ca.Function  # (C, S, x_next, t) -> the old state with ok = 0 and t_fail set
     pc_fn: ca.Function
-    layout: Layout
+    layout: StateLayout
     n_sub: int
     thr: tuple | None  # (cl_thr_lag, cl_thr_wrench, their _iv forms) with thruster dynamics (:func:`arvcas.sim.thrust_forcing.thruster_functions`), else None
 
@@ -300,7 +310,7 @@ def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     return StepParts(ctrls, rk4, ok_fn, keep, freeze, pc_fn, L, cfg.substeps, thr)
 
 
-def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, Layout, ca.Function]:
+def _build_steps(spec: RunSpec, trace: bool, firsts) -> tuple[list, StateLayout, ca.Function]:
     """:func:`build_step` for each flag of ``firsts``, sharing one plant substep and one finalize."""
     law, cfg, lay = spec.law, spec.cfg, spec.lay
     parts = step_parts(spec, trace, firsts)
@@ -569,7 +579,7 @@ def controller_reads(fns: dict[str, ca.Function], name: str) -> bool:
     return any(out)
 
 
-def _controller_part(spec: RunSpec, L: Layout, S, ins, tk, first: bool, trace: bool) -> ca.Function:
+def _controller_part(spec: RunSpec, L: StateLayout, S, ins, tk, first: bool, trace: bool) -> ca.Function:
     """The controller part of one sample (sample 0 if ``first``): (S, K, t_k, noise_k, rec0_time, rec0_arm)
     -> (C, thrust[, trace_k]); ``S`` the SX loop state and constants stacked, ``ins`` its two symbols.
 
@@ -762,7 +772,7 @@ def sample_times(cfg: ScenarioConfig) -> np.ndarray:
     return np.arange(scenario.n_samples(cfg)) * cfg.time_h
 
 
-def run_start(spec: RunSpec, L: Layout, pc_fn: ca.Function, G, unc, phase, ekf, water, p):
+def run_start(spec: RunSpec, L: StateLayout, pc_fn: ca.Function, G, unc, phase, ekf, water, p):
     """The run's first loop state S0 and its constants K (the step's inputs ``S`` and ``K``) from the
     run's inputs (MX): the one definition :func:`build_run` and the lockstep runs share."""
     consts = _consts_fn(spec.opts, spec.lay)(p)
@@ -777,7 +787,7 @@ def run_start(spec: RunSpec, L: Layout, pc_fn: ca.Function, G, unc, phase, ekf, 
     return S0, K
 
 
-def run_end(L: Layout, Sf, N: int):
+def run_end(L: StateLayout, Sf, N: int):
     """The run's outputs (:data:`OUTPUTS`) from the last loop state ``Sf`` after N samples (MX)."""
     chat = Sf[L.slices["chat_sum"]] / N
     rmse = ca.sqrt(Sf[L.slices["e2_sum"]] / N)

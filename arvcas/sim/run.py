@@ -33,6 +33,7 @@ from arvcas.build import calls, codegen
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import Controller, get as get_controller, provenance
 from arvcas.model.uvms import ModelOptions
+from arvcas.system.loader import UNSET, renamed_system
 from arvcas.system.params import Params, default_layout, system_tag
 from arvcas.sim import accumulate, closedloop, profiles, scenario, schedule, signals as signals_mod
 from arvcas.sim.result import Result
@@ -68,22 +69,39 @@ class SimulationError(ValueError):
     """Bad input to a simulation (one line), raised before anything runs."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Run:
     """The description of a closed-loop run: what to compile.
 
     ``controller``: a registered name or a :class:`~arvcas.controllers.Controller`; ``scenario``: a
     :class:`~arvcas.sim.scenario.ScenarioConfig`, a scenario file, or None (the system's default);
-    ``params``: the system: :class:`~arvcas.system.params.Params`, an :class:`arvcas.system.System`, a shipped
-    system's name (``arvcas systems``), a system file, or None (Haidou-1);
-    ``options``: :class:`~arvcas.model.uvms.ModelOptions`.
+    ``system``: :class:`~arvcas.system.params.Params`, an :class:`arvcas.system.System`, a shipped
+    system's name (``arvcas systems``), a system file, or None (the default system, :data:`arvcas.system.DEFAULT`);
+    ``options``: :class:`~arvcas.model.uvms.ModelOptions`. ``params=``, the old name of ``system=``, still
+    works with a DeprecationWarning.
     """
 
     controller: str | Controller = "proposed"
     scenario: ScenarioConfig | str | Path | None = None
-    params: Params | str | Path | None = None
+    system: Params | str | Path | None = None
     options: ModelOptions = ModelOptions()
     accumulators: tuple = ()  # arvcas.sim.accumulate.Accumulator: the output "acc" (docs/objectives.md)
+
+    def __init__(self, controller: str | Controller = "proposed", scenario: ScenarioConfig | str | Path | None = None,
+                 system: Params | str | Path | None = None, options: ModelOptions = ModelOptions(),
+                 accumulators: tuple = (), *, params=UNSET):
+        for k, v in (("controller", controller), ("scenario", scenario),
+                     ("system", renamed_system(system, params, "Run")), ("options", options),
+                     ("accumulators", accumulators)):
+            object.__setattr__(self, k, v)
+
+    @property
+    def params(self):
+        """Deprecated: the old name of :attr:`system`."""
+        import warnings
+
+        warnings.warn("Run.params is now Run.system (Run.params will be removed)", DeprecationWarning, stacklevel=2)
+        return self.system
 
     def compile(self) -> "CompiledRun":
         """The compiled run. Cheap when repeated: its compiled functions are memoised per process by
@@ -91,7 +109,7 @@ class Run:
         from arvcas.system import resolve
 
         with_law = get_controller(self.controller)
-        params = self.params if isinstance(self.params, Params) else resolve(self.params).params
+        params = self.system if isinstance(self.system, Params) else resolve(self.system).params
         sc = self.scenario if self.scenario is not None else params.default("scenario")
         cfg = sc if isinstance(sc, ScenarioConfig) else scenario.load_scenario(sc)
         if not isinstance(self.options, ModelOptions):

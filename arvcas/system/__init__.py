@@ -13,6 +13,6 @@
 This layer uses none above it (docs/architecture.md) but the model's matrices in the physical check.
 """
 
-from arvcas.system.loader import DEFAULT, SHIPPED, System, load_system, resolve, shipped
+from arvcas.system.loader import DEFAULT, SHIPPED, UNSET, System, load_system, renamed_system, resolve, shipped
 
-__all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT"]
+__all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT", "UNSET", "renamed_system"]

@@ -7,17 +7,17 @@ systems are the files named in :data:`SHIPPED` under ``arvcas/data/``; ``arvcas 
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 from arvcas.system import params as params_mod
-from arvcas.system.params import Params, ParamsError
+from arvcas.system.params import DEFAULT, Params, ParamsError
 
-__all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT"]
+__all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT", "UNSET", "renamed_system"]
 
 SHIPPED = ("haidou1", "bluerov2_heavy_alpha5", "hinsdale_bluerov2_alpha5", "bluerov2", "bluerov2_heavy")
-DEFAULT = "haidou1"
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ def shipped() -> dict[str, Path]:
 
 
 def load_system(name_or_path: str | Path | None = None) -> System:
-    """A shipped system by name (``arvcas systems``) or a system file by path (default: Haidou-1).
+    """A shipped system by name (``arvcas systems``) or a system file by path (default: :data:`DEFAULT`).
 
     A one-line :class:`arvcas.system.params.ParamsError` for an unknown name (with the closest shipped one)
     and for every fault of the file (:func:`arvcas.system.params.load`).
@@ -85,8 +85,31 @@ def load_system(name_or_path: str | Path | None = None) -> System:
     return System(params_mod.load(p))
 
 
+class _Unset:
+    def __repr__(self) -> str:
+        return "UNSET"
+
+
+UNSET = _Unset()
+"""The default of a deprecated ``params=`` keyword: not given (None is a value: the default system)."""
+
+
+def renamed_system(system, params, where: str):
+    """The system of a call that may still use the old keyword ``params=`` (renamed ``system=``; kept one
+    release): ``params`` if given, with a :class:`DeprecationWarning` naming the new keyword; both given is a
+    one-line :class:`TypeError`."""
+    if params is UNSET:
+        return system
+    if system is not None:
+        raise TypeError(f"{where}: system= and params= (its old name) both given; give system= only")
+    warnings.warn(f"{where}: the keyword params= is now system= (params= will be removed)", DeprecationWarning,
+                  stacklevel=3)
+    return params
+
+
 def resolve(system) -> System:
-    """``system`` as a :class:`System`: None (Haidou-1), a name, a path, a System or a Params."""
+    """``system`` as a :class:`System`: None (the default system, :data:`DEFAULT`), a name, a path, a System or
+    a Params."""
     if isinstance(system, System):
         return system
     if isinstance(system, Params):

@@ -1,6 +1,6 @@
-"""Model parameters: load and validate ``data/haidou1.toml`` into an immutable :class:`Params`.
+"""Model parameters: load and validate a system file (``data/<system>.toml``) into an immutable :class:`Params`.
 
-Every physical number of the model lives in that one file, each with its unit and its source. The
+Every physical number of a system lives in its one file, each with its unit and its source. The
 file's schema is the dataclasses below (:mod:`arvcas.system.config`: dimension and rule beside each field);
 the loader converts to SI (mm -> m, deg -> rad) and then checks that the numbers describe a physical
 vehicle (:func:`check_physical`). ``Params.vector()`` is the runtime input ``p`` of every compiled
@@ -22,7 +22,11 @@ import numpy as np
 from arvcas.system import config, systemfile, tomlfile
 
 __all__ = ["Params", "ParamsError", "Layout", "load", "view", "layout_for", "default_layout", "SCHEMA", "UNITS",
-           "default_path", "check_physical", "check_plausible", "PlausibilityWarning"]
+           "default_path", "check_physical", "check_plausible", "PlausibilityWarning", "DEFAULT"]
+
+DEFAULT = "haidou1"
+"""The default system: the shipped system (``data/<DEFAULT>.toml``) that every argument taking a system
+uses when given none (re-exported as :data:`arvcas.system.DEFAULT`). The one place that names it."""
 
 
 class ParamsError(ValueError):
@@ -91,17 +95,18 @@ def layout_for(structure: systemfile.Structure) -> Layout:
 
 def system_tag(structure) -> str:
     """How a system's structure enters a compile-cache description: nothing for the default system
-    (Haidou-1, whose descriptions predate systems), `` system=<structure>`` for any other."""
+    (:data:`DEFAULT`, whose descriptions predate systems), `` system=<structure>`` for any other."""
     return "" if structure == default_layout().structure else f" system={structure.key()}"
 
 
 def default_path() -> Path:
-    return Path(str(resources.files("arvcas") / "data" / "haidou1.toml"))
+    """The packaged file of the default system, :data:`DEFAULT`."""
+    return Path(str(resources.files("arvcas") / "data" / f"{DEFAULT}.toml"))
 
 
 @functools.lru_cache(maxsize=1)
 def default_layout() -> Layout:
-    """The layout of the packaged default system, Haidou-1 (``data/haidou1.toml``)."""
+    """The layout of the packaged default system, :data:`DEFAULT` (:func:`default_path`)."""
     return load().layout
 
 
@@ -211,7 +216,7 @@ def read_doc(path: Path) -> tuple[dict, str]:
 
 
 def load(path: str | Path | None = None) -> Params:
-    """Load and validate a system file (default: the packaged ``data/haidou1.toml``).
+    """Load and validate a system file (default: the default system's packaged file, :func:`default_path`).
 
     Raises :class:`ParamsError` with one line naming the file and key for a missing, unreadable,
     non-UTF-8 or malformed file, an unknown or missing key, a wrong unit or type, a non-finite value,

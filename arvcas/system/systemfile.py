@@ -46,9 +46,10 @@ COMMAND_UNITS = {"us": ("pwm", "pwm_rate"), "1": ("1", "rate"), "rad/s": ("angul
 TABLE_VECTORS = ("command", "thrust")  # a table map's two columns: parameters <key>.0 .. <key>.<n-1>
 MAX_TABLE_POINTS = 10_000
 
-# Haidou-1's parametric layout (Appendix B): its six thrusters in the order of B's columns
-# (arvcas.model.thrusters: stern left and right, rotatable; side thrusters at the bow and the stern; verticals)
-HAIDOU1_THRUSTERS = ("T1 stern left", "T2 stern right", "T3 side (bow)", "T4 side (stern)", "T5 vertical (port)",
+# the parametric thruster layout of the paper's Appendix B (a [thrusters] table of delta_sL ... x_hS, no
+# [[thrusters.unit]] list; Haidou-1's): its six thrusters in the order of B's columns (arvcas.model.thrusters:
+# stern left and right, rotatable; side thrusters at the bow and the stern; verticals)
+PARAMETRIC_THRUSTERS = ("T1 stern left", "T2 stern right", "T3 side (bow)", "T4 side (stern)", "T5 vertical (port)",
                      "T6 vertical (starboard)")
 # element labels of the vector entries: parameter ``<key>.<label>``
 VECTOR_ELEMENTS = {
@@ -138,7 +139,7 @@ class Structure:
     hydro: tuple[HydroTerm, ...]  # in file order
     hydro_per_rho: bool  # "per_rho" units (SI coefficient rho * value) or "SI"
     coriolis_added_mass: bool
-    thrusters: tuple[str, ...] | None  # names of a thruster list; None: Haidou-1's parametric layout
+    thrusters: tuple[str, ...] | None  # names of a thruster list; None: the parametric layout (Appendix B)
     arm: str  # "none" | "dh" | "chain"
     n_joints: int
     mount_rpy: bool
@@ -168,8 +169,8 @@ class Structure:
         return dataclasses.replace(self, thruster_maps=(), thruster_dynamics=None)
 
     def thruster_names(self) -> tuple[str, ...]:
-        """The thrusters' names in allocation order (the columns of B): the list's, or Haidou-1's six."""
-        return HAIDOU1_THRUSTERS if self.thrusters is None else self.thrusters
+        """The thrusters' names in allocation order (the columns of B): the list's, or the parametric layout's six."""
+        return PARAMETRIC_THRUSTERS if self.thrusters is None else self.thrusters
 
     def key(self) -> str:
         """A stable text of the structure, for compile-cache keys."""

@@ -85,7 +85,7 @@ def evaluate_rows(task: EvalTask, gains: np.ndarray, n_threads: int | None = Non
         outs = [run.outputs(gains, seed, unc, ph, n_threads) for seed, unc, ph in task.draws]
         outs = [{**o, "chat": o[kind]} for o in outs]
         return outs, run_key(task.controller, task.cfg, task.params, task.accumulators)
-    outs = [simulate_batch(task.controller, gains, seed=seed, params=task.params, cfg=task.cfg,
+    outs = [simulate_batch(task.controller, gains, seed=seed, system=task.params, cfg=task.cfg,
                            uncertainty=unc, phase=ph, n_threads=n_threads, return_status=True, chat=task.chat)
             for seed, unc, ph in task.draws]
     chat = np.stack([o[0] for o in outs])

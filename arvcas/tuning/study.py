@@ -25,7 +25,7 @@ Layout (see ``studies/*.toml`` for commented examples)::
                    (one value per objective), chat? ("commanded": eq. 42 on the command, the paper's, the
                    default; "delivered": on the thrusters' delivered wrench), constraints? (["peak_thrust <=
                    0.8 * limit", ...]), settling_band? ([m, rad] of settling_time)
-    [evaluation]   system? (a shipped system's name or a system file; default Haidou-1), scenario? (path,
+    [evaluation]   system? (a shipped system's name or a system file; default: the default system, haidou1), scenario? (path,
                    relative to the study file; default the system's), [[evaluation.draws]] noise_seed,
                    uncertainty? ([C, D, g, arm] factors), phase_deg? (6 disturbance phases, deg)
     [engine]       name = "local" | "dask", threads?, scheduler?, workers?, timeout_s?
@@ -47,6 +47,7 @@ import numpy as np
 from arvcas.system import config, tomlfile
 from arvcas.system.config import Choices, Count, Invalid, Unique, ge, gt, le, quantity, setting
 from arvcas.controllers import gains as gains_mod
+from arvcas.controllers.base import accepted as controller_names  # registered names and their aliases
 from arvcas.sim import scenario as scenario_mod
 
 __all__ = [
@@ -287,12 +288,12 @@ class Study:
     scenario_path: str | None = None  # as written in the file (None: the system's default scenario)
     text: str = dataclasses.field(repr=False, default="")
     path: str = ""
-    system: str | None = None  # evaluation.system as written (None: Haidou-1)
+    system: str | None = None  # evaluation.system as written (None: the default system)
     params: object = dataclasses.field(repr=False, compare=False, default=None)  # the system's Params
     plugins: tuple[str, ...] = ()  # study.plugins as written (loaded when the file was read)
 
     def system_params(self):
-        """The parameters the study's runs use (its system's; Haidou-1's by default)."""
+        """The parameters the study's runs use (its system's; the default system's by default)."""
         if self.params is not None:
             return self.params
         from arvcas.system.params import load
@@ -349,7 +350,7 @@ class Study:
 @dataclass(frozen=True)
 class _StudySection:
     name: str = setting()
-    controllers: tuple[str, ...] = setting(Choices(gains_mod.controllers, "controller"), Unique(), Count(1),
+    controllers: tuple[str, ...] = setting(Choices(controller_names, "controller"), Unique(), Count(1),
                                            scalar_ok=True)
     seed: int = setting(ge(0))  # NSGA-II's generator
     description: str = setting(default="")
@@ -426,7 +427,10 @@ def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | N
         scenario_mod.check_trajectory_limits(cfg, params if params is not None else load_params())
     except scenario_mod.ScenarioError as e:
         raise StudyError(f"{where}: evaluation.scenario: {e}") from None
-    controllers = f.study.controllers
+    controllers = tuple(gains_mod.check_controller(c) for c in f.study.controllers)  # aliases -> registered names
+    if len(set(controllers)) != len(controllers):
+        raise StudyError(f"{where}: study.controllers: a controller is named twice (a name and its alias): "
+                         f"{', '.join(f.study.controllers)}")
     variables = _variables(f.variables, controllers, cfg, where, params)
     per_gen = f.algorithm.population + f.algorithm.n_offspring
     config.check_memory(len(f.evaluation.draws) * per_gen * _PER_CANDIDATE_DRAW_BYTES,
@@ -470,7 +474,7 @@ def _load_plugins(doc: dict, where: str, base_dir) -> None:
                 pass  # not a plugin's either: the validation names it with the allowed ones
     names = sec.get("controllers")
     for n in (names,) if isinstance(names, str) else names if isinstance(names, list) else ():
-        if isinstance(n, str) and n not in base.names():
+        if isinstance(n, str) and n not in base.accepted():
             try:
                 base.get(n)
             except plugins.PluginError as e:  # an entry point of that name that does not load
