@@ -162,9 +162,9 @@ def run_file(test_file: str, python: str) -> dict:
 
 
 def run_suite(n: int, python: str, files: list[str] = ()) -> dict:
-    """The whole suite as CI runs it (``-n n --dist loadscope``) with an empty cache: per worker, its CPU and
+    """The whole suite as CI runs it (``-n n --dist loadscope --no-loadscope-reorder``, .ci/run) with an empty cache: per worker, its CPU and
     how long it sat idle at the end (the balance of --dist loadscope); per file, its tests' CPU."""
-    r = _pytest(["-n", str(n), "--dist", "loadscope", "-rs", *files], python)
+    r = _pytest(["-n", str(n), "--dist", "loadscope", "--no-loadscope-reorder", "-rs", *files], python)
     t_end = max(t["end"] for t in r["tests"])
     for w, rec in r["workers"].items():
         mine = [t for t in r["tests"] if (t["worker"] or "main") == w]

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import os
+from pathlib import Path
 
 import pytest
 
@@ -87,6 +89,30 @@ def pin_models(dry):
 
     return {pl: pm.build(dry, payload=pl) for pl in (0.0, 0.5, 1.0)}
 
+
+
+# Under xdist (--dist loadscope --no-loadscope-reorder, .ci/run) the modules are handed to the workers in the
+# order collected: the costliest first, by the CPU seconds the last measurement of the whole suite gave each
+# (results/ci/suite.json, benchmarks/ci_cost.py --suite), so that no worker is left with a long module at the
+# end while the other idles. A module it does not list comes after those it lists. A run on one process keeps
+# pytest's order.
+SUITE_COSTS = Path(__file__).resolve().parents[1] / "results" / "ci" / "suite.json"
+
+
+def _module_costs() -> dict[str, float]:
+    try:
+        files = json.loads(SUITE_COSTS.read_text(encoding="utf-8"))["files"]
+        return {str(f["file"]): float(f["tests_cpu_s"]) for f in files}
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+
+
+def pytest_collection_modifyitems(session, config, items):
+    if not hasattr(config, "workerinput"):  # not an xdist worker
+        return
+    cost = _module_costs()
+    if cost:
+        items.sort(key=lambda it: -cost.get(it.path.name, 0.0))  # stable: each module's own order is kept
 
 
 # Skips a CI run allows: what depends on the machine rather than on what was installed (the CI runs as root;
