@@ -162,8 +162,9 @@ def run_file(test_file: str, python: str) -> dict:
 
 
 def run_suite(n: int, python: str, files: list[str] = ()) -> dict:
-    """The whole suite as CI runs it (``-n n --dist loadscope --no-loadscope-reorder``, .ci/run) with an empty cache: per worker, its CPU and
-    how long it sat idle at the end (the balance of --dist loadscope); per file, its tests' CPU."""
+    """The whole suite as CI runs it (``-n n --dist loadscope --no-loadscope-reorder``, .ci/run) with an empty
+    cache: per worker, its CPU and how long it sat idle at the end (the balance); per file, its tests' CPU.
+    Interrupted (SIGINT to pytest), the workers still write what they ran: the summary says ``complete: false``."""
     r = _pytest(["-n", str(n), "--dist", "loadscope", "--no-loadscope-reorder", "-rs", *files], python)
     t_end = max(t["end"] for t in r["tests"])
     for w, rec in r["workers"].items():
@@ -227,7 +228,8 @@ def summarise_suite(r: dict) -> dict:
     per_file = sorted(({"file": Path(f).name, "tests_cpu_s": round(sum(map(_test_cpu, ts)), 1),
                         "worker": ts[0]["worker"], "n_tests": len(ts)} for f, ts in by_file.items()),
                       key=lambda x: -x["tests_cpu_s"])
-    return {"wall_s": r["wall_s"], "cpu_s": r["cpu_s"], "summary": r["summary"], "workers": r["workers"],
+    return {"complete": r["pytest_rc"] in (0, 1), "n_tests": len(r["tests"]),  # 2: interrupted (SIGINT)
+            "wall_s": r["wall_s"], "cpu_s": r["cpu_s"], "summary": r["summary"], "workers": r["workers"],
             "builds": len(r["builds"]), "compile_s": round(sum(b["compile_time_s"] for b in r["builds"]), 1),
             "files": per_file, **_costliest(r["tests"], r["fixtures"]),
             "repeated_builds": _repeated([("", b) for b in r["builds"]])}
@@ -249,7 +251,8 @@ def main(argv=None) -> int:
                     help="the per-file records, merged across calls (default: %(default)s)")
     ap.add_argument("--out", type=Path, help=f"default: {OUT.relative_to(ROOT)} (each file alone), "
                                              f"{SUITE.relative_to(ROOT)} (--suite)")
-    ap.add_argument("--report", action="store_true", help="print the table of results/ci/cost.json and exit")
+    ap.add_argument("--from-raw", action="store_true", help="summarise the records in --raw again, run nothing")
+    ap.add_argument("--report", action="store_true", help="print the table of results/ci/files.json and exit")
     a = ap.parse_args(argv)
     if a.report:
         doc = json.loads(OUT.read_text())
@@ -258,8 +261,11 @@ def main(argv=None) -> int:
         print(f"{doc['total_cpu_s']:8.1f} s CPU in all")
         return 0
     if a.suite:
-        r = run_suite(a.suite, a.python, a.files)
-        a.raw.write_text(json.dumps(r))
+        if a.from_raw:
+            r = json.loads(a.raw.read_text())
+        else:
+            r = run_suite(a.suite, a.python, a.files)
+            a.raw.write_text(json.dumps(r))
         doc = {"what": f"the whole suite, pytest -n {a.suite} --dist loadscope, an empty compile cache "
                        "(benchmarks/ci_cost.py --suite): wall and CPU seconds (pytest, its workers, their compilers)",
                **_stamp(), **summarise_suite(r)}
@@ -270,7 +276,7 @@ def main(argv=None) -> int:
             if not (ROOT / f).is_file():
                 sys.exit(f"ci_cost: no test file {f}")
         raw = json.loads(a.raw.read_text()) if a.raw.exists() else {}
-        for f in files:
+        for f in [] if a.from_raw else files:
             r = run_file(f, a.python)
             raw[f] = r
             a.raw.write_text(json.dumps(raw))

@@ -94,16 +94,20 @@ def pin_models(dry):
 # Under xdist (--dist loadscope --no-loadscope-reorder, .ci/run) the modules are handed to the workers in the
 # order collected: the costliest first, by the CPU seconds the last measurement of the whole suite gave each
 # (results/ci/suite.json, benchmarks/ci_cost.py --suite), so that no worker is left with a long module at the
-# end while the other idles. A module it does not list comes after those it lists. A run on one process keeps
-# pytest's order.
+# end while the other idles. A module it does not list comes after those it lists. Without a complete
+# measurement, and in a run on one process, pytest's order is kept.
 SUITE_COSTS = Path(__file__).resolve().parents[1] / "results" / "ci" / "suite.json"
 
 
 def _module_costs() -> dict[str, float]:
+    """CPU seconds per test file from a complete measurement of the suite; none from an interrupted one (it
+    would send the modules it did not reach last, whatever they cost)."""
     try:
-        files = json.loads(SUITE_COSTS.read_text(encoding="utf-8"))["files"]
-        return {str(f["file"]): float(f["tests_cpu_s"]) for f in files}
-    except (OSError, ValueError, KeyError, TypeError):
+        doc = json.loads(SUITE_COSTS.read_text(encoding="utf-8"))
+        if doc.get("complete") is not True:
+            return {}
+        return {str(f["file"]): float(f["tests_cpu_s"]) for f in doc["files"]}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return {}
 
 
