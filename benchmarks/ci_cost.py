@@ -235,11 +235,12 @@ def summarise_suite(r: dict) -> dict:
             "repeated_builds": _repeated([("", b) for b in r["builds"]])}
 
 
-def _stamp() -> dict:
-    commit = _git("rev-parse", "HEAD")
-    dirty = bool(_git("status", "--porcelain", "--untracked-files=no"))
-    return {"git_commit": (commit or "unknown") + ("+dirty" if dirty else ""), "nproc": os.cpu_count(),
-            "opt_level": os.environ.get("ARVCAS_OPT_LEVEL", "tests/conftest.py's")}
+def _stamp(commit: str | None = None, opt_level: str | None = None) -> dict:
+    if commit is None:
+        commit = (_git("rev-parse", "HEAD") or "unknown") + (
+            "+dirty" if _git("status", "--porcelain", "--untracked-files=no") else "")
+    return {"git_commit": commit, "nproc": os.cpu_count(),
+            "opt_level": opt_level or os.environ.get("ARVCAS_OPT_LEVEL", "tests/conftest.py's")}
 
 
 def main(argv=None) -> int:
@@ -252,6 +253,9 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, help=f"default: {OUT.relative_to(ROOT)} (each file alone), "
                                              f"{SUITE.relative_to(ROOT)} (--suite)")
     ap.add_argument("--from-raw", action="store_true", help="summarise the records in --raw again, run nothing")
+    ap.add_argument("--commit", help="with --from-raw: the commit the records were measured on (a tree exported "
+                                     "by git archive has no git to ask)")
+    ap.add_argument("--opt-level", default=None, help="with --from-raw: the level the tests built at")
     ap.add_argument("--report", action="store_true", help="print the table of results/ci/files.json and exit")
     a = ap.parse_args(argv)
     if a.report:
@@ -268,7 +272,7 @@ def main(argv=None) -> int:
             a.raw.write_text(json.dumps(r))
         doc = {"what": f"the whole suite, pytest -n {a.suite} --dist loadscope, an empty compile cache "
                        "(benchmarks/ci_cost.py --suite): wall and CPU seconds (pytest, its workers, their compilers)",
-               **_stamp(), **summarise_suite(r)}
+               **_stamp(a.commit, a.opt_level), **summarise_suite(r)}
         out = a.out or SUITE
     else:
         files = a.files or sorted(str(p.relative_to(ROOT)) for p in (ROOT / "tests").glob("test_*.py"))
@@ -283,7 +287,8 @@ def main(argv=None) -> int:
             print(f"{r['cpu_s']:8.1f} s CPU {r['wall_s']:8.1f} s wall {len(r['builds']):4d} builds  {f}  {r['summary']}",
                   flush=True)
         doc = {"what": "each tests/ file run alone (pytest -p no:xdist) with an empty compile cache: CPU seconds of "
-                       "pytest and its compiler processes (benchmarks/ci_cost.py)", **_stamp(), **summarise_files(raw)}
+                       "pytest and its compiler processes (benchmarks/ci_cost.py)", **_stamp(a.commit, a.opt_level),
+               **summarise_files(raw)}
         out = a.out or OUT
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(doc, indent=1) + "\n")
