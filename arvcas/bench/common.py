@@ -267,7 +267,7 @@ def _temp_cache():
 
 
 def _default_opt_level() -> str:
-    return codegen.default_opt_level()
+    return codegen.DEFAULT_OPT_LEVEL  # the level arvcas ships with, whatever ARVCAS_OPT_LEVEL says
 
 
 def _fresh_copy(f: ca.Function) -> ca.Function:
