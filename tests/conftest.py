@@ -2,12 +2,21 @@
 
 from __future__ import annotations
 
+import json
 import os
+from pathlib import Path
 
 import pytest
 
+from arvcas.build import codegen as _codegen
 from arvcas.system import params as _params
 from arvcas.model import uvms as _uvms
+
+# Builds that name no level compile at -O0 (ARVCAS_OPT_LEVEL, inherited by the command lines the tests start):
+# a run compiles about 4x faster and computes the same bits (tests/test_closedloop.py compares -O0 with -O2);
+# a test whose property depends on the optimiser names its level. ARVCAS_OPT_LEVEL=-O2 runs the suite at the
+# shipped level (docs/testing.md).
+os.environ.setdefault(_codegen.OPT_LEVEL_ENV, "-O0")
 
 
 @pytest.fixture(scope="module")
@@ -80,6 +89,34 @@ def pin_models(dry):
 
     return {pl: pm.build(dry, payload=pl) for pl in (0.0, 0.5, 1.0)}
 
+
+
+# Under xdist (--dist loadscope --no-loadscope-reorder, .ci/run) the modules are handed to the workers in the
+# order collected: the costliest first, by the CPU seconds the last measurement of the whole suite gave each
+# (results/ci/suite.json, benchmarks/ci_cost.py --suite), so that no worker is left with a long module at the
+# end while the other idles. A module it does not list comes after those it lists. Without a complete
+# measurement, and in a run on one process, pytest's order is kept.
+SUITE_COSTS = Path(__file__).resolve().parents[1] / "results" / "ci" / "suite.json"
+
+
+def _module_costs() -> dict[str, float]:
+    """CPU seconds per test file from a complete measurement of the suite; none from an interrupted one (it
+    would send the modules it did not reach last, whatever they cost)."""
+    try:
+        doc = json.loads(SUITE_COSTS.read_text(encoding="utf-8"))
+        if doc.get("complete") is not True:
+            return {}
+        return {str(f["file"]): float(f["tests_cpu_s"]) for f in doc["files"]}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
+
+
+def pytest_collection_modifyitems(session, config, items):
+    if not hasattr(config, "workerinput"):  # not an xdist worker
+        return
+    cost = _module_costs()
+    if cost:
+        items.sort(key=lambda it: -cost.get(it.path.name, 0.0))  # stable: each module's own order is kept
 
 
 # Skips a CI run allows: what depends on the machine rather than on what was installed (the CI runs as root;

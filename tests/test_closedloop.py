@@ -187,15 +187,19 @@ def test_simulate_many_rows_equal_single_runs(cfg):
 
 
 @pytest.mark.skipif(not codegen.supported_isa(), reason="this CPU has none of codegen.ISA_FLAGS' features")
-def test_isa_flags_leave_every_output_bitwise_equal(cfg, monkeypatch):
-    """The run built with this CPU's instruction-set flags (-mavx) and without (ARVCAS_ISA=baseline)
-    gives the same bits: chat, rmse, ok, t_fail of a running and of a diverging gain set."""
+def test_isa_flags_and_opt_levels_leave_every_output_bitwise_equal(cfg, monkeypatch):
+    """The run built at -O2 with this CPU's instruction-set flags (-mavx), without them (ARVCAS_ISA=baseline)
+    and at -O0 (the tests' level, tests/conftest.py) gives the same bits: chat, rmse, ok, t_fail of a running
+    and of a diverging gain set."""
     P = load_params()
     F = closedloop.build_run(closedloop.RunSpec("agsta", cfg), trace=False)
-    fast = codegen.build(F)
+    fast = codegen.build(F, opt_level="-O2")
     monkeypatch.setenv("ARVCAS_ISA", "baseline")
-    base = codegen.build(F)
+    base = codegen.build(F, opt_level="-O2")
     monkeypatch.delenv("ARVCAS_ISA")
+    monkeypatch.setenv(codegen.OPT_LEVEL_ENV, "-O0")
+    o0 = codegen.build(F)
+    assert "-O0" in codegen.artifact_of(o0)["flags"]
     flags = codegen.artifact_of(fast)["flags"], codegen.artifact_of(base)["flags"]
     assert all(f in flags[0] for f in codegen.supported_isa()) and not any(f in flags[1] for f in codegen.supported_isa())
     g = gains.default_gains("agsta").copy()
@@ -207,9 +211,10 @@ def test_isa_flags_leave_every_output_bitwise_equal(cfg, monkeypatch):
     for gs in (g, bad):
         args = (gs, profiles.noise_sequence(cfg, 2), cfg.uncertainty, np.array(cfg.disturbance_phase),
                 cfg.ekf_vector, cfg.water_vector, P.vector(), *schedule.table(cfg, P.vector()))
-        out_fast, out_base = calls.call(fast, *args), calls.call(base, *args)
-        for a, b in zip(out_fast, out_base):
+        out_fast, out_base, out_o0 = calls.call(fast, *args), calls.call(base, *args), calls.call(o0, *args)
+        for a, b, c in zip(out_fast, out_base, out_o0):
             np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+            np.testing.assert_array_equal(a.view(np.uint64), c.view(np.uint64))
         oks.append(float(out_fast[2].item()))
     assert oks == [1.0, 0.0]
 

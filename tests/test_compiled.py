@@ -135,7 +135,7 @@ def test_manifest_contents(built, cache):
     m = manifest_of(so)
     assert so.name == f"uvms_rhs-{m['key'][:20]}.so"
     assert m["so_sha256"] == sha256(so)
-    assert m["flags"][:3] == ["-shared", "-fPIC", C.DEFAULT_OPT_LEVEL]
+    assert m["flags"][:3] == ["-shared", "-fPIC", C.default_opt_level()]
     assert m["casadi_version"] == ca.__version__
     assert m["compile_time_s"] > 0
     d, arts = C.cache_info()
@@ -355,6 +355,20 @@ def test_other_opt_level_is_another_artifact(fresh_cache):
     b = C.artifact_of(C.build(make_toy("toy_olevel", 1.0), opt_level="-O1"))
     assert a["key"] != b["key"] and a["path"] != b["path"]
     assert "-O0" in a["flags"] and "-O1" in b["flags"]
+
+
+def test_default_opt_level_from_the_environment(fresh_cache, monkeypatch):
+    """ARVCAS_OPT_LEVEL sets the level of a build that names none (the tests' -O0); unset, -O2; a named level
+    wins; a bad value is refused in one line naming the variable."""
+    monkeypatch.delenv(C.OPT_LEVEL_ENV, raising=False)
+    assert C.default_opt_level() == C.DEFAULT_OPT_LEVEL == "-O2"
+    monkeypatch.setenv(C.OPT_LEVEL_ENV, "-O1")
+    assert "-O1" in C.artifact_of(C.build(make_toy("toy_envlevel", 1.0)))["flags"]
+    assert "-O0" in C.artifact_of(C.build(make_toy("toy_envlevel", 1.0), opt_level="-O0"))["flags"]
+    monkeypatch.setenv(C.OPT_LEVEL_ENV, "-Ofast")
+    with pytest.raises(ValueError, match=r"^ARVCAS_OPT_LEVEL='-Ofast': expected one of -O0, -O1, -O2") as e:
+        C.build(make_toy("toy_envlevel", 2.0))
+    assert "\n" not in str(e.value)
 
 
 def test_compiled_unknown_name():

@@ -31,6 +31,8 @@ from arvcas.model import uvms
 from arvcas.system.params import load
 from arvcas.system import SHIPPED, load_system
 
+from make_helpers import make_cmd
+
 RTOL = 1e-12
 
 
@@ -79,7 +81,7 @@ def _run(cmd, **kw):
 def made(exported, prefix):
     if shutil.which("make") is None or shutil.which("c++") is None:
         pytest.skip("make or c++ is not installed")
-    out = _run(["make", "-C", str(exported)])
+    out = _run(make_cmd(exported))
     lib = prefix.rstrip("_")
     assert re.search(rf"^compiling lib{lib}\.so \.\.\. \d+ s$", out, re.M), out  # make's progress line
     return exported

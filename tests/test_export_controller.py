@@ -32,6 +32,7 @@ from arvcas.system import load_system
 from arvcas.tuning.front import read_front
 
 from trust_helpers import synthetic_front
+from make_helpers import make_cmd
 
 LAWS = ("proposed", "agsta", "pid")
 SYSTEMS = ("haidou1", "bluerov2_heavy_alpha5")  # the shipped systems with a scenario and gains of their own
@@ -76,7 +77,7 @@ def case(request, tmp_path_factory):
         argv += ["--config", str(d / "scenario.toml")]
     assert cli.main(argv) == 0
     out = d / "out"
-    _run(["make", "-C", str(out)])
+    _run(make_cmd(out))
     mod, ctl = load_binding(out)
     run = arvcas.Run(law, scenario=cfg, system=s.params).compile()
     return name, law, out, mod, ctl, run, run.simulate(seed=SEED)

@@ -139,9 +139,10 @@ def test_lockstep_runs_equal_scalar_runs_bitwise(system, law, limit, group):
     assert not group or not ok[4:8].any(), f"{system} / {law}: rows 4-7 should all diverge: {ok}"
 
 
-def test_lockstep_default_build_through_batch_and_many():
+def test_lockstep_default_build_through_batch_and_many(monkeypatch):
     """The default (-O2, this CPU's W) lockstep run against the default scalar run, through batch (shared
     noise and disturbance) and many, 2 threads, a batch size that is not a multiple of W."""
+    monkeypatch.setenv(codegen.OPT_LEVEL_ENV, codegen.DEFAULT_OPT_LEVEL)  # not the tests' -O0 (tests/conftest.py)
     run = _short_run("haidou1", "proposed", duration=2.0)
     G, seeds, U, PH = _members(run, n_run=4, n_div=2, seed=1)
     assert run.lockstep().W == lanes.lane_width()

@@ -30,6 +30,7 @@ from arvcas.system import load_system
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.front import read_front
 
+from make_helpers import make_cmd
 from studytext import tiny_study
 
 SYSTEM = "bluerov2_heavy_alpha5"
@@ -183,7 +184,7 @@ def exported(imu_depth_run, tmp_path_factory):
     (d / "scenario.toml").write_text(cfg.to_toml(), encoding="utf-8")
     assert cli.main(["export-controller", str(d / "out"), "--controller", "pid", "--system", SYSTEM,
                      "--config", str(d / "scenario.toml")]) == 0
-    subprocess.run(["make", "-C", str(d / "out")], check=True, capture_output=True, timeout=600)
+    subprocess.run(make_cmd(d / "out"), check=True, capture_output=True, timeout=600)
     mod, ctl = load_binding(d / "out")
     return d / "out", mod, ctl
 

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import gc
-import inspect
 import math
 import os
 import platform
@@ -268,7 +267,7 @@ def _temp_cache():
 
 
 def _default_opt_level() -> str:
-    return str(inspect.signature(codegen.build).parameters["opt_level"].default)
+    return codegen.DEFAULT_OPT_LEVEL  # the level arvcas ships with, whatever ARVCAS_OPT_LEVEL says
 
 
 def _fresh_copy(f: ca.Function) -> ca.Function:

@@ -31,6 +31,9 @@ pays anyway. So there is no cheaper first-level key; a per-process memo makes a 
 line to the stream :func:`report_progress` set (the command line sets standard error):
 ``arvcas: compiling the run for bluerov2_heavy_alpha5 / proposed ... 6.8 s``. Cache hits are silent.
 
+``opt_level`` left out (None) is :func:`default_opt_level`: ``ARVCAS_OPT_LEVEL`` when set (the tests set ``-O0``,
+docs/testing.md), else :data:`DEFAULT_OPT_LEVEL`.
+
 Besides ``opt_level`` and ``flags``, ``-ffp-contract=off -fno-math-errno`` is always passed: GCC contracts ``a*b+c``
 into FMA by default wherever the target has FMA (aarch64, ``-march=native``), which changes the last
 bits against CasADi's VM and between machines. Flags that change the numbers (``-Ofast``,
@@ -75,6 +78,7 @@ __all__ = [
     "CompileError",
     "Artifact",
     "cache_dir",
+    "default_opt_level",
     "build",
     "compiled",
     "artifact_of",
@@ -98,6 +102,10 @@ BASE_FLAGS = ("-shared", "-fPIC")
 # measured alternately in one process on the 100 s run: -O1 4.95 ms, -O2 4.76 ms, -O3 4.73 ms, every
 # output bitwise equal (-ffp-contract=off: no level changes a result); it compiles about 1.4x longer.
 DEFAULT_OPT_LEVEL = "-O2"
+# ARVCAS_OPT_LEVEL: the level of every build that names none (tests/conftest.py sets -O0: a run compiles about 4x
+# faster, runs about 3x slower, computes the same bits); :func:`default_opt_level`
+OPT_LEVEL_ENV = "ARVCAS_OPT_LEVEL"
+OPT_LEVELS = ("-O0", "-O1", "-O2", "-O3", "-Os", "-Og")
 FIXED_FLAGS = ("-ffp-contract=off", "-fno-math-errno", "-fno-semantic-interposition", "-finline-small-functions")
 LIBS = ("-lm",)
 # The instruction set, for the libraries this machine builds and loads (not for export-c's Makefile
@@ -216,7 +224,21 @@ def cache_dir() -> Path:
 # flags, compiler, key
 
 
-def _check_flags(opt_level: str, flags) -> list[str]:
+def default_opt_level() -> str:
+    """The optimisation level of a build that names none: ``ARVCAS_OPT_LEVEL`` when it is set, else
+    :data:`DEFAULT_OPT_LEVEL`. No level changes a result (``-ffp-contract=off``): ``-O0`` only trades run speed
+    (about 3x slower) for compile time (about 4x shorter; results/bench.md's opt sweep)."""
+    v = os.environ.get(OPT_LEVEL_ENV, "").strip()
+    if not v:
+        return DEFAULT_OPT_LEVEL
+    if v not in OPT_LEVELS:
+        raise ValueError(f"{OPT_LEVEL_ENV}={v!r}: expected one of {', '.join(OPT_LEVELS)} (or unset: {DEFAULT_OPT_LEVEL})")
+    return v
+
+
+def _check_flags(opt_level: str | None, flags) -> list[str]:
+    if opt_level is None:
+        opt_level = default_opt_level()
     if isinstance(flags, str) or not isinstance(flags, (tuple, list)):
         raise ValueError(f"flags: expected a tuple of strings, got {flags!r}")
     if not isinstance(opt_level, str) or not opt_level.startswith("-O"):
@@ -533,14 +555,15 @@ def _load(plan, so: Path, manifest: dict) -> ca.Function:
 def build(
     fn: ca.Function,
     *,
-    opt_level: str = DEFAULT_OPT_LEVEL,
+    opt_level: str | None = None,
     flags: tuple[str, ...] = (),
     lock_timeout: float = LOCK_TIMEOUT_S,
     extra_c: str = "",
 ) -> ca.Function:
     """``fn`` compiled to C and loaded with :func:`casadi.external` (same name, inputs, outputs).
 
-    ``opt_level`` is passed to ``cc`` as is (``-O0``..``-O3``, ``-Os``, ``-Og``), then ``flags``.
+    ``opt_level`` is passed to ``cc`` as is (``-O0``..``-O3``, ``-Os``, ``-Og``; None: :func:`default_opt_level`),
+    then ``flags``.
     ``extra_c``: C source appended to the generated file (part of the cache key), e.g. a loop over
     ``fn`` that other code calls from the same library (:mod:`arvcas.build.dynamics`).
     Raises ValueError for ``-Ofast``/``-ffast-math`` and kin, :class:`CacheError` for an unsafe cache
@@ -640,7 +663,7 @@ def build_described(
     description: str,
     make: Callable[[], ca.Function],
     *,
-    opt_level: str = DEFAULT_OPT_LEVEL,
+    opt_level: str | None = None,
     flags: tuple[str, ...] = (),
     lock_timeout: float = LOCK_TIMEOUT_S,
     batch_loop: bool = False,
@@ -689,7 +712,7 @@ def build_described(
         return f
 
 
-def _described(name: str, description: str, opt_level: str, flags, batch_loop: bool) -> tuple[list[str], str, str]:
+def _described(name: str, description: str, opt_level: str | None, flags, batch_loop: bool) -> tuple[list[str], str, str]:
     """(compiler flags, the full description, its :func:`_ident`) of a :func:`build_described` call."""
     cmd_flags = _check_flags(opt_level, flags)
     if not name.isidentifier() or not name.isascii():
@@ -710,7 +733,7 @@ _MADE: dict[str, ca.Function] = {}  # the last graphs described_digest built: a 
 
 
 def described_digest(name: str, description: str, make: Callable[[], ca.Function], *,
-                     opt_level: str = DEFAULT_OPT_LEVEL, flags: tuple[str, ...] = (), batch_loop: bool = False) -> str:
+                     opt_level: str | None = None, flags: tuple[str, ...] = (), batch_loop: bool = False) -> str:
     """sha256 of the C that CasADi generates for the function a :func:`build_described` call with the same
     arguments compiles (without its appended loops): what the function computes, the same in every
     process and on every machine (no paths, times or versions in it).

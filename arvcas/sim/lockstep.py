@@ -316,7 +316,7 @@ fail:
 """
 
 
-def build(run, W: int | None = None, flags: tuple[str, ...] = (), opt_level: str = codegen.DEFAULT_OPT_LEVEL
+def build(run, W: int | None = None, flags: tuple[str, ...] = (), opt_level: str | None = None
           ) -> LockstepRun:
     """The lockstep library of a :class:`arvcas.sim.run.CompiledRun` (metrics only), W lanes (default
     :func:`arvcas.build.lanes.lane_width`), from the compile cache when it is there. ``flags`` and

@@ -185,11 +185,12 @@ class CompiledRun:
         fn = self._fns.get(trace)
         if fn is None:
             name, desc, make = self._described(trace)
-            fn = _FUNCTIONS.get((name, desc))
+            memo = (name, desc, codegen.default_opt_level())
+            fn = _FUNCTIONS.get(memo)
             if fn is None:
                 what = f"the run for {self.params.structure.name} / {self.controller.name}" + (" (traced)" if trace else "")
                 fn = codegen.build_described(name, desc, make, batch_loop=True, label=what)
-                _FUNCTIONS[(name, desc)] = fn
+                _FUNCTIONS[memo] = fn
             self._fns[trace] = fn
         return fn
 
