@@ -71,8 +71,8 @@ def _tokens(path: Path, lang: str = "c") -> str:
 def _headers(parts, P, d: Path) -> Path:
     fns, c_text, prefix, opts = parts
     h = d / "both.h"
-    h.write_text(export._header(fns, c_text, prefix, opts, P) + export._params_header(P, opts, prefix),
-                 encoding="utf-8")
+    v = export._values(fns, c_text, prefix, opts, P, export.example_inputs(P))
+    h.write_text(export._render("export/plant.h.j2", v) + export.params_header(P, opts, prefix), encoding="utf-8")
     return h
 
 
@@ -90,9 +90,8 @@ def test_c_comment_and_string_by_construction():
         with pytest.raises(ValueError, match="not a plain word"):
             text.build_word(bad, "flag")
     for bad in ("a b_", "x$(shell id)_", "x\n_"):  # the build files take only plain words
-        for write in (export._makefile, export._cmake, export._cmake_consumer):
-            with pytest.raises(export.ExportError, match="not a plain word"):
-                write(bad)
+        with pytest.raises(export.ExportError, match="not a plain word"):  # Makefile and both CMake files
+            export.build_files(bad)
 
 
 @PROPERTY
