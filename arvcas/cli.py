@@ -7,9 +7,9 @@ name, help, ``add_arguments`` and ``run`` (the handlers live with their packages
 the files it will write and a ``check`` of the options that do not apply. :func:`main` parses, then,
 before calling ``run``:
 
-* input policy (:func:`arvcas.io.files.check_input`): every declared input is a regular file
+* input policy (:func:`arvcas.util.files.check_input`): every declared input is a regular file
   (a front may also be a study directory); FIFOs, devices and directories are refused by name;
-* output policy (:func:`arvcas.io.files.check_outputs`): no output is an input or another output,
+* output policy (:func:`arvcas.util.files.check_outputs`): no output is an input or another output,
   none is a special file, an existing file arvcas did not write is refused without ``--force``
   (added to every command that writes); stale temporary files of killed runs are removed;
 * bounds: counts, seeds and timeouts are checked by their argparse types (:mod:`arvcas.io.cliargs`:
@@ -452,7 +452,7 @@ def _run_import_uuv(a: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from arvcas.io import files
+    from arvcas.util import files
     from arvcas.system import params as params_mod
     from arvcas.system import uuv
 
@@ -555,7 +555,7 @@ def bench_module():
 
 
 def _run_bench(a: argparse.Namespace) -> int:
-    from arvcas.io import files
+    from arvcas.util import files
 
     files.prepare_dir(a.out, f"--out {a.out}")  # before measuring
     run = bench_module().run
@@ -709,7 +709,7 @@ def _inputs(cmd: Command, a: argparse.Namespace) -> list[tuple[str, Path]]:
 
 def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[str, Path] | None:
     """The input policy for one input ``p`` of argument ``dest``: (label, path of the file) or None."""
-    from arvcas.io import files
+    from arvcas.util import files
 
     if p is None:
         return None
@@ -739,7 +739,7 @@ def _input(dest: str, kind: str, what: list, p, a: argparse.Namespace) -> tuple[
 def _load_plugins(a: argparse.Namespace) -> list[tuple[str, Path]]:
     """Load the ``--plugin`` of a command (before its check: the check may look a controller up); returns
     the plugin files as inputs (no output may replace them)."""
-    from arvcas.io import plugins
+    from arvcas.util import plugins
 
     out = []
     for spec in getattr(a, "plugin", None) or []:
@@ -763,7 +763,7 @@ def _canonical_controllers(a: argparse.Namespace) -> None:
 
 
 def _apply_policies(cmd: Command, a: argparse.Namespace) -> None:
-    from arvcas.io import files
+    from arvcas.util import files
 
     inputs = _inputs(cmd, a) + _load_plugins(a)
     _canonical_controllers(a)
@@ -804,7 +804,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the ``arvcas`` command line; returns the exit code (0 ok, 2 usage or library error)."""
     import signal
 
-    from arvcas.io import files
+    from arvcas.util import files
 
     ap = _parser()
     try:

@@ -160,7 +160,7 @@ def drift(out: Path) -> None:
 
 
 def _write(path: Path, doc: dict) -> None:
-    from arvcas.io import files
+    from arvcas.util import files
 
     files.write_text(path, json.dumps(doc, indent=1) + "\n")
     print(f"wrote {path}")
@@ -173,7 +173,7 @@ def _binom(p: float, n: int) -> str:
 
 def readme(out: Path) -> None:
     """README.md from the committed JSON files (nothing recomputed)."""
-    from arvcas.io import files
+    from arvcas.util import files
 
     text = readme_markdown(out)
     files.write_text(out / "README.md", text)

@@ -174,7 +174,7 @@ def rendered(root: Path = ROOT) -> dict[str, str]:
 def _write(path: Path, text: str) -> None:
     """A page arvcas's writer recorded in its folder's manifest is replaced through that writer (the manifest
     stays true); the others were written plainly by their scripts and are so again."""
-    from arvcas.io import files
+    from arvcas.util import files
     if files.written_by_arvcas(path):
         files.write_text(path, text, kind="md")
     else:

@@ -96,7 +96,7 @@ def identify(out: Path) -> None:
               "--force"])
     text = buf.getvalue() + f"wall time {time.perf_counter() - t0:.1f} s\n"
     print(text)
-    from arvcas.io import files
+    from arvcas.util import files
 
     files.write_text(out / "identify.log", text)
 
@@ -110,7 +110,7 @@ def step(out: Path) -> None:
     """The validation's plant step: 0.02 s (the logs' sample time) against 0.005 s."""
     import arvcas
     from arvcas.ident import logs, validate
-    from arvcas.io import files
+    from arvcas.util import files
 
     system = arvcas.load_system(SYSTEM)
     rows = {}
@@ -133,7 +133,7 @@ def synthetic(out: Path, seeds: int = SYN_SEEDS) -> None:
     from arvcas.ident import logs
     from arvcas.ident import synthetic as syn
     from arvcas.ident.estimate import Z95
-    from arvcas.io import files
+    from arvcas.util import files
     from arvcas.system import System
 
     model = arvcas.load_system(SYSTEM)
@@ -223,7 +223,7 @@ AUTHORS = {"roll": 1.27, "pitch": 1.73, "roll_sd": 0.69, "pitch_sd": 0.82, "tria
 
 def summary(out: Path) -> None:
     """results/validation/README.md from the JSON files the other parts wrote (no number typed by hand)."""
-    from arvcas.io import files
+    from arvcas.util import files
 
     text = summary_markdown(out)
     files.write_text(out / "README.md", text)
@@ -509,7 +509,8 @@ def speed(out: Path) -> None:
     import arvcas
     from arvcas.experiments import validation as V
     from arvcas.ident import logcache, logs, plant, validate
-    from arvcas.io import files, style
+    from arvcas.util import files
+    from arvcas.io import style
 
     system = arvcas.load_system(SYSTEM)
     work = Path(tempfile.mkdtemp(prefix="arvcas-speed-"))
@@ -584,7 +585,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     a.out = a.out.resolve()
     os.chdir(ROOT)  # the commands are given paths relative to the repository (_rel)
-    from arvcas.io import files
+    from arvcas.util import files
 
     files.prepare_dir(a.out, "--out")
     for name in a.only or PARTS:

@@ -37,7 +37,7 @@ def fresh(monkeypatch):
     import sys
 
     from arvcas.controllers import base
-    from arvcas.io import plugins
+    from arvcas.util import plugins
     from arvcas.metrics import objectives
 
     for name in ("_LOADED", "_EP_DONE", "_FAILED"):

@@ -25,7 +25,7 @@ from fmpy.validation import validate_fmu  # noqa: E402
 
 from arvcas.build import fmu as fmu_mod  # noqa: E402
 from arvcas.build.dynamics import compiled  # noqa: E402
-from arvcas.io import files  # noqa: E402
+from arvcas.util import files  # noqa: E402
 
 from trust_helpers import bounded  # noqa: E402
 from arvcas.sim import profiles, scenario  # noqa: E402

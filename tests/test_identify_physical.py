@@ -28,7 +28,7 @@ from arvcas.cli import main
 from arvcas.ident import identify as ident_mod
 from arvcas.ident import logs, physical, synthetic
 from arvcas.ident.estimate import identified_name, writable
-from arvcas.io import files
+from arvcas.util import files
 from arvcas.system import System
 from arvcas.system.params import ParamsError, check_physical
 from ident_helpers import armless

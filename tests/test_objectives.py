@@ -115,7 +115,7 @@ def test_constraint_errors(text, msg):
 
 
 def test_user_objective_registered(tmp_path):
-    from arvcas.io import plugins
+    from arvcas.util import plugins
 
     f = tmp_path / "my_objective.py"
     f.write_text(

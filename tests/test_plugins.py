@@ -23,7 +23,7 @@ import pytest
 
 from arvcas import cli
 from arvcas.controllers import base
-from arvcas.io import plugins
+from arvcas.util import plugins
 from arvcas.io.results import read_result
 from arvcas.model.spatial import J
 from arvcas.tuning import checkpoint as ck

@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-from arvcas.io import files
+from arvcas.util import files
 from arvcas.sim.scenario import default_scenario_path
 
 from trust_helpers import assert_refused, synthetic_front

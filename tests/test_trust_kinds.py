@@ -14,7 +14,7 @@ import h5py
 import pytest
 
 from arvcas.build import export, fmu
-from arvcas.io import files
+from arvcas.util import files
 from arvcas.io.results import ResultsError, atomic_write
 
 from trust_helpers import assert_refused, run, snapshot, synthetic_front

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from arvcas.io import files
+from arvcas.util import files
 from arvcas.io.results import read_result
 
 from trust_helpers import assert_refused, run, snapshot, synthetic_front

@@ -15,7 +15,7 @@ import pytest
 
 from arvcas import cli
 from arvcas.controllers.gains import default_gains
-from arvcas.io.files import TMP_MARK
+from arvcas.util.files import TMP_MARK
 from arvcas.tuning import load_study, run_study
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.engines import LocalEngine

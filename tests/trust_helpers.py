@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from arvcas import cli
-from arvcas.io.files import TMP_MARK
+from arvcas.util.files import TMP_MARK
 
 
 def bounded(fn, timeout: float = 120.0):

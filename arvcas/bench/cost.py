@@ -697,7 +697,8 @@ def figures(r: dict) -> dict:
 
 def write_files(r: dict, d: Path) -> list[Path]:
     """``cost_*.png`` and README.md into directory ``d`` from bench.json's ``cost`` key."""
-    from arvcas.io import files, style
+    from arvcas.util import files
+    from arvcas.io import style
 
     d = files.prepare_dir(Path(d), f"bench: {d}")
     out = [style.write_figure(d / name, fig) for name, fig in figures(r).items()]

@@ -128,9 +128,9 @@ def _run_only(out, quick: bool, only: tuple[str, ...], log, wait: Callable[[], f
 
 def write(res: dict, out: str | Path) -> tuple[Path, Path]:
     """Write ``bench.json`` and ``bench.md`` into the directory ``out`` (created if its parent exists),
-    atomically and only over files arvcas wrote (:mod:`arvcas.io.files`); with a ``cost`` section, its
+    atomically and only over files arvcas wrote (:mod:`arvcas.util.files`); with a ``cost`` section, its
     figures and README into ``out/cost/`` (:func:`arvcas.bench.cost.write_files`)."""
-    from arvcas.io import files
+    from arvcas.util import files
 
     d = files.prepare_dir(Path(out), f"bench: --out {out}")
     pj, pm = d / "bench.json", d / "bench.md"

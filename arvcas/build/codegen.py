@@ -19,7 +19,7 @@ with ``cc`` and loaded with :func:`casadi.external`. Builds are cached between p
 * **locked**: an ``fcntl.flock`` lock file per key (exclusive to build, shared to verify and load),
   so two processes building the same function at once compile it once and both succeed. Waiting is
   bounded: on timeout, and in a cache that cannot be written (read-only), the function is built
-  privately in a directory of this process outside the cache (:func:`arvcas.io.files.private_dir`,
+  privately in a directory of this process outside the cache (:func:`arvcas.util.files.private_dir`,
   in the system's temporary directory) and not published.
 
 Generating C for ``uvms_rhs`` (6-9k instructions) takes 15-40 ms: a few per cent of compiling it
@@ -502,7 +502,7 @@ def _publish(plan: _Plan, d: Path, so: Path, man: Path) -> dict:
 
 def _build_private(plan: _Plan, d: Path) -> ca.Function:
     """Build in a directory of this process outside the cache ``d`` (which may be read-only)."""
-    from arvcas.io.files import private_dir
+    from arvcas.util.files import private_dir
 
     work = private_dir("build")
     with _LOCK:

@@ -20,7 +20,7 @@ arvcas itself):
   through ``find_package``) and Python ctypes (``example.py``), printing the same lines.
 * ``README.md`` and ``arvcas-export.json``, the manifest: every file written with its sha256.
 
-The one output policy of :mod:`arvcas.io.files` decides what may be replaced: a file in DIR is only
+The one output policy of :mod:`arvcas.util.files` decides what may be replaced: a file in DIR is only
 replaced if the directory's ``.arvcas-manifest.json`` records it as written by export-c with its
 current sha256 (arvcas wrote it, as an export, and nobody changed it since); anything else is refused
 with a one-line :class:`ExportError` unless ``force``. ``consumer/`` is never a symbolic link (refused
@@ -189,13 +189,13 @@ def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-KIND = "export-c"  # the kind of every file export-c writes (arvcas.io.files); an export's kind is its command
+KIND = "export-c"  # the kind of every file export-c writes (arvcas.util.files); an export's kind is its command
 
 
 def _write(out: Path, name: str, data: bytes, kind: str = KIND) -> None:
-    """Through the one atomic writer (:mod:`arvcas.io.files`), which applies the output policy again
+    """Through the one atomic writer (:mod:`arvcas.util.files`), which applies the output policy again
     (and :func:`check_replaceable`'s --force permissions); a subdirectory is never a symbolic link."""
-    from arvcas.io import files
+    from arvcas.util import files
 
     path = out / name
     if path.parent != out:
@@ -473,11 +473,11 @@ def write_package(out: Path, texts: dict[str, str], prefix: str, what: str) -> l
 
 
 def check_replaceable(out: Path, names, force: bool, what: str) -> None:
-    """The one output policy (:func:`arvcas.io.files.check_outputs`, kind ``what``: the export's command):
+    """The one output policy (:func:`arvcas.util.files.check_outputs`, kind ``what``: the export's command):
     a file in ``out`` is replaced only if that export wrote it and nobody changed it since (the
     directory's manifest), or with ``force``; a subdirectory that is a symbolic link is refused even
     with ``force``. One line, naming the file."""
-    from arvcas.io import files as _files
+    from arvcas.util import files as _files
 
     if out.exists():
         _files.check_outputs([(f"{what}: DIR {out}", out / n, what, out) for n in names], force=force,

@@ -32,7 +32,7 @@ from importlib import resources
 from pathlib import Path
 
 from arvcas.build.templating import render
-from arvcas.io import files
+from arvcas.util import files
 from arvcas.system.loader import UNSET, renamed_system
 
 import casadi as ca
@@ -362,11 +362,11 @@ def _compile(src_dir: Path, out: Path) -> None:
 # the output file
 
 
-KIND = "fmu"  # the kind of the file in the directory's manifest (arvcas.io.files)
+KIND = "fmu"  # the kind of the file in the directory's manifest (arvcas.util.files)
 
 
 def _refuse_replacing(p: Path) -> None:
-    """The output policy of :mod:`arvcas.io.files` for an existing ``p``, by the directory's manifest
+    """The output policy of :mod:`arvcas.util.files` for an existing ``p``, by the directory's manifest
     (never by what the file claims inside, so a foreign file is not even opened)."""
     kind = files.kind_of(p)
     if kind is None:
@@ -399,7 +399,7 @@ def export_fmu(path, system=None, opts=None, force: bool = False, inputs: str = 
     """Write an FMI 2.0 FMU (Model Exchange and Co-Simulation) of the coupled vehicle + arm to ``path``.
 
     ``path`` must end in ``.fmu``; an existing file is replaced only if arvcas recorded it as an FMU it
-    wrote (the directory's manifest, :mod:`arvcas.io.files`; nothing inside the file is trusted), or
+    wrote (the directory's manifest, :mod:`arvcas.util.files`; nothing inside the file is trusted), or
     with ``force=True``. ``system`` (its :class:`arvcas.system.params.Params` or :class:`arvcas.system.System`,
     a system file, or None for the default system; ``params=``: its old name) sizes the FMU (:func:`layout`)
     and sets the parameters' start values; every one stays settable in the FMU. ``opts`` is

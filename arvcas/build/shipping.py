@@ -90,7 +90,7 @@ def preload(b: dict) -> int:
         todo = [it for it in b["items"] if it["ident"] not in codegen._PRELOADED]
         if not todo:
             return 0
-        from arvcas.io.files import private_dir
+        from arvcas.util.files import private_dir
 
         d = private_dir("shipped")
         if not codegen._PRIVATE_DIRS:

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from arvcas.io import plugins
+from arvcas.util import plugins
 
 __all__ = ["Gain", "Controller", "ControllerError", "call_law", "register", "get", "names", "available", "unregister", "adopt",
            "origin", "provenance", "describe_provenance", "GROUP", "aliases", "canonical", "accepted"]
@@ -106,7 +106,7 @@ class Controller:
     def own_source_files(self) -> list[str]:
         """The files of this law's code outside the package (empty for the package's own laws): for each
         class of its hierarchy defined elsewhere, its module's file, or every ``.py`` file of the
-        top-level package it is in (:func:`arvcas.io.plugins.source_files`). They key the compile cache."""
+        top-level package it is in (:func:`arvcas.util.plugins.source_files`). They key the compile cache."""
         pkg = str(Path(__file__).resolve().parents[1])
         out = set()
         for cls in type(self).__mro__:
@@ -233,7 +233,7 @@ def call_law(law: Controller, method: str, *args):
 
 _REGISTRY: dict[str, Controller] = {}
 _ALIASES: dict[str, str] = {}  # alias -> the registered name it stands for
-_ORIGIN: dict[str, object] = {}  # name -> the plugin (arvcas.io.plugins.Plugin) that registered it
+_ORIGIN: dict[str, object] = {}  # name -> the plugin (arvcas.util.plugins.Plugin) that registered it
 _LOCK = threading.Lock()
 GROUP = "arvcas.controllers"  # the entry-point group of controllers (docs/plugins.md)
 
@@ -366,7 +366,7 @@ def get(name) -> Controller:
 
 
 def adopt(obj) -> list[str]:
-    """Register the controllers ``obj`` defines (the registry's side of :mod:`arvcas.io.plugins`): a
+    """Register the controllers ``obj`` defines (the registry's side of :mod:`arvcas.util.plugins`): a
     Controller instance, a Controller subclass (instantiated), or a module: the subclasses with a
     ``name`` defined in it (or, for a package, in its submodules) and the instances it holds. A law the
     module registered itself is kept. Returns the names registered."""
@@ -410,7 +410,7 @@ def _claim(name: str) -> None:
 
 
 def origin(name: str):
-    """The plugin (:class:`arvcas.io.plugins.Plugin`) that registered controller ``name``, or None (built
+    """The plugin (:class:`arvcas.util.plugins.Plugin`) that registered controller ``name``, or None (built
     in, or registered from the user's own Python code)."""
     with _LOCK:
         return _ORIGIN.get(name)

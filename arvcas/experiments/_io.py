@@ -1,6 +1,6 @@
 """The provenance attributes every ``arvcas.experiments`` file carries, and its HDF5 readers.
 
-Files are written and directories checked by :mod:`arvcas.io.files` (errors as ``ResultsError``).
+Files are written and directories checked by :mod:`arvcas.util.files` (errors as ``ResultsError``).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 
 from arvcas._version import __version__
-from arvcas.io import files
+from arvcas.util import files
 from arvcas.io.results import ResultsError, atomic_write
 
 __all__ = ["atomic_write", "write_text", "write_figure", "write_result_dir", "stored_inputs", "provenance",

@@ -493,7 +493,7 @@ def knees_outputs(a):
 
 def run_knees(a: argparse.Namespace) -> int:
     from arvcas.experiments.knees import replay_knees
-    from arvcas.io import files
+    from arvcas.util import files
 
     files.prepare_dir(a.out, f"--out {a.out}")
     replay_knees(a.study_dir, a.out, fmt=a.format or "png")

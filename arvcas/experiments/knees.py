@@ -37,7 +37,8 @@ def output_files(out: str | Path, controllers, fmt: str = "png") -> list[Path]:
 def replay_knees(study_dir: str | Path, out: str | Path, say=print, fmt: str = "png") -> dict:
     """Replay every front's knee; write ``knee_<controller>.h5``, ``knees.md`` and three figures (``fmt``:
     png, pdf or svg)."""
-    from arvcas.io import files, results, style
+    from arvcas.util import files
+    from arvcas.io import results, style
     from arvcas.io.plots import plot_errors, plot_states
     from arvcas.model import thrusters
     from arvcas.system.params import view

@@ -8,7 +8,7 @@ random numbers), and writes into ``out_dir``::
     table3.md                                 paper's Table 3 and ours, ratios, the docs/model.md §6 checks
     fig05.png ... fig11.png                   the paper's Figures 5-11 (arvcas.io.plots; or .pdf, .svg)
 
-Every file is written atomically by :mod:`arvcas.io.files` (temporary name in ``out_dir``, then ``os.replace``).
+Every file is written atomically by :mod:`arvcas.util.files` (temporary name in ``out_dir``, then ``os.replace``).
 """
 
 from __future__ import annotations
@@ -23,7 +23,8 @@ import numpy as np
 
 from arvcas import metrics
 from arvcas.controllers import gains as gains_mod
-from arvcas.io import files as _files, plots, results, style
+from arvcas.util import files as _files
+from arvcas.io import plots, results, style
 from arvcas.sim import scenario
 from arvcas.io.results import ResultsError
 from arvcas.sim.scenario import ScenarioConfig

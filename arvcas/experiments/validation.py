@@ -325,7 +325,7 @@ def _readme(doc: dict, results, logs, system, seconds: float, fmt: str | None) -
 
 def run_validate(a) -> int:
     from arvcas.ident.validate import validate_log
-    from arvcas.io import files
+    from arvcas.util import files
 
     system = _system(a)
     logs = _logs(a, system)
@@ -422,7 +422,7 @@ def _check_loads(out: Path, text: str) -> None:
     written if the loader refuses it."""
     import os
 
-    from arvcas.io import files
+    from arvcas.util import files
     from arvcas.system import load_system
 
     tmp = out.parent / f".{out.stem}{files.TMP_MARK}{os.getpid()}-check.toml"
@@ -439,7 +439,7 @@ def _check_loads(out: Path, text: str) -> None:
 def run_identify(a) -> int:
     from arvcas.ident.estimate import writable
     from arvcas.ident.identify import identify
-    from arvcas.io import files
+    from arvcas.util import files
 
     system = _system(a)
     for n in a.free:

@@ -11,6 +11,6 @@
   IPOPT, 95 % intervals from the Gauss-Newton information, unidentifiable directions named.
 
 This layer sits above the simulation and tuning layers (it uses the model, the build cache and the
-file policies of :mod:`arvcas.io.files`) and below the experiments and the command line, which write
+file policies of :mod:`arvcas.util.files`) and below the experiments and the command line, which write
 its reports.
 """

@@ -273,7 +273,7 @@ def writable(system, names) -> None:
     inertials and tool come from the URDF, which arvcas does not rewrite."""
     import tomllib
 
-    from arvcas.io.files import read_text
+    from arvcas.util.files import read_text
 
     doc = tomllib.loads(read_text(system.path, "system file", IdentifyError))
     maps = doc.get("thrusters", {}).get("map", {}) if isinstance(doc.get("thrusters"), dict) else {}
@@ -326,7 +326,7 @@ def _system_text(est: Estimate, out_path, date: str | None) -> str:
     from arvcas.system.systemfile import VECTOR_ELEMENTS
 
     src = Path(est.system.path)
-    from arvcas.io.files import read_text
+    from arvcas.util.files import read_text
 
     doc = tomlkit.parse(read_text(src, "system file", IdentifyError))
     date = date or datetime.date.today().isoformat()

@@ -328,7 +328,7 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
     else estimated (module docstring); ``h_max``: the largest plant step (default the logs' sample time);
     ``progress(k, cost)``: called every IPOPT iteration. SIGINT (Ctrl-C) stops after the current
     iteration and returns the best iterate (status "interrupted"); SIGTERM and SIGHUP stop it and raise
-    :class:`arvcas.io.files.Terminated` (nothing is returned, so nothing unfinished is written).
+    :class:`arvcas.util.files.Terminated` (nothing is returned, so nothing unfinished is written).
     ``physical_set``: the physical parameterisations and the hold inside the loader's rules
     (:mod:`arvcas.ident.physical`); False leaves each parameter only its sign bounds (to see where the
     unconstrained optimum lies). ``cost``: ``"simulation"`` (open loop over each trial, its initial state
@@ -434,7 +434,7 @@ def identify(system, logs: list[Log], free, *, signals=None, sigma: dict | None 
         if caught and prob.pool is not None:
             prob.pool.shutdown()
     if caught:  # the unfinished estimate is dropped: nothing is written
-        from arvcas.io.files import Terminated
+        from arvcas.util.files import Terminated
 
         raise Terminated(caught[0])
     if stop.is_set():

@@ -365,7 +365,7 @@ _MOTOR_FUNCTIONS = {**{33 + k: k + 1 for k in range(8)}, **{82 + k: k + 9 for k 
 def _read_ardupilot(path: Path, m: LogMapping, info: LogInfo, where: str):
     """(the autopilot's log with every message the streams name, the segment the mapping picks)."""
     from arvcas.ident import ardupilot
-    from arvcas.io.files import check_input
+    from arvcas.util.files import check_input
 
     p = check_input(path, "ArduPilot log", LogError)
     wanted: dict[str, set[str]] = {}
@@ -547,7 +547,7 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
     name = info.name or (p.name[: -len(MAPPING_SUFFIX)] if p.name.endswith(MAPPING_SUFFIX) else p.stem)
     bag = None
     if info.bag is not None:
-        from arvcas.io.files import check_input
+        from arvcas.util.files import check_input
 
         bag = check_input(base / info.bag, "ROS bag", LogError, allow_dir=True)
     # the mapping's own rules, before reading any stream

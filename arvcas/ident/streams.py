@@ -42,7 +42,7 @@ def read_csv(path: Path, names: list[str], time_col: str, mapping: str) -> Table
     file, more than :data:`MAX_LOG_BYTES` of text or :data:`MAX_SAMPLES` rows are one line."""
     import zlib
 
-    from arvcas.io.files import check_input
+    from arvcas.util.files import check_input
 
     check_input(path, "log file", LogError)
     gz = path.suffix == ".gz"

@@ -1,2 +1,3 @@
-"""Files and figures: reading and writing any file (:mod:`.files`: input and output policies, the atomic
-writer), HDF5 results (:mod:`.results`) and plots (:mod:`.plots`)."""
+"""Results and figures: HDF5 results (:mod:`.results`), MATLAB files (:mod:`.matfile`), plots (:mod:`.plots`)
+in the house style (:mod:`.style`), the command line's shared argument checks (:mod:`.cliargs`) and ArduSub
+parameter files (:mod:`.ardusub_params`). Reading and writing any file goes through :mod:`arvcas.util.files`."""

@@ -130,7 +130,7 @@ def add_model_args(p: argparse.ArgumentParser) -> None:
 
 
 def output_kinds(outs, formats: dict[str, str]) -> list:
-    """``(label, path)`` outputs with the kind (:mod:`arvcas.io.files`) each will be written as, by suffix:
+    """``(label, path)`` outputs with the kind (:mod:`arvcas.util.files`) each will be written as, by suffix:
     ``formats`` maps ``h5`` or ``mat`` to the arvcas format written there (others: by suffix)."""
     from arvcas.io.matfile import mat_kind
 

@@ -130,7 +130,7 @@ def front_variables(front) -> tuple[dict, dict, dict, dict]:
 
 
 def mat_kind(fmt: str) -> str:
-    """The kind (:mod:`arvcas.io.files`) of a .mat file of format ``fmt`` (``arvcas-result``, ``arvcas-front``)."""
+    """The kind (:mod:`arvcas.util.files`) of a .mat file of format ``fmt`` (``arvcas-result``, ``arvcas-front``)."""
     return f"{fmt} (.mat)"
 
 

@@ -19,7 +19,7 @@ factors), ``phase`` (disturbance phases, rad), ``h`` (s), ``ok``, ``t_fail`` (s;
 ``meta`` (JSON text of ``Result.meta``). ``params``/``param_names``, ``uncertainty`` and ``phase``
 are absent when the Result has none.
 
-Writing is atomic, through :func:`arvcas.io.files.atomic_write` (temporary name in the target
+Writing is atomic, through :func:`arvcas.util.files.atomic_write` (temporary name in the target
 directory, fsync, ``os.replace``): an interrupted write leaves any previous file untouched and no
 partial file under the final name; an existing file arvcas did not write is not replaced.
 """
@@ -37,7 +37,7 @@ import h5py
 import numpy as np
 
 from arvcas.controllers import gains as gains_mod
-from arvcas.io import files
+from arvcas.util import files
 from arvcas.system.params import SCHEMA as PARAM_SCHEMA
 from arvcas.sim.signals import Signal
 from arvcas.sim.simulation import Result
@@ -64,7 +64,7 @@ class ResultsError(ValueError):
 
 
 def check_dir(d, what: str | None = None) -> Path:
-    """``d`` after checking that it is an existing, writable directory (:func:`arvcas.io.files.check_dir`)."""
+    """``d`` after checking that it is an existing, writable directory (:func:`arvcas.util.files.check_dir`)."""
     return files.check_dir(d, what, ResultsError)
 
 
@@ -174,7 +174,7 @@ def _put(f: h5py.File, name: str, data: np.ndarray, sig: Signal) -> None:
 
 
 def atomic_write(path, write: Callable[[Path], None], kind: str | None = None) -> Path:
-    """:func:`arvcas.io.files.atomic_write` with errors as :class:`ResultsError`; ``kind``: the file's
+    """:func:`arvcas.util.files.atomic_write` with errors as :class:`ResultsError`; ``kind``: the file's
     ``format`` (an HDF5 file), else as files.atomic_write's."""
     return files.atomic_write(path, write, ResultsError, kind)
 

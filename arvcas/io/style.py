@@ -3,7 +3,7 @@ a colour-blind-safe palette, how dense noisy series are drawn, and the formats a
 
 Every figure function of arvcas draws inside :func:`styled` (a decorator: matplotlib's ``rc_context``
 around the function, so nothing global changes) into a Figure from :func:`figure`, and is written by
-:func:`write_figure` (atomically, through :func:`arvcas.io.files.atomic_write`) in one of :data:`FORMATS`.
+:func:`write_figure` (atomically, through :func:`arvcas.util.files.atomic_write`) in one of :data:`FORMATS`.
 
 * **Sizes.** A single journal column is 3.5 in (88-90 mm: Elsevier 90 mm, IEEE and MDPI 88.9 mm), a
   full page width 7.16 in (182 mm). Text is set at 8 pt (tick labels and legends 7 pt), the size
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from arvcas.io import files
+from arvcas.util import files
 
 __all__ = ["COLUMN_WIDTH", "PAGE_WIDTH", "PALETTE", "FORMATS", "PNG_DPI", "RC", "styled", "figure", "color",
            "trace", "log_labels", "figure_format", "save", "write_figure"]
@@ -229,7 +229,7 @@ def save(fig, path, fmt: str) -> None:
 
 
 def write_figure(path, fig, fmt: str | None = None, error: type[ValueError] = files.FileError) -> Path:
-    """A matplotlib figure, written atomically (:func:`arvcas.io.files.atomic_write`) in ``fmt`` (``png``,
+    """A matplotlib figure, written atomically (:func:`arvcas.util.files.atomic_write`) in ``fmt`` (``png``,
     ``pdf`` or ``svg``; default: from the name's suffix) by :func:`save`; its kind is ``fmt``."""
     try:
         fmt = figure_format(path, fmt)

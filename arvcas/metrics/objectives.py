@@ -25,7 +25,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from arvcas.io import plugins
+from arvcas.util import plugins
 from arvcas.metrics.indices import normalised_objectives
 from arvcas.sim import scenario
 from arvcas.sim.accumulate import Accumulator, event_times, width
@@ -340,7 +340,7 @@ def origin(name: str) -> dict:
 
 
 def adopt(obj) -> list[str]:
-    """Register the objectives ``obj`` defines (the registry's side of :mod:`arvcas.io.plugins`): an
+    """Register the objectives ``obj`` defines (the registry's side of :mod:`arvcas.util.plugins`): an
     Objective instance, an Objective subclass with a name (instantiated), or a module's such objects."""
     import inspect
 

@@ -82,7 +82,7 @@ def default_roots(path: Path) -> list[Path]:
 def expand(path: Path, packages: dict[str, Path], args: dict[str, str], error=ImportError_) -> tuple[str, list[str]]:
     """The URDF text of a xacro file (``$(find pkg)`` resolved in ``packages``, ``$(arg x)`` from ``args``) and
     the files it included; a plain URDF is returned as read."""
-    from arvcas.io.files import read_text
+    from arvcas.util.files import read_text
 
     text = read_text(path, "robot description", error)
     if "xacro" not in text:
@@ -164,7 +164,7 @@ def _bounded(eval_all, path: Path, error):
 
 def _yaml(path: Path, what: str, error) -> Any:
     """A YAML file (uuv_simulator's configuration), parsed safely; one-line errors naming it."""
-    from arvcas.io.files import read_text
+    from arvcas.util.files import read_text
 
     try:
         import yaml

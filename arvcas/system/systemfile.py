@@ -509,7 +509,7 @@ def read_tables(doc: dict, path: str | Path, error: type[Exception]) -> dict:
     maps = thr.get("map") if isinstance(thr, dict) else None
     if not isinstance(maps, dict) or not any(isinstance(m, dict) and "table" in m for m in maps.values()):
         return doc
-    from arvcas.io.files import read_text
+    from arvcas.util.files import read_text
 
     new = {}
     for name, m in maps.items():

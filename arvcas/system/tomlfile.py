@@ -10,9 +10,9 @@ __all__ = ["read_text", "parse"]
 
 
 def read_text(path: str | Path, error: type[ValueError], what: str = "file") -> str:
-    """The UTF-8 text of ``path`` (:func:`arvcas.io.files.read_text`: regular files only, never blocking on
+    """The UTF-8 text of ``path`` (:func:`arvcas.util.files.read_text`: regular files only, never blocking on
     a FIFO, a size cap, no byte-order mark); any problem raises ``error`` naming the file."""
-    from arvcas.io.files import read_text as _read
+    from arvcas.util.files import read_text as _read
 
     return _read(path, what, error)
 

@@ -392,7 +392,7 @@ def convert(doc: dict, path: Path, error) -> dict:
                     f"{config.closest(extra[0], _ARM_KEYS)}")
     upath = systemfile.rel_path(path, arm["urdf"])
     uwhere = str(upath)
-    from arvcas.io.files import read_text
+    from arvcas.util.files import read_text
 
     root = parse(read_text(upath, "URDF file", error), uwhere, error)
     kinds = {j.get("name"): j.get("type") for j in root.findall("joint")}

@@ -534,7 +534,7 @@ def _short(p: str, packages: dict[str, Path]) -> str:
 def _description_file(p: Path, error) -> Path:
     """The robot file: ``p`` itself, or in a description package's folder its ``robots/`` (``urdf/``) file
     named ``*default*``, or the only one."""
-    from arvcas.io.files import check_input
+    from arvcas.util.files import check_input
 
     if p.is_dir():
         cands = sorted(x for d in ("robots", "urdf", ".") for x in (p / d).glob("*")

@@ -65,7 +65,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from arvcas.io import files
+from arvcas.util import files
 
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "HISTORY_FIELDS", "CheckpointError", "Checkpoint", "write_checkpoint",

@@ -163,7 +163,7 @@ def check_front_export(a: argparse.Namespace) -> None:
 
 
 def run_front_export(a: argparse.Namespace) -> int:
-    from arvcas.io import files
+    from arvcas.util import files
     from arvcas.tuning.checkpoint import CheckpointError
     from arvcas.tuning.front import export_front
 
@@ -195,7 +195,8 @@ def front_plot_outputs(a: argparse.Namespace) -> list:
 
 def run_front_plot(a: argparse.Namespace) -> int:
     from arvcas.io.cliargs import figure_file
-    from arvcas.io import files, style
+    from arvcas.util import files
+    from arvcas.io import style
     from arvcas.tuning.front import plot_front, read_front
 
     fr = read_front(a.file)
@@ -232,7 +233,8 @@ def add_compare(p: argparse.ArgumentParser) -> None:
 def run_compare(a: argparse.Namespace) -> int:
     """Two or more fronts (``compare`` on Monte Carlo files is :func:`arvcas.experiments.cli.run_compare`)."""
     from arvcas.io.cliargs import figure_file
-    from arvcas.io import files, style
+    from arvcas.util import files
+    from arvcas.io import style
     from arvcas.tuning.compare import compare_fronts, format_comparison
     from arvcas.tuning.front import check_same_model, plot_fronts, read_front
 

@@ -134,7 +134,7 @@ def _chunk(task: EvalTask, gains: np.ndarray, n_threads: int, bundle: dict | Non
     from arvcas.build import shipping
 
     try:
-        from arvcas.io import plugins
+        from arvcas.util import plugins
 
         for spec in task.plugins:
             plugins.load(spec, what="plugin")

@@ -448,7 +448,7 @@ def _load_plugins(doc: dict, where: str, base_dir) -> None:
     """Before the file is validated (its controllers must be registered by then): load ``study.plugins``
     and look up, among the installed entry points, the controllers it names that are not registered."""
     from arvcas.controllers import base
-    from arvcas.io import plugins
+    from arvcas.util import plugins
 
     sec = doc.get("study") if isinstance(doc.get("study"), dict) else {}
     if "plugins" in sec:

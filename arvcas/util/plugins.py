@@ -32,7 +32,7 @@ so the same file loaded as a file or as an installed module keys the same compil
 
 :func:`source_files` lists the files whose code defines a module (every ``.py`` file of its top-level
 package, when it is in one): a law's compiled library is keyed by their contents, and a front records
-their digest (:func:`digest`). This module imports nothing of arvcas but :mod:`arvcas.io.files`.
+their digest (:func:`digest`). This module imports nothing of arvcas but :mod:`arvcas.util.files`.
 """
 
 from __future__ import annotations
@@ -166,7 +166,7 @@ def load(spec, base_dir=None, what: str = "--plugin") -> Plugin:
         p = Path(s).expanduser()
         if not p.is_absolute() and base_dir is not None:
             p = Path(base_dir) / p
-        from arvcas.io import files
+        from arvcas.util import files
 
         try:
             files.check_input(p, "plugin file", PluginError)
