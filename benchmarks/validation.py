@@ -386,7 +386,7 @@ def _where(out: Path, a: dict, b: dict) -> list[str]:
         "of the measured depth). One net buoyancy cannot give both; the tether, paid out by hand and with its own "
         "weight and drag, is the likely difference. Depth is therefore validated, not fitted (depth RMSE "
         f"{min(r['rmse']['z'] for r in b.values()):.2f}-{max(r['rmse']['z'] for r in b.values()):.2f} m over the "
-        "trials); the model has no tether (issue 22).",
+        "trials); the model has no tether (docs/model.md §10).",
         "* **Slow attitude drift.** With the arm still, the baselines' roll and pitch drift as the vehicle rises ("
         + ", ".join(f"{t}: roll {drift[t][0]:+.2f}, pitch {drift[t][1]:+.2f} deg" for t in BASELINES) + ") while the "
         "model holds one equilibrium: a load that changes with depth (the tether again) rather than a parameter.",

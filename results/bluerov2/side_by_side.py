@@ -1,9 +1,9 @@
-"""The two BlueROV2 studies side by side (issue 22 item 5): writes results/bluerov2/side_by_side.md.
+"""The two BlueROV2 studies side by side: writes results/bluerov2/side_by_side.md.
 
     python results/bluerov2/side_by_side.py
 
-Reads only committed files: the instantaneous-thruster study (issue 12: results/bluerov2/<controller>/,
-knees/) and the two T200 studies (issue 22: t200_group_noise/ with issue 12's group sensor variances,
+Reads only committed files: the instantaneous-thruster study (results/bluerov2/<controller>/,
+knees/) and the two T200 studies (t200_group_noise/ with the first BlueROV2 study's group sensor variances,
 t200/ with the shipped scenario's per-axis ones; <controller>/, knees/ in each). For each study:
 hypervolume at (2, 2) on its own normalisation (its own AGSTA at the default gains), the knee, the lowest
 f_chat and f_rmse, the pairwise dominance (arvcas.tuning.compare_fronts); the T200 fronts also on the
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-STUDIES = {"instantaneous thrusters, current as a wrench (issue 12)": HERE,
+STUDIES = {"instantaneous thrusters, current as a wrench (the first study)": HERE,
            "T200 + current + tether, group noise": HERE / "t200_group_noise",
            "T200 + current + tether, per-axis noise (the shipped scenario)": HERE / "t200"}
 CONTROLLERS = ("proposed", "agsta", "pid")
