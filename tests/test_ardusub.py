@@ -97,23 +97,30 @@ def test_mixer_normalises_and_clips():
     assert np.allclose(m[:4], [0.3, -0.3, -0.3, 0.3]) and np.allclose(m[4:], 0)
 
 
-def test_motor_mapping_on_the_bluerov2_heavy():
-    """Every thruster of the shipped BlueROV2 Heavy is one ArduSub motor in its place, and a positive roll,
-    pitch, yaw or throttle from the mixer gives the wrench of that sign through the system's thrusters."""
-    blue = arvcas.load_system("bluerov2_heavy_alpha5")
+@pytest.mark.parametrize("system, sign", [
+    ("bluerov2_heavy_alpha5", -1.0),
+    (str(Path(__file__).resolve().parents[1] / "studies/systems/hinsdale_bluerov2_alpha5_identified_t200.toml"), 1.0),
+], ids=["heavy", "hinsdale"])
+def test_motor_mapping_on_the_bluerov2_heavy(system, sign):
+    """Every thruster of a BlueROV2 Heavy frame (the shipped one; the identified Hinsdale vehicle's stand-in
+    thrusters) is one ArduSub motor in its place, in ArduSub's order, all mirrored (von Benzon's directions) or
+    none (the Robotic Decision Making Lab's), and a positive roll, pitch or yaw or a downward throttle from the
+    mixer gives a wrench of that sign, in that DOF only, through the system's thrusters."""
+    blue = arvcas.load_system(system)
     P = view(blue.params.vector(), blue.params.layout)
     sel = ardusub.motor_of_thruster(P)
     W = np.array([np.array(ca.evalf(w)).ravel() for w, _ in sel])
     assert np.allclose(W.sum(axis=1), 1) and np.allclose(W.sum(axis=0), 1)  # a permutation
     assert list(W.argmax(axis=1)) == list(range(8))  # the system file lists them in ArduSub's order
     signs = np.array([float(ca.evalf(s)) for _, s in sel])
-    assert set(signs) <= {-1.0, 1.0}
+    assert np.all(signs == sign), signs
     B = np.array(ca.evalf(arvcas.model.thrusters.B_T(P)))
     for k, inputs in ((3, (0.2, 0, 0, 0)), (4, (0, 0.2, 0, 0)), (5, (0, 0, 0.2, 0)), (2, (0, 0, 0, -0.2))):
         out = np.array(ca.evalf(ardusub.mixer(*inputs))).ravel()
         thrust_dir = signs * (W @ out)  # along each thruster's direction (before the map's nonlinearity)
         wrench = B @ thrust_dir
         assert wrench[k] > 0, (k, wrench)  # roll, pitch, yaw right; throttle -0.2 (down): +z
+        assert np.abs(np.delete(wrench, k)).max() < 1e-9 * wrench[k], (k, wrench)
 
 
 def test_param_export_parses_and_names_exist(tmp_path):

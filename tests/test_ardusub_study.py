@@ -1,4 +1,5 @@
-"""The committed ArduSub study (studies/ardusub.toml, results/ardusub/): the knee's ``.param`` file parses as
+"""The committed ArduSub studies (studies/ardusub.toml, results/ardusub/; studies/ardusub_identified.toml,
+results/ardusub/identified/): each knee's ``.param`` file parses as
 ArduPilot's parameter format (``NAME value`` per line, ``#`` comments), every name is in ArduSub's parameter list
 shipped in arvcas/data/ardusub_params.toml with its value inside ArduSub's range and equal to the knee's gain, and
 the committed ardusub knee replays bit for bit (slow: the run's cold build takes minutes)."""
@@ -21,6 +22,10 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "ardusub"
 PARAM = RESULTS / "knee" / "bluerov2_heavy_ardusub.param"
 FRONT = RESULTS / "ardusub" / "front.h5"
+# (the knee's .param file, its front, its system): the BlueROV2 Heavy's study and the identified Hinsdale vehicle's
+STUDIES = [(PARAM, FRONT, "bluerov2_heavy"),
+           (RESULTS / "identified" / "knee" / "hinsdale_bluerov2_alpha5_identified_t200_ardusub.param",
+            RESULTS / "identified" / "front.h5", "hinsdale_bluerov2_alpha5_identified_t200")]
 # ArduPilot's parameter files: a name of capitals, digits and underscores (at most 16 characters, AP_Param's
 # limit), a separator (space, comma or tab) and a number; '#' starts a comment
 LINE = re.compile(r"^([A-Z][A-Z0-9_]{0,15})[ ,\t]+([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)$")
@@ -39,8 +44,9 @@ def parse(text: str) -> dict[str, float]:
     return out
 
 
-def test_knee_param_file_parses_and_names_are_ardusubs():
-    text = PARAM.read_text()
+@pytest.mark.parametrize("param, front, system", STUDIES, ids=["heavy", "identified"])
+def test_knee_param_file_parses_and_names_are_ardusubs(param, front, system):
+    text = param.read_text()
     values = parse(text)
     table = tomllib.loads((Path(arvcas.__file__).parent / "data" / "ardusub_params.toml").read_text())["param"]
     assert values and set(values) <= set(table), set(values) - set(table)
@@ -48,7 +54,7 @@ def test_knee_param_file_parses_and_names_are_ardusubs():
         lo, hi = table[name]["range"]
         assert lo <= v <= hi, (name, v, lo, hi)
     # the twelve tuned parameters, each the knee's gain in its slot
-    fr = read_front(FRONT)
+    fr = read_front(front)
     g = fr.gains[fr.knee()]
     slots = ardusub.slot_names()
     tuned = {n: float(v) for n, v in zip(slots, g) if n is not None}
@@ -58,7 +64,7 @@ def test_knee_param_file_parses_and_names_are_ardusubs():
     header = [ln for ln in text.splitlines() if ln.startswith("#")]
     for key in ("system", "front", "member", "objectives"):
         assert any(ln.startswith(f"# {key}:") for ln in header), key
-    assert "bluerov2_heavy" in text and "knee" in text
+    assert f"# system: {system}\n" in text and "# member: knee\n" in text
 
 
 def test_parse_refuses_what_ardupilot_would_not_read():

@@ -147,7 +147,9 @@ class Checkpoint:
     run_digest: str = ""  # arvcas.sim.run.CompiledRun.digest() of the run that computed it ("": older file)
     restamps: list = field(default_factory=list)  # run digests set after a bit-for-bit replay (arvcas front restamp)
     model_changes: list = field(default_factory=list)  # resumes allowed under other code or parameters
-    system: str = ""  # the system the runs used: a shipped name or a system file ("": Haidou-1)
+    # the system the runs used: a shipped name or a system file ("": Haidou-1); a file is stored relative to the
+    # front file's directory (the front and the file move together with the repository) and read back absolute
+    system: str = ""
     # "instantaneous": that system with thrusters that deliver their command at once (Params.instantaneous())
     system_variant: str = ""
     ref_chat: np.ndarray | None = None  # the objectives' per-DOF normalisation (None: Table 3's AGSTA)
@@ -388,7 +390,19 @@ def _doc(ds: h5py.Dataset, system: str = "") -> None:
     ds.attrs["description"] = desc
 
 
-def _write(f: h5py.File, c: Checkpoint) -> None:
+def _system_attr(system: str, d: Path) -> str:
+    """How the file stores ``Checkpoint.system``: a shipped name as is, a system file's path relative to ``d``
+    (the front file's directory)."""
+    return os.path.relpath(system, d) if Path(system).is_absolute() else system
+
+
+def _system_read(system: str, d: Path) -> str:
+    """``Checkpoint.system`` from the stored attribute: a relative system file path resolved against ``d``."""
+    p = Path(system)
+    return str((d / p).resolve()) if p.suffix.lower() == ".toml" and not p.is_absolute() else system
+
+
+def _write(f: h5py.File, c: Checkpoint, d: Path) -> None:
     f.attrs["format"] = FORMAT
     f.attrs["format_version"] = FORMAT_VERSION
     for k in _ATTRS:
@@ -404,7 +418,7 @@ def _write(f: h5py.File, c: Checkpoint) -> None:
         f.attrs["restamps"] = json.dumps(list(c.restamps))
     f.attrs["model_changes"] = json.dumps(list(c.model_changes))
     if c.system:
-        f.attrs["system"] = c.system
+        f.attrs["system"] = _system_attr(c.system, d)
     if c.system_variant:
         f.attrs["system_variant"] = c.system_variant
     if c.plugin:
@@ -487,7 +501,7 @@ def write_checkpoint(c: Checkpoint, path: Path, touch: bool = True) -> Path:
 
 def _write_file(tmp: Path, c: Checkpoint) -> None:
     with files.new_hdf5(tmp) as f:  # in memory, then plain I/O: a full disk is one OSError
-        _write(f, c)
+        _write(f, c, Path(tmp).resolve().parent)
 
 
 def remove_stale_temps(d: Path) -> None:
@@ -548,7 +562,7 @@ def _read(f: h5py.File, path: Path) -> Checkpoint:
     kw["run_digest"] = _s(f.attrs["run_digest"]) if "run_digest" in f.attrs else ""
     kw["restamps"] = _json_attr(f, "restamps", path, list) if "restamps" in f.attrs else []
     kw["model_changes"] = _json_attr(f, "model_changes", path, list) if "model_changes" in f.attrs else []
-    kw["system"] = _s(f.attrs["system"]) if "system" in f.attrs else ""
+    kw["system"] = _system_read(_s(f.attrs["system"]), path.resolve().parent) if "system" in f.attrs else ""
     kw["system_variant"] = _s(f.attrs["system_variant"]) if "system_variant" in f.attrs else ""
     if kw["system_variant"] not in SYSTEM_VARIANTS:
         raise CheckpointError(f"{path}: system_variant {kw['system_variant']!r}: allowed "
