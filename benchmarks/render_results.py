@@ -137,6 +137,7 @@ PAGES = [
      _step_accuracy, "results/step/bluerov2_heavy_alpha5/README.note.in"),
     # scripts in their folder, reading that folder's committed fronts (no JSON: the renderer reads them)
     ("results/ardusub/README.md", None, _folder_script("results/ardusub/render.py")),
+    ("results/ardusub/identified/README.md", None, _folder_script("results/ardusub/identified/render.py")),
     ("results/bluerov2/side_by_side.md", None, _folder_script("results/bluerov2/side_by_side.py")),
     # benchmarks/validation.py's summary, from the JSON files and identify.log of results/validation
     ("results/validation/README.md", None, _validation),
