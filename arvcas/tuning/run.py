@@ -350,7 +350,8 @@ def _new_checkpoint(study: Study, controller: str, task: EvalTask) -> ck.Checkpo
 
 
 def _system_ref(study: Study) -> str:
-    """How a checkpoint names the study's system: a shipped name, or the system file's absolute path."""
+    """How a checkpoint names the study's system: a shipped name, or the system file's absolute path (the front file
+    stores it relative to its own folder: :mod:`arvcas.tuning.checkpoint`)."""
     if study.system is None:
         return ""
     from arvcas.system import shipped

@@ -54,7 +54,13 @@ def main() -> None:
             if not row["ok"]:  # where it diverged: the tracking error (m, rad) at the run's end (held after it)
                 r = arvcas.simulate("ardusub", fronts[src].gains[i], seed=int(study.draws[0].noise_seed),
                                     system=study.params, cfg=study.scenario)
-                row["e_at_fail"] = np.asarray(r.e)[-1].tolist()
+                e = np.asarray(r.e)
+                row["e_at_fail"] = e[-1].tolist()
+                cfg = study.scenario
+                limits = np.array([cfg.limits_e_position] * 3 + [cfg.limits_e_attitude] * 3)
+                j = int(np.argmax(np.abs(e[-1]) / limits))  # the DOF past its limit
+                n = int(round(row["t_fail"] / r.h)) + 1
+                row["fail_dof"], row["h"], row["e_fail_dof"] = j, float(r.h), e[:n, j].tolist()
     def finite(v):  # JSON has no NaN: a diverged run's objectives and t_fail of a run that did not fail are null
         return [finite(x) for x in v] if isinstance(v, list) else (None if isinstance(v, float) and not np.isfinite(v) else v)
 

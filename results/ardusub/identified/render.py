@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import tomllib
 from pathlib import Path
 
@@ -52,6 +53,20 @@ def _heavy_render():
     return mod
 
 
+def ident_interval(name: str) -> str:
+    """The 95 % interval ``[lo, hi]`` the identification printed for ``name`` (the identified file's header)."""
+    text = (ROOT / "results" / "validation" / "hinsdale_bluerov2_alpha5_identified.toml").read_text()
+    return re.search(rf"^# {re.escape(name)}\s+\S+\s+\S+\s+(\[[^\]]+\])", text, flags=re.M).group(1)
+
+
+def oscillation(e: np.ndarray, h: float) -> tuple[float, float, float]:
+    """A growing oscillation's period (s: twice the mean time between sign changes), the median ratio of each
+    half-swing's peak |e| to the previous one's, and the first full half-swing's peak."""
+    cross = np.flatnonzero(np.diff(np.sign(e)) != 0) + 1
+    peaks = np.array([np.abs(e[a:b]).max() for a, b in zip(cross[:-1], cross[1:])])
+    return 2 * h * float(np.mean(np.diff(cross))), float(np.median(peaks[1:] / peaks[:-1])), float(peaks[0])
+
+
 def markdown() -> str:
     """README.md's text, from the committed files (benchmarks/render_results.py checks it)."""
     hr = _heavy_render()
@@ -60,6 +75,7 @@ def markdown() -> str:
     ca_, ch = ck.read_checkpoint(HERE / "front.h5"), ck.read_checkpoint(HEAVY / "ardusub" / "front.h5")
     table = tomllib.loads((Path(arvcas.__file__).parent / "data" / "ardusub_params.toml").read_text())["param"]
     knee, better, heavy = param_values(PARAM), param_values(BETTER), param_values(HEAVY_PARAM)
+    better_h = param_values(HEAVY / "better_than_defaults" / "bluerov2_heavy_ardusub.param")
     fb, ib = improvement(fa.F, fa.table2_F)
     assert f"\n# member: {ib}\n" in BETTER.read_text(), f"{BETTER} is not front member {ib}; export it again"
     header = [ln for ln in PARAM.read_text().splitlines() if ln.startswith("#")]
@@ -266,6 +282,21 @@ def markdown() -> str:
             said.append(f"the {name[src]}'s member better than its defaults is "
                         + ("also better than the defaults in both objectives" if both else
                            "not better than the defaults in both objectives") + f" on the {name[on]}")
+    for src, on in (("heavy", "identified"), ("identified", "heavy")):
+        r = crossed[on][f"{src} better_than_defaults"]
+        if not r["ok"]:
+            period, growth, peak0 = oscillation(np.array(r["e_fail_dof"]), r["h"])
+            w(f"On the {name[on]} the {name[src]}'s member better than its defaults makes {DOFS[r['fail_dof']]} "
+              f"oscillate with a period of {period:.1f} s, each swing {growth:.2f} times the one before (median), "
+              f"from {g(peak0)} rad to past the 0.5 rad limit at {r['t_fail']:.1f} s: an unstable loop, not a drift. "
+              f"The identified hull's pitch is far less damped (M_q {g(pa['hydro.M_q'])} and M_q_absq "
+              f"{g(pa.get('hydro.M_q_absq', 0.0))} against the Heavy's {g(ph['hydro.M_q'])} and "
+              f"{g(ph.get('hydro.M_q_absq', 0.0))}) and heavier in pitch (table \"The two vehicles\"); that member's "
+              f"pitch-rate I is {better_h['ATC_RAT_PIT_I'] / table['ATC_RAT_PIT_I']['default']:.1f} times ArduSub's default. "
+              f"The identification left the pitch damping uncertain (M_q 95 % interval {ident_interval('hydro.M_q')}, "
+              f"M_q_absq {ident_interval('hydro.M_q_absq')} at its bound: the identified file's header), so that "
+              "vehicle's pitch margin is the least known of its loops.")
+            w("")
     w("The members that beat ArduSub's defaults on their own vehicle, moved to the other: " + "; ".join(said) + ". "
       "(A knee trades RMSE for less chattering on its own vehicle too, so its f_rmse above the defaults' is no "
       "verdict.) The transfer is not symmetric and not safe: tune on your own identified vehicle, not on a sister "
