@@ -1,7 +1,8 @@
 """Each vehicle's tuned gains on the other vehicle: the BlueROV2 Heavy study's knee and better-than-defaults member
 (results/ardusub/ardusub/front.h5) run on the identified Hinsdale vehicle's study (studies/ardusub_identified.toml),
 and this folder's two on the Heavy's (studies/ardusub.toml, its ardusub task), each vehicle's own knee beside them
-as the check that the evaluation is the study's (it reproduces the front's objectives). Writes crossed.json beside
+as the check that the evaluation is the study's (it reproduces the front's objectives); then the same gains and
+ArduSub's defaults on eight other noise seeds (whether each run holds or diverges). Writes crossed.json beside
 this script; results/ardusub/identified/render.py reads it. Run from the repository root (a few runs, plus the
 compiled runs' builds if they are not in the cache):
 
@@ -10,6 +11,7 @@ compiled runs' builds if they are not in the cache):
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -22,6 +24,7 @@ from arvcas.tuning.run import eval_task, evaluate_gains
 from arvcas.tuning.study import load_study
 
 HERE = Path(__file__).resolve().parent
+SEEDS = tuple(range(1, 9))  # other sensor-noise seeds than the studies' one (seed 0)
 ROOT = HERE.parents[2]
 # vehicle -> (its study, its ardusub front, the member better than the defaults: that of render.py's improvement)
 VEHICLES = {
@@ -50,6 +53,12 @@ def main() -> None:
                                            "rmse": ev.rmse[0, k].tolist(), "ok": bool(ev.ok[0, k]),
                                            "t_fail": float(ev.t_fail[0, k])}
                         for k, (src, which, i) in enumerate(rows)}
+        # the same gains, and ArduSub's defaults, on other noise seeds: does a run's fate depend on its noise draw?
+        other = dataclasses.replace(task, draws=tuple((s, *task.draws[0][1:]) for s in SEEDS))
+        ev_s = evaluate_gains(make_engine(study.engine), other, np.vstack([gains, fronts[vehicle].table2]))
+        for k, row in enumerate(list(out[vehicle].values()) + [out[vehicle].setdefault("defaults", {})]):
+            row["other_seeds"] = {"seeds": list(SEEDS), "ok": ev_s.ok[:, k].tolist(),
+                                  "t_fail": ev_s.t_fail[:, k].tolist()}
         for (src, which, i), row in zip(rows, out[vehicle].values()):
             if not row["ok"]:  # where it diverged: the tracking error (m, rad) at the run's end (held after it)
                 r = arvcas.simulate("ardusub", fronts[src].gains[i], seed=int(study.draws[0].noise_seed),
@@ -62,9 +71,13 @@ def main() -> None:
                 n = int(round(row["t_fail"] / r.h)) + 1
                 row["fail_dof"], row["h"], row["e_fail_dof"] = j, float(r.h), e[:n, j].tolist()
     def finite(v):  # JSON has no NaN: a diverged run's objectives and t_fail of a run that did not fail are null
-        return [finite(x) for x in v] if isinstance(v, list) else (None if isinstance(v, float) and not np.isfinite(v) else v)
+        if isinstance(v, dict):
+            return {k: finite(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [finite(x) for x in v]
+        return None if isinstance(v, float) and not np.isfinite(v) else v
 
-    out = {v: {k: {f: finite(x) for f, x in row.items()} for k, row in rows.items()} for v, rows in out.items()}
+    out = finite(out)
     (HERE / "crossed.json").write_text(json.dumps(out, indent=1, allow_nan=False) + "\n")
 
 

@@ -263,7 +263,7 @@ def markdown() -> str:
         return f"**diverged** at {r['t_fail']:.1f} s ({DOFS[j]} error {g(r['e_at_fail'][j])}, limit {g(limits[j])})"
 
     w(f"| ArduSub's defaults | ({g(d[0])}, {g(d[1])}) | ({g(dh[0])}, {g(dh[1])}) |")
-    for key in crossed["identified"]:
+    for key in (k_ for k_ in crossed["identified"] if k_ != "defaults"):
         src, which = key.split(" ")
         w(f"| {name[src]}'s {which.replace('_', ' ')} (member {crossed['identified'][key]['member']}) | "
           f"{cell(crossed['identified'][key])} | {cell(crossed['heavy'][key])} |")
@@ -297,6 +297,18 @@ def markdown() -> str:
               f"M_q_absq {ident_interval('hydro.M_q_absq')} at its bound: the identified file's header), so that "
               "vehicle's pitch margin is the least known of its loops.")
             w("")
+    seeds = crossed["identified"]["defaults"]["other_seeds"]["seeds"]
+    fate = {(v, k_): r["other_seeds"] for v in crossed for k_, r in crossed[v].items()}
+    held = [vk for vk, s in fate.items() if all(s["ok"])]
+    failed = [vk for vk, s in fate.items() if not any(s["ok"])]
+    mixed = [vk for vk in fate if vk not in held and vk not in failed]
+    w(f"On {len(seeds)} other sensor-noise seeds ({seeds[0]}-{seeds[-1]}; `crossed.json`, `other_seeds`), "
+      f"{len(held)} of the {len(fate)} runs above (ArduSub's defaults included) hold on every seed"
+      + (", " + " and ".join(f"the {name[k_.split(' ')[0]]}'s {k_.split(' ')[1].replace('_', ' ')} on the {name[v]} "
+                             f"diverges on every seed (at {min(fate[(v, k_)]['t_fail']):.1f}-"
+                             f"{max(fate[(v, k_)]['t_fail']):.1f} s)" for v, k_ in failed) if failed else "")
+      + (f"; {len(mixed)} hold on some seeds only" if mixed else "") + ": the outcome is the gains', not the noise draw's.")
+    w("")
     w("The members that beat ArduSub's defaults on their own vehicle, moved to the other: " + "; ".join(said) + ". "
       "(A knee trades RMSE for less chattering on its own vehicle too, so its f_rmse above the defaults' is no "
       "verdict.) The transfer is not symmetric and not safe: tune on your own identified vehicle, not on a sister "
