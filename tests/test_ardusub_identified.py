@@ -1,7 +1,8 @@
 """The ArduSub study on the identified Hinsdale vehicle (studies/ardusub_identified.toml,
 results/ardusub/identified/): its system file is what studies/systems/hinsdale_t200.py writes from the identified
 file and the Heavy's T200 dynamics (so neither can change without it), ArduSub's motors map onto its eight
-thrusters with the right signs (tests/test_ardusub.py::test_motor_mapping_on_the_bluerov2_heavy), and a front of a system file outside arvcas records that file relative to itself
+thrusters with the right signs (tests/test_ardusub.py::test_motor_mapping_on_the_bluerov2_heavy), and a front
+of a system file outside arvcas records that file relative to itself
 (the committed front replays from any checkout; the replay itself is tests/test_committed_fronts.py)."""
 
 from __future__ import annotations

@@ -32,7 +32,8 @@ DOFS = ("x", "y", "z", "phi", "theta", "psi")
 # (label, unit, the value from a system's parameters by name): what sets the attitude and depth loops' plant
 PHYSICS = (
     ("mass", "kg", lambda d: d["vehicle.m"]),
-    ("buoyancy - weight", "N", lambda d: d["env.rho"] * d["env.g"] * d["vehicle.volume"] - d["vehicle.m"] * d["env.g"]),
+    ("buoyancy - weight of the vehicle body (an arm adds its links')", "N",
+     lambda d: d["env.rho"] * d["env.g"] * d["vehicle.volume"] - d["vehicle.m"] * d["env.g"]),
     ("zG - zB (metacentric height, level)", "m", lambda d: d["vehicle.zG"] - d["vehicle.zB"]),
     ("heave mass + added mass", "kg", lambda d: d["vehicle.m"] - d.get("hydro.Z_wdot", 0.0)),
     ("heave damping Z_w, Z_w_absw", "N s/m, N s^2/m^2", lambda d: (d.get("hydro.Z_w", 0.0), d.get("hydro.Z_w_absw", 0.0))),
