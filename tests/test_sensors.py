@@ -91,6 +91,38 @@ def test_a_set_that_cannot_hold_the_task_is_refused_in_one_line(extra, fragment)
     assert "\n" not in msg and msg.startswith("s.toml: ") and fragment in msg, msg
 
 
+@pytest.mark.parametrize("extra,fragment", [
+    ('imu_period = { value = 0.1, unit = "s", source = "t" }\ndepth_period = { value = 0.1, unit = "s", source = "t" }\n'
+     'depth_latency = { value = 0.15, unit = "s", source = "t" }',
+     "sensors.depth_latency: 0.15 s must be a whole multiple of time.h (0.1 s), from 0 to 10 samples (1 s)"),
+    ('imu_period = { value = 0.1, unit = "s", source = "t" }\ndepth_period = { value = 0.1, unit = "s", source = "t" }\n'
+     'imu_latency = { value = 1.1, unit = "s", source = "t" }',
+     "sensors.imu_latency: 1.1 s must be a whole multiple of time.h (0.1 s), from 0 to 10 samples (1 s)"),
+    ('imu_period = { value = 0.1, unit = "s", source = "t" }\ndepth_period = { value = 0.1, unit = "s", source = "t" }\n'
+     'dvl_latency = { value = 0.1, unit = "s", source = "t" }',
+     "sensors.dvl_latency: the dvl sensor is not fitted (no sensors.dvl_period)"),
+    ('position_latency = { value = 0.1, unit = "s", source = "t" }',
+     "sensors.position_latency: the position sensor is not fitted (no sensors.position_period)"),
+    ('imu_period = { value = 0.1, unit = "s", source = "t" }\ndepth_period = { value = 0.1, unit = "s", source = "t" }\n'
+     'depth_latency = { value = -0.1, unit = "s", source = "t" }', "sensors.depth_latency"),
+])
+def test_a_latency_that_is_not_whole_samples_is_refused_in_one_line(extra, fragment):
+    with pytest.raises(ScenarioError) as ei:
+        loads_scenario(_text(extra), "s.toml")
+    msg = str(ei.value)
+    assert "\n" not in msg and msg.startswith("s.toml: ") and fragment in msg, msg
+
+
+def test_latencies_in_samples_and_round_trip():
+    _, cfg = _cfg()
+    lagged = replace(cfg, sensors_depth_latency=0.3, sensors_imu_latency=0.0)
+    assert scenario.latencies(lagged) == (("depth", 3),)  # 0: not lagging
+    back = loads_scenario(lagged.to_toml(), "round trip")
+    assert back.sensors_depth_latency == 0.3 and scenario.latencies(back) == (("depth", 3),)
+    assert scenario.latencies(cfg) == () and lagged.graph_key() != cfg.graph_key()
+    assert replace(cfg, sensors_depth_latency=0.0).graph_key() == cfg.graph_key()  # 0 is none
+
+
 def test_a_trajectory_without_a_position_fix_is_refused_before_compile(tmp_path, capsys):
     from pathlib import Path
 
@@ -162,6 +194,57 @@ def test_station_keeping_with_imu_and_depth(imu_depth_run):
     assert worst < 1e-12, worst  # measured 1.2e-14 m
     every_sample = numpy_ekf(cfg, y, {i: 1 for i in sset})
     assert np.abs(every_sample - r.eta_hat)[:, 2].max() > 1e-3  # the depth's rate is what the run did (3 cm)
+
+
+LAGGED = {"sensors_imu_latency": 0.1, "sensors_depth_latency": 0.3}  # 1 and 3 samples; depth every 2 samples
+
+
+@pytest.fixture(scope="module")
+def lagged_run():
+    s, cfg = _cfg()
+    cfg = replace(cfg, **LAGGED)
+    run = arvcas.Run("pid", scenario=cfg, system=s.params).compile()
+    return s, cfg, run, run.simulate(seed=SEED)
+
+
+def _lagged(x, d):
+    """x (12, N + 1) with component i taken from sample k - d[i] (before sample 0: the state of sample 0)."""
+    return np.array([[x[i, max(k - d[i], 0)] for k in range(x.shape[1])] for i in range(12)])
+
+
+def test_lagging_sensors_fused_as_they_arrive(imu_depth_run, lagged_run):
+    """The reading that arrives at sample k is the state of sample k - d plus sample k's noise; the EKF fuses it as
+    the state of sample k: it is the NumPy EKF fed those readings (to 1e-12). Fed the readings without their lag
+    it is far off (the delay is in the run)."""
+    s, cfg, run, r = lagged_run
+    assert r.ok
+    x, noise = np.hstack([r.eta, r.nu]).T, profiles.noise_sequence(cfg, SEED)
+    d = [0] * 12
+    for i in scenario.SENSORS["imu"]:
+        d[i] = 1
+    d[2] = 3
+    sset = {i: every for i, _, every in scenario.measured(cfg)}
+    ref = numpy_ekf(cfg, _lagged(x, d) + noise, sset)
+    worst = np.abs(ref - r.eta_hat).max()
+    assert worst < 1e-12, worst
+    fresh = numpy_ekf(cfg, x + noise, sset)
+    assert np.abs(fresh - r.eta_hat)[:, 2].max() > 1e-3
+    r0 = imu_depth_run[3]
+    assert not np.array_equal(r0.eta, r.eta)  # the lag changed what the controller did
+
+
+def test_latency_zero_is_the_run_without_latency(imu_depth_run):
+    """Latency 0 given for every fitted sensor: the same compiled arithmetic (run digest) and the same run, bit
+    for bit."""
+    s, cfg, run, r = imu_depth_run
+    zero = replace(cfg, sensors_imu_latency=0.0, sensors_depth_latency=0.0)
+    run0 = arvcas.Run("pid", scenario=zero, system=s.params).compile()
+    assert run0.digest() == run.digest()
+    r0 = run0.simulate(seed=SEED)
+    for k in ("eta", "nu", "eta_hat", "tau_cmd"):
+        np.testing.assert_array_equal(r0.series[k], r.series[k], err_msg=k)
+    np.testing.assert_array_equal(r0.rmse, r.rmse)
+    np.testing.assert_array_equal(r0.chat, r.chat)
 
 
 def test_simulate_reports_held_dofs_and_drift(tmp_path, capsys):
