@@ -258,18 +258,36 @@ def test_simulate_reports_held_dofs_and_drift(tmp_path, capsys):
     assert "horizontal drift (not held):" in out
 
 
-@pytest.fixture(scope="module")
-def exported(imu_depth_run, tmp_path_factory):
+def _export(cfg, d):
+    """``arvcas export-controller`` of pid for ``cfg``, built: (its directory, the binding's module, a controller)."""
     if shutil.which("make") is None or shutil.which("c++") is None:
         pytest.skip("make or c++ is not installed")
-    s, cfg, run, r = imu_depth_run
-    d = tmp_path_factory.mktemp("ctl_imu_depth")
     (d / "scenario.toml").write_text(cfg.to_toml(), encoding="utf-8")
     assert cli.main(["export-controller", str(d / "out"), "--controller", "pid", "--system", SYSTEM,
                      "--config", str(d / "scenario.toml")]) == 0
     subprocess.run(make_cmd(d / "out"), check=True, capture_output=True, timeout=600)
     mod, ctl = load_binding(d / "out")
     return d / "out", mod, ctl
+
+
+@pytest.fixture(scope="module")
+def exported(imu_depth_run, tmp_path_factory):
+    return _export(imu_depth_run[1], tmp_path_factory.mktemp("ctl_imu_depth"))
+
+
+def _reproduces(ctl, run, r):
+    """Closed around the plant the exported controller reproduces the compiled run (1e-12); fed the run's own
+    states it returns the run's estimate and commands bit for bit."""
+    ctl.reset()
+    e = close_loop(ctl, run, seed=SEED)
+    for k in ("eta", "nu", "eta_hat", "tau_cmd"):
+        a, b = e[k].reshape(r.series[k].shape), r.series[k]
+        assert np.abs(a - b).max() <= 1e-12 * max(1.0, np.abs(b).max()), k
+    np.testing.assert_allclose(e["rmse"], r.rmse, rtol=1e-12, atol=0)
+    dyn = run.params.structure.has_thruster_dynamics
+    e = close_loop(ctl, run, seed=SEED, states=np.hstack([r.eta, r.nu]), delivered=r.thrust if dyn else None)
+    for k in ("eta_hat", "eta_ref", "tau_cmd"):
+        np.testing.assert_array_equal(e[k].reshape(r.series[k].shape), r.series[k], err_msg=k)
 
 
 def test_exported_controller_takes_only_imu_and_depth(imu_depth_run, exported):
@@ -285,16 +303,22 @@ def test_exported_controller_takes_only_imu_and_depth(imu_depth_run, exported):
     assert "y[6]  r: attitude phi theta psi and body rates p q r; every sample" in header
     with pytest.raises(Exception):
         ctl.step([0.0] * 12, 0.0)  # the full state is not what it takes
-    ctl.reset()
-    e = close_loop(ctl, run, seed=SEED)
-    for k in ("eta", "nu", "eta_hat", "tau_cmd"):
-        a, b = e[k].reshape(r.series[k].shape), r.series[k]
-        assert np.abs(a - b).max() <= 1e-12 * max(1.0, np.abs(b).max()), k
-    np.testing.assert_allclose(e["rmse"], r.rmse, rtol=1e-12, atol=0)
-    dyn = run.params.structure.has_thruster_dynamics
-    e = close_loop(ctl, run, seed=SEED, states=np.hstack([r.eta, r.nu]), delivered=r.thrust if dyn else None)
-    for k in ("eta_hat", "eta_ref", "tau_cmd"):
-        np.testing.assert_array_equal(e[k].reshape(r.series[k].shape), r.series[k], err_msg=k)
+    _reproduces(ctl, run, r)
+
+
+def test_exported_controller_tuned_with_latency(lagged_run, tmp_path):
+    """A scenario with lagging sensors exports a controller whose header states the latency it was tuned with; it
+    takes each reading as it arrives (the delay is in the plant: close_loop delays the readings as the run does)
+    and reproduces the compiled run."""
+    s, cfg, run, r = lagged_run
+    out, mod, ctl = _export(cfg, tmp_path)
+    assert mod.N_Y == 7
+    header = (out / (default_prefix(SYSTEM, "pid").rstrip("_") + ".h")).read_text()
+    assert ("y[0]  z: depth z from pressure; every 2 samples (0.2 s): read when round(t / SAMPLE_TIME) is a multiple "
+            "of 2, ignored otherwise; tuned with a latency of 3 samples (0.3 s): pass the reading when it arrives") \
+        in header
+    assert "y[6]  r: attitude phi theta psi and body rates p q r; every sample; tuned with a latency of 1 sample (0.1 s)" in header
+    _reproduces(ctl, run, r)
 
 
 def test_a_short_study_with_imu_and_depth(tmp_path):

@@ -231,9 +231,11 @@ def _measurements(cfg) -> list[dict]:
         rate = "every sample" if every == 1 else (f"every {every} samples ({every * h:g} s): read when round(t / "
                                                   f"SAMPLE_TIME) is a multiple of {every}, ignored otherwise")
         if sensor in lag:
-            rate += (f"; tuned with a latency of {lag[sensor]} samples ({lag[sensor] * h:g} s): pass the reading "
+            d = lag[sensor]
+            rate += (f"; tuned with a latency of {d} sample{'s' if d > 1 else ''} ({d * h:g} s): pass the reading "
                      f"when it arrives")
-        out.append({"index": i, "name": Y_NAMES[i], "sensor": SENSOR_WHAT.get(sensor), "kind": sensor, "rate": rate})
+        out.append({"index": i, "name": Y_NAMES[i], "sensor": SENSOR_WHAT.get(sensor), "kind": sensor, "rate": rate,
+                    "latency": lag.get(sensor, 0) * h})
     return out
 
 
