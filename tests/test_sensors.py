@@ -233,6 +233,18 @@ def test_lagging_sensors_fused_as_they_arrive(imu_depth_run, lagged_run):
     assert not np.array_equal(r0.eta, r.eta)  # the lag changed what the controller did
 
 
+def test_lagging_sensors_in_lockstep_lanes(lagged_run):
+    """The shift register is loop state like any other: W runs in lockstep give the scalar runs' bits."""
+    s, cfg, run, r = lagged_run
+    G = np.asarray(run.default_gains())[None, :] * np.array([[1.0], [0.8], [1.2], [0.9], [1.1]])
+    seeds = np.arange(5) + SEED
+    ref = run.many(G, seeds, n_threads=1, lockstep=False)
+    got = run.many(G, seeds, n_threads=2, lockstep=True)
+    for a, b, name in zip(ref, got, ("chat", "rmse", "ok", "t_fail")):
+        assert a.tobytes() == b.tobytes(), name
+    np.testing.assert_array_equal(ref[1][0], r.rmse)  # row 0: the default gains, seed SEED: the traced run's
+
+
 def test_latency_zero_is_the_run_without_latency(imu_depth_run):
     """Latency 0 given for every fitted sensor: the same compiled arithmetic (run digest) and the same run, bit
     for bit."""
