@@ -121,6 +121,10 @@ def test_latencies_in_samples_and_round_trip():
     assert back.sensors_depth_latency == 0.3 and scenario.latencies(back) == (("depth", 3),)
     assert scenario.latencies(cfg) == () and lagged.graph_key() != cfg.graph_key()
     assert replace(cfg, sensors_depth_latency=0.0).graph_key() == cfg.graph_key()  # 0 is none
+    assert scenario.latencies(lagged.with_h(0.05)) == (("depth", 6),)  # the same time, in the new samples
+    with pytest.raises(ScenarioError, match=r"^ScenarioConfig.with_h: sensors.depth_latency: 0.3 s must be a whole "
+                                            r"multiple of time.h \(0.2 s\)"):
+        lagged.with_h(0.2)
 
 
 def test_a_trajectory_without_a_position_fix_is_refused_before_compile(tmp_path, capsys):
