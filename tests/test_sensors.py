@@ -91,6 +91,42 @@ def test_a_set_that_cannot_hold_the_task_is_refused_in_one_line(extra, fragment)
     assert "\n" not in msg and msg.startswith("s.toml: ") and fragment in msg, msg
 
 
+@pytest.mark.parametrize("extra,fragment", [
+    ('imu_period = { value = 0.1, unit = "s", source = "t" }\ndepth_period = { value = 0.1, unit = "s", source = "t" }\n'
+     'depth_latency = { value = 0.15, unit = "s", source = "t" }',
+     "sensors.depth_latency: 0.15 s must be a whole multiple of time.h (0.1 s), from 0 to 10 samples (1 s)"),
+    ('imu_period = { value = 0.1, unit = "s", source = "t" }\ndepth_period = { value = 0.1, unit = "s", source = "t" }\n'
+     'imu_latency = { value = 1.1, unit = "s", source = "t" }',
+     "sensors.imu_latency: 1.1 s must be a whole multiple of time.h (0.1 s), from 0 to 10 samples (1 s)"),
+    ('imu_period = { value = 0.1, unit = "s", source = "t" }\ndepth_period = { value = 0.1, unit = "s", source = "t" }\n'
+     'dvl_latency = { value = 0.1, unit = "s", source = "t" }',
+     "sensors.dvl_latency: the dvl sensor is not fitted (no sensors.dvl_period)"),
+    ('position_latency = { value = 0.1, unit = "s", source = "t" }',
+     "sensors.position_latency: the position sensor is not fitted (no sensors.position_period)"),
+    ('imu_period = { value = 0.1, unit = "s", source = "t" }\ndepth_period = { value = 0.1, unit = "s", source = "t" }\n'
+     'depth_latency = { value = -0.1, unit = "s", source = "t" }', "sensors.depth_latency"),
+])
+def test_a_latency_that_is_not_whole_samples_is_refused_in_one_line(extra, fragment):
+    with pytest.raises(ScenarioError) as ei:
+        loads_scenario(_text(extra), "s.toml")
+    msg = str(ei.value)
+    assert "\n" not in msg and msg.startswith("s.toml: ") and fragment in msg, msg
+
+
+def test_latencies_in_samples_and_round_trip():
+    _, cfg = _cfg()
+    lagged = replace(cfg, sensors_depth_latency=0.3, sensors_imu_latency=0.0)
+    assert scenario.latencies(lagged) == (("depth", 3),)  # 0: not lagging
+    back = loads_scenario(lagged.to_toml(), "round trip")
+    assert back.sensors_depth_latency == 0.3 and scenario.latencies(back) == (("depth", 3),)
+    assert scenario.latencies(cfg) == () and lagged.graph_key() != cfg.graph_key()
+    assert replace(cfg, sensors_depth_latency=0.0).graph_key() == cfg.graph_key()  # 0 is none
+    assert scenario.latencies(lagged.with_h(0.05)) == (("depth", 6),)  # the same time, in the new samples
+    with pytest.raises(ScenarioError, match=r"^ScenarioConfig.with_h: sensors.depth_latency: 0.3 s must be a whole "
+                                            r"multiple of time.h \(0.2 s\)"):
+        lagged.with_h(0.2)
+
+
 def test_a_trajectory_without_a_position_fix_is_refused_before_compile(tmp_path, capsys):
     from pathlib import Path
 
@@ -164,6 +200,69 @@ def test_station_keeping_with_imu_and_depth(imu_depth_run):
     assert np.abs(every_sample - r.eta_hat)[:, 2].max() > 1e-3  # the depth's rate is what the run did (3 cm)
 
 
+LAGGED = {"sensors_imu_latency": 0.1, "sensors_depth_latency": 0.3}  # 1 and 3 samples; depth every 2 samples
+
+
+@pytest.fixture(scope="module")
+def lagged_run():
+    s, cfg = _cfg()
+    cfg = replace(cfg, **LAGGED)
+    run = arvcas.Run("pid", scenario=cfg, system=s.params).compile()
+    return s, cfg, run, run.simulate(seed=SEED)
+
+
+def _lagged(x, d):
+    """x (12, N + 1) with component i taken from sample k - d[i] (before sample 0: the state of sample 0)."""
+    return np.array([[x[i, max(k - d[i], 0)] for k in range(x.shape[1])] for i in range(12)])
+
+
+def test_lagging_sensors_fused_as_they_arrive(imu_depth_run, lagged_run):
+    """The reading that arrives at sample k is the state of sample k - d plus sample k's noise; the EKF fuses it as
+    the state of sample k: it is the NumPy EKF fed those readings (to 1e-12). Fed the readings without their lag
+    it is far off (the delay is in the run)."""
+    s, cfg, run, r = lagged_run
+    assert r.ok
+    x, noise = np.hstack([r.eta, r.nu]).T, profiles.noise_sequence(cfg, SEED)
+    d = [0] * 12
+    for i in scenario.SENSORS["imu"]:
+        d[i] = 1
+    d[2] = 3
+    sset = {i: every for i, _, every in scenario.measured(cfg)}
+    ref = numpy_ekf(cfg, _lagged(x, d) + noise, sset)
+    worst = np.abs(ref - r.eta_hat).max()
+    assert worst < 1e-12, worst
+    fresh = numpy_ekf(cfg, x + noise, sset)
+    assert np.abs(fresh - r.eta_hat)[:, 2].max() > 1e-3
+    r0 = imu_depth_run[3]
+    assert not np.array_equal(r0.eta, r.eta)  # the lag changed what the controller did
+
+
+def test_lagging_sensors_in_lockstep_lanes(lagged_run):
+    """The shift register is loop state like any other: W runs in lockstep give the scalar runs' bits."""
+    s, cfg, run, r = lagged_run
+    G = np.asarray(run.default_gains())[None, :] * np.array([[1.0], [0.8], [1.2], [0.9], [1.1]])
+    seeds = np.arange(5) + SEED
+    ref = run.many(G, seeds, n_threads=1, lockstep=False)
+    got = run.many(G, seeds, n_threads=2, lockstep=True)
+    for a, b, name in zip(ref, got, ("chat", "rmse", "ok", "t_fail")):
+        assert a.tobytes() == b.tobytes(), name
+    np.testing.assert_array_equal(ref[1][0], r.rmse)  # row 0: the default gains, seed SEED: the traced run's
+
+
+def test_latency_zero_is_the_run_without_latency(imu_depth_run):
+    """Latency 0 given for every fitted sensor: the same compiled arithmetic (run digest) and the same run, bit
+    for bit."""
+    s, cfg, run, r = imu_depth_run
+    zero = replace(cfg, sensors_imu_latency=0.0, sensors_depth_latency=0.0)
+    run0 = arvcas.Run("pid", scenario=zero, system=s.params).compile()
+    assert run0.digest() == run.digest()
+    r0 = run0.simulate(seed=SEED)
+    for k in ("eta", "nu", "eta_hat", "tau_cmd"):
+        np.testing.assert_array_equal(r0.series[k], r.series[k], err_msg=k)
+    np.testing.assert_array_equal(r0.rmse, r.rmse)
+    np.testing.assert_array_equal(r0.chat, r.chat)
+
+
 def test_simulate_reports_held_dofs_and_drift(tmp_path, capsys):
     s, cfg = _cfg()
     p = tmp_path / "imu_depth.toml"
@@ -175,18 +274,36 @@ def test_simulate_reports_held_dofs_and_drift(tmp_path, capsys):
     assert "horizontal drift (not held):" in out
 
 
-@pytest.fixture(scope="module")
-def exported(imu_depth_run, tmp_path_factory):
+def _export(cfg, d):
+    """``arvcas export-controller`` of pid for ``cfg``, built: (its directory, the binding's module, a controller)."""
     if shutil.which("make") is None or shutil.which("c++") is None:
         pytest.skip("make or c++ is not installed")
-    s, cfg, run, r = imu_depth_run
-    d = tmp_path_factory.mktemp("ctl_imu_depth")
     (d / "scenario.toml").write_text(cfg.to_toml(), encoding="utf-8")
     assert cli.main(["export-controller", str(d / "out"), "--controller", "pid", "--system", SYSTEM,
                      "--config", str(d / "scenario.toml")]) == 0
     subprocess.run(make_cmd(d / "out"), check=True, capture_output=True, timeout=600)
     mod, ctl = load_binding(d / "out")
     return d / "out", mod, ctl
+
+
+@pytest.fixture(scope="module")
+def exported(imu_depth_run, tmp_path_factory):
+    return _export(imu_depth_run[1], tmp_path_factory.mktemp("ctl_imu_depth"))
+
+
+def _reproduces(ctl, run, r):
+    """Closed around the plant the exported controller reproduces the compiled run (1e-12); fed the run's own
+    states it returns the run's estimate and commands bit for bit."""
+    ctl.reset()
+    e = close_loop(ctl, run, seed=SEED)
+    for k in ("eta", "nu", "eta_hat", "tau_cmd"):
+        a, b = e[k].reshape(r.series[k].shape), r.series[k]
+        assert np.abs(a - b).max() <= 1e-12 * max(1.0, np.abs(b).max()), k
+    np.testing.assert_allclose(e["rmse"], r.rmse, rtol=1e-12, atol=0)
+    dyn = run.params.structure.has_thruster_dynamics
+    e = close_loop(ctl, run, seed=SEED, states=np.hstack([r.eta, r.nu]), delivered=r.thrust if dyn else None)
+    for k in ("eta_hat", "eta_ref", "tau_cmd"):
+        np.testing.assert_array_equal(e[k].reshape(r.series[k].shape), r.series[k], err_msg=k)
 
 
 def test_exported_controller_takes_only_imu_and_depth(imu_depth_run, exported):
@@ -202,16 +319,22 @@ def test_exported_controller_takes_only_imu_and_depth(imu_depth_run, exported):
     assert "y[6]  r: attitude phi theta psi and body rates p q r; every sample" in header
     with pytest.raises(Exception):
         ctl.step([0.0] * 12, 0.0)  # the full state is not what it takes
-    ctl.reset()
-    e = close_loop(ctl, run, seed=SEED)
-    for k in ("eta", "nu", "eta_hat", "tau_cmd"):
-        a, b = e[k].reshape(r.series[k].shape), r.series[k]
-        assert np.abs(a - b).max() <= 1e-12 * max(1.0, np.abs(b).max()), k
-    np.testing.assert_allclose(e["rmse"], r.rmse, rtol=1e-12, atol=0)
-    dyn = run.params.structure.has_thruster_dynamics
-    e = close_loop(ctl, run, seed=SEED, states=np.hstack([r.eta, r.nu]), delivered=r.thrust if dyn else None)
-    for k in ("eta_hat", "eta_ref", "tau_cmd"):
-        np.testing.assert_array_equal(e[k].reshape(r.series[k].shape), r.series[k], err_msg=k)
+    _reproduces(ctl, run, r)
+
+
+def test_exported_controller_tuned_with_latency(lagged_run, tmp_path):
+    """A scenario with lagging sensors exports a controller whose header states the latency it was tuned with; it
+    takes each reading as it arrives (the delay is in the plant: close_loop delays the readings as the run does)
+    and reproduces the compiled run."""
+    s, cfg, run, r = lagged_run
+    out, mod, ctl = _export(cfg, tmp_path)
+    assert mod.N_Y == 7
+    header = (out / (default_prefix(SYSTEM, "pid").rstrip("_") + ".h")).read_text()
+    assert ("y[0]  z: depth z from pressure; every 2 samples (0.2 s): read when round(t / SAMPLE_TIME) is a multiple "
+            "of 2, ignored otherwise; tuned with a latency of 3 samples (0.3 s): pass the reading when it arrives") \
+        in header
+    assert "y[6]  r: attitude phi theta psi and body rates p q r; every sample; tuned with a latency of 1 sample (0.1 s)" in header
+    _reproduces(ctl, run, r)
 
 
 def test_a_short_study_with_imu_and_depth(tmp_path):

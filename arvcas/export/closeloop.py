@@ -116,7 +116,7 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     ``controller``: a binding's ``Controller`` (:func:`load_binding`), initialised with the gains to
     compare; ``run``: the :class:`arvcas.sim.run.CompiledRun` whose scenario, system and time table
     are used; ``seed``: the noise sequence (:func:`arvcas.sim.profiles.noise_sequence`), fed in as the
-    measurement ``y = x + noise``; ``rhs(x, tau, q, qd, qdd, payload) -> xdot`` and ``thrust(u) ->
+    measurement ``y = x + noise`` (a lagging sensor's components of ``x`` from ``d`` samples ago); ``rhs(x, tau, q, qd, qdd, payload) -> xdot`` and ``thrust(u) ->
     tau``: the exported plant (default: ``arvcas.dynamics("uvms_rhs")`` and ``("thrust")`` of the
     run's system, the compiled C that ``arvcas export-c`` writes). The plant is integrated like the
     run's: ``h / h_plant`` RK4 steps per sample with the thrust held, the arm's motion and the
@@ -177,6 +177,10 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
     N = n - 1
     hp, h = cfg.time_h_plant, cfg.time_h
     noise = profiles.noise_sequence(cfg, seed)
+    lag = np.zeros(12, dtype=int)  # each component's latency in samples: it reads the state of sample k - lag
+    for name, d in scenario.latencies(cfg):
+        lag[list(scenario.SENSORS[name])] = d
+    past = []  # the true states of the samples so far (before sample 0: the initial state)
     held = np.array(scenario.held_dofs(cfg), dtype=float)
     ph = np.array(cfg.disturbance_phase, dtype=float)
     cos_ph = np.array([math.cos(v) for v in ph])
@@ -206,7 +210,9 @@ def close_loop(controller, run, seed: int = 0, rhs=None, thrust=None, states=Non
         if truth is not None:
             u_true = u_hold if delivered is None else np.asarray(delivered[k], dtype=float)
             tau_arm = np.array(truth(x, u_true, tab.time[0:TS, k], tab.arm[0:AS, k], p, ph, water, tk)).ravel()
-        u = np.array(controller.step([(x + noise[:, k])[i] for i, _, _ in measured(cfg)], tk, tau_arm))
+        past.append(x.copy())
+        x_read = np.array([past[max(k - lag[i], 0)][i] for i in range(12)])  # a lagging sensor's reading (docs/sensors.md)
+        u = np.array(controller.step([(x_read + noise[:, k])[i] for i, _, _ in measured(cfg)], tk, tau_arm))
         dg = controller.diagnostics()
         tau_v, y1 = np.array(dg["tau_cmd"]), np.array(dg["eta_ref"])
         for name in names:

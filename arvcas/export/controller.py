@@ -47,7 +47,7 @@ from arvcas.build.templating import c_double, render
 from arvcas.controllers import gains as gains_mod
 from arvcas.controllers.base import DOFS, Controller, get as get_controller
 from arvcas.sim.closedloop import controller_diagnostics, controller_functions, controller_reads, controller_sizes
-from arvcas.sim.scenario import SENSOR_WHAT, ScenarioConfig, measured
+from arvcas.sim.scenario import SENSOR_WHAT, ScenarioConfig, latencies, measured
 from arvcas.sim.scenario import COMPONENTS as Y_NAMES
 from arvcas.sim.thrust_forcing import command_functions
 from arvcas.system.loader import UNSET, renamed_system
@@ -223,12 +223,19 @@ def _p_rules(P) -> list[int]:
 
 
 def _measurements(cfg) -> list[dict]:
-    """y's components: the name in [eta; nu], what measures it and how often it is fresh."""
+    """y's components: the name in [eta; nu], what measures it, how often it is fresh and the latency it was tuned
+    with (docs/sensors.md: the controller takes each reading as it arrives, as the state of that sample)."""
     h, out = cfg.time_h, []
+    lag = dict(latencies(cfg))
     for i, sensor, every in measured(cfg):
         rate = "every sample" if every == 1 else (f"every {every} samples ({every * h:g} s): read when round(t / "
                                                   f"SAMPLE_TIME) is a multiple of {every}, ignored otherwise")
-        out.append({"index": i, "name": Y_NAMES[i], "sensor": SENSOR_WHAT.get(sensor), "kind": sensor, "rate": rate})
+        if sensor in lag:
+            d = lag[sensor]
+            rate += (f"; tuned with a latency of {d} sample{'s' if d > 1 else ''} ({d * h:g} s): pass the reading "
+                     f"when it arrives")
+        out.append({"index": i, "name": Y_NAMES[i], "sensor": SENSOR_WHAT.get(sensor), "kind": sensor, "rate": rate,
+                    "latency": lag.get(sensor, 0) * h})
     return out
 
 

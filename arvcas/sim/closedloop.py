@@ -80,12 +80,14 @@ def __getattr__(name: str):
 
 
 def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int, n_ekf: int = 5,
-                 n_water: int = 0, thr_consts: tuple[int, int] | None = None, n_acc: int = 0) -> StateLayout:
+                 n_water: int = 0, thr_consts: tuple[int, int] | None = None, n_acc: int = 0,
+                 n_lag: int = 0) -> StateLayout:
     """The loop state: the plant (with the thrusters' rotor states and delivered thrust when they have
     dynamics), EKF and reference; the controller's own state; the metrics and status; then the run's
     constants (carried through the loop, never changed). ``thr_consts``: the sizes of the thruster
     dynamics' per-run constants (:func:`arvcas.sim.thrust_forcing.thruster_constants`), None for instantaneous thrusters; ``n_acc``:
-    the rows of the run's accumulators (:mod:`arvcas.sim.accumulate`; none: no slot)."""
+    the rows of the run's accumulators (:mod:`arvcas.sim.accumulate`; none: no slot); ``n_lag``: the rows of the
+    sensors' shift register of lagging readings (:func:`arvcas.sim.ekf.lag_size`; none: no slot)."""
     dyn = thr_consts is not None
     return StateLayout([
         ("x", 12),  # true plant state [eta; nu]
@@ -95,6 +97,7 @@ def state_layout(ctrl: Controller, n_gains: int, n_thr: int, n_pc: int, n_p: int
         *controller_memory(ctrl),
         # previous command (CHAT); held realised thrust, or with dynamics the previous delivered wrench
         ("tau_prev", 6), ("tdel_prev", 6) if dyn else ("u_hold", n_thr),
+        *([("lag", n_lag)] if n_lag else []),  # the lagging sensors' past readings (docs/sensors.md)
         ("chat_sum", 6), ("chatd_sum", 6), ("e2_sum", 6), *([("acc", n_acc)] if n_acc else []), ("ok", 1), ("t_fail", 1),
         # constants of the run carried through the loop
         ("gains", n_gains), ("unc", 4), ("phase_cs", 12), ("ekf", n_ekf), ("water", n_water), ("p", n_p),
@@ -290,7 +293,7 @@ def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     n_thr = lay.structure.n_thrusters
     dyn = lay.structure.has_thruster_dynamics
     L = state_layout(law, ng, n_thr, pc_fn.size1_out(0), len(lay), cfg.ekf_vector.size, cfg.water_vector.size,
-                     thrust_forcing.constant_sizes(cfg, lay), n_accumulated(spec))
+                     thrust_forcing.constant_sizes(cfg, lay), n_accumulated(spec), ekf_mod.lag_size(cfg))
     i_x1, i_ok, i_const = L.slices["x"].stop, L.slices["ok"].start, L.slices["gains"].start  # constants follow t_fail
     Sd, Kc = ca.SX.sym("S", i_const), ca.SX.sym("K", L.size - i_const)
     S = ca.vertcat(Sd, Kc)
@@ -598,13 +601,14 @@ def _controller_part(spec: RunSpec, L: StateLayout, S, ins, tk, first: bool, tra
     Fz, Mx, My, Mhat = consts[0], consts[1], consts[2], consts[3:9]
     unc, phase_cs = L.get(S, "unc"), L.get(S, "phase_cs")
     h = cfg.time_h
+    x = L.get(S, "x")
+    # 1. sensors: a lagging sensor reports the state of d samples ago (docs/sensors.md)
+    x_read, lag_next = ekf_mod.delayed(cfg, x, L.get(S, "lag") if "lag" in L.slices else None, first)
+    y = x_read + noise
     first = ca.SX(1.0 if first else 0.0)  # a constant: every branch on it folds away
     ok = L.get(S, "ok")
     eta_d = ca.DM(cfg.initial_eta_d)
 
-    x = L.get(S, "x")
-    # 1. sensors
-    y = x + noise
 
     q, pl = R0["q"], R0["payload"]
     eta, nu = x[0:6], x[6:12]
@@ -645,6 +649,7 @@ def _controller_part(spec: RunSpec, L: StateLayout, S, ins, tk, first: bool, tra
     # (never changed: the step passes them on itself)
     new = {
         **cs.memory, "tau_prev": tau_v, **({"tdel_prev": tau_real_held} if dyn else {"u_hold": u_sat}),
+        **({} if lag_next is None else {"lag": lag_next}),
         "chat_sum": chat_sum, "chatd_sum": chatd_sum, "e2_sum": e2_sum,
         **({"acc": _accumulate(spec, L.get(S, "acc"), last, accumulate.SampleView(
             t=tk, h=h, e=e_true, eta=eta, nu=nu, eta_ref=y1, tau_cmd=tau_v, tau_del=tau_real_held,

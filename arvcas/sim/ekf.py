@@ -20,7 +20,8 @@ from arvcas.model.spatial import J
 from arvcas.sim import scenario
 from arvcas.sim.scenario import ScenarioConfig
 
-__all__ = ["PSYM", "N_PSYM", "measure", "predict", "update", "transition", "sensor_rows", "held_only"]
+__all__ = ["PSYM", "N_PSYM", "measure", "predict", "update", "transition", "sensor_rows", "held_only", "lag_size",
+           "delayed"]
 
 PSYM = [(i, j) for i in range(12) for j in range(i, 12)]  # the covariance's upper triangle, row by row
 _PSYM_INDEX = {ij: k for k, ij in enumerate(PSYM)}
@@ -86,6 +87,35 @@ def sensor_rows(cfg: ScenarioConfig, tk):
         return None
     k = ca.floor(tk / cfg.time_h + 0.5)
     return [(i, None if every == 1 else ca.fmod(k, every) == 0) for i, _, every in scenario.measured(cfg)]
+
+
+def lag_size(cfg: ScenarioConfig) -> int:
+    """The rows of the loop state's shift register of lagging readings (:func:`delayed`): ``d`` past values of
+    each component of every sensor that lags ``d`` samples; 0 when none lags (no register in the loop state)."""
+    return sum(d * len(scenario.SENSORS[n]) for n, d in scenario.latencies(cfg))
+
+
+def delayed(cfg: ScenarioConfig, x, lag, first: bool):
+    """What the sensors report at sample k before noise, and the shift register for sample k+1 (docs/sensors.md).
+
+    ``x``: the true ``[eta; nu]`` at t_k (12); ``lag``: the register (:func:`lag_size` rows): for each lagging
+    sensor (:func:`arvcas.sim.scenario.latencies` order) ``d`` blocks of its components, block ``j`` the state of
+    sample ``k - 1 - j``. A sensor lagging ``d`` samples reports its components of sample ``k - d``; before the run
+    the vehicle was at its initial state, so at sample 0 (``first``) the register is that state. Returns ``(x
+    with the lagging components replaced, the register for k+1)``; ``x`` itself and an empty register when no
+    sensor lags."""
+    out, nxt, o = [x[i] for i in range(12)], [], 0
+    for n, d in scenario.latencies(cfg):
+        comps = scenario.SENSORS[n]
+        m = len(comps)
+        blocks = [[x[i] if first else lag[o + j * m + c] for c, i in enumerate(comps)] for j in range(d)]
+        for c, i in enumerate(comps):
+            out[i] = blocks[d - 1][c]
+        nxt += [x[i] for i in comps] + [v for b in blocks[:d - 1] for v in b]
+        o += d * m
+    if not nxt:
+        return x, None
+    return ca.vertcat(*out), ca.vertcat(*nxt)
 
 
 def held_only(cfg: ScenarioConfig, e):

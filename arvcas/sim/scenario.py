@@ -25,7 +25,7 @@ from arvcas.system.config import ge, gt, le, quantity
 __all__ = [
     "ScenarioConfig", "ScenarioError", "load_scenario", "loads_scenario", "default_scenario_path",
     "check_joint_limits", "check_trajectory_limits", "n_samples", "ScenarioFile", "MAX_SUBSTEPS",
-    "SENSORS", "sensor_set", "measured", "held_dofs",
+    "SENSORS", "sensor_set", "measured", "held_dofs", "latencies", "MAX_LATENCY",
 ]
 
 
@@ -37,6 +37,7 @@ class ScenarioError(ValueError):
 _POSE = ("length",) * 3 + ("angle",) * 3  # x, y, z, phi, theta, psi
 _RATE = ("velocity",) * 3 + ("angular_velocity",) * 3  # u, v, w, p, q, r
 _WRENCH = ("force",) * 3 + ("torque",) * 3  # X, Y, Z, K, M, N
+MAX_LATENCY = 10  # controller samples a sensor's reading may lag (docs/sensors.md): its shift register is in the loop state
 MAX_SUBSTEPS = 1000  # h / h_plant: the plant's RK4 steps of one sample are unrolled in the compiled graph
 MAX_CURRENT_POINTS = 10_000
 MAX_THRUST_NODES = 16  # time.thrust_quadrature: Gauss-Legendre nodes per half plant step
@@ -124,6 +125,12 @@ class _Sensors:
     depth_period: float | None = quantity("time", gt(0), default=None)
     dvl_period: float | None = quantity("time", gt(0), default=None)
     position_period: float | None = quantity("time", gt(0), default=None)
+    # each fitted sensor's latency: a reading that arrives at sample k is the state of sample k - d (a whole
+    # number d of controller samples, at most MAX_LATENCY); none given: 0, a reading is the state of its sample
+    imu_latency: float | None = quantity("time", ge(0), default=None)
+    depth_latency: float | None = quantity("time", ge(0), default=None)
+    dvl_latency: float | None = quantity("time", ge(0), default=None)
+    position_latency: float | None = quantity("time", ge(0), default=None)
 
     def _config_check(self, given: frozenset[str]) -> None:
         group = [k for k in ("var_position", "var_attitude", "var_velocity") if k in given]
@@ -343,6 +350,10 @@ class ScenarioConfig:
     sensors_depth_period: float | None = None
     sensors_dvl_period: float | None = None
     sensors_position_period: float | None = None
+    sensors_imu_latency: float | None = None  # each sensor's latency (docs/sensors.md); None: 0
+    sensors_depth_latency: float | None = None
+    sensors_dvl_latency: float | None = None
+    sensors_position_latency: float | None = None
     text: str = ""  # the file's text, stored in result files
     path: str = ""
 
@@ -518,6 +529,8 @@ class ScenarioConfig:
         if self.has_trajectory:  # sampled into the time table: only its presence shapes the graph
             water |= {f.name: None for f in dataclasses.fields(self) if f.name.startswith("trajectory_")}
             water["trajectory_pattern"] = "table"
+        # a latency of 0 is no latency: the same graph as none given (docs/sensors.md)
+        water |= {f"sensors_{n}_latency": None for n in SENSORS if not getattr(self, f"sensors_{n}_latency")}
         return replace(self, text="", path="", ekf_q_eta=0.0, ekf_q_nu=0.0,
                        sensors_var_position=0.0 if group else None, sensors_var_attitude=0.0 if group else None,
                        sensors_var_velocity=0.0 if group else None, sensors_var_eta=None if group else z6,
@@ -707,6 +720,17 @@ def measured(cfg: ScenarioConfig) -> tuple[tuple[int, str, int], ...]:
     return tuple((i, *by[i]) for i in sorted(by))
 
 
+def latencies(cfg: ScenarioConfig) -> tuple[tuple[str, int], ...]:
+    """The fitted sensors whose readings lag, as ``(name, d)`` in :data:`SENSORS` order: a reading that arrives at
+    sample k is the state of sample k - d (d >= 1 controller samples; docs/sensors.md). Empty when none lags."""
+    out = []
+    for n in SENSORS:
+        lat = getattr(cfg, f"sensors_{n}_latency")
+        if lat is not None and getattr(cfg, f"sensors_{n}_period") is not None and round(lat / cfg.time_h) > 0:
+            out.append((n, int(round(lat / cfg.time_h))))
+    return tuple(out)
+
+
 def held_dofs(cfg: ScenarioConfig) -> tuple[bool, ...]:
     """The DOFs (x y z phi theta psi) the task holds: all six, or without a position sensor depth, attitude and
     heading (x, y drift: reported, not penalised; docs/sensors.md)."""
@@ -719,6 +743,7 @@ def _check_sensors(cfg: ScenarioConfig, where: str) -> None:
     the vehicle in x, y); each period is the controller's h or a whole multiple of it, or faster than h."""
     sset = sensor_set(cfg)
     if sset is None:
+        _check_latencies(cfg, where, ())
         return
     names = dict(sset)
     for n in ("imu", "depth"):
@@ -735,6 +760,22 @@ def _check_sensors(cfg: ScenarioConfig, where: str) -> None:
         if r > 1 + 1e-9 and abs(r - round(r)) > 1e-9:
             raise ScenarioError(f"{where}: sensors.{n}_period: {p:g} s must be at most time.h ({cfg.time_h:g} s) or "
                                 f"a whole multiple of it (the controller reads its sensors at its own samples)")
+    _check_latencies(cfg, where, names)
+
+
+def _check_latencies(cfg: ScenarioConfig, where: str, fitted) -> None:
+    """Each latency belongs to a fitted sensor and is a whole number of controller samples, 0 to MAX_LATENCY."""
+    for n in SENSORS:
+        lat = getattr(cfg, f"sensors_{n}_latency")
+        if lat is None:
+            continue
+        if n not in fitted:
+            raise ScenarioError(f"{where}: sensors.{n}_latency: the {n} sensor is not fitted (no sensors.{n}_period): "
+                                f"give its period or remove its latency")
+        r = lat / cfg.time_h
+        if abs(r - round(r)) > 1e-9 or round(r) > MAX_LATENCY:
+            raise ScenarioError(f"{where}: sensors.{n}_latency: {lat:g} s must be a whole multiple of time.h "
+                                f"({cfg.time_h:g} s), from 0 to {MAX_LATENCY} samples ({MAX_LATENCY * cfg.time_h:g} s)")
 
 
 def _check_current(cfg: ScenarioConfig, where: str) -> None:
