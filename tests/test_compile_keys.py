@@ -123,3 +123,30 @@ def test_a_new_process_shares_the_library_of_the_same_c(cache):
     out = [subprocess.run([sys.executable, "-c", script, d], env=env, capture_output=True, text=True, check=True)
            .stdout.split() for d in ("first description", "second description")]
     assert out[0][0] == "1" and out[1][0] == "0" and out[0][1] == out[1][1]
+
+
+def test_a_shipped_library_is_used_whatever_the_workers_level(cache, tmp_path, monkeypatch):
+    """A bundle's library is known by what its caller asked for (the default level), not by the level that
+    default is where it lands: a worker with another ``ARVCAS_OPT_LEVEL`` and ``ARVCAS_ISA`` uses what it was
+    shipped (its manifest says how it was built); a worker asking for a level by name gets that level."""
+    from arvcas.build import shipping
+
+    f = codegen.build_described("keys_ship", "shipped", lambda: _fn("keys_ship", 4.0))
+    client_flags = codegen.artifact_of(f)["flags"]
+    b = shipping.bundle([f])
+    worker_cache = tmp_path / "worker-cache"
+    worker_cache.mkdir(mode=0o700)
+    level = "-O3" if codegen.default_opt_level() != "-O3" else "-O1"
+    monkeypatch.setenv("ARVCAS_OPT_LEVEL", level)
+    monkeypatch.setenv("ARVCAS_ISA", "baseline")
+    monkeypatch.setenv("ARVCAS_CACHE", str(worker_cache))
+    monkeypatch.setattr(codegen, "_PRELOADED", {})
+    _new_process()
+    assert shipping.preload(b) == 1
+    n0 = _compiles()
+    g = codegen.build_described("keys_ship", "shipped", lambda: pytest.fail("the worker built what it was shipped"))
+    assert codegen.artifact_of(g)["flags"] == client_flags and codegen.artifact_of(g).get("shipped")
+    assert codegen.described_digest("keys_ship", "shipped", lambda: pytest.fail("built a graph")) == \
+        codegen.artifact_of(f)["c_sha256"]
+    h = codegen.build_described("keys_ship", "shipped", lambda: _fn("keys_ship", 4.0), opt_level=level)
+    assert _compiles() == n0 + 1 and level in codegen.artifact_of(h)["flags"]
