@@ -84,7 +84,6 @@ __all__ = [
     "cache_dir",
     "default_opt_level",
     "build",
-    "compiled",
     "artifact_of",
     "cache_info",
     "stats",
