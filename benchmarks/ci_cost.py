@@ -6,7 +6,11 @@ plugin (``-p benchmarks.ci_cost``) that records, per test phase (set-up, call, t
 the wall time, the CPU time of the process and of its children (the C compiler) and the compiles it started
 (:func:`arvcas.build.codegen.stats`). Afterwards every manifest the file's caches hold is read: a function whose
 generated C (``c_sha256``) was compiled in more than one file, or under more than one name, is listed under
-``repeated_builds``. CPU time, unlike wall time, hardly changes when other processes share the machine.
+``repeated_builds``; one compiled under more than one key (as one cache shared by the files would hold it) under
+``several_keys``, with the key fields that differ where the manifests record the descriptions; ``one_cache``: the
+builds and compile seconds of such a shared cache. ``c_sha256`` leaves out C appended to a function's own (a batch
+loop): two keys of one ``c_sha256`` at one flag list are a library with the loop and one without.
+CPU time, unlike wall time, changes less when other processes share the machine.
 
     python benchmarks/ci_cost.py                       # every tests/test_*.py (about an hour of CPU)
     python benchmarks/ci_cost.py tests/test_lockstep.py tests/test_systems.py   # some files, merged into the JSON
@@ -230,6 +234,12 @@ def _several_keys(builds: list[tuple[str, dict]]) -> list[dict]:
     return sorted(out, key=lambda r: -r["compile_s_total"])
 
 
+def _one_cache(builds: list[dict]) -> dict:
+    """What the files' builds would be in one cache that they shared: the distinct keys, their compile seconds."""
+    keys = {b["key"]: b for b in builds}
+    return {"builds": len(keys), "compile_s": round(sum(b["compile_time_s"] for b in keys.values()), 1)}
+
+
 def _costliest(tests: list[dict], fixtures: list[dict]) -> dict:
     rows = sorted((_test_row(t) for t in tests), key=lambda r: -r["cpu_s"])
     fx = sorted(({k: v for k, v in x.items() if k != "cc_cpu_s"} | {"cpu_s": round(x["cpu_s"] + x["cc_cpu_s"], 2)}
@@ -246,7 +256,8 @@ def summarise_files(files: dict[str, dict]) -> dict:
     return {"files": per_file, "total_cpu_s": round(sum(r["cpu_s"] for r in per_file), 1),
             **_costliest([t for r in files.values() for t in r["tests"]], [x for r in files.values() for x in r["fixtures"]]),
             "repeated_builds": _repeated([(Path(f).name, b) for f, r in files.items() for b in r["builds"]]),
-            "several_keys": _several_keys([(Path(f).name, b) for f, r in files.items() for b in r["builds"]])}
+            "several_keys": _several_keys([(Path(f).name, b) for f, r in files.items() for b in r["builds"]]),
+            "one_cache": _one_cache([b for r in files.values() for b in r["builds"]])}
 
 
 def summarise_suite(r: dict) -> dict:
