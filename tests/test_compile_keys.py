@@ -150,3 +150,14 @@ def test_a_shipped_library_is_used_whatever_the_workers_level(cache, tmp_path, m
         codegen.artifact_of(f)["c_sha256"]
     h = codegen.build_described("keys_ship", "shipped", lambda: _fn("keys_ship", 4.0), opt_level=level)
     assert _compiles() == n0 + 1 and level in codegen.artifact_of(h)["flags"]
+
+
+def test_every_system_is_named_in_its_compile_descriptions():
+    """The default system takes the same path as any other: its runs' and tables' descriptions name it."""
+    from arvcas.system import DEFAULT, load_system, shipped
+    from arvcas.system.params import system_tag
+
+    assert DEFAULT in shipped()
+    for name in shipped():
+        tag = system_tag(load_system(name).structure)
+        assert tag.startswith(" system=") and f"name='{name}'" in tag, (name, tag[:80])
