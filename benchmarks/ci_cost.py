@@ -6,7 +6,11 @@ plugin (``-p benchmarks.ci_cost``) that records, per test phase (set-up, call, t
 the wall time, the CPU time of the process and of its children (the C compiler) and the compiles it started
 (:func:`arvcas.build.codegen.stats`). Afterwards every manifest the file's caches hold is read: a function whose
 generated C (``c_sha256``) was compiled in more than one file, or under more than one name, is listed under
-``repeated_builds``. CPU time, unlike wall time, hardly changes when other processes share the machine.
+``repeated_builds``; one compiled under more than one key (as one cache shared by the files would hold it) under
+``several_keys``, with the key fields that differ where the manifests record the descriptions; ``one_cache``: the
+builds and compile seconds of such a shared cache. ``c_sha256`` leaves out C appended to a function's own (a batch
+loop): two keys of one ``c_sha256`` at one flag list are a library with the loop and one without.
+CPU time, unlike wall time, changes less when other processes share the machine.
 
     python benchmarks/ci_cost.py                       # every tests/test_*.py (about an hour of CPU)
     python benchmarks/ci_cost.py tests/test_lockstep.py tests/test_systems.py   # some files, merged into the JSON
@@ -19,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import resource
 import subprocess
 import sys
@@ -125,8 +130,8 @@ def _manifests(d: Path) -> list[dict]:
         except (OSError, ValueError):
             continue
         if isinstance(m, dict) and "c_sha256" in m and "compile_time_s" in m:
-            out.append({k: m[k] for k in ("name", "c_sha256", "key", "compile_time_s", "codegen_time_s",
-                                          "n_instructions")} | {"opt": next(
+            out.append({k: m.get(k) for k in ("name", "c_sha256", "key", "compile_time_s", "codegen_time_s",
+                                              "n_instructions", "description", "flags")} | {"opt": next(
                                               (f for f in m["flags"] if f.startswith("-O")), None)})
     return out
 
@@ -202,6 +207,39 @@ def _repeated(builds: list[tuple[str, dict]]) -> list[dict]:
     return sorted(out, key=lambda r: -r["compile_s_total"])
 
 
+def _fields(description: str) -> dict[str, str]:
+    """``name=value`` fields of a compile description (a dataclass repr and ``key=value`` words)."""
+    parts = re.split(r",\s(?=\w+=)|\s(?=\w+=)|\((?=\w+=)", description)
+    return dict(p.split("=", 1) for p in parts if re.match(r"\w+=", p))
+
+
+def _several_keys(builds: list[tuple[str, dict]]) -> list[dict]:
+    """Functions whose generated C at one level was compiled under more than one cache key (as one cache shared
+    by the files would hold them): the key fields that differ, when the manifests record the descriptions."""
+    by_c: dict[str, list] = defaultdict(list)
+    for f, b in builds:  # the whole flag list where the record has it (another ISA is another library)
+        by_c[b["c_sha256"] + str(b.get("flags") or b["opt"])].append((f, b))
+    out = []
+    for bs in by_c.values():
+        keys = {b["key"]: b for _, b in bs}
+        if len(keys) < 2:
+            continue
+        descs = [_fields(b["description"]) if b.get("description") else None for b in keys.values()]
+        known = [d for d in descs if d is not None]
+        differ = sorted({k for d in known for k in d if any(e.get(k) != d.get(k) for e in known)})
+        out.append({"name": bs[0][1]["name"], "opt": bs[0][1]["opt"], "n_keys": len(keys),
+                    "files": sorted({f for f, _ in bs if f}),
+                    "compile_s_total": round(sum(b["compile_time_s"] for b in keys.values()), 1),
+                    "undescribed_keys": sum(d is None for d in descs), "fields_that_differ": differ})
+    return sorted(out, key=lambda r: -r["compile_s_total"])
+
+
+def _one_cache(builds: list[dict]) -> dict:
+    """What the files' builds would be in one cache that they shared: the distinct keys, their compile seconds."""
+    keys = {b["key"]: b for b in builds}
+    return {"builds": len(keys), "compile_s": round(sum(b["compile_time_s"] for b in keys.values()), 1)}
+
+
 def _costliest(tests: list[dict], fixtures: list[dict]) -> dict:
     rows = sorted((_test_row(t) for t in tests), key=lambda r: -r["cpu_s"])
     fx = sorted(({k: v for k, v in x.items() if k != "cc_cpu_s"} | {"cpu_s": round(x["cpu_s"] + x["cc_cpu_s"], 2)}
@@ -217,7 +255,9 @@ def summarise_files(files: dict[str, dict]) -> dict:
                        for f, r in files.items()), key=lambda r: -r["cpu_s"])
     return {"files": per_file, "total_cpu_s": round(sum(r["cpu_s"] for r in per_file), 1),
             **_costliest([t for r in files.values() for t in r["tests"]], [x for r in files.values() for x in r["fixtures"]]),
-            "repeated_builds": _repeated([(Path(f).name, b) for f, r in files.items() for b in r["builds"]])}
+            "repeated_builds": _repeated([(Path(f).name, b) for f, r in files.items() for b in r["builds"]]),
+            "several_keys": _several_keys([(Path(f).name, b) for f, r in files.items() for b in r["builds"]]),
+            "one_cache": _one_cache([b for r in files.values() for b in r["builds"]])}
 
 
 def summarise_suite(r: dict) -> dict:
@@ -232,7 +272,8 @@ def summarise_suite(r: dict) -> dict:
             "wall_s": r["wall_s"], "cpu_s": r["cpu_s"], "summary": r["summary"], "workers": r["workers"],
             "builds": len(r["builds"]), "compile_s": round(sum(b["compile_time_s"] for b in r["builds"]), 1),
             "files": per_file, **_costliest(r["tests"], r["fixtures"]),
-            "repeated_builds": _repeated([("", b) for b in r["builds"]])}
+            "repeated_builds": _repeated([("", b) for b in r["builds"]]),
+            "several_keys": _several_keys([("", b) for b in r["builds"]])}
 
 
 def _stamp(commit: str | None = None, opt_level: str | None = None) -> dict:

@@ -48,9 +48,11 @@ def cluster(tmp_path):
         if src.exists():
             (bindir / name).symlink_to(src)
     env = {k: v for k, v in os.environ.items() if not k.startswith(("DASK_", "ARVCAS_"))}
-    wenv = dict(env, PATH=str(bindir), ARVCAS_CACHE=str(tmp_path / "worker-cache"), OMP_NUM_THREADS="1")
-    if "ARVCAS_OPT_LEVEL" in os.environ:  # the client's build level (tests: -O0): a bundle's libraries are found
-        wenv["ARVCAS_OPT_LEVEL"] = os.environ["ARVCAS_OPT_LEVEL"]  # by a key that holds it (docs/testing.md)
+    # another default level and instruction set than the client's (tests: -O0, -mavx where the CPU has it): a
+    # worker uses the libraries it was shipped, as the client built them
+    other = "-O3" if codegen.default_opt_level() != "-O3" else "-O1"
+    wenv = dict(env, PATH=str(bindir), ARVCAS_CACHE=str(tmp_path / "worker-cache"), OMP_NUM_THREADS="1",
+                ARVCAS_OPT_LEVEL=other, ARVCAS_ISA="baseline")
     assert shutil.which("cc", path=wenv["PATH"]) is None
     procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                                "--scheduler-file", str(sfile)], env=env, cwd=tmp_path,

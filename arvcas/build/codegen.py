@@ -6,7 +6,9 @@ with ``cc`` and loaded with :func:`casadi.external`. Builds are cached between p
 
 * **keyed by content**: key = sha256 over (generated C text, ``cc --version`` first line, full
   compiler flag list, CasADi version, arvcas version). The C symbol names are prefixed by the
-  function's name (CasADi's ``CASADI_PREFIX``), so several libraries live in one process.
+  function's name (CasADi's ``CASADI_PREFIX``), so several libraries live in one process. A described
+  build (:func:`build_described`) finds its library by a manifest of its description that names this
+  key: descriptions that give the same C share one library, compiled once.
 * **verified**: an artifact ``<cache>/<name>-<key[:20]>.so`` is loaded only if its manifest
   ``<name>-<key[:20]>.json`` exists, holds the same key, and the sha256 of the ``.so`` bytes matches
   the manifest. A truncated, tampered or foreign file is rebuilt, never loaded.
@@ -24,8 +26,9 @@ with ``cc`` and loaded with :func:`casadi.external`. Builds are cached between p
 
 Generating C for ``uvms_rhs`` (6-9k instructions) takes 15-40 ms: a few per cent of compiling it
 (0.3 s at -O0, 1-2 s at -O2) and less than building its SX graph, which a cache hit in a new process
-pays anyway. So there is no cheaper first-level key; a per-process memo makes a repeated
-:func:`build` of the same Function object cost a dictionary lookup (no disk access, no hashing).
+pays anyway. So :func:`build` has no cheaper first-level key (a per-process memo makes a repeated
+:func:`build` of the same Function object a dictionary lookup); a description is one, for a caller that
+can name what shapes its graph.
 
 **Progress**: a build (graph, C and compiler) that takes more than :data:`PROGRESS_AFTER_S` writes one
 line to the stream :func:`report_progress` set (the command line sets standard error):
@@ -67,6 +70,7 @@ from typing import Callable, Iterator
 
 import casadi as ca
 
+from arvcas.build.batchloop import batch_loop_c
 from arvcas.build.progress import PROGRESS_AFTER_S, Progress as _Progress, report_progress  # noqa: F401 (re-exported)
 
 __all__ = [
@@ -80,7 +84,6 @@ __all__ = [
     "cache_dir",
     "default_opt_level",
     "build",
-    "compiled",
     "artifact_of",
     "cache_info",
     "stats",
@@ -154,8 +157,6 @@ class Artifact:
     flags: tuple[str, ...]
     key: str
     verified: bool  # manifest present, key consistent, .so sha256 matches
-
-
 
 
 # ---------------------------------------------------------------------------------------------
@@ -605,12 +606,13 @@ def _hit(look, so: Path, man: Path) -> tuple[ca.Function | None, str, str]:
 
 
 def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_timeout: float,
-                       label: str = "") -> ca.Function:
+                       label: str | None = "") -> ca.Function:
     """Load the verified artifact of ``look`` (name, key), else build it (``make_plan()``) and publish it.
 
     A cache whose lock files cannot be created (read-only) still serves verified artifacts: the
     ``.so`` is checked against its manifest's sha256 and published by ``os.replace``, so loading
     without the lock is safe; a build there is private (a temporary directory, not published).
+    ``label`` None: no progress line (the caller shows one).
     """
     so, man, lock = d / f"{look.stem()}.so", d / f"{look.stem()}.json", d / f"{look.stem()}.lock"
     unloadable = ""  # a verified library that did not load (tampered and re-signed, or foreign): rebuilt
@@ -620,14 +622,15 @@ def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_tim
             if f is not None:
                 return f
     what = label or look.name
+    line = _Progress if label is not None else (lambda _what: contextlib.nullcontext())
     with _flock(lock, exclusive=True, timeout=lock_timeout) as got:
         if got is None:
             log.info("cache %s is not writable: building %s privately", d, look.name)
-            with _Progress(what):
+            with line(what):
                 return _build_private(make_plan(), d)
         if not got:
             log.warning("lock %s busy for %.0f s: building %s privately", lock, lock_timeout, look.name)
-            with _Progress(what):
+            with line(what):
                 return _build_private(make_plan(), d)
         if not unloadable:  # another process may have built it meanwhile
             f, why, unloadable = _hit(look, so, man)
@@ -638,7 +641,7 @@ def _lookup_or_publish(look, make_plan: Callable[[], "_Plan"], d: Path, lock_tim
             _STATS["rejected"] += 1
             log.warning("cached %s rejected (%s): rebuilding", so.name, why)
         _sweep(d)
-        with _Progress(what):
+        with line(what):
             plan = make_plan()
             m = _publish(plan, d, so, man)
         return _load(plan, so, m)
@@ -672,13 +675,17 @@ def build_described(
 ) -> ca.Function:
     """The compiled function ``name`` described by ``description``, built by ``make()`` only on a miss.
 
-    The cache key is sha256 over (``description``, :func:`arvcas.build.provenance.model_hash` — the
-    package's model, simulation, controller and codegen code and its data —, the compiler, the
-    flags, CasADi's and arvcas's versions): a warm start loads the library without building the
-    CasADi graph at all. ``description`` must name everything else that shapes the graph (the caller's
-    options, scenario fields, a user controller's own source). ``make()`` must return a Function
-    called ``name``. Memoized per process. ``batch_loop``: the library also holds
-    :func:`batch_loop_c`'s loops (part of the key), which :func:`arvcas.build.calls.call_many` uses.
+    Two keys. The library is the one :func:`build` makes of the same C (keyed by the C, the compiler,
+    the flags, CasADi's and arvcas's versions), so descriptions that give the same C share one
+    library. A description finds it without building the CasADi graph (a warm start): its key is
+    sha256 over (``description``, :func:`arvcas.build.provenance.model_hash` — the package's model,
+    simulation, controller and codegen code and its data —, the compiler, the flags), and its
+    manifest names the C's key; on a miss ``make()`` builds the graph, its C is generated (cheap
+    beside compiling) and compiled only if no library of that C is cached. ``description`` must name
+    everything else that shapes the graph (the caller's options, scenario fields, a user controller's
+    own source). ``make()`` must return a Function called ``name``. Memoized per process. ``batch_loop``:
+    the library also holds :func:`batch_loop_c`'s loops (part of the key), which
+    :func:`arvcas.build.calls.call_many` uses.
     ``label``: what the progress line calls the build ("the run for haidou1 / proposed"; default ``name``).
     ``extra_c``: called with ``make()``'s Function after it, returns C appended to the library (e.g. a
     lockstep loop, :mod:`arvcas.sim.lockstep`); ``description`` must say what it holds.
@@ -703,12 +710,55 @@ def build_described(
             fn = made if made is not None else make()
             if not isinstance(fn, ca.Function) or fn.name() != name:
                 raise TypeError(f"build_described: make() must return a casadi.Function named {name!r}")
-            p = _plan(fn, cmd_flags, (batch_loop_c(fn) if batch_loop else "") + (extra_c(fn) if extra_c else ""))
-            return _Plan(p.name, p.n_instructions, p.c_text, p.codegen_s, p.compiler, p.cmd_flags, key, p.c_sha256)
+            return _plan(fn, cmd_flags, (batch_loop_c(fn) if batch_loop else "") + (extra_c(fn) if extra_c else ""))
 
-        f = _lookup_or_publish(_Lookup(name, key), make_plan, cache_dir(), lock_timeout, label)
-        _MANIFESTS[f.__hash__()]["ident"] = ident
+        f = _described_lookup(_Lookup(name, key), make_plan, cache_dir(), lock_timeout, label or name)
+        _MANIFESTS[f.__hash__()].update(ident=ident, described_key=key)
         _DESCRIBED[mkey] = f
+        return f
+
+
+def _alias_hit(look: "_Lookup", man: Path, d: Path) -> ca.Function | None:
+    """The library a description's manifest ``man`` names, loaded if that library verifies against its own
+    manifest (:func:`_hit`); else None (no alias, a foreign one, or its library gone or rejected)."""
+    try:
+        m = json.loads(man.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(m, dict) or m.get("key") != look.key or m.get("name") != look.name:
+        return None
+    lib = _Lookup(look.name, str(m.get("library_key", "")))
+    if len(lib.key) != 64 or not all(c in "0123456789abcdef" for c in lib.key):
+        return None
+    return _hit(lib, d / f"{lib.stem()}.so", d / f"{lib.stem()}.json")[0]
+
+
+def _described_lookup(look: "_Lookup", make_plan: Callable[[], "_Plan"], d: Path, lock_timeout: float,
+                      what: str) -> ca.Function:
+    """The library of a description (``look``: name, description key): through the description's manifest
+    (``<name>-<key[:20]>.json``: the key of the library of its C) when it is there, else ``make_plan()``'s
+    C found in the cache or compiled (:func:`_lookup_or_publish`), and the description's manifest written."""
+    man, lock = d / f"{look.stem()}.json", d / f"{look.stem()}.lock"
+    with _flock(lock, exclusive=False, timeout=lock_timeout) as got:
+        if got or got is None:
+            f = _alias_hit(look, man, d)
+            if f is not None:
+                return f
+    with _flock(lock, exclusive=True, timeout=lock_timeout) as got:
+        if got:  # another process may have written it meanwhile
+            f = _alias_hit(look, man, d)
+            if f is not None:
+                return f
+        with _Progress(what):
+            plan = make_plan()
+            f = _lookup_or_publish(plan, lambda: plan, d, lock_timeout, None)
+        if got and not (artifact_of(f) or {}).get("private"):
+            fd, tmp = tempfile.mkstemp(prefix=".alias-", suffix=".json", dir=d)
+            with os.fdopen(fd, "w", encoding="utf-8") as out:
+                json.dump({"format": MANIFEST_FORMAT, "name": look.name, "key": look.key, "library_key": plan.key,
+                           "c_sha256": plan.c_sha256, "flags": list(plan.cmd_flags)}, out, indent=1)
+            os.chmod(tmp, 0o644)
+            os.replace(tmp, man)
         return f
 
 
@@ -719,7 +769,7 @@ def _described(name: str, description: str, opt_level: str | None, flags, batch_
         raise ValueError(f"function name {name!r} is not a C identifier")
     if batch_loop:
         description = description + " +batch_loop"
-    return cmd_flags, description, _ident(name, description, cmd_flags)
+    return cmd_flags, description, _ident(name, description, opt_level, flags)
 
 
 def _described_key(name: str, description: str, cmd_flags: list[str]) -> str:
@@ -779,62 +829,22 @@ def digest_of(f: ca.Function) -> str:
     return str(m.get("c_sha256", "")) if m else ""
 
 
-def batch_loop_c(f: ca.Function) -> str:
-    """C appended to ``f``'s generated code: ``<name>_arvcas_batch``, a loop over ``n`` evaluations of ``f``.
-
-    ``int <name>_arvcas_batch(long long n, long long chunk, long long* next, int* stop, long long* failed,
-    const double* const* a, const long long* sa, double* const* r, const long long* sr, long long* iw,
-    double* w)``: input ``k`` of evaluation ``i`` is ``a[k] + i * sa[k]`` (``sa[k] = 0``: all share it),
-    output ``k`` goes to ``r[k] + i * sr[k]``; ``iw``, ``w``: the caller's work arrays (``f.sz_iw()``,
-    ``f.sz_w()`` entries), one set per concurrent call. The evaluations are taken ``chunk`` at a time
-    from the shared counter ``*next`` (atomically), so several threads calling it at once share the
-    ``n`` evaluations dynamically; each stops before its next chunk once ``*stop`` is set (by another
-    caller or by an interrupted Python), and a failed evaluation sets ``*stop``, stores its index in
-    ``*failed`` and returns 1 (else 0). :func:`arvcas.build.calls.run_loop` calls it.
-    """
-    name = f.name()
-    n_in, n_out = f.n_in(), f.n_out()
-    return f"""
-/* arvcas: {name} on n evaluations (arvcas.build.codegen.batch_loop_c) */
-CASADI_SYMBOL_EXPORT int {name}_arvcas_batch(long long int n, long long int chunk, long long int* next, int* stop,
-    long long int* failed, const casadi_real* const* a, const long long int* sa, casadi_real* const* r,
-    const long long int* sr, casadi_int* iw, casadi_real* w) {{
-  const casadi_real* arg[{max(f.sz_arg(), n_in, 1)}];
-  casadi_real* res[{max(f.sz_res(), n_out, 1)}];
-  long long int i, i0, i1;
-  int k;
-  for (;;) {{
-    if (__atomic_load_n(stop, __ATOMIC_RELAXED)) return 0;
-    i0 = __atomic_fetch_add(next, chunk, __ATOMIC_RELAXED);
-    if (i0 >= n) return 0;
-    i1 = i0 + chunk < n ? i0 + chunk : n;
-    for (i = i0; i < i1; ++i) {{
-      for (k = 0; k < {n_in}; ++k) arg[k] = a[k] + i * sa[k];
-      for (k = 0; k < {n_out}; ++k) res[k] = r[k] + i * sr[k];
-      if ({name}(arg, res, iw, w, 0)) {{
-        *failed = i;
-        __atomic_store_n(stop, 1, __ATOMIC_RELAXED);
-        return 1;
-      }}
-    }}
-  }}
-}}
-"""
-
-
 # ---------------------------------------------------------------------------------------------
 # what a shipped library is known by (arvcas.build.shipping: libraries for processes without a compiler)
 
 _PRELOADED: dict[str, ca.Function] = {}  # ident -> a shipped library, loaded
 
 
-def _ident(name: str, description: str, cmd_flags) -> str:
-    """What a described build is, without the toolchain: a process that got the library shipped knows
-    it by this (it may have no compiler to ask for its version)."""
+def _ident(name: str, description: str, opt_level: str | None, flags) -> str:
+    """What a described build is, as its caller asked for it (``opt_level`` None: the default level, whatever
+    it is in the process that built it), without the toolchain: a process that got the library shipped
+    knows it by this (it may have no compiler to ask for its version, nor the client's ``ARVCAS_OPT_LEVEL``
+    or ``ARVCAS_ISA``); the library's manifest says which flags built it."""
     from arvcas.build.provenance import model_hash
 
     h = hashlib.sha256()
-    for part in ("arvcas-ident-1", name, description, model_hash(), "\0".join(cmd_flags), ca.__version__):
+    level = "default" if opt_level is None else opt_level
+    for part in ("arvcas-ident-2", name, description, model_hash(), level, "\0".join(flags), ca.__version__):
         b = part.encode()
         h.update(len(b).to_bytes(8, "little"))
         h.update(b)

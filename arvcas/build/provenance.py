@@ -2,7 +2,7 @@
 
 :func:`model_hash` is a sha256 over the bytes of every file that shapes a compiled graph or a
 simulated number: the model layer (``arvcas/model``), the simulation layer (``arvcas/sim``), the
-controllers (``arvcas/controllers``), code generation (``arvcas/build/codegen.py``, the lane rewrite ``arvcas/build/lanes.py``), the parameter and
+controllers (``arvcas/controllers``), code generation (``arvcas/build/codegen.py``, its batch loop ``arvcas/build/batchloop.py``, the lane rewrite ``arvcas/build/lanes.py``), the parameter and
 configuration readers, and the packaged data files (``arvcas/data``). It keys the compile cache (a
 warm start loads a library without building its graph, :mod:`arvcas.build.codegen`).
 
@@ -23,7 +23,7 @@ __all__ = ["model_hash", "model_files"]
 _PKG = Path(__file__).resolve().parents[1]
 # folders (every *.py and data file below them) and single files, relative to the package
 _TREES = ("model", "sim", "controllers", "data")
-_FILES = ("system/params.py", "system/tomlfile.py", "system/config.py", "build/codegen.py", "build/lanes.py", "build/provenance.py", "__init__.py")
+_FILES = ("system/params.py", "system/tomlfile.py", "system/config.py", "build/codegen.py", "build/batchloop.py", "build/lanes.py", "build/provenance.py", "__init__.py")
 _SUFFIXES = (".py", ".toml", ".urdf", ".json", ".csv")  # .csv: thrust tables (docs/system-file.md)
 
 _LOCK = threading.Lock()

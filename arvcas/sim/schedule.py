@@ -186,19 +186,19 @@ _TABLES: "OrderedDict[tuple, Table]" = OrderedDict()
 _TABLES_KEEP = 4  # a table is ~20 MB at the paper's sampling
 
 
-def _described(kind: str, key, structure=None) -> tuple[str, str]:
+def _described(kind: str, key, structure) -> tuple[str, str]:
     """(name, description) of the table function ``kind`` for ``key`` (:func:`arvcas.build.codegen.build_described`)."""
-    st = "" if structure is None else system_tag(structure)
-    return {"time": "sched_time_map", "arm": "sched_arm_map"}[kind], f"schedule {kind} {key!r} chunk={ARM_CHUNK}{st}"
+    return ({"time": "sched_time_map", "arm": "sched_arm_map"}[kind],
+            f"schedule {kind} {key!r} chunk={ARM_CHUNK}{system_tag(structure)}")
 
 
-def _compiled(kind: str, key, make, structure=None) -> ca.Function:
+def _compiled(kind: str, key, make, structure) -> ca.Function:
     """The compiled table function ``kind`` for ``key`` (a frozen description of what shapes it):
     loaded from the cache by that description, its graph built only on a miss."""
     with _FUNCS_LOCK:
         f = _FUNCS.get((kind, key, structure))
         if f is None:
-            what = f"the {kind} table for {(structure or default_layout().structure).name}"
+            what = f"the {kind} table for {structure.name}"
             f = codegen.build_described(*_described(kind, key, structure), make, label=what)
             _FUNCS[(kind, key, structure)] = f
         return f

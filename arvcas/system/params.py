@@ -94,9 +94,9 @@ def layout_for(structure: systemfile.Structure) -> Layout:
 
 
 def system_tag(structure) -> str:
-    """How a system's structure enters a compile-cache description: nothing for the default system
-    (:data:`DEFAULT`, whose descriptions predate systems), `` system=<structure>`` for any other."""
-    return "" if structure == default_layout().structure else f" system={structure.key()}"
+    """How a system's structure enters a compile-cache description: `` system=<structure>``, the default
+    system (:data:`DEFAULT`) as every other."""
+    return f" system={structure.key()}"
 
 
 def default_path() -> Path:
