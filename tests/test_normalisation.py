@@ -146,3 +146,38 @@ def test_compare_refuses_fronts_normalised_differently(system):
     with pytest.raises(ValueError, match=r"^compare: the fronts' objectives are normalised differently \("):
         compare_fronts(a, b)
     assert compare_fronts(a, a).hv[0] == compare_fronts(a, a).hv[1]
+
+
+def test_haidou1_named_or_not_is_one_study_and_a_changed_copy_is_its_own(tmp_path):
+    """The default system takes the path every system takes: a study that names ``haidou1`` is recorded and
+    normalised as one that names no system (the paper's Table 3); a copy of its file with other numbers is
+    another system, recorded by its path and normalised by its own AGSTA."""
+    from arvcas.system import result_ref
+    from arvcas.tuning import run as tr
+
+    base = """
+[study]
+name = "h"
+controllers = ["agsta"]
+seed = 1
+[variables]
+scale = 2.0
+[algorithm]
+population = 4
+[termination]
+max_generations = 1
+[objectives]
+names = ["chat", "rmse"]
+reference_point = [5.0, 5.0]
+"""
+    draw = "[[evaluation.draws]]\nnoise_seed = 1\n"
+    (tmp_path / "none.toml").write_text(base + "[evaluation]\n" + draw, encoding="utf-8")
+    (tmp_path / "named.toml").write_text(base + '[evaluation]\nsystem = "haidou1"\n' + draw, encoding="utf-8")
+    copy = tmp_path / "mine.toml"
+    for f in ("haidou1.toml", "scenario.toml", "gains.toml"):
+        shutil.copy(DATA / f, tmp_path / ("mine.toml" if f == "haidou1.toml" else f))
+    (tmp_path / "copy.toml").write_text(base + '[evaluation]\nsystem = "mine.toml"\n' + draw, encoding="utf-8")
+    studies = {k: load_study(tmp_path / f"{k}.toml") for k in ("none", "named", "copy")}
+    assert [result_ref(s.params) for s in studies.values()] == ["", "", str(copy.resolve())]
+    for k in ("none", "named"):
+        assert tr.normalisation(studies[k], studies[k].params, None) == (None, "the paper's AGSTA value")

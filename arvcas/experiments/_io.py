@@ -62,15 +62,10 @@ def stored_inputs(path, config_text: str, params_vector, error: type[ValueError]
 
 
 def system_ref(params) -> str:
-    """How a result file names the system of ``params``: "" for Haidou-1, a shipped name, or the file."""
-    from arvcas.system.params import default_layout
-    from arvcas.system import shipped
+    """How a result file names the system of ``params`` (:func:`arvcas.system.result_ref`)."""
+    from arvcas.system import result_ref
 
-    st = params.structure
-    if st == default_layout().structure:
-        return ""
-    ships = shipped()
-    return st.name if st.name in ships and Path(params.path) == ships[st.name] else str(Path(params.path).resolve())
+    return result_ref(params)
 
 
 def system_reference(params, cfg) -> tuple | None:

@@ -13,6 +13,6 @@
 This layer uses none above it (docs/architecture.md) but the model's matrices in the physical check.
 """
 
-from arvcas.system.loader import DEFAULT, SHIPPED, UNSET, System, load_system, renamed_system, resolve, shipped
+from arvcas.system.loader import DEFAULT, SHIPPED, UNSET, System, load_system, renamed_system, resolve, result_ref, shipped
 
-__all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT", "UNSET", "renamed_system"]
+__all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT", "UNSET", "renamed_system", "result_ref"]

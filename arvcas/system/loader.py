@@ -15,7 +15,7 @@ from pathlib import Path
 from arvcas.system import params as params_mod
 from arvcas.system.params import DEFAULT, Params, ParamsError
 
-__all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT", "UNSET", "renamed_system"]
+__all__ = ["System", "SHIPPED", "load_system", "shipped", "resolve", "DEFAULT", "UNSET", "renamed_system", "result_ref"]
 
 SHIPPED = ("haidou1", "bluerov2_heavy_alpha5", "hinsdale_bluerov2_alpha5", "bluerov2", "bluerov2_heavy")
 
@@ -115,3 +115,19 @@ def resolve(system) -> System:
     if isinstance(system, Params):
         return System(system)
     return load_system(system)
+
+
+def result_ref(params: Params | None) -> str:
+    """How a result file (a front, a Monte Carlo or sweep file) names the system of ``params``: ``""`` for the
+    default system (files written before systems were data name it so, and the readers read ``""`` as the
+    paper's Haidou-1: its Table 2 gains and Table 3 normalisation), a shipped system's name, or else the
+    system file's absolute path (a copy of a shipped file with other numbers is its own system). Decided by
+    the system itself, not by how it was asked for: a study naming ``haidou1`` and one naming no system are
+    the same study. ``None``: the default system."""
+    if params is None:
+        return ""
+    ships = shipped()
+    name = params.structure.name
+    if name in ships and params.path is not None and Path(params.path) == ships[name]:
+        return "" if name == DEFAULT else name
+    return str(Path(params.path).resolve())

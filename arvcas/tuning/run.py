@@ -243,7 +243,8 @@ def eval_task(study: Study, controller: str, params=None) -> EvalTask:
 
 def normalisation(study: Study, params, draws) -> tuple[tuple | None, str]:
     """The objectives' per-DOF normalisation and where it comes from (docs/objectives.md, "Normalisation"):
-    ``(None, "the paper's AGSTA value")`` (Table 3) for Haidou-1 unless the study names another; else the
+    ``(None, "the paper's AGSTA value")`` (Table 3) for Haidou-1 (named in the study or the default) unless
+    the study gives its own values; else the
     values the study gives (``objectives.normalisation_chat``, ``normalisation_rmse``), or a law at its
     default gains on the study's first draw: the one ``objectives.normalisation`` names, or with "auto"
     the first of the AGSTA and the study's own controllers whose defaults run to the end on that draw (the
@@ -253,7 +254,7 @@ def normalisation(study: Study, params, draws) -> tuple[tuple | None, str]:
     if o.normalisation_chat is not None:
         return (tuple(o.normalisation_chat), tuple(o.normalisation_rmse)), \
             "the study's objectives.normalisation_chat and normalisation_rmse"
-    if study.system is None and o.normalisation == "auto":
+    if not _system_ref(study) and o.normalisation == "auto":
         return None, "the paper's AGSTA value"
     from arvcas.controllers.base import ControllerError
     from arvcas.sim.simulation import compiled_run
@@ -350,14 +351,11 @@ def _new_checkpoint(study: Study, controller: str, task: EvalTask) -> ck.Checkpo
 
 
 def _system_ref(study: Study) -> str:
-    """How a checkpoint names the study's system: a shipped name, or the system file's absolute path (the front file
-    stores it relative to its own folder: :mod:`arvcas.tuning.checkpoint`)."""
-    if study.system is None:
-        return ""
-    from arvcas.system import shipped
+    """How a checkpoint names the study's system (:func:`arvcas.system.result_ref`: "" for the default system,
+    named or not; the front file stores a file's path relative to its own folder: :mod:`arvcas.tuning.checkpoint`)."""
+    from arvcas.system import result_ref
 
-    name = study.params.structure.name
-    return name if name in shipped() and Path(study.params.path) == shipped()[name] else str(Path(study.params.path).resolve())
+    return result_ref(study.params)
 
 
 def _identity_diff(stored: str, current: dict) -> list[str]:
