@@ -266,6 +266,8 @@ _CHILD = """
 import json, resource, sys, time
 from arvcas.ident import logs
 from arvcas.ident import ardupilot, streams
+if len(sys.argv) > 3:  # the readers' block size (bytes)
+    streams.CSV_BLOCK_BYTES = ardupilot.TLOG_BLOCK_BYTES = ardupilot.DATAFLASH_BLOCK_BYTES = int(sys.argv[3])
 logs.load_log(sys.argv[2])  # a small log of the same kind first: every import and first-use cost
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t0 = time.perf_counter()
@@ -276,12 +278,13 @@ print(json.dumps({"base_kib": base, "peak_kib": peak, "seconds": dt, "samples": 
 """
 
 
-def peak(mapping: Path, small: Path, code: Path = ROOT) -> dict:
+def peak(mapping: Path, small: Path, code: Path = ROOT, block: int | None = None) -> dict:
     """Peak resident memory (KiB) of a fresh process that reads ``mapping`` with the readers of ``code``, and
-    the same figure before it (``base_kib``: after reading ``small``, a small log of the same kind)."""
+    the same figure before it (``base_kib``: after reading ``small``, a small log of the same kind); ``block``:
+    the bytes the CSV, telemetry and DataFlash readers read at a time (default theirs)."""
     env = dict(os.environ, PYTHONPATH=str(code))
-    r = subprocess.run([sys.executable, "-c", _CHILD, str(mapping), str(small)], env=env, capture_output=True,
-                       text=True)
+    r = subprocess.run([sys.executable, "-c", _CHILD, str(mapping), str(small)] + ([str(block)] if block else []),
+                       env=env, capture_output=True, text=True)
     if r.returncode:
         raise RuntimeError(f"{mapping}: {r.stderr.strip().splitlines()[-1] if r.stderr.strip() else r.returncode}")
     return json.loads(r.stdout.strip().splitlines()[-1])

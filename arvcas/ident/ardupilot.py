@@ -150,6 +150,66 @@ def _read(mavutil, path: Path, kind: str, wanted: dict[str, set[str]], budget: B
     return out
 
 
+def _give_back(data_map, start: int, end: int) -> None:
+    """Drop the pages of bytes ``start:end`` of a mapped file from this process's memory (they are read
+    from the file again if touched): what reading a log costs is then what it keeps, not the file."""
+    import mmap
+
+    if hasattr(data_map, "madvise") and hasattr(mmap, "MADV_DONTNEED"):
+        lo = start // mmap.PAGESIZE * mmap.PAGESIZE
+        data_map.madvise(mmap.MADV_DONTNEED, lo, min(end, len(data_map)) - lo)
+
+
+def _index_blocks(r, keep: set[str]) -> tuple[list, list[int]]:
+    """The offsets of the messages of a DataFlash log (``r``, pymavlink's reader: its mapped file) that ``keep``
+    names (NumPy arrays, by message type), and every type's count: pymavlink's indexer run on blocks of
+    :data:`DATAFLASH_BLOCK_BYTES`, each after the FMT messages seen before it (a message's length is its
+    format's); the indexer stops where pymavlink's stops (a message of no format). Each block's pages are
+    given back to the system after it is indexed."""
+    from pymavlink import dfindexer
+
+    fmt_len = r.formats[0x80].len
+    lengths = {0x80: fmt_len}
+    names: dict[int, str] = {0x80: "FMT"}
+    kept: dict[int, list] = {}
+    counts = [0] * 256
+    prefix = b""  # every FMT message so far
+    pos, n = 0, r.data_len
+    while pos < n:
+        end = min(pos + DATAFLASH_BLOCK_BYTES, n)
+        buf = prefix + r.data_map[pos:end]
+        base = pos - len(prefix)
+        found = dfindexer.build_offsets(memoryview(buf), 0x80, fmt_len, 3, 4, r.HEAD1, r.HEAD2)
+        last = pos
+        for t in [0x80] + [t for t in range(256) if t != 0x80]:
+            if not found[t]:
+                continue
+            a = np.asarray(found[t], dtype=np.int64) + base
+            a = a[a >= pos]
+            if t not in lengths:  # a message of no format: pymavlink's indexer stopped before it
+                continue
+            a = a[a + lengths[t] <= end]  # the last message may be cut by the block's end: the next block has it
+            if not a.size:
+                continue
+            last = max(last, int(a[-1]) + lengths[t])
+            counts[t] += a.size
+            if t == 0x80:
+                for o in a.tolist():
+                    rec = r.data_map[o:o + fmt_len]
+                    lengths[rec[3]] = rec[4]
+                    names[rec[3]] = rec[5:9].split(b"\0", 1)[0].decode("ascii", "replace")
+                    prefix += rec
+            if names.get(t) in keep:
+                kept.setdefault(t, []).append(a)
+        del buf, found
+        _give_back(r.data_map, pos, end)
+        if last <= pos:
+            break  # no whole message in the block: where pymavlink's indexer stops
+        pos = last
+    offsets = [np.concatenate(kept[t]) if t in kept else [] for t in range(256)]
+    return offsets, counts
+
+
 def _base(name: str) -> str:
     return name.split("[", 1)[0]
 
@@ -161,20 +221,44 @@ def _value(msg, name: str) -> float:
     return float(getattr(msg, name))
 
 
+DATAFLASH_BLOCK_BYTES = 4 << 20  # a DataFlash log is indexed this much at a time
+_DF_KEEP = ("FMT", "FMTU", "UNIT", "MULT", "PARM", "MODE", "ARM", "EV")  # messages whose offsets are always kept
+
+
 def _read_dataflash(mavutil, path: Path, wanted: dict[str, set[str]], budget: Budget) -> AutopilotLog:
-    """pymavlink's DataFlash reader indexes the file and parses its formats (FMT, FMTU, UNIT); the messages
-    named are then unpacked from its index with each format's own struct and multipliers (a message object
-    per sample costs 0.3 ms, measured: 44 s for a 10-minute log of 117,000 messages)."""
+    """pymavlink's DataFlash reader indexes the file and parses its formats (FMT, FMTU, UNIT, MULT); the
+    messages named are then unpacked from its index with each format's own struct and multipliers (a
+    message object per sample costs 0.3 ms, measured: 44 s for a 10-minute log of 117,000 messages). The
+    index is built by pymavlink's own indexer (:mod:`pymavlink.dfindexer`) a block at a time
+    (:func:`_index_blocks`): it keeps the offsets of the messages named and of :data:`_DF_KEEP` only, and
+    counts the others."""
 
     from pymavlink import DFReader
 
     class Reader(DFReader.DFReader_binary):
+        counts: list[int] | None = None
+
+        def init_arrays_fast(self, progress_callback=None):
+            offsets, self.counts = _index_blocks(self, set(wanted) | set(_DF_KEEP))
+            real = DFReader.dfindexer
+
+            class Indexed:  # pymavlink's indexing after its build_offsets: FMT, UNIT, MULT, FMTU, first messages
+                @staticmethod
+                def build_offsets(*a, **k):
+                    return offsets
+
+            DFReader.dfindexer = Indexed
+            try:
+                super().init_arrays_fast(progress_callback)
+            finally:
+                DFReader.dfindexer = real
+
         def init_clock(self):  # the boot clock (TimeUS) is the time base: no search for a GPS clock
             self.init_clock_usec()
 
     r = Reader(str(path))
     out = AutopilotLog(path, "DataFlash")
-    counts = {tid: len(offs) for tid, offs in enumerate(r.offsets)}
+    counts = dict(enumerate(r.counts if r.counts is not None else [len(offs) for offs in r.offsets]))
     for tid, fmt in r.formats.items():
         if counts.get(tid, 0) or fmt.name in wanted:
             out.fields[fmt.name] = list(fmt.columns)
@@ -190,10 +274,22 @@ def _read_dataflash(mavutil, path: Path, wanted: dict[str, set[str]], budget: Bu
         bad = next((c for c in cols if c not in fmt.colhash), None)
         if bad is not None:
             raise Error(f"{path}: message {name} field {bad!r}: DataFlash fields are named whole (no [index])")
-        offs = [o for o in r.offsets[tid] if o + fmt.len <= r.data_len]  # not a message cut short at the end
+        offs = np.asarray(r.offsets[tid], dtype=np.int64)
+        offs = offs[offs + fmt.len <= r.data_len]  # not a message cut short at the end
         codes = re.findall(r"\d*[A-Za-z?]", fmt.msg_struct.lstrip("<"))
         dt = np.dtype([(f"f{k}", "<" + (f"S{c[:-1]}" if c.endswith("s") else _NUMPY[c])) for k, c in enumerate(codes)])
-        a = np.frombuffer(b"".join(r.data_map[o + 3:o + fmt.len] for o in offs), dtype=dt)
+        body = np.empty((offs.size, fmt.len - 3), np.uint8)
+        raw = np.frombuffer(r.data_map, np.uint8)
+        step = np.arange(3, fmt.len)
+        i = 0
+        while i < offs.size:  # gathered from the file a block at a time (at most 16,384 messages, 1 MB of file)
+            j = min(i + 16384, int(np.searchsorted(offs, offs[i] + (1 << 20))), offs.size)
+            o = offs[i:j]
+            body[i:j] = raw[o[:, None] + step]
+            _give_back(r.data_map, int(o[0]), int(o[-1]) + fmt.len)
+            i = j
+        del raw
+        a = body.reshape(-1).view(dt)
 
         def col(c):
             k = fmt.colhash[c]
@@ -347,6 +443,7 @@ class _Vehicle:
         self.out = out
         self.budget = budget
         self.kept = 0  # values in rows
+        self.left = budget.values - budget.used  # values the budget leaves
         self.rows: dict[str, list[array]] = {}  # message -> its times, then each field named (sorted), float64
         self.sorted: dict[str, list[str]] = {}
         self.last: dict[str, float] = {}
@@ -408,8 +505,9 @@ class _Vehicle:
         cols = self.rows.get(name)
         if cols is None:
             cols = self.rows[name] = [array("d") for _ in range(1 + len(wanted[name]))]
-        if self.kept % 65536 < len(cols):  # every 65,536 values or so
-            self.budget.check(self.kept, str(path), f"{self.kept:,} values (by {name} at {t:.3f} s on the boot clock)")
+        if self.kept + len(cols) > self.left:
+            self.budget.check(self.kept + len(cols), str(path), f"{self.kept + len(cols):,} values (by {name} at "
+                                                                f"{t:.3f} s on the boot clock)")
         cols[0].append(t)
         for c, n in zip(cols[1:], self.names(name, wanted)):
             c.append(_value(m, n))
