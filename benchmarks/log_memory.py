@@ -6,7 +6,8 @@ values the mapping keeps, on synthetic logs where most of the data is not mapped
 
 Each log is written to a temporary directory (never committed) with a mapping file, then read by
 :func:`arvcas.ident.logs.load_log` in a fresh Python process that reports its peak resident memory
-(``resource.getrusage(RUSAGE_SELF).ru_maxrss``) and the same figure before it, after reading a small log of
+(``VmHWM`` of ``/proc/self/status``: ``ru_maxrss`` would carry the parent's peak across ``exec``) and the
+same figure before it, after reading a small log of
 the same kind (the baseline: the imports and every first-use cost); ``added`` is their difference. The
 logs (seconds of data grow with the size asked):
 
@@ -264,16 +265,26 @@ def write(reader: str, d: Path, size: float) -> tuple[Path, int]:
 
 _CHILD = """
 import json, resource, sys, time
+
+
+def hwm():  # KiB: this process's peak resident memory (Linux: VmHWM, which a fork does not inherit)
+    try:
+        with open("/proc/self/status") as f:
+            return int(next(ln for ln in f if ln.startswith("VmHWM:")).split()[1])
+    except (OSError, StopIteration):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+
+
 from arvcas.ident import logs
 from arvcas.ident import ardupilot, streams
 if len(sys.argv) > 3:  # the readers' block size (bytes)
     streams.CSV_BLOCK_BYTES = ardupilot.TLOG_BLOCK_BYTES = ardupilot.DATAFLASH_BLOCK_BYTES = int(sys.argv[3])
 logs.load_log(sys.argv[2])  # a small log of the same kind first: every import and first-use cost
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+base = hwm()
 t0 = time.perf_counter()
 lg = logs.load_log(sys.argv[1])
 dt = time.perf_counter() - t0
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+peak = hwm()
 print(json.dumps({"base_kib": base, "peak_kib": peak, "seconds": dt, "samples": int(lg.t.size)}))
 """
 

@@ -156,7 +156,8 @@ def _csv_block(data: bytes, path: Path, line: int, width: int, idx: list[int]) -
             why = " (a decimal comma? fields are separated by commas and decimals take a point)" if n > width else ""
             raise LogError(f"{path}: row {line + k}: {n} fields, the header has {width}{why}")
     try:
-        rows = np.loadtxt(io.StringIO(_utf8(data, path, line)), delimiter=",", usecols=idx, ndmin=2, dtype=float)
+        _utf8(data, path, line)  # (a str of the block would cost 1-4 bytes a character: NumPy reads the bytes)
+        rows = np.loadtxt(io.BytesIO(data), delimiter=",", usecols=idx, ndmin=2, dtype=float, encoding="utf-8")
     except ValueError as e:
         msg = " ".join(str(e).split())
         raise LogError(f"{path}: a number could not be read in rows {line} to {line + len(lines) - 1} "
