@@ -33,8 +33,7 @@ CONSTANT_MB = 16.0
 
 
 @pytest.mark.slow
-# not ROS 1 bags: rosbags indexes every message of the bag (every topic) when it opens it (docs/logs.md)
-@pytest.mark.parametrize("reader", ["csv", "ros2-mcap", "ros2-sqlite3", "bin", "tlog"])
+@pytest.mark.parametrize("reader", ["csv", "ros1", "ros2-mcap", "ros2-sqlite3", "bin", "tlog"])
 def test_a_log_costs_what_it_keeps_not_its_file(tmp_path, reader):
     (tmp_path / "big").mkdir()
     (tmp_path / "small").mkdir()

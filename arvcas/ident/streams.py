@@ -179,6 +179,28 @@ def _field(msg: Any, path: str) -> float:
     return float(v)
 
 
+def _ros1_reader(bag: Path, topic: str):
+    """rosbags' ROS 1 reader of ``bag`` that indexes the messages of ``topic`` only: rosbags reads the index of
+    every chunk when it opens a bag, an object of ~100 bytes a message of any topic; the other topics' are
+    dropped chunk by chunk (their message count reads 0)."""
+    from rosbags.rosbag1 import Reader
+
+    class _Sink(dict):
+        def __init__(self, indexes, keep):
+            super().__init__()
+            self.indexes, self.keep = indexes, keep
+
+        def __getitem__(self, conn):
+            return self.indexes[conn] if conn in self.keep else []
+
+    class TopicReader(Reader):
+        def read_index_data(self, pos, indexes):
+            keep = {c.id for c in self.connections if c.topic == topic}
+            super().read_index_data(pos, _Sink(indexes, keep))
+
+    return TopicReader(bag)
+
+
 def read_bag(bag: Path, topic: str, names: list[str], time_field: str | None, mapping: str,
              budget: Budget | None = None) -> Table:
     """The fields ``names`` (and the time) of the messages of one topic of a ROS bag. Only that topic's
@@ -194,7 +216,10 @@ def read_bag(bag: Path, topic: str, names: list[str], time_field: str | None, ma
     where = f"{bag} topic {topic}"
     n = 0
     try:
-        with AnyReader([bag]) as reader:
+        reader = AnyReader([bag])
+        if not reader.is2:  # a ROS 1 bag: its index of the other topics' messages is not kept
+            reader.readers = [_ros1_reader(bag, topic)]
+        with reader:
             conns = [c for c in reader.connections if c.topic == topic]
             if not conns:
                 topics = sorted({c.topic for c in reader.connections})
