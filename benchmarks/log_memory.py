@@ -295,7 +295,7 @@ def peak(mapping: Path, small: Path, code: Path = ROOT, block: int | None = None
     the bytes the CSV, telemetry and DataFlash readers read at a time (default theirs)."""
     env = dict(os.environ, PYTHONPATH=str(code))
     r = subprocess.run([sys.executable, "-c", _CHILD, str(mapping), str(small)] + ([str(block)] if block else []),
-                       env=env, capture_output=True, text=True)
+                       env=env, capture_output=True, text=True, cwd=code)  # (python -c puts the cwd first on sys.path)
     if r.returncode:
         raise RuntimeError(f"{mapping}: {r.stderr.strip().splitlines()[-1] if r.stderr.strip() else r.returncode}")
     return json.loads(r.stdout.strip().splitlines()[-1])
