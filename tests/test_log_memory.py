@@ -130,3 +130,16 @@ def test_any_block_size_reads_the_same_autopilot_log(tmp_path, reader, block, mo
         for c, v in cols.items():
             np.testing.assert_array_equal(part.tables[k][1][c], v)
     assert whole.fields == part.fields and (whole.t_first, whole.t_last) == (part.t_first, part.t_last)
+
+
+@pytest.mark.parametrize("f, width", [(logs.R_from_euler, 3), (logs.R_from_quaternion, 4)])
+def test_rotations_a_block_at_a_time_are_the_same_to_the_bit(f, width):
+    """The attitude's matrices built a block of rows at a time equal those built at once (every row is
+    computed alone: elementwise trigonometry and a 3 x 3 product)."""
+    x = np.random.default_rng(3).normal(size=(100_003, width))
+    if width == 4:
+        x /= np.linalg.norm(x, axis=1)[:, None]
+    Cw, Cb = logs.WORLD_FRAMES["enu"], logs.BODY_FRAMES["flu"]
+    whole = Cw @ f(x) @ Cb
+    for block in (1, 7, 4096, 1 << 16):
+        assert np.array_equal(logs._rotations(f, x, Cw, Cb, block), whole), block

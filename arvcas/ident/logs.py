@@ -527,6 +527,15 @@ def _columns_of(sm: StreamMap) -> list[str]:
     return list(dict.fromkeys(names))
 
 
+def _rotations(f, x: np.ndarray, Cw: np.ndarray, Cb: np.ndarray, block: int = 1 << 16) -> np.ndarray:
+    """``Cw @ f(x) @ Cb``, (n, 3, 3), a block of rows at a time: what it costs is the n matrices, not the
+    temporaries of ``f`` (a dozen arrays of every row)."""
+    R = np.empty((x.shape[0], 3, 3))
+    for i in range(0, x.shape[0], block):
+        R[i:i + block] = Cw @ f(x[i:i + block]) @ Cb
+    return R
+
+
 def _interp(tq: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:
     if y.ndim == 1:
         return np.interp(tq, t, y)
@@ -678,12 +687,12 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             if bad.size:
                 raise LogError(f"{tb.where}: columns {', '.join(sm.quaternion.columns)}: not a unit quaternion at "
                                f"row {bad[0] + 2} (norm {nrm[bad[0]]:.4g})")
-            R = Cw @ R_from_quaternion(qv / nrm[:, None]) @ Cb
+            R = _rotations(R_from_quaternion, qv / nrm[:, None], Cw, Cb)
             _check_quaternion_order(sm, qv / nrm[:, None], R, cols("acceleration")[0] if sm.acceleration is not None else None,
                                     Cw, Cb, f"{tb.where}: {where} {key}.quaternion_order")
         elif sm.euler is not None:
             ev, s_e = cols("euler")
-            R = Cw @ R_from_euler(ev) @ Cb
+            R = _rotations(R_from_euler, ev, Cw, Cb)
         if R is not None:
             e = euler_from_R(R)
             med = np.degrees(np.median(np.abs(e[:, 0])))
