@@ -9,6 +9,7 @@ from __future__ import annotations
 import gzip
 import io
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -157,7 +158,9 @@ def _csv_block(data: bytes, path: Path, line: int, width: int, idx: list[int]) -
             raise LogError(f"{path}: row {line + k}: {n} fields, the header has {width}{why}")
     try:
         _utf8(data, path, line)  # (a str of the block would cost 1-4 bytes a character: NumPy reads the bytes)
-        rows = np.loadtxt(io.BytesIO(data), delimiter=",", usecols=idx, ndmin=2, dtype=float, encoding="utf-8")
+        with warnings.catch_warnings():  # a block of only blank or comment lines holds no data: no warning
+            warnings.filterwarnings("ignore", "loadtxt: input contained no data", UserWarning)
+            rows = np.loadtxt(io.BytesIO(data), delimiter=",", usecols=idx, ndmin=2, dtype=float, encoding="utf-8")
     except ValueError as e:
         msg = " ".join(str(e).split())
         raise LogError(f"{path}: a number could not be read in rows {line} to {line + len(lines) - 1} "
