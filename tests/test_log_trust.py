@@ -113,11 +113,13 @@ def test_a_corrupt_gzip_log_is_one_line(tmp_path, damage):
 def test_a_log_is_bounded_by_the_values_it_keeps(tmp_path, monkeypatch):
     p = _stream(tmp_path, ("t,a,b,c\n" + "".join(f"{k},{k},{k},{k}\n" for k in range(1000))).encode())
     monkeypatch.setattr(streams, "CSV_BLOCK_BYTES", 256)
-    monkeypatch.setattr(streams, "MAX_CSV_VALUES", 2500)
-    assert streams.read_csv(p, ["a"], "t", "m").time.size == 1000  # 2 columns kept: 2000 values
-    with pytest.raises(LogError, match=r"more than 833 rows of the 3 columns read \(arvcas.ident.streams.MAX_SAMPLES, "
-                                       r"MAX_CSV_VALUES\)"):
-        streams.read_csv(p, ["a", "b"], "t", "m")
+    budget = streams.Budget("m.log.toml", max_mb=2500 * 8 / 1e6)  # 2,500 values
+    assert streams.read_csv(p, ["a"], "t", "m", budget).time.size == 1000  # 2 columns kept: 2000 values
+    assert budget.used == 2000
+    with pytest.raises(LogError, match=rf"^{p}: [\d,]+ rows \(by row \d+\) of the 3 columns read would keep 0.02 MB of "
+                                       r"values \(float64\) with the streams before it, more than \[log\] "
+                                       r"max_memory_mb = 0.02 in m.log.toml: raise it"):
+        streams.read_csv(p, ["a", "b"], "t", "m", streams.Budget("m.log.toml", max_mb=2500 * 8 / 1e6))
 
 
 _floats = st.floats(allow_nan=False, allow_infinity=False, width=64)

@@ -389,7 +389,9 @@ def test_tlog_values_and_heartbeat_segment(tmp_path):
     (tmp_path / "damaged.tlog").write_bytes(raw[:cut] + bytes(range(3, 20)) + raw[cut:])
     from arvcas.ident import ardupilot
 
-    assert ardupilot._tlog_frames(raw) is not None and ardupilot._tlog_frames(raw[:cut] + b"\x03" + raw[cut:]) is None
+    # the scan ends at the end of the data (framed throughout) or at -1 (the byte after a frame is no frame)
+    assert list(ardupilot._tlog_frames(raw))[-1] == len(raw)
+    assert list(ardupilot._tlog_frames(raw[:cut] + b"\x03" + raw[cut:]))[-1] == -1
     lg2 = _load(_mapping(tmp_path, "dmg", "damaged.tlog", "", TLOG_STREAMS))
     assert lg2.t0 == lg.t0 and np.max(np.abs(lg2.signals["roll"] - X[:, 3])) < 1e-3
 

@@ -24,10 +24,13 @@ from __future__ import annotations
 
 import math
 import re
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from arvcas.ident.streams import Budget, LogError
 
 __all__ = ["AutopilotLog", "Segment", "Error", "read", "table", "segments", "mode_name", "KINDS", "BOOT_TIME_FIELDS",
            "LOG_UNITS"]
@@ -95,11 +98,15 @@ def _import(mapping: str):
     return mavutil
 
 
-def read(path: Path, wanted: dict[str, set[str]], mapping: str) -> AutopilotLog:
+def read(path: Path, wanted: dict[str, set[str]], mapping: str, budget: Budget | None = None) -> AutopilotLog:
     """The messages ``wanted`` (message -> field names) of the log ``path``, with arming, modes and parameters.
 
-    Unknown messages and fields are refused (one line listing what the log holds) after the pass."""
+    Unknown messages and fields are refused (one line listing what the log holds) after the pass. What the
+    messages keep (their times and fields, float64) is checked against ``budget`` (default:
+    :data:`arvcas.ident.streams.MAX_MEMORY_MB`): from the index of a DataFlash log before any message is
+    unpacked, as it is read in a telemetry log (:class:`arvcas.ident.streams.LogError`)."""
     mavutil = _import(mapping)
+    budget = budget or Budget(mapping)
     kind = KINDS.get(path.suffix.lower())
     if kind is None:
         raise Error(f"{path}: not an ArduPilot log: the file name ends in .bin (DataFlash) or .tlog (MAVLink "
@@ -110,9 +117,10 @@ def read(path: Path, wanted: dict[str, set[str]], mapping: str) -> AutopilotLog:
     if key in _READ:  # several mappings (a dive's segments) on one log: read once per process
         out = _READ[key]
     else:
-        out = _READ[key] = _read(mavutil, path, kind, wanted)
+        out = _READ[key] = _read(mavutil, path, kind, wanted, budget)
         while len(_READ) > _READ_KEPT:
             _READ.pop(next(iter(_READ)))
+    budget.spend(sum(t.size * (1 + len(c)) for t, c in out.tables.values()), str(path), "the messages named")
     for msg, names in wanted.items():
         if msg not in out.fields:
             raise Error(f"{path}: no message {msg!r} (named in {mapping}); the log holds "
@@ -128,18 +136,78 @@ _READ: dict = {}  # (file, its mtime and size, the messages and fields read) -> 
 _READ_KEPT = 8
 
 
-def _read(mavutil, path: Path, kind: str, wanted: dict[str, set[str]]) -> AutopilotLog:
+def _read(mavutil, path: Path, kind: str, wanted: dict[str, set[str]], budget: Budget) -> AutopilotLog:
     try:
         if kind == "DataFlash":
-            out = _read_dataflash(mavutil, path, wanted)
+            out = _read_dataflash(mavutil, path, wanted, budget)
         else:
-            out = _read_tlog(mavutil, path, wanted)
-    except Error:
+            out = _read_tlog(mavutil, path, wanted, budget)
+    except (Error, LogError):
         raise
     except Exception as e:  # pymavlink's own errors on a damaged file
         raise Error(f"{path}: not a readable {kind} log ({type(e).__name__}: {' '.join(str(e).split())[:160]})") \
             from None
     return out
+
+
+def _give_back(data_map, start: int, end: int) -> None:
+    """Drop the pages of bytes ``start:end`` of a mapped file from this process's memory (they are read
+    from the file again if touched): what reading a log costs is then what it keeps, not the file."""
+    import mmap
+
+    if hasattr(data_map, "madvise") and hasattr(mmap, "MADV_DONTNEED"):
+        lo = start // mmap.PAGESIZE * mmap.PAGESIZE
+        data_map.madvise(mmap.MADV_DONTNEED, lo, min(end, len(data_map)) - lo)
+
+
+def _index_blocks(r, keep: set[str]) -> tuple[list, list[int]]:
+    """The offsets of the messages of a DataFlash log (``r``, pymavlink's reader: its mapped file) that ``keep``
+    names (NumPy arrays, by message type), and every type's count: pymavlink's indexer run on blocks of
+    :data:`DATAFLASH_BLOCK_BYTES`, each after the FMT messages seen before it (a message's length is its
+    format's); the indexer stops where pymavlink's stops (a message of no format). Each block's pages are
+    given back to the system after it is indexed."""
+    from pymavlink import dfindexer
+
+    fmt_len = r.formats[0x80].len
+    lengths = {0x80: fmt_len}
+    names: dict[int, str] = {0x80: "FMT"}
+    kept: dict[int, list] = {}
+    counts = [0] * 256
+    prefix = b""  # every FMT message so far
+    pos, n = 0, r.data_len
+    while pos < n:
+        end = min(pos + DATAFLASH_BLOCK_BYTES, n)
+        buf = prefix + r.data_map[pos:end]
+        base = pos - len(prefix)
+        found = dfindexer.build_offsets(memoryview(buf), 0x80, fmt_len, 3, 4, r.HEAD1, r.HEAD2)
+        last = pos
+        for t in [0x80] + [t for t in range(256) if t != 0x80]:
+            if not found[t]:
+                continue
+            a = np.asarray(found[t], dtype=np.int64) + base
+            a = a[a >= pos]
+            if t not in lengths:  # a message of no format: pymavlink's indexer stopped before it
+                continue
+            a = a[a + lengths[t] <= end]  # the last message may be cut by the block's end: the next block has it
+            if not a.size:
+                continue
+            last = max(last, int(a[-1]) + lengths[t])
+            counts[t] += a.size
+            if t == 0x80:
+                for o in a.tolist():
+                    rec = r.data_map[o:o + fmt_len]
+                    lengths[rec[3]] = rec[4]
+                    names[rec[3]] = rec[5:9].split(b"\0", 1)[0].decode("ascii", "replace")
+                    prefix += rec
+            if names.get(t) in keep:
+                kept.setdefault(t, []).append(a)
+        del buf, found
+        _give_back(r.data_map, pos, end)
+        if last <= pos:
+            break  # no whole message in the block: where pymavlink's indexer stops
+        pos = last
+    offsets = [np.concatenate(kept[t]) if t in kept else [] for t in range(256)]
+    return offsets, counts
 
 
 def _base(name: str) -> str:
@@ -153,20 +221,44 @@ def _value(msg, name: str) -> float:
     return float(getattr(msg, name))
 
 
-def _read_dataflash(mavutil, path: Path, wanted: dict[str, set[str]]) -> AutopilotLog:
-    """pymavlink's DataFlash reader indexes the file and parses its formats (FMT, FMTU, UNIT); the messages
-    named are then unpacked from its index with each format's own struct and multipliers (a message object
-    per sample costs 0.3 ms, measured: 44 s for a 10-minute log of 117,000 messages)."""
+DATAFLASH_BLOCK_BYTES = 4 << 20  # a DataFlash log is indexed this much at a time
+_DF_KEEP = ("FMT", "FMTU", "UNIT", "MULT", "PARM", "MODE", "ARM", "EV")  # messages whose offsets are always kept
+
+
+def _read_dataflash(mavutil, path: Path, wanted: dict[str, set[str]], budget: Budget) -> AutopilotLog:
+    """pymavlink's DataFlash reader indexes the file and parses its formats (FMT, FMTU, UNIT, MULT); the
+    messages named are then unpacked from its index with each format's own struct and multipliers (a
+    message object per sample costs 0.3 ms, measured: 44 s for a 10-minute log of 117,000 messages). The
+    index is built by pymavlink's own indexer (:mod:`pymavlink.dfindexer`) a block at a time
+    (:func:`_index_blocks`): it keeps the offsets of the messages named and of :data:`_DF_KEEP` only, and
+    counts the others."""
 
     from pymavlink import DFReader
 
     class Reader(DFReader.DFReader_binary):
+        counts: list[int] | None = None
+
+        def init_arrays_fast(self, progress_callback=None):
+            offsets, self.counts = _index_blocks(self, set(wanted) | set(_DF_KEEP))
+            real = DFReader.dfindexer
+
+            class Indexed:  # pymavlink's indexing after its build_offsets: FMT, UNIT, MULT, FMTU, first messages
+                @staticmethod
+                def build_offsets(*a, **k):
+                    return offsets
+
+            DFReader.dfindexer = Indexed
+            try:
+                super().init_arrays_fast(progress_callback)
+            finally:
+                DFReader.dfindexer = real
+
         def init_clock(self):  # the boot clock (TimeUS) is the time base: no search for a GPS clock
             self.init_clock_usec()
 
     r = Reader(str(path))
     out = AutopilotLog(path, "DataFlash")
-    counts = {tid: len(offs) for tid, offs in enumerate(r.offsets)}
+    counts = dict(enumerate(r.counts if r.counts is not None else [len(offs) for offs in r.offsets]))
     for tid, fmt in r.formats.items():
         if counts.get(tid, 0) or fmt.name in wanted:
             out.fields[fmt.name] = list(fmt.columns)
@@ -182,10 +274,22 @@ def _read_dataflash(mavutil, path: Path, wanted: dict[str, set[str]]) -> Autopil
         bad = next((c for c in cols if c not in fmt.colhash), None)
         if bad is not None:
             raise Error(f"{path}: message {name} field {bad!r}: DataFlash fields are named whole (no [index])")
-        offs = [o for o in r.offsets[tid] if o + fmt.len <= r.data_len]  # not a message cut short at the end
+        offs = np.asarray(r.offsets[tid], dtype=np.int64)
+        offs = offs[offs + fmt.len <= r.data_len]  # not a message cut short at the end
         codes = re.findall(r"\d*[A-Za-z?]", fmt.msg_struct.lstrip("<"))
         dt = np.dtype([(f"f{k}", "<" + (f"S{c[:-1]}" if c.endswith("s") else _NUMPY[c])) for k, c in enumerate(codes)])
-        a = np.frombuffer(b"".join(r.data_map[o + 3:o + fmt.len] for o in offs), dtype=dt)
+        body = np.empty((offs.size, fmt.len - 3), np.uint8)
+        raw = np.frombuffer(r.data_map, np.uint8)
+        step = np.arange(3, fmt.len)
+        i = 0
+        while i < offs.size:  # gathered from the file a block at a time (at most 16,384 messages, 1 MB of file)
+            j = min(i + 16384, int(np.searchsorted(offs, offs[i] + (1 << 20))), offs.size)
+            o = offs[i:j]
+            body[i:j] = raw[o[:, None] + step]
+            _give_back(r.data_map, int(o[0]), int(o[-1]) + fmt.len)
+            i = j
+        del raw
+        a = body.reshape(-1).view(dt)
 
         def col(c):
             k = fmt.colhash[c]
@@ -216,10 +320,12 @@ def _read_dataflash(mavutil, path: Path, wanted: dict[str, set[str]]) -> Autopil
             armed = a
             out.arming_logged = True
         out.changes.append((float(t), armed, mode))
-    for name in wanted:
-        if name not in out.fields:
-            continue
-        cols = [n for n in sorted(wanted[name]) if _base(n) in out.fields[name]]
+    named = [(name, [n for n in sorted(wanted[name]) if _base(n) in out.fields[name]]) for name in wanted
+             if name in out.fields]
+    count = {name: len(r.offsets[r.name_to_id[name]]) if name in r.name_to_id else 0 for name, _ in named}
+    budget.check(sum(count[name] * (1 + len(cols)) for name, cols in named), str(path),
+                 f"{sum(count.values()):,} messages ({', '.join(f'{n} {c:,}' for n, c in count.items())})")
+    for name, cols in named:
         t, inst, vals = rows(name, cols)
         for i in ([None] if inst is None else sorted(set(inst.tolist()))):
             k = slice(None) if i is None else inst == i
@@ -232,68 +338,82 @@ def _read_dataflash(mavutil, path: Path, wanted: dict[str, set[str]]) -> Autopil
     return out
 
 
-def _columns(rr: list, names: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    t = np.array([x[0] for x in rr], dtype=float)
-    data = np.array([x[1] for x in rr], dtype=float).reshape(len(rr), len(names))
-    return t, {n: data[:, i] for i, n in enumerate(names)}
-
-
 # MAVLink messages decoded whatever the mapping names: HEARTBEAT, SYSTEM_TIME, PARAM_VALUE, ATTITUDE (boot times)
 _TLOG_ALWAYS = (0, 2, 22, 30)
 
 
-def _tlog_frames(data: bytes) -> list[tuple[int, int, int, int]] | None:
-    """(start, end, system id, message id) of every frame of a telemetry log (each an 8-byte time, then a
-    MAVLink 1 or 2 frame), or None where the file is not framed throughout (a damaged stretch)."""
-    out = []
-    i, n = 0, len(data)
+TLOG_BLOCK_BYTES = 8 << 20  # a telemetry log is read this much at a time
+
+
+def _tlog_frames(data: bytes, i: int = 0):
+    """(start, end, system id, message id) of the frames of ``data`` from ``i`` on (each an 8-byte time, then a
+    MAVLink 1 or 2 frame), up to the first frame cut short by its end; then the offset where that frame
+    starts, or -1 where ``data`` is not framed there (a damaged stretch)."""
+    n = len(data)
     while i + 16 <= n:
         k = i + 8
         if data[k] == 0xFD:  # MAVLink 2: header 10, CRC 2, signature 13 when signed
+            if k + 10 > n:
+                break  # a header cut short at the end of the block
             size = 12 + data[k + 1] + (13 if data[k + 2] & 1 else 0)
             sid, mid = data[k + 5], data[k + 7] | data[k + 8] << 8 | data[k + 9] << 16
         elif data[k] == 0xFE:  # MAVLink 1: header 6, CRC 2
             size, sid, mid = 8 + data[k + 1], data[k + 3], data[k + 5]
         else:
-            return None
+            yield -1
+            return
         if k + size > n:
-            break  # a frame cut short at the end of the file
-        out.append((k, k + size, sid, mid))
+            break  # a frame cut short at the end of the block
+        yield k, k + size, sid, mid
         i = k + size
-    return out
+    yield i
 
 
-def _read_tlog(mavutil, path: Path, wanted: dict[str, set[str]]) -> AutopilotLog:
-    """Only the frames of the messages named (and those of :data:`_TLOG_ALWAYS`) are decoded, by pymavlink
-    (which checks each frame's CRC and skips a damaged one); a file not framed throughout is read by
-    pymavlink's robust parser whole."""
+def _read_tlog(mavutil, path: Path, wanted: dict[str, set[str]], budget: Budget) -> AutopilotLog:
+    """The file is read in blocks of :data:`TLOG_BLOCK_BYTES`; only the frames of the messages named (and
+    those of :data:`_TLOG_ALWAYS`) are decoded, by pymavlink (which checks each frame's CRC and skips a
+    damaged one), their values kept in float64 arrays as they come (checked against ``budget``). A file not
+    framed throughout is read again by pymavlink's robust parser, whole."""
     seen: dict[int, _Vehicle] = {}  # system id -> what it sent (one pass; the vehicle is chosen at the end)
 
     def vehicle(sid: int) -> _Vehicle:
         if sid not in seen:
-            seen[sid] = _Vehicle(AutopilotLog(path, "MAVLink telemetry"))
+            seen[sid] = _Vehicle(AutopilotLog(path, "MAVLink telemetry"), budget)
         return seen[sid]
 
-    data = path.read_bytes()
-    frames = _tlog_frames(data)
-    if frames is not None:
-        mavutil.set_dialect("ardupilotmega")
-        mod = mavutil.mavlink
-        mav = mod.MAVLink(None)
-        ids = {cls.id for cls in mod.mavlink_map.values() if cls.msgname in wanted} | set(_TLOG_ALWAYS)
-        for a, b, sid, mid in frames:
-            cls = mod.mavlink_map.get(mid)
-            if cls is None:
-                continue
-            v = vehicle(sid)
-            v.saw(cls.msgname, cls.fieldnames, getattr(cls, "fieldunits_by_name", {}))
-            if mid in ids:
-                try:
-                    m = mav.decode(bytearray(data[a:b]))
-                except mod.MAVError:
-                    continue  # a damaged frame (its CRC)
-                v.add(m, wanted, path)
-    else:
+    mavutil.set_dialect("ardupilotmega")
+    mod = mavutil.mavlink
+    mav = mod.MAVLink(None)
+    ids = {cls.id for cls in mod.mavlink_map.values() if cls.msgname in wanted} | set(_TLOG_ALWAYS)
+    known: set[tuple[int, int]] = set()  # (system id, message id) whose fields are noted
+    framed = True
+    with open(path, "rb") as f:
+        rest = b""
+        while framed:
+            chunk = f.read(TLOG_BLOCK_BYTES)
+            data = rest + chunk
+            for fr in _tlog_frames(data):
+                if isinstance(fr, int):
+                    framed = fr >= 0
+                    rest = data[fr:] if framed else b""
+                    break
+                a, b, sid, mid = fr
+                cls = mod.mavlink_map.get(mid)
+                if cls is None:
+                    continue
+                if (sid, mid) not in known:
+                    known.add((sid, mid))
+                    vehicle(sid).saw(cls.msgname, cls.fieldnames, getattr(cls, "fieldunits_by_name", {}))
+                if mid in ids:
+                    try:
+                        m = mav.decode(bytearray(data[a:b]))
+                    except mod.MAVError:
+                        continue  # a damaged frame (its CRC)
+                    seen[sid].add(m, wanted, path)
+            if not chunk:
+                break
+    if not framed:
+        seen.clear()
         r = mavutil.mavlink_connection(str(path), robust_parsing=True, dialect="ardupilotmega")
         while True:
             m = r.recv_msg()
@@ -309,23 +429,34 @@ def _read_tlog(mavutil, path: Path, wanted: dict[str, set[str]]) -> AutopilotLog
                     f"{', '.join(map(str, vehicles))}); keep one vehicle's messages per log")
     v = seen[vehicles[0]]
     out = v.out
-    for name, rr in v.rows.items():
-        out.tables[(name, None)] = _columns(rr, sorted(wanted[name]))
-        out.t_first, out.t_last = min(out.t_first, rr[0][0]), max(out.t_last, rr[-1][0])
+    for name, cc in v.rows.items():
+        t = np.frombuffer(cc[0], dtype=float)
+        out.tables[(name, None)] = (t, {n: np.frombuffer(c, dtype=float) for n, c in zip(sorted(wanted[name]), cc[1:])})
+        out.t_first, out.t_last = min(out.t_first, float(t[0])), max(out.t_last, float(t[-1]))
     return out
 
 
 class _Vehicle:
     """The messages of one MAVLink system id, on its boot clock."""
 
-    def __init__(self, out: AutopilotLog):
+    def __init__(self, out: AutopilotLog, budget: Budget):
         self.out = out
-        self.rows: dict[str, list] = {}
+        self.budget = budget
+        self.kept = 0  # values in rows
+        self.left = budget.values - budget.used  # values the budget leaves
+        self.rows: dict[str, list[array]] = {}  # message -> its times, then each field named (sorted), float64
+        self.sorted: dict[str, list[str]] = {}
         self.last: dict[str, float] = {}
         self.wrap: dict[str, float] = {}
         self.boot: float | None = None  # the boot time of the latest message that carried time_boot_ms
         self.state: tuple | None = None  # (armed, mode) of the latest autopilot heartbeat
         self.ardupilot = False
+
+    def names(self, name: str, wanted: dict[str, set[str]]) -> list[str]:
+        """The fields of ``name`` kept, in the order of its columns."""
+        if name not in self.sorted:
+            self.sorted[name] = sorted(wanted[name])
+        return self.sorted[name]
 
     def saw(self, name: str, fields, units) -> None:
         if name not in self.out.fields:
@@ -371,7 +502,16 @@ class _Vehicle:
         if self.last.get(name) == t:
             return  # the same message again (a repeated transmission)
         self.last[name] = t
-        self.rows.setdefault(name, []).append((t, [_value(m, n) for n in sorted(wanted[name])]))
+        cols = self.rows.get(name)
+        if cols is None:
+            cols = self.rows[name] = [array("d") for _ in range(1 + len(wanted[name]))]
+        if self.kept + len(cols) > self.left:
+            self.budget.check(self.kept + len(cols), str(path), f"{self.kept + len(cols):,} values (by {name} at "
+                                                                f"{t:.3f} s on the boot clock)")
+        cols[0].append(t)
+        for c, n in zip(cols[1:], self.names(name, wanted)):
+            c.append(_value(m, n))
+        self.kept += len(cols)
 
 
 def _type_of(m, name: str) -> str:

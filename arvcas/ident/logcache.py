@@ -5,7 +5,8 @@ messages are deserialised one by one, and the joints' smoothing splines are fitt
 read by :func:`arvcas.ident.logs.load_log` is stored as an ``.npz`` file (no pickle) under
 ``<cache>/logs/`` (:func:`arvcas.build.codegen.cache_dir`), keyed by the SHA-256 of
 
-* the source of the modules that parse logs (this one, :mod:`arvcas.ident.logs`, :mod:`arvcas.system.config`),
+* the source of the modules that parse logs (this one, :mod:`arvcas.ident.logs` and its readers
+  :mod:`arvcas.ident.streams` and :mod:`arvcas.ident.ardupilot`, :mod:`arvcas.system.config`),
 * the mapping file's path as given, its bytes, and the system's joint count and thruster names it was checked
   against,
 * the bytes of every file the mapping names: each string value of the mapping that is the name of a file or a
@@ -35,10 +36,11 @@ FORMAT = "arvcas-log-cache-1"
 
 
 def _code_digest() -> str:
+    from arvcas.ident import ardupilot, streams
     from arvcas.system import config
 
     h = hashlib.sha256(FORMAT.encode())
-    for mod in (logs_mod, config):
+    for mod in (logs_mod, streams, ardupilot, config):
         h.update(Path(mod.__file__).read_bytes())
     h.update(Path(__file__).read_bytes())
     return h.hexdigest()

@@ -42,7 +42,7 @@ import numpy as np
 from arvcas.system import config
 from arvcas.system.config import Choices, Count, Invalid, Unique, ge, gt, le, quantity, setting
 from arvcas.system.systemfile import COMMAND_UNITS
-from arvcas.ident.streams import LogError, Table, read_bag, read_csv
+from arvcas.ident.streams import MAX_MEMORY_MB, Budget, LogError, Table, read_bag, read_csv
 
 __all__ = ["LogError", "Log", "JointTrajectory", "load_log", "load_logs", "MAPPING_SUFFIX", "SIGNALS",
            "euler_from_R", "R_from_euler", "WORLD_FRAMES", "BODY_FRAMES"]
@@ -191,6 +191,8 @@ class LogInfo:
     joint_cutoff: float = quantity("1", gt(0), default=2.0)  # Hz: where the joint splines halve an amplitude
     # the arm held still at these angles (rad, q1..qn) through the log: no joint stream (an autopilot's log)
     held_joints: tuple[float, ...] | None = quantity("angle", n=config.ANY_LENGTH, default=None, unit="rad")
+    # MB (10^6 bytes) the values read from the log's files may take (float64): more is refused before it is read
+    max_memory_mb: float = quantity("1", gt(0), default=MAX_MEMORY_MB)
 
     def _config_check(self, given):
         if self.t_end is not None and self.t_end <= self.t_start:
@@ -362,7 +364,7 @@ def _check_quaternion_order(sm, q: np.ndarray, R: np.ndarray, acc, Cw, Cb, what:
 _MOTOR_FUNCTIONS = {**{33 + k: k + 1 for k in range(8)}, **{82 + k: k + 9 for k in range(4)}}  # SERVOn_FUNCTION
 
 
-def _read_ardupilot(path: Path, m: LogMapping, info: LogInfo, where: str):
+def _read_ardupilot(path: Path, m: LogMapping, info: LogInfo, where: str, budget: Budget):
     """(the autopilot's log with every message the streams name, the segment the mapping picks)."""
     from arvcas.ident import ardupilot
     from arvcas.util.files import check_input
@@ -373,7 +375,7 @@ def _read_ardupilot(path: Path, m: LogMapping, info: LogInfo, where: str):
         if sm.message is not None:
             wanted.setdefault(sm.message, set()).update(_columns_of(sm))
     try:
-        alog = ardupilot.read(p, wanted, where)
+        alog = ardupilot.read(p, wanted, where, budget)
         segs = ardupilot.segments(alog, info.segment or "armed", info.modes)
     except ardupilot.Error as e:
         raise LogError(str(e)) from None
@@ -525,6 +527,15 @@ def _columns_of(sm: StreamMap) -> list[str]:
     return list(dict.fromkeys(names))
 
 
+def _rotations(f, x: np.ndarray, Cw: np.ndarray, Cb: np.ndarray, block: int = 1 << 16) -> np.ndarray:
+    """``Cw @ f(x) @ Cb``, (n, 3, 3), a block of rows at a time: what it costs is the n matrices, not the
+    temporaries of ``f`` (a dozen arrays of every row)."""
+    R = np.empty((x.shape[0], 3, 3))
+    for i in range(0, x.shape[0], block):
+        R[i:i + block] = Cw @ f(x[i:i + block]) @ Cb
+    return R
+
+
 def _interp(tq: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:
     if y.ndim == 1:
         return np.interp(tq, t, y)
@@ -613,16 +624,17 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
         raise LogError(f"{where}: no thrust, command or wrench stream: map one, or say [log] passive = true "
                        f"(the thrusters were off)")
     alog, seg = None, None
+    budget = Budget(where, info.max_memory_mb)  # what the streams' values may take, all together
     if info.ardupilot is not None:  # one pass over the autopilot's log: every message the streams name
-        alog, seg = _read_ardupilot(base / info.ardupilot, m, info, where)
+        alog, seg = _read_ardupilot(base / info.ardupilot, m, info, where, budget)
     # read every stream, check its time, find the common window
     tabs = []
     for i, sm in enumerate(m.stream):
         names = _columns_of(sm)
         if sm.file is not None:
-            tab = read_csv(base / sm.file, names, sm.time, where)
+            tab = read_csv(base / sm.file, names, sm.time, where, budget)
         elif sm.topic is not None:
-            tab = read_bag(bag, sm.topic, names, sm.time, where)
+            tab = read_bag(bag, sm.topic, names, sm.time, where, budget)
         else:
             tab = _ardupilot_table(alog, sm, names, f"{where} stream[{i + 1}]")
         tab.time = tab.time * (1.0 if sm.message is not None else TIME_UNITS[sm.time_unit]) + sm.time_offset
@@ -675,12 +687,12 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             if bad.size:
                 raise LogError(f"{tb.where}: columns {', '.join(sm.quaternion.columns)}: not a unit quaternion at "
                                f"row {bad[0] + 2} (norm {nrm[bad[0]]:.4g})")
-            R = Cw @ R_from_quaternion(qv / nrm[:, None]) @ Cb
+            R = _rotations(R_from_quaternion, qv / nrm[:, None], Cw, Cb)
             _check_quaternion_order(sm, qv / nrm[:, None], R, cols("acceleration")[0] if sm.acceleration is not None else None,
                                     Cw, Cb, f"{tb.where}: {where} {key}.quaternion_order")
         elif sm.euler is not None:
             ev, s_e = cols("euler")
-            R = Cw @ R_from_euler(ev) @ Cb
+            R = _rotations(R_from_euler, ev, Cw, Cb)
         if R is not None:
             e = euler_from_R(R)
             med = np.degrees(np.median(np.abs(e[:, 0])))

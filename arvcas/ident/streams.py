@@ -9,6 +9,7 @@ from __future__ import annotations
 import gzip
 import io
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,15 +18,46 @@ import numpy as np
 
 from arvcas.system import config
 
-__all__ = ["LogError", "Table", "read_csv", "read_bag", "MAX_LOG_BYTES", "MAX_SAMPLES", "CSV_BLOCK_BYTES",
-           "MAX_CSV_VALUES"]
+__all__ = ["LogError", "Table", "Budget", "read_csv", "read_bag", "MAX_LOG_BYTES", "MAX_SAMPLES", "CSV_BLOCK_BYTES",
+           "MAX_MEMORY_MB"]
 
 MAX_LOG_BYTES = 1 << 30  # one stream file (after decompression); a trial of an hour at 1 kHz is ~100 MB
 MAX_SAMPLES = 20_000_000  # rows of one stream
+# MB (10^6 bytes) the values a log keeps may take as float64: [log] max_memory_mb's default (100 million values)
+MAX_MEMORY_MB = 800.0
 
 
 class LogError(ValueError):
     """One line naming the mapping or stream file, the key or column, and the reason."""
+
+
+@dataclass
+class Budget:
+    """What one log may keep: ``max_mb`` MB of float64 values (``[log] max_memory_mb`` of ``mapping``), spent
+    stream by stream. A reader asks :meth:`check` before it keeps values: from an index (a bag's message
+    counts, a DataFlash log's) before reading them, or as it reads (a CSV file, a telemetry log)."""
+
+    mapping: str
+    max_mb: float = MAX_MEMORY_MB
+    used: int = 0  # values kept by the streams read so far
+
+    @property
+    def values(self) -> int:
+        """The values the whole log may keep."""
+        return int(self.max_mb * 1e6 // 8)
+
+    def check(self, values: int, where: str, what: str) -> None:
+        """:class:`LogError` if ``values`` more than those kept would pass the budget: one line naming
+        ``where`` (the file), ``what`` it would keep, what that costs and the setting."""
+        if self.used + values > self.values:
+            mb = (self.used + values) * 8 / 1e6
+            raise LogError(f"{where}: {what} would keep {f'{mb:,.0f}' if mb >= 10 else f'{mb:.2g}'} MB of values "
+                           f"(float64) with the streams before it, more than [log] max_memory_mb = {self.max_mb:g} "
+                           f"in {self.mapping}: raise it, cut the log, or map fewer fields")
+
+    def spend(self, values: int, where: str, what: str) -> None:
+        self.check(values, where, what)
+        self.used += values
 
 @dataclass
 class Table:
@@ -35,11 +67,13 @@ class Table:
     cols: dict[str, np.ndarray]
 
 
-def read_csv(path: Path, names: list[str], time_col: str, mapping: str) -> Table:
+def read_csv(path: Path, names: list[str], time_col: str, mapping: str, budget: Budget | None = None) -> Table:
     """The columns ``names`` (and the time) of a CSV log (``.gz``: gzip), streamed in blocks of whole lines
     (:data:`CSV_BLOCK_BYTES`): what it costs is the columns read, not the file. Every row must have as many
     fields as the header (a decimal comma shifts every column: refused naming the row); a corrupt gzip
-    file, more than :data:`MAX_LOG_BYTES` of text or :data:`MAX_SAMPLES` rows are one line."""
+    file, more than :data:`MAX_LOG_BYTES` of text, :data:`MAX_SAMPLES` rows or more values than ``budget``
+    (default: :data:`MAX_MEMORY_MB`) are one line, as soon as a block passes them."""
+    budget = budget or Budget(mapping)
     import zlib
 
     from arvcas.util.files import check_input
@@ -80,9 +114,10 @@ def read_csv(path: Path, names: list[str], time_col: str, mapping: str) -> Table
                     block, n_lines = _csv_block(data, path, line, len(header), idx)
                     line += n_lines
                     n_rows += block.shape[0]
-                    if n_rows > MAX_SAMPLES or n_rows * len(want) > MAX_CSV_VALUES:
-                        raise LogError(f"{path}: more than {min(MAX_SAMPLES, MAX_CSV_VALUES // len(want))} rows of "
-                                       f"the {len(want)} columns read (arvcas.ident.streams.MAX_SAMPLES, MAX_CSV_VALUES)")
+                    if n_rows > MAX_SAMPLES:
+                        raise LogError(f"{path}: more than {MAX_SAMPLES} rows (arvcas.ident.streams.MAX_SAMPLES)")
+                    budget.check(n_rows * len(want), str(path), f"{n_rows:,} rows (by row {line - 1}) of the "
+                                                                f"{len(want)} columns read")
                     blocks.append(block)
                 if not chunk:
                     break
@@ -92,14 +127,15 @@ def read_csv(path: Path, names: list[str], time_col: str, mapping: str) -> Table
         raise LogError(f"{path}: {'not a readable gzip file' if gz else 'cannot be read'} "
                        f"({' '.join(str(e).split())})") from None
     data = np.concatenate(blocks) if blocks else np.zeros((0, len(want)))
+    del blocks
     if data.shape[0] < 2:
         raise LogError(f"{path}: fewer than 2 rows of data")
+    budget.spend(data.size, str(path), f"its {len(want)} columns read")
     cols = {n: data[:, i] for i, n in enumerate(want)}
     return Table(str(path), cols.pop(time_col), time_col, cols)
 
 
 CSV_BLOCK_BYTES = 8 << 20  # a CSV log is read this much at a time
-MAX_CSV_VALUES = 100_000_000  # numbers kept of one CSV stream (800 MB as float64): rows x the columns read
 
 
 def _utf8(raw: bytes, path: Path, line: int) -> str:
@@ -121,7 +157,10 @@ def _csv_block(data: bytes, path: Path, line: int, width: int, idx: list[int]) -
             why = " (a decimal comma? fields are separated by commas and decimals take a point)" if n > width else ""
             raise LogError(f"{path}: row {line + k}: {n} fields, the header has {width}{why}")
     try:
-        rows = np.loadtxt(io.StringIO(_utf8(data, path, line)), delimiter=",", usecols=idx, ndmin=2, dtype=float)
+        _utf8(data, path, line)  # (a str of the block would cost 1-4 bytes a character: NumPy reads the bytes)
+        with warnings.catch_warnings():  # a block of only blank or comment lines holds no data: no warning
+            warnings.filterwarnings("ignore", "loadtxt: input contained no data", UserWarning)
+            rows = np.loadtxt(io.BytesIO(data), delimiter=",", usecols=idx, ndmin=2, dtype=float, encoding="utf-8")
     except ValueError as e:
         msg = " ".join(str(e).split())
         raise LogError(f"{path}: a number could not be read in rows {line} to {line + len(lines) - 1} "
@@ -143,37 +182,79 @@ def _field(msg: Any, path: str) -> float:
     return float(v)
 
 
-def read_bag(bag: Path, topic: str, names: list[str], time_field: str | None, mapping: str) -> Table:
+def _ros1_reader(bag: Path, topic: str):
+    """rosbags' ROS 1 reader of ``bag`` that indexes the messages of ``topic`` only: rosbags reads the index of
+    every chunk when it opens a bag, an object of ~100 bytes a message of any topic; the other topics' are
+    dropped chunk by chunk (their message count reads 0)."""
+    from rosbags.rosbag1 import Reader
+
+    class _Sink(dict):
+        def __init__(self, indexes, keep):
+            super().__init__()
+            self.indexes, self.keep = indexes, keep
+
+        def __getitem__(self, conn):
+            return self.indexes[conn] if conn in self.keep else []
+
+    class TopicReader(Reader):
+        def read_index_data(self, pos, indexes):
+            keep = {c.id for c in self.connections if c.topic == topic}
+            super().read_index_data(pos, _Sink(indexes, keep))
+
+    return TopicReader(bag)
+
+
+def read_bag(bag: Path, topic: str, names: list[str], time_field: str | None, mapping: str,
+             budget: Budget | None = None) -> Table:
+    """The fields ``names`` (and the time) of the messages of one topic of a ROS bag. Only that topic's
+    messages are read and deserialised, one at a time, into float64 arrays sized by the bag's message count
+    (its index or metadata), which is checked against ``budget`` (default: :data:`MAX_MEMORY_MB`) and
+    :data:`MAX_SAMPLES` before any message is read."""
     try:
         from rosbags.highlevel import AnyReader
     except ImportError:
         raise LogError(f"{mapping}: reading ROS bags needs the rosbags package: pip install 'arvcas[bags]'") \
             from None
+    budget = budget or Budget(mapping)
     where = f"{bag} topic {topic}"
-    t, rows = [], []
+    n = 0
     try:
-        with AnyReader([bag]) as reader:
+        reader = AnyReader([bag])
+        if not reader.is2:  # a ROS 1 bag: its index of the other topics' messages is not kept
+            reader.readers = [_ros1_reader(bag, topic)]
+        with reader:
             conns = [c for c in reader.connections if c.topic == topic]
             if not conns:
                 topics = sorted({c.topic for c in reader.connections})
                 raise LogError(f"{bag}: no topic {topic!r} (named in {mapping}){config.closest(topic, topics)}")
+            count = sum(int(c.msgcount or 0) for c in conns)
+            if count > MAX_SAMPLES:
+                raise LogError(f"{where}: {count:,} messages, more than {MAX_SAMPLES:,} "
+                               f"(arvcas.ident.streams.MAX_SAMPLES)")
+            budget.check(count * (1 + len(names)), where, f"{count:,} messages of {1 + len(names)} values")
+            data = np.empty((max(count, 2), 1 + len(names)))  # the time, then the fields
             for conn, stamp, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
+                if n == data.shape[0]:  # more messages than the index counted
+                    if n >= MAX_SAMPLES:
+                        raise LogError(f"{where}: more than {MAX_SAMPLES:,} messages (arvcas.ident.streams.MAX_SAMPLES)")
+                    budget.check(2 * n * data.shape[1], where, f"more than {n:,} messages of {data.shape[1]} values")
+                    data = np.concatenate([data, np.empty_like(data)])
                 try:
-                    t.append(stamp * 1e-9 if time_field is None else _field(msg, time_field))
-                    rows.append([_field(msg, n) for n in names])
+                    data[n, 0] = stamp * 1e-9 if time_field is None else _field(msg, time_field)
+                    data[n, 1:] = [_field(msg, nm) for nm in names]
                 except KeyError as e:
                     raise LogError(f"{where}: message {conn.msgtype} has no field {e.args[0]!r}") from None
                 except (TypeError, ValueError, IndexError):
                     raise LogError(f"{where}: a field of {names} is not a number") from None
-                if len(t) > MAX_SAMPLES:
-                    raise LogError(f"{where}: more than {MAX_SAMPLES} messages")
+                n += 1
     except LogError:
         raise
     except Exception as e:  # rosbags' own errors: unreadable metadata, storage, message types
         raise LogError(f"{bag}: not a readable ROS bag ({type(e).__name__}: {' '.join(str(e).split())[:160]})") \
             from None
-    if len(t) < 2:
+    if n < 2:
         raise LogError(f"{where}: fewer than 2 messages")
-    data = np.array(rows, dtype=float).reshape(len(rows), len(names))
-    return Table(where, np.array(t, dtype=float), time_field or "log time", {n: data[:, i] for i, n in enumerate(names)})
+    data = data[:n]
+    budget.spend(data.size, where, f"{n:,} messages of {data.shape[1]} values")
+    return Table(where, data[:, 0], time_field or "log time", {nm: data[:, i + 1] for i, nm in enumerate(names)})
