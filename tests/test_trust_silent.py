@@ -31,6 +31,28 @@ def test_constraints_that_never_hold_or_always_hold_are_refused(name):
     assert objectives.parse_constraint(f"{name} >= 1e-3", "c").number == 1e-3
 
 
+@pytest.mark.parametrize("name", [n for n in objectives.names() if objectives.get(n).nonnegative
+                                  and type(objectives.get(n)).limit is not objectives.Objective.limit])
+@pytest.mark.parametrize("rhs, factor", [("-0.8 * limit", -0.8), ("limit * -2", -2.0), ("0 * limit", 0.0),
+                                         ("1e-3*limit", 1e-3)])
+def test_a_factor_of_the_limit_is_checked_as_a_bound_is(name, rhs, factor):
+    """The limit of a never-negative objective is >= 0: a negative factor can never hold with <=, a factor
+    at or below 0 always holds with >=."""
+    le, ge = f"{name} <= {rhs}", f"{name} >= {rhs}"
+    if factor < 0:
+        with pytest.raises(objectives.ObjectiveError, match=rf"^c: .* can never hold: {name} is never negative "
+                                                            r"\(give a factor >= 0\)$"):
+            objectives.parse_constraint(le, "c")
+    else:
+        assert objectives.parse_constraint(le, "c").factor == factor
+    if factor <= 0:
+        with pytest.raises(objectives.ObjectiveError, match=rf"^c: .* always holds: {name} is never negative "
+                                                            r"\(give a factor > 0\)$"):
+            objectives.parse_constraint(ge, "c")
+    else:
+        assert objectives.parse_constraint(ge, "c").factor == factor
+
+
 def test_every_built_in_objective_declares_its_sign_and_a_plugins_is_not_assumed():
     assert all(objectives.get(n).nonnegative for n in ("chat", "rmse", "iae", "energy", "peak_thrust",
                                                        "saturation_time", "settling_time", "excursion"))
