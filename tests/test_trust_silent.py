@@ -106,8 +106,12 @@ def test_negative_nominal_model_factors_are_refused_per_row():
 # ---- gain tables -----------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("value, shown", [("true", r"True \(bool\)"), ('"2.55"', r"'2.55' \(str\)"),
-                                          ("[2.55]", r"\[2.55\] \(list\)"), ("{ a = 1 }", r"\{'a': 1\} \(dict\)")])
-def test_a_gain_table_with_booleans_or_strings_for_numbers_is_refused(tmp_path, value, shown):
+                                          ("[2.55]", r"\[2.55\] \(list\)"), ("{ a = 1 }", r"\{'a': 1\} \(dict\)"),
+                                          ("nan", r"nan; expected a finite number > 0"),
+                                          ("-inf", r"-inf; expected a finite number > 0"),
+                                          ("-2.0", r"-2.0; expected a finite number > 0"),
+                                          ("0", r"0; expected a finite number > 0")])
+def test_a_gain_table_with_anything_but_positive_finite_numbers_is_refused(tmp_path, value, shown):
     from arvcas.controllers import gains
     from arvcas.system import shipped
 
@@ -123,7 +127,8 @@ def test_a_gain_table_with_booleans_or_strings_for_numbers_is_refused(tmp_path, 
     system = system.replace('table = "t200_16v.csv"', f'table = "{src / "t200_16v.csv"}"')
     (tmp_path / "s.toml").write_text(system)
     gains._TABLES.clear()
-    with pytest.raises(gains.GainError, match=rf"g.toml: \[agsta\].y: c is {shown}; expected a number$"):
+    tail = "" if "expected" in shown else "; expected a number"
+    with pytest.raises(gains.GainError, match=rf"g.toml: \[agsta\].y: c is {shown}{tail}$"):
         gains.default_gains("agsta", str(tmp_path / "s.toml"))
 
 
