@@ -136,7 +136,7 @@ def ident_inputs():
 
 # ---- 1: hostile names on the front page ----------------------------------------------------------------
 
-def chromium_check(page: Path, payload: str):
+def chromium_check(page: Path, payload: str, shown: bool = True):
     exe = shutil.which("chromium") or shutil.which("chromium-browser")
     need(exe, "chromium is not installed")
     with tempfile.TemporaryDirectory() as profile:
@@ -152,7 +152,7 @@ def chromium_check(page: Path, payload: str):
     need(not re.search(r'data-pwned="\d"', dom), "a script the name carried ran")
     import html
 
-    need(html.escape(payload, quote=False) in dom, "the name is not shown as text")
+    need(not shown or html.escape(payload, quote=False) in dom, "the name is not shown as text")
 
 
 def explore_case(payload: str, where: str) -> str:
@@ -180,11 +180,11 @@ def explore_case(payload: str, where: str) -> str:
     else:  # the page's own file name
         dirs = [src]
         page = d / f"{payload.replace('/', '_')}.html"
-    rc, _out, err = cli("front", "explore", *dirs, "--out", page, "--members", "knee")
+    rc, _out, err = cli("front", "explore", *dirs, "--out", page, "--members", "knee", "--allow-model-change")
     if rc != 0:
         return one_line(rc, err)  # refusing a name is fine, in one line
-    chromium_check(page, payload)
-    return f"page loads in Chromium, the {where} shown as text, nothing ran"
+    chromium_check(page, payload, shown=where != "page file name")  # the page does not show its own file name
+    return f"page loads in Chromium, the {where} {'shown as text, ' if where != 'page file name' else ''}nothing ran"
 
 
 for _k, _p in enumerate(HOSTILE):
@@ -194,7 +194,7 @@ for _k, _p in enumerate(HOSTILE):
 
 # ---- 2: signals during long commands -------------------------------------------------------------------
 
-def signalled(argv, sig, wait_for: str | None, after: float, out: Path, expect_rc: int | None = None):
+def signalled(argv, sig, wait_for: str | None, after: float, out: Path, expect_rc: int | None = None, env=None):
     """Run ``argv``; send ``sig`` once stdout shows ``wait_for`` (else after ``after`` s); the one line and
     the untouched ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -202,7 +202,7 @@ def signalled(argv, sig, wait_for: str | None, after: float, out: Path, expect_r
         out.write_text("# a file from an earlier run\n")
     before = snapshot(out.parent)
     p = subprocess.Popen([sys.executable, "-c", PRE, *map(str, argv)], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=ENV, cwd=WORK, stdin=subprocess.DEVNULL)
+                         stderr=subprocess.PIPE, text=True, env=env or ENV, cwd=WORK, stdin=subprocess.DEVNULL)
     t0 = time.monotonic()
     if wait_for:
         for line in p.stdout:
@@ -296,9 +296,18 @@ for _sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
     case(2, f"validate: {_sig.name} while it works: non-zero, one line, nothing replaced")(_validate)
 
 
+for _sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
+    def _simulate(s=_sig):
+        d = WORK / f"sim_{s.name}"
+        return signalled(["simulate", "--system", "bluerov2_heavy_alpha5", "--controller", "agsta", "--out",
+                          d / "r.h5"], s, None, 5.0, d / "keep.json", expect_rc=130 if s == signal.SIGINT else None,
+                         env=dict(ENV, ARVCAS_CACHE=str(WORK / f"cache_{s.name}")))  # a cold compile: the signal comes during it
+    case(2, f"simulate: {_sig.name} during the compile: non-zero, one line, no result file")(_simulate)
+
+
 # ---- 3: identified files written elsewhere -------------------------------------------------------------
 
-def _relative_system(name: str) -> Path:
+def _relative_system(name: str, defaults: bool = False) -> Path:
     import arvcas
     from ident_helpers import armless
 
@@ -309,16 +318,22 @@ def _relative_system(name: str) -> Path:
     table = Path(rov.path).parent / doc["thrusters"]["map"]["t200_16v"]["table"]
     shutil.copy(table, d / "tables" / "mine.csv")
     doc["thrusters"]["map"]["t200_16v"]["table"] = "tables/mine.csv"
+    if defaults:  # the scenario and gain table in a subfolder, named relative to the system file
+        (d / "defaults").mkdir()
+        for k, v in arvcas.load_system("bluerov2_heavy_alpha5").params.defaults:
+            if k in ("scenario", "gains"):
+                shutil.copy(v, d / "defaults" / Path(v).name)
+                doc.setdefault("defaults", tomlkit.table())[k] = f"defaults/{Path(v).name}"
     src = d / "rov.toml"
     src.write_text(tomlkit.dumps(doc), encoding="utf-8")
     return src
 
 
-def _identify_elsewhere(name: str) -> str:
+def _identify_elsewhere(name: str, defaults: bool = False) -> str:
     import arvcas
     from arvcas.ident import synthetic
 
-    src = _relative_system(name)
+    src = _relative_system(name, defaults)
     s = arvcas.load_system(src)
     trial = synthetic.write_trial(src.parent / "logs", "t0", s, duration=3.0, seed=0, p=s.params.vector())
     out = WORK / f"elsewhere_{len(name)}" / "deeper" / "rov_identified.toml"
@@ -331,10 +346,18 @@ def _identify_elsewhere(name: str) -> str:
     rc, o, err = cli("params", "--system", out, cwd=WORK)
     need(rc == 0, f"the identified file does not load: {err.strip()[-300:]}")
     ident = arvcas.load_system(out)
+    if defaults:
+        from arvcas.controllers import gains
+
+        for k, v in ident.params.defaults:
+            need(Path(v).exists(), f"[defaults] {k} does not resolve: {v}")
+        gains.default_gains("agsta", out)
     return f"loads from another folder as {ident.name[:20]}... ({len(ident.name)} characters)"
 
 
 case(3, "identify --out elsewhere: relative thrust table")(lambda: _identify_elsewhere("rov"))
+case(3, "identify --out elsewhere: [defaults] scenario and gains relative")(
+    lambda: _identify_elsewhere("rovd", defaults=True))
 case(3, "identify --out elsewhere: a 64-character system name")(lambda: _identify_elsewhere("r" * 64))
 case(3, "identify --out elsewhere: a 60-character system name (+ '_identified')")(
     lambda: _identify_elsewhere("s" * 60))
