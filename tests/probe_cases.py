@@ -215,7 +215,8 @@ def signalled(argv, sig, wait_for: str | None, after: float, out: Path, expect_r
     else:
         while time.monotonic() - t0 < after and p.poll() is None:
             time.sleep(0.1)
-    need(p.poll() is None, f"ended before the signal ({p.returncode}): {p.stderr.read()[-300:]}")
+    if p.poll() is not None:  # (not an f-string argument of need: reading stderr waits for the end)
+        raise Probe(f"ended before the signal ({p.returncode}): {p.stderr.read()[-300:]}")
     p.send_signal(sig)
     _o, err = p.communicate(timeout=300)
     name = signal.Signals(sig).name
