@@ -205,6 +205,10 @@ def signalled(argv, sig, wait_for: str | None, after: float, out: Path, expect_r
     p = subprocess.Popen([sys.executable, "-c", PRE, *map(str, argv)], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=env or ENV, cwd=WORK, stdin=subprocess.DEVNULL)
     t0 = time.monotonic()
+    import threading
+
+    watchdog = threading.Timer(900.0, p.kill)  # a command that never says wait_for does not hang the probe
+    watchdog.start()
     if wait_for:
         for line in p.stdout:
             if wait_for in line:
@@ -219,6 +223,7 @@ def signalled(argv, sig, wait_for: str | None, after: float, out: Path, expect_r
         raise Probe(f"ended before the signal ({p.returncode}): {p.stderr.read()[-300:]}")
     p.send_signal(sig)
     _o, err = p.communicate(timeout=300)
+    watchdog.cancel()
     name = signal.Signals(sig).name
     want = expect_rc if expect_rc is not None else 128 + sig
     need("Traceback" not in err, "a traceback: " + err.strip()[-300:])
@@ -295,7 +300,7 @@ def _study(d: Path) -> Path:
 for _sig in (signal.SIGTERM, signal.SIGHUP):
     case(2, f"tune: {_sig.name} mid-study: non-zero, one line, no temporary file")(
         lambda s=_sig: signalled(["tune", _study(WORK / f"tune_{s.name}"), "--out",
-                                  WORK / f"tune_{s.name}" / "out"], s, "generation", 0,
+                                  WORK / f"tune_{s.name}" / "out"], s, "agsta gen 1", 0,
                                  WORK / f"tune_{s.name}" / "out" / "keep.json", unchanged=False))  # a checkpoint
 
 
