@@ -208,6 +208,7 @@ def signalled(argv, sig, wait_for: str | None, after: float, out: Path, expect_r
     import threading
 
     watchdog = threading.Timer(900.0, p.kill)  # a command that never says wait_for does not hang the probe
+    watchdog.daemon = True
     watchdog.start()
     if wait_for:
         for line in p.stdout:
