@@ -810,6 +810,7 @@ def main(argv=None) -> int:
     ap.add_argument("--match", default="", help="only cases whose name holds this text")
     ap.add_argument("--out", default=str(ROOT / "results" / "probe"), help="where probe.json and probe.md go")
     ap.add_argument("--keep", action="store_true", help="keep the working directory")
+    ap.add_argument("--merge", action="store_true", help="replace only the cases run in an existing probe.json")
     a = ap.parse_args(argv)
     items = {int(x) for x in a.only.split(",") if x}
     WORK = Path(tempfile.mkdtemp(prefix="arvcas-probe-"))
@@ -835,6 +836,10 @@ def main(argv=None) -> int:
             shutil.rmtree(WORK, ignore_errors=True)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
+    if a.merge and (out / "probe.json").exists():  # the earlier rows, with the cases run now replaced
+        new = {(r["item"], r["case"]): r for r in rows}
+        old = json.loads((out / "probe.json").read_text(encoding="utf-8"))["rows"]
+        rows = [new.pop((r["item"], r["case"]), r) for r in old] + list(new.values())
     import arvcas
 
     n_fail = sum(r["verdict"] == "FAIL" for r in rows)
