@@ -43,6 +43,10 @@ int main(void) {
   n_ekf = (int)(sizeof prm.ekf / sizeof prm.ekf[0]);
   off_unc = @UP@N_GAINS; off_ekf = off_unc + 4; off_eta = off_ekf + n_ekf; off_p = off_eta + 6;
   /* NULL pointers: documented codes, nothing dereferenced */
+  @P@default_params(NULL);
+  CHECK(@P@init(NULL, NULL) == @UP@E_NULL);
+  CHECK(@P@step(NULL, NULL, 0.0, NULL, NULL) == @UP@E_NULL);
+  CHECK(@P@error(12345) != NULL && @P@error(-12345) != NULL);
   CHECK(@P@init(NULL, &prm) == @UP@E_NULL);
   CHECK(@P@init(&s, NULL) == @UP@E_NULL);
   CHECK(@P@step(NULL, y, 0.0, NULL, u) == @UP@E_NULL);

@@ -48,6 +48,11 @@ CASES = {
     "width": ('return tau, {"w": x["w"][0:3]}', ["step returned SX of shape (3, 1) for the state entry 'w'",
                                                   "a 6-vector"]),
     "statetype": ("return tau, None", ["step returned NoneType None as its state", "a dict"]),
+    "nan": ("return ca.DM([float('nan')] * 6), x", ["step returned DM of shape (6, 1) with non-finite values as "
+                                                    "tau_v", "6 finite numbers"]),
+    "constinf": ("return ca.SX.ones(6) * float('inf'), x", ["SX of shape (6, 1) with non-finite values as tau_v"]),
+    "stateinf": ('return tau, {"w": ca.DM.ones(6) * float("inf")}', ["DM of shape (6, 1) with non-finite values for "
+                                                                     "the state entry 'w'"]),
 }
 
 
@@ -88,7 +93,8 @@ class _Returns(arvcas.Controller):
 _numbers = st.floats(allow_nan=True, allow_infinity=True, width=64)
 _vectors = st.lists(_numbers, min_size=0, max_size=8)
 _leaves = st.none() | st.booleans() | st.text(max_size=5) | _numbers | _vectors | \
-    st.builds(lambda v: ca.DM(v) if v else ca.DM(0, 1), _vectors)
+    st.builds(lambda v: ca.DM(v) if v else ca.DM(0, 1), _vectors) | \
+    st.builds(ca.DM, st.lists(_numbers, min_size=6, max_size=6)) | st.builds(ca.DM, st.lists(_numbers, min_size=2, max_size=2))
 _states = st.dictionaries(st.sampled_from(["w", "v"]), _leaves, max_size=2) | _leaves
 _returns = st.tuples(_leaves, _states) | _leaves | st.tuples(_leaves) | st.tuples(_leaves, _states, _leaves)
 

@@ -31,6 +31,28 @@ def test_constraints_that_never_hold_or_always_hold_are_refused(name):
     assert objectives.parse_constraint(f"{name} >= 1e-3", "c").number == 1e-3
 
 
+@pytest.mark.parametrize("name", [n for n in objectives.names() if objectives.get(n).nonnegative
+                                  and type(objectives.get(n)).limit is not objectives.Objective.limit])
+@pytest.mark.parametrize("rhs, factor", [("-0.8 * limit", -0.8), ("limit * -2", -2.0), ("0 * limit", 0.0),
+                                         ("1e-3*limit", 1e-3)])
+def test_a_factor_of_the_limit_is_checked_as_a_bound_is(name, rhs, factor):
+    """The limit of a never-negative objective is >= 0: a negative factor can never hold with <=, a factor
+    at or below 0 always holds with >=."""
+    le, ge = f"{name} <= {rhs}", f"{name} >= {rhs}"
+    if factor < 0:
+        with pytest.raises(objectives.ObjectiveError, match=rf"^c: .* can never hold: {name} is never negative "
+                                                            r"\(give a factor >= 0\)$"):
+            objectives.parse_constraint(le, "c")
+    else:
+        assert objectives.parse_constraint(le, "c").factor == factor
+    if factor <= 0:
+        with pytest.raises(objectives.ObjectiveError, match=rf"^c: .* always holds: {name} is never negative "
+                                                            r"\(give a factor > 0\)$"):
+            objectives.parse_constraint(ge, "c")
+    else:
+        assert objectives.parse_constraint(ge, "c").factor == factor
+
+
 def test_every_built_in_objective_declares_its_sign_and_a_plugins_is_not_assumed():
     assert all(objectives.get(n).nonnegative for n in ("chat", "rmse", "iae", "energy", "peak_thrust",
                                                        "saturation_time", "settling_time", "excursion"))
@@ -84,8 +106,12 @@ def test_negative_nominal_model_factors_are_refused_per_row():
 # ---- gain tables -----------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("value, shown", [("true", r"True \(bool\)"), ('"2.55"', r"'2.55' \(str\)"),
-                                          ("[2.55]", r"\[2.55\] \(list\)"), ("{ a = 1 }", r"\{'a': 1\} \(dict\)")])
-def test_a_gain_table_with_booleans_or_strings_for_numbers_is_refused(tmp_path, value, shown):
+                                          ("[2.55]", r"\[2.55\] \(list\)"), ("{ a = 1 }", r"\{'a': 1\} \(dict\)"),
+                                          ("nan", r"nan; expected a finite number > 0"),
+                                          ("-inf", r"-inf; expected a finite number > 0"),
+                                          ("-2.0", r"-2.0; expected a finite number > 0"),
+                                          ("0", r"0; expected a finite number > 0")])
+def test_a_gain_table_with_anything_but_positive_finite_numbers_is_refused(tmp_path, value, shown):
     from arvcas.controllers import gains
     from arvcas.system import shipped
 
@@ -101,7 +127,8 @@ def test_a_gain_table_with_booleans_or_strings_for_numbers_is_refused(tmp_path, 
     system = system.replace('table = "t200_16v.csv"', f'table = "{src / "t200_16v.csv"}"')
     (tmp_path / "s.toml").write_text(system)
     gains._TABLES.clear()
-    with pytest.raises(gains.GainError, match=rf"g.toml: \[agsta\].y: c is {shown}; expected a number$"):
+    tail = "" if "expected" in shown else "; expected a number"
+    with pytest.raises(gains.GainError, match=rf"g.toml: \[agsta\].y: c is {shown}{tail}$"):
         gains.default_gains("agsta", str(tmp_path / "s.toml"))
 
 

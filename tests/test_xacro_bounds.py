@@ -65,3 +65,32 @@ def test_a_bounded_expansion_just_below_the_element_bound_and_the_real_descripti
     monkeypatch.undo()
     text, _ = uuv.expand(DATA / "rexrov2_description" / "robots" / "rexrov2_oberon7.xacro", uuv.find_packages([DATA]), {})
     assert "oberon7" in text and xacro.eval_all.__name__ == "eval_all"  # xacro is left as it was
+
+
+# one expression can run without end inside Python (no element is counted meanwhile): an integer power
+# tower, a property that doubles itself 60 times (2^61 characters), a repetition of 10^12 characters
+EXPRESSIONS = {
+    "tower": HEAD + '  <link name="${10**10**10}"/>\n</robot>\n',
+    "doubling": HEAD + '  <xacro:property name="p0" value="xx"/>\n' + "".join(
+        f'  <xacro:property name="p{i}" value="${{p{i - 1}}}${{p{i - 1}}}"/>\n' for i in range(1, 61))
+    + '  <link name="${p60}"/>\n</robot>\n',
+    "repeat": HEAD + '  <link name="${\'x\' * 10**12}"/>\n</robot>\n',
+}
+
+
+@pytest.mark.parametrize("tag", list(EXPRESSIONS))
+def test_an_expression_without_end_is_stopped_by_the_time_and_memory_bounds(tmp_path, capsys, monkeypatch, tag):
+    import time
+
+    monkeypatch.setattr(rosfiles, "MAX_XACRO_SECONDS", 1.0)
+    src = tmp_path / "expr.xacro"
+    src.write_text(EXPRESSIONS[tag])
+    out = tmp_path / "x.toml"
+    t0 = time.monotonic()
+    assert main(["import-system", "uuv", str(src), "--out", str(out), "--max-thrust", "100"]) == 2
+    took = time.monotonic() - t0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"arvcas: error: {src}: xacro: ") and not out.exists(), err
+    assert took < 1.0 + rosfiles.XACRO_GRACE_SECONDS + 30, took  # killed at its bound, not run to its end
+    if tag != "repeat":  # xacro reports the MemoryError of a repetition in its own words, at once
+        assert "refused (arvcas.system.rosfiles.MAX_XACRO_" in err, err

@@ -166,7 +166,7 @@ def _column(v, n: int):
     import casadi as ca
 
     if isinstance(v, (ca.SX, ca.MX, ca.DM)):
-        return v if v.shape == (n, 1) else None
+        return v if v.shape == (n, 1) and _finite_if_constant(v) else None
     if v is None or isinstance(v, (str, bytes, bool, dict)):
         return None
     try:
@@ -180,9 +180,25 @@ def _column(v, n: int):
     return ca.DM(a.reshape(n, 1))
 
 
+def _finite_if_constant(v) -> bool:
+    """A CasADi column's values are finite where they are known now (a DM, or an expression of no symbol):
+    a NaN or inf constant would only show after the compile, as a run that fails."""
+    import casadi as ca
+    import numpy as np
+
+    if not isinstance(v, ca.DM):
+        if ca.symvar(v):
+            return True
+        v = ca.evalf(v)
+    return bool(np.all(np.isfinite(np.asarray(v, dtype=float))))
+
+
 def _what_is(v) -> str:
     shape = getattr(v, "shape", None)
-    return f"{type(v).__name__} of shape {tuple(shape)}" if shape is not None else f"{type(v).__name__} {_shown(v)}"
+    if shape is None:
+        return f"{type(v).__name__} {_shown(v)}"
+    bad = "" if not hasattr(v, "is_constant") or _finite_if_constant(v) else " with non-finite values"
+    return f"{type(v).__name__} of shape {tuple(shape)}{bad}"
 
 
 def _state(law: Controller, method: str, got) -> dict:

@@ -120,6 +120,8 @@ def default_gains(controller, system=None) -> np.ndarray:
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 raise GainError(f"{where}: [{c.defaults_block}].{d}: {col} is {v!r} ({type(v).__name__}); "
                                 f"expected a number")
+            if not (np.isfinite(v) and v > 0):  # check_gains' rule, here where the file and key are known
+                raise GainError(f"{where}: [{c.defaults_block}].{d}: {col} is {v!r}; expected a finite number > 0")
     return np.concatenate([np.asarray(block[d], dtype=float) for d in DOFS])
 
 

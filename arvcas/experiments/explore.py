@@ -136,7 +136,8 @@ def _objectives(names, fronts, norm: str) -> list[dict]:
 
 
 def _checked(path: Path, allow_model_change: bool):
-    """A front, its checkpoint, system, scenario and what changed since the study (checked before any run)."""
+    """A front, its checkpoint, system, scenario, what changed since the study (checked before any run) and
+    whether the page may be written when a replay does not reproduce (``allow_model_change``)."""
     from arvcas.sim.scenario import loads_scenario
     from arvcas.tuning import checkpoint as ck
     from arvcas.tuning.front import check_provenance, read_front, system_params
@@ -146,14 +147,14 @@ def _checked(path: Path, allow_model_change: bool):
     params = system_params(c)
     changed = check_provenance(fr.path, params, allow_model_change, "front explore")
     cfg = loads_scenario(fr.scenario_text, f"{fr.path} (study scenario)")
-    return fr, c, params, cfg, changed
+    return fr, c, params, cfg, changed, allow_model_change
 
 
 def _front_data(path: Path, checked, members, samples: int, say) -> dict:
     from arvcas.io.plots import controller_color, controller_label, thruster_names
     from arvcas.sim.simulation import compiled_run
 
-    fr, c, params, cfg, changed = checked
+    fr, c, params, cfg, changed, allow = checked
     run = compiled_run(fr.controller, params, cfg)
     seed, unc, phase = int(fr.draw_seeds[0]), fr.draw_uncertainty[0], fr.draw_phase[0]
     one_draw = fr.draw_seeds.size == 1
@@ -168,7 +169,7 @@ def _front_data(path: Path, checked, members, samples: int, say) -> dict:
         r = run.simulate(gains, seed, unc, phase)
         if one_draw and chat_ref is not None and np.all(np.isfinite(chat_ref)):
             d = max(float(np.max(np.abs(r.chat - chat_ref))), float(np.max(np.abs(r.rmse - rmse_ref))))
-            if d != 0.0 and not changed:
+            if d != 0.0 and not (changed or allow):  # allowed: the page records the difference
                 raise ValueError(f"front explore: {fr.path}: member {key}'s replay does not reproduce its stored CHAT/RMSE "
                                  f"(max difference {d:.3g}); the model changed? (--allow-model-change to write the "
                                  f"page anyway; it records the difference)")

@@ -444,11 +444,20 @@ def parse_constraint(text: str, where: str = "constraint", settling_band=None) -
                                  f"{', '.join(with_limit)}); give a number")
         if not np.isfinite(factor):
             raise ObjectiveError(f"{pre}{text!r}: the factor must be finite")
+        # the limit of a never-negative objective is itself >= 0 (peak_thrust's: u_max and -u_min), so the
+        # factor's sign decides as a number's does
+        _sign_check(o, op, factor, text, pre, "a factor")
         return Constraint(text=text, objective=name, op=op, factor=factor)
     if not np.isfinite(float(num)):
         raise ObjectiveError(f"{pre}{text!r}: the bound must be finite")
-    if o.nonnegative and op == "<=" and float(num) < 0:
-        raise ObjectiveError(f"{pre}{text!r} can never hold: {name} is never negative (give a bound >= 0)")
-    if o.nonnegative and op == ">=" and float(num) <= 0:
-        raise ObjectiveError(f"{pre}{text!r} always holds: {name} is never negative (give a bound > 0)")
+    _sign_check(o, op, float(num), text, pre, "a bound")
     return Constraint(text=text, objective=name, op=op, number=float(num))
+
+
+def _sign_check(o: Objective, op: str, value: float, text: str, pre: str, what: str) -> None:
+    """A constraint on a never-negative objective that can never hold (``<=`` below 0) or always holds
+    (``>=`` at or below 0): one line."""
+    if o.nonnegative and op == "<=" and value < 0:
+        raise ObjectiveError(f"{pre}{text!r} can never hold: {o.name} is never negative (give {what} >= 0)")
+    if o.nonnegative and op == ">=" and value <= 0:
+        raise ObjectiveError(f"{pre}{text!r} always holds: {o.name} is never negative (give {what} > 0)")

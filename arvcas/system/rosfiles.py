@@ -1,6 +1,6 @@
 """A ROS description's files, read for an import (:mod:`arvcas.system.uuv`, docs/importing.md): the ROS
 packages under a few roots (for ``$(find pkg)``), a xacro file expanded with bounds on its elements, their
-nesting and its time (macros can expand without bound), and uuv_simulator's YAML (its thruster allocation
+nesting, its time and its memory (macros and expressions can expand without bound), and uuv_simulator's YAML (its thruster allocation
 matrix and thrust limits). Every fault is one line naming the file and what is wrong.
 """
 
@@ -19,7 +19,8 @@ import numpy as np
 from arvcas.system import config, urdf
 
 __all__ = ["ImportError_", "find_packages", "default_roots", "expand", "read_tam", "read_max_thrust",
-           "rel_path", "MAX_PACKAGE_SCAN", "MAX_XACRO_ELEMENTS", "MAX_XACRO_DEPTH", "MAX_XACRO_SECONDS"]
+           "rel_path", "MAX_PACKAGE_SCAN", "MAX_XACRO_ELEMENTS", "MAX_XACRO_DEPTH", "MAX_XACRO_SECONDS",
+           "MAX_XACRO_BYTES", "XACRO_GRACE_SECONDS"]
 
 MAX_PACKAGE_SCAN = 20000  # directories looked at when indexing ROS packages for $(find ...)
 # Bounds of a xacro expansion (macros can expand exponentially: a macro calling another twice, 40 deep, is
@@ -28,6 +29,10 @@ MAX_PACKAGE_SCAN = 20000  # directories looked at when indexing ROS packages for
 MAX_XACRO_ELEMENTS = 20_000
 MAX_XACRO_DEPTH = 100
 MAX_XACRO_SECONDS = 30.0
+# the child process that expands a xacro file (expand): memory it may add, and the time it has past
+# MAX_XACRO_SECONDS before it is killed (one expression can run without end inside Python: ${10**10**10})
+MAX_XACRO_BYTES = 1 << 30
+XACRO_GRACE_SECONDS = 5.0
 
 
 class ImportError_(ValueError):
@@ -81,7 +86,64 @@ def default_roots(path: Path) -> list[Path]:
 
 def expand(path: Path, packages: dict[str, Path], args: dict[str, str], error=ImportError_) -> tuple[str, list[str]]:
     """The URDF text of a xacro file (``$(find pkg)`` resolved in ``packages``, ``$(arg x)`` from ``args``) and
-    the files it included; a plain URDF is returned as read."""
+    the files it included; a plain URDF is returned as read.
+
+    Where processes fork (Linux, macOS) the expansion runs in a child process with at most
+    :data:`MAX_XACRO_BYTES` more memory than this one, killed after :data:`MAX_XACRO_SECONDS` (plus
+    :data:`XACRO_GRACE_SECONDS`): a single ``${...}`` expression can run without end inside Python
+    (``${10**10**10}``) or double a string 60 times, which no count of elements sees."""
+    import multiprocessing as mp
+
+    if "fork" not in mp.get_all_start_methods():
+        return _expand(path, packages, args, error)
+    ctx = mp.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    child = ctx.Process(target=_expand_child, args=(send, path, packages, args, error), daemon=True)
+    child.start()
+    send.close()
+    try:
+        if not recv.poll(MAX_XACRO_SECONDS + XACRO_GRACE_SECONDS):
+            raise error(f"{path}: xacro: the expansion took more than {MAX_XACRO_SECONDS:g} s; refused "
+                        f"(arvcas.system.rosfiles.MAX_XACRO_SECONDS)")
+        try:
+            kind, *value = recv.recv()
+        except EOFError:  # the child died without a word (killed by the system: out of memory)
+            child.join(5)
+            raise error(f"{path}: xacro: the expansion stopped without a result (exit code {child.exitcode}); "
+                        f"refused") from None
+    finally:
+        if child.is_alive():
+            child.kill()
+        child.join(5)
+        recv.close()
+    if kind == "error":
+        raise error(value[0])
+    return value[0], value[1]
+
+
+def _expand_child(send, path, packages, args, error) -> None:
+    """In a forked child: bound the memory, expand, send ("ok", text, includes) or ("error", line)."""
+    try:
+        import resource
+
+        with open("/proc/self/statm") as fh:  # the address space this process already has (Linux)
+            have = int(fh.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+        resource.setrlimit(resource.RLIMIT_AS, (have + MAX_XACRO_BYTES, resource.getrlimit(resource.RLIMIT_AS)[1]))
+    except (OSError, ValueError, ImportError):
+        pass  # no /proc (macOS) or a lower hard limit: the time bound stays
+    try:
+        send.send(("ok", *_expand(path, packages, args, error)))
+    except MemoryError:
+        send.send(("error", f"{path}: xacro: the expansion needed more than {MAX_XACRO_BYTES >> 20} MiB; refused "
+                            f"(arvcas.system.rosfiles.MAX_XACRO_BYTES)"))
+    except Exception as e:  # noqa: BLE001 - error's one line, or xacro's own
+        send.send(("error", str(e) if isinstance(e, (ImportError_, error)) else f"{path}: xacro: {e}"))
+    finally:
+        send.close()
+
+
+def _expand(path: Path, packages: dict[str, Path], args: dict[str, str], error=ImportError_) -> tuple[str, list[str]]:
+    """:func:`expand` in this process (the element, depth and time bounds of :func:`_bounded`)."""
     from arvcas.util.files import read_text
 
     text = read_text(path, "robot description", error)
