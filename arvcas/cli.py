@@ -284,7 +284,7 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
 
     from arvcas.build.dynamics import compiled
     from arvcas.model.manipulator import stow_pose
-    from arvcas.sim import profiles, scenario
+    from arvcas.sim import limits, profiles, scenario
     from arvcas.system.params import load, view
 
     params = load(params_path)
@@ -296,7 +296,7 @@ def demo_table(params_path: Path | None = None, n_quad: int = 5, t_end: float = 
         raise ValueError(f"demo: system '{params.structure.name}' ({params.path}) names no default scenario "
                          f"([defaults] scenario): the demo follows its arm motion")
     cfg = scenario.load_scenario(params.default("scenario"))
-    scenario.check_joint_limits(cfg, params)
+    limits.check_joint_limits(cfg, params)
     f = compiled("arm_wrench", model_options(n_quad), system=params)
     z6 = np.zeros(6)
     ts = ca.SX.sym("t")

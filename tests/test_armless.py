@@ -21,7 +21,7 @@ import arvcas
 from arvcas import cli
 from arvcas.ident import logs, plant, validate
 from arvcas.model import thrusters
-from arvcas.sim import profiles, scenario
+from arvcas.sim import limits, profiles, scenario
 from arvcas.system.params import ParamsError, load, view
 
 # ArduSub's factors (roll, pitch, yaw, throttle, forward, lateral) per motor, AP_Motors6DOF.cpp @0fd5fbf
@@ -180,7 +180,7 @@ def test_scenario_without_arm():
     # a system with an arm under a scenario without one holds its stow pose, carries nothing
     heavy = arvcas.load_system("bluerov2_heavy_alpha5")
     q0 = ca.DM([heavy.params[f"arm.stow.q{i}"] for i in range(1, 5)])
-    scenario.check_joint_limits(cfg, heavy.params)
+    limits.check_joint_limits(cfg, heavy.params)
     for t in (0.0, 7.5, 60.0):
         q, qd, qdd = profiles.joint_trajectory(cfg, q0, t)
         np.testing.assert_array_equal(np.array(q), np.array(q0))
@@ -199,10 +199,10 @@ def test_task_without_arm():
                 'duration = { value = 20.0, unit = "s", source = "test" }\n')
     cfg = scenario.loads_scenario(base + approach, "task.toml")
     assert cfg.trajectory_pattern == "approach" and not profiles.has_arm_motion(cfg)
-    scenario.check_trajectory_limits(cfg, s.params)
+    limits.check_trajectory_limits(cfg, s.params)
     fast = scenario.loads_scenario(base + approach.replace("value = 20.0", "value = 0.5"), "task.toml")
     with pytest.raises(scenario.ScenarioError, match=r"thruster T\d .* of its limit"):
-        scenario.check_trajectory_limits(fast, s.params)
+        limits.check_trajectory_limits(fast, s.params)
 
 
 def test_scenario_payload_without_arm_motion_refused():

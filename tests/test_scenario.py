@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from arvcas.sim import profiles, scenario
+from arvcas.sim import limits, profiles, scenario
 from arvcas.system.params import load as load_params
 from arvcas.sim.scenario import ScenarioError, default_scenario_path, load_scenario, loads_scenario
 
@@ -120,7 +120,7 @@ def test_quintic_trajectory(cfg):
         np.testing.assert_allclose((qp - qm) / (2 * e), np.array(f(tt)[1]).ravel(), atol=1e-8)
         dp, dm = np.array(f(tt + e)[1]).ravel(), np.array(f(tt - e)[1]).ravel()
         np.testing.assert_allclose((dp - dm) / (2 * e), np.array(f(tt)[2]).ravel(), atol=1e-7)
-    scenario.check_joint_limits(cfg, P)
+    limits.check_joint_limits(cfg, P)
 
 
 def test_payload_ramp_and_disturbance(cfg):
@@ -148,4 +148,4 @@ def test_noise_sequence_seeded(cfg):
 def test_joint_limit_check_names_the_joint(cfg):
     P = load_params().replace({"arm.stow.q3": math.radians(45)})
     with pytest.raises(ScenarioError, match="arm.stow \\(q0\\): joint 3 target 45.00 deg outside Table 1 limits \\[-90, 30\\] deg"):
-        scenario.check_joint_limits(cfg, P)
+        limits.check_joint_limits(cfg, P)

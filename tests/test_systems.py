@@ -17,7 +17,7 @@ import pytest
 import arvcas
 from arvcas.model import thrusters, vehicle
 from arvcas.system.params import ParamsError, view
-from arvcas.sim import profiles, scenario
+from arvcas.sim import limits, profiles, scenario
 from arvcas.system import shipped
 
 SYSTEMS = ("haidou1", "bluerov2_heavy_alpha5", "hinsdale_bluerov2_alpha5", "bluerov2", "bluerov2_heavy")
@@ -284,7 +284,7 @@ def test_paper_scenario_as_waypoints_equals_its_reach_form(params):
     a = scenario.load_scenario()
     b = scenario.loads_scenario(_paper_waypoint_text(), "waypoints")
     assert b.arm_qg is None and len(b.arm_waypoint) == 4 and len(b.payload_event) == 1
-    scenario.check_joint_limits(b, params)
+    limits.check_joint_limits(b, params)
     P = view(params)
     from arvcas.model.manipulator import stow_pose
 
@@ -315,7 +315,7 @@ def test_waypoints_outside_the_limits_or_of_the_wrong_size_are_refused(params, s
     b = scenario.loads_scenario(_paper_waypoint_text().replace("[60.0, 60.0, -60.0, 0.0, 60.0, 0.0]",
                                                                "[60.0, 60.0, -60.0, 0.0, 120.0, 0.0]", 1), "w")
     with pytest.raises(scenario.ScenarioError, match=r"arm.waypoint\[2\].q: joint 5 target 120.00 deg outside"):
-        scenario.check_joint_limits(b, params)
+        limits.check_joint_limits(b, params)
     with pytest.raises(scenario.ScenarioError, match=r"6 joint angles, but system 'bluerov2_heavy_alpha5' has 4"):
         arvcas.Run("pid", scenario=scenario.loads_scenario(_paper_waypoint_text(), "w"),
                    system="bluerov2_heavy_alpha5").compile()

@@ -16,7 +16,7 @@ from numpy.polynomial import polynomial as npoly
 from scipy.integrate import quad
 
 import arvcas
-from arvcas.sim import scenario, schedule, trajectory as tj
+from arvcas.sim import limits, scenario, schedule, trajectory as tj
 from arvcas.sim.scenario import ScenarioError
 
 
@@ -162,10 +162,10 @@ def test_a_trajectory_beyond_the_thrusters_is_refused_before_any_work():
     fast = task(waypoints((1, [0] * 6), (3, [20, 0, 0, 0, 0, 0])))
     with pytest.raises(ScenarioError, match=r"task.toml: trajectory.waypoint\[2\].t: the trajectory asks thruster "
                                             r"\S+ for \d+ % of its limit at t = [\d.]+ s \(segment 1 of 1"):
-        scenario.check_trajectory_limits(fast, params)
+        limits.check_trajectory_limits(fast, params)
     with pytest.raises(ScenarioError, match="waypoint"):
         arvcas.Run("pid", scenario=fast, system=params).compile()
-    scenario.check_trajectory_limits(task(), params)  # the 0.21 m approach in 14 s
+    limits.check_trajectory_limits(task(), params)  # the 0.21 m approach in 14 s
 
 
 # ---- tasks in the closed loop ------------------------------------------------------------------------------

@@ -35,7 +35,7 @@ from arvcas.controllers.base import Controller, get as get_controller, provenanc
 from arvcas.model.uvms import ModelOptions
 from arvcas.system.loader import UNSET, renamed_system
 from arvcas.system.params import Params, default_layout, system_tag
-from arvcas.sim import accumulate, closedloop, profiles, scenario, schedule, signals as signals_mod
+from arvcas.sim import accumulate, closedloop, limits, profiles, scenario, schedule, signals as signals_mod
 from arvcas.sim.result import Result
 from arvcas.sim.scenario import ScenarioConfig
 
@@ -114,8 +114,8 @@ class Run:
         cfg = sc if isinstance(sc, ScenarioConfig) else scenario.load_scenario(sc)
         if not isinstance(self.options, ModelOptions):
             raise SimulationError(f"options: expected arvcas.model.uvms.ModelOptions, got {type(self.options).__name__}")
-        scenario.check_joint_limits(cfg, params)
-        scenario.check_trajectory_limits(cfg, params)
+        limits.check_joint_limits(cfg, params)
+        limits.check_trajectory_limits(cfg, params)
         schedule.check_table_memory(cfg, params.layout)
         _check_lag(cfg, params)
         return CompiledRun(with_law, cfg, params, self.options, tuple(self.accumulators))

@@ -424,7 +424,9 @@ def loads_study(text: str, where: str = "<study text>", base_dir: str | Path | N
     try:  # a task the vehicle cannot follow is refused before any work (docs/tasks.md)
         from arvcas.system.params import load as load_params
 
-        scenario_mod.check_trajectory_limits(cfg, params if params is not None else load_params())
+        from arvcas.sim.limits import check_trajectory_limits
+
+        check_trajectory_limits(cfg, params if params is not None else load_params())
     except scenario_mod.ScenarioError as e:
         raise StudyError(f"{where}: evaluation.scenario: {e}") from None
     controllers = tuple(gains_mod.check_controller(c) for c in f.study.controllers)  # aliases -> registered names
