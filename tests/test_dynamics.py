@@ -95,8 +95,9 @@ def test_batch_same_bits_on_any_thread_count_and_as_single_calls():
     rng = np.random.default_rng(5)
     d = arvcas.dynamics("uvms_rhs")
     n = 2 * dyn.THREAD_MIN_BATCH + 37
-    args = [np.array(_inputs(uvms.plant_functions()["uvms_rhs"], rng)[i]) for i in range(6)]
-    x = np.array([_inputs(uvms.plant_functions()["vehicle_rhs"], rng)[0] for _ in range(n)])
+    fs = uvms.plant_functions()  # built once (a graph build per row cost minutes of CPU)
+    args = [np.array(_inputs(fs["uvms_rhs"], rng)[i]) for i in range(6)]
+    x = np.array([_inputs(fs["vehicle_rhs"], rng)[0] for _ in range(n)])
     a1 = d(x, *args[1:], n_threads=1)
     a2 = d(x, *args[1:], n_threads=2)
     a3 = d(x, *args[1:], n_threads=5)

@@ -103,10 +103,13 @@ def parse_term(name: str) -> HydroTerm:
     """The term a derivative's name defines (docs/system-file.md); ValueError (one line) if it defines none."""
     full = HYDRO_ALIASES.get(name, name)
     toks = full.split("_")
-    hint = config.closest(name, _valid_examples())
+
+    def hint() -> str:  # the closest valid names, computed only for a refusal (difflib: ~3 ms a name)
+        return config.closest(name, _valid_examples())
+
     if len(toks) < 2 or toks[0] not in FORCES or len(toks[0]) != 1:
         raise _Bad(f"'{name}' is not a derivative name: it must be <F>_<factor>... with <F> one of "
-                   f"{', '.join(FORCES)}{hint}")
+                   f"{', '.join(FORCES)}{hint()}")
     row = FORCES.index(toks[0])
     rest = toks[1:]
     if len(rest) == 1 and rest[0].endswith("dot") and len(rest[0]) == 4 and rest[0][0] in VELOCITIES:
@@ -121,10 +124,10 @@ def parse_term(name: str) -> HydroTerm:
             factors += list(t)
         else:
             raise _Bad(f"'{name}': unknown factor '{t}' (factors: u v w p q r, absu .. absr, udot .. rdot "
-                       f"alone, ds, ds2){hint}")
+                       f"alone, ds, ds2){hint()}")
     plain = [i for i, f in enumerate(factors) if len(f) == 1]
     if not plain:
-        raise _Bad(f"'{name}': a damping term needs a velocity factor (u v w p q r){hint}")
+        raise _Bad(f"'{name}': a damping term needs a velocity factor (u v w p q r){hint()}")
     i0 = plain[0]
     col = VELOCITIES.index(factors[i0])
     return HydroTerm(name, row, col, None, tuple(factors[:i0] + factors[i0 + 1:]))
