@@ -81,7 +81,7 @@ def c_names(run) -> dict[str, str]:
             for m in re.finditer(r"/\* ([A-Za-z0-9_]+):\([^\n]*\*/\n(?:static )?int casadi_(f[0-9]+)\(", c)}
 
 
-_LINE = re.compile(r"^\s*([\d,]+) \([^)]*\)\s+(?:\*\s+)?[^:]*:(\S+?)(?:\.constprop\S*|\.isra\S*)?\s+\[")
+_LINE = re.compile(r"^\s*([\d,]+) \([^)]*\)\s+(?:\*\s+)?[^:\s]*:(\S+?)(?:\.constprop\S*|\.isra\S*)?(?:\s+\[.*)?$")
 
 
 def parse_annotate(txt: str, inclusive: bool) -> dict[str, int]:
