@@ -39,6 +39,11 @@ def _bluerov2_step(doc: dict) -> str:
     return bluerov2_step.markdown(doc)
 
 
+def _sample_cost(doc: dict) -> str:
+    from benchmarks import sample_cost
+    return sample_cost.markdown(doc)
+
+
 def _thrusters(doc: dict) -> str:
     from benchmarks import thruster_step
     return thruster_step.markdown(doc)
@@ -130,6 +135,7 @@ PAGES = [
     ("results/bench.md", "results/bench.json", _bench_md),
     ("results/cost/README.md", "results/bench.json", _cost_readme),
     ("results/bluerov2_step/README.md", "results/bluerov2_step/bluerov2_step.json", _bluerov2_step),
+    ("results/bluerov2_step/sample_cost.md", "results/bluerov2_step/sample_cost.json", _sample_cost),
     ("results/step/bluerov2_heavy_alpha5/thrusters.md", "results/step/bluerov2_heavy_alpha5/thrusters.json", _thrusters),
     ("results/lockstep/README.md", "results/lockstep/lockstep.json", _lockstep),
     ("results/step/README.md", "results/step/step_accuracy.json", _step_accuracy, "results/step/README.note.in"),
