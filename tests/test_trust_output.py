@@ -114,7 +114,7 @@ def test_sighup_in_a_subprocess_leaves_no_temp_file(tmp_path):
     code = (
         "import os, signal, sys\n"
         "from pathlib import Path\n"
-        "from arvcas.io import files\n"
+        "from arvcas.util import files\n"
         "files.install_signal_handlers()\n"
         "def w(p):\n"
         "    p.write_bytes(b'half')\n"

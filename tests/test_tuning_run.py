@@ -173,9 +173,9 @@ def test_failed_checkpoint_write_keeps_the_previous_one(reference, tmp_path, mon
     real = ck._write
     calls = {"n": 0}
 
-    def full_disk(f, c):
+    def full_disk(*args):
         calls["n"] += 1
-        real(f, c)
+        real(*args)
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(ck, "_write", full_disk)

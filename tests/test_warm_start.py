@@ -64,7 +64,7 @@ def test_the_child_runs_the_copy(copy):
     assert r.stdout.strip().startswith(str(root))
 
 
-def test_warm_start_builds_no_graph_and_edits_rebuild(copy):
+def test_warm_start_builds_no_graph_and_edits_find_the_library_by_its_c(copy):
     root, cache = copy
     cold = child(root, cache)
     assert cold["stats"]["compile"] == 1
@@ -72,23 +72,29 @@ def test_warm_start_builds_no_graph_and_edits_rebuild(copy):
     assert warm["stats"] == {**warm["stats"], "compile": 0, "disk_hit": 1}
     assert warm["path"] == cold["path"] and warm["tau"] == cold["tau"]
 
-    # an edit of model code (even a comment) changes the key: a rebuild, into another artifact
+    # an edit of model code (even a comment) changes the run's description key: the graph is built again
+    # (forbidden, it fails), its C generated and, being the same C, found by the C's own key: no compile, the
+    # same library (the cache keys a library by its C: docs/provenance.md)
     with open(root / "arvcas" / "model" / "thrusters.py", "a") as f:
         f.write("\n# edited by a test\n")
+    with pytest.raises(AssertionError, match="a warm start built a graph"):
+        child(root, cache, forbid_graph=True)
     edited = child(root, cache)
-    assert edited["stats"]["compile"] == 1 and edited["path"] != cold["path"]
+    assert edited["stats"]["compile"] == 0 and edited["path"] == cold["path"] and edited["tau"] == cold["tau"]
+    assert child(root, cache, forbid_graph=True)["stats"]["compile"] == 0  # the edited description is warm now
 
-    # an edit of the data file
+    # an edit of the data file: the parameters are the function's input, not its C
     with open(root / "arvcas" / "data" / "haidou1.toml", "a") as f:
         f.write("\n# edited by a test\n")
     data = child(root, cache)
-    assert data["stats"]["compile"] == 1 and data["path"] not in (cold["path"], edited["path"])
+    assert data["stats"]["compile"] == 0 and data["path"] == cold["path"]
 
-    # another model option
+    # another model option that the thrust map does not read (the links' drag quadrature): another
+    # description, the same C, the same library; then warm under its own description
     opt = child(root, cache, n_quad=6)
-    assert opt["stats"]["compile"] == 1 and opt["path"] != data["path"]
-    # and the option's own artifact is then warm
+    assert opt["stats"]["compile"] == 0 and opt["path"] == data["path"]
     assert child(root, cache, n_quad=6, forbid_graph=True)["stats"]["compile"] == 0
+    # (a description whose C differs compiles its own library: tests/test_compile_keys.py)
 
 
 def test_closed_loop_run_warm_start_builds_no_graph():
