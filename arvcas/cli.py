@@ -815,7 +815,7 @@ def main(argv: list[str] | None = None) -> int:
         import logging
 
         logging.basicConfig(level=logging.INFO, format="arvcas: %(message)s")
-    old = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP)}
+    old = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)}
     files.install_signal_handlers()
     import warnings
 
@@ -842,7 +842,9 @@ def main(argv: list[str] | None = None) -> int:
             warnings.showwarning = show
             for w in (PlausibilityWarning, ScenarioWarning):
                 warnings.simplefilter("always", w)
-            return cmd.run(a)
+            rc = cmd.run(a)
+            files.check_signals()  # a signal whose exception was swallowed on the way (files.raise_for_signal)
+            return rc
     except (ValueError, OSError) as e:
         msg = " ".join(str(e).split()) or type(e).__name__
         print(f"arvcas: error: {msg}", file=sys.stderr)
@@ -862,6 +864,7 @@ def main(argv: list[str] | None = None) -> int:
             for s, h in old.items():
                 if h is not None:
                     signal.signal(s, h)
+            files.forget_signals()  # reported (or this command ended before its signal's handler ran)
 
 
 if __name__ == "__main__":

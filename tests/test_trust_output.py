@@ -110,6 +110,70 @@ def test_sigterm_during_a_write_keeps_the_previous_file(tmp_path, front, capsys,
     assert snapshot(tmp_path) == before and png.stat().st_size > 0
 
 
+class _Hostile:
+    """An argument CasADi's overload resolution asks for ``tocsc`` (``casadi.casadi.DM_from_csc``): the signal
+    comes then, so its handler raises inside a converter whose exceptions SWIG discards."""
+
+    sent = False
+
+    def __getattr__(self, name):
+        if name == "tocsc" and not self.sent:  # once: CasADi tries the converter for more than one overload
+            self.sent = True
+            os.kill(os.getpid(), signal.SIGTERM)
+        raise AttributeError(name)
+
+
+@pytest.mark.parametrize("where", ["before the write", "in a command that writes nothing"])
+def test_a_signal_casadi_swallows_still_ends_the_command(tmp_path, front, capsys, monkeypatch, where):
+    """SIGTERM while CasADi resolves an overload (as during a run's graph construction): CasADi drops the
+    Terminated the handler raised (the call fails with its own NotImplementedError, or succeeds through another
+    overload); the command still ends with 143 in one line, and the previous file stays."""
+    import casadi as ca
+    from matplotlib.figure import Figure
+
+    from arvcas import cli
+
+    assert run(["front", "plot", front], capsys)[0] == 0
+    before = snapshot(tmp_path)
+    swallowed = []
+
+    def signal_inside_casadi():
+        try:
+            ca.mtimes(_Hostile(), ca.SX.sym("x"))
+        except NotImplementedError:  # CasADi's own error, not the Terminated: the signal's exception is gone
+            swallowed.append(True)
+
+    if where == "before the write":
+        real = Figure.savefig
+
+        def savefig(self, fname, *a, **k):
+            signal_inside_casadi()
+            return real(self, fname, *a, **k)
+
+        monkeypatch.setattr(Figure, "savefig", savefig)
+        argv = ["front", "plot", str(front)]
+    else:
+        from arvcas.tuning import front as front_mod
+
+        real_export = front_mod.export_front
+
+        def export_front(*a, **k):
+            signal_inside_casadi()
+            return real_export(*a, **k)
+
+        monkeypatch.setattr(front_mod, "export_front", export_front)
+        argv = ["front", "export", str(front), "--format", "csv"]  # to standard output
+    code = cli.main(argv)
+    err = capsys.readouterr().err
+    assert swallowed == [True], "CasADi no longer discards an exception raised in its converters"
+    assert code == 128 + signal.SIGTERM and err.strip().splitlines()[-1] == "arvcas: terminated (SIGTERM)", err
+    assert snapshot(tmp_path) == before
+    monkeypatch.undo()
+    # the next command starts clean, in this thread or another (cli.main forgets the signal when it returns)
+    assert cli.main(["front", "export", str(front), "--format", "json"]) == 0
+    assert run(["front", "export", front, "--format", "json"], capsys)[0] == 0
+
+
 def test_sighup_in_a_subprocess_leaves_no_temp_file(tmp_path):
     code = (
         "import os, signal, sys\n"

@@ -72,6 +72,7 @@ import casadi as ca
 
 from arvcas.build.batchloop import batch_loop_c
 from arvcas.build.progress import PROGRESS_AFTER_S, Progress as _Progress, report_progress  # noqa: F401 (re-exported)
+from arvcas.util.files import check_signals
 
 __all__ = [
     "build_described",
@@ -429,6 +430,7 @@ def run_compiler(cmd: list[str], work: Path, name: str) -> subprocess.CompletedP
     """Run the compiler in its own process group; on any interruption (an exception, KeyboardInterrupt,
     the SystemExit a SIGTERM handler raises, a timeout) the whole group (cc, cc1, as, ld) is killed
     and reaped before the exception goes on, so no compiler outlives the build."""
+    check_signals()  # a signal that came while the graph was built, its exception swallowed: no compile
     try:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=work,
                                 start_new_session=True)

@@ -16,7 +16,8 @@ Writing (:func:`atomic_write`, :func:`write_text`; figures: :func:`arvcas.io.sty
     directory, fsync'ed and renamed over the final name (``os.replace``): an interrupted or failed
     write leaves the previous file untouched and no partial file under the final name. The temporary
     file is removed on any exception, including the :class:`Terminated` that
-    :func:`install_signal_handlers` raises on SIGTERM and SIGHUP (as Python does on SIGINT);
+    :func:`install_signal_handlers` raises on SIGTERM and SIGHUP (as Python does on SIGINT), and nothing is
+    renamed into place once such a signal came, even where its exception was swallowed (:func:`check_signals`);
     temporaries of killed processes (their pid no longer runs) are removed by
     :func:`remove_stale_temps` before a command writes into a directory. Writers that need a
     temporary directory beside their output (the FMU's build) name it the same way
@@ -67,7 +68,8 @@ from pathlib import Path
 __all__ = [
     "FileError", "Terminated", "MAX_TEXT_BYTES", "TMP_MARK", "MANIFEST", "check_input", "read_bytes", "read_text",
     "check_dir", "prepare_dir", "target", "atomic_write", "write_text", "remove_stale_temps",
-    "install_signal_handlers", "written_by_arvcas", "hdf5_format", "permit_replace", "check_outputs", "same_file",
+    "install_signal_handlers", "raise_for_signal", "check_signals", "pending_signal", "forget_signals",
+    "written_by_arvcas", "hdf5_format", "permit_replace", "check_outputs", "same_file",
     "kind_of", "default_kind", "subdir", "temp_dir", "release_temp", "private_dir", "new_hdf5",
 ]
 
@@ -352,6 +354,7 @@ def _replace_with(path: Path, write: Callable[[Path], None]) -> None:
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
+        check_signals()  # a signal whose exception was swallowed: nothing is published
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
@@ -563,17 +566,61 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _raise_terminated(signum, frame):
+_PENDING: list[int] = []  # the signals whose exception was raised in this command (pending_signal)
+
+
+def raise_for_signal(signum: int):
+    """Note ``signum`` as pending, then raise its exception: :class:`Terminated` (SIGTERM, SIGHUP) or
+    KeyboardInterrupt (SIGINT).
+
+    The exception alone is not enough. A Python signal handler runs at whatever Python code the main thread is in,
+    and that can be code a C extension calls and whose exceptions it discards: CasADi's SWIG overload
+    resolution calls Python converters (``casadi.casadi.DM_from_csc`` and kin) while it tries each overload and
+    clears any error they raise, so a SIGTERM during a graph's construction was lost and the command went on to
+    write its result and exit 0. The pending signal stays noted, and :func:`check_signals` raises it again
+    where arvcas looks (before a file is published, before and after a compile, when a command returns)."""
+    _PENDING.append(signum)
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
     raise Terminated(signum)
 
 
+def _raise_terminated(signum, frame):
+    raise_for_signal(signum)
+
+
+def check_signals() -> None:
+    """Raise again the exception of a signal this command received (:func:`raise_for_signal`), in case the
+    first was swallowed; nothing if none came."""
+    if _PENDING:
+        s = _PENDING[0]
+        if s == signal.SIGINT:
+            raise KeyboardInterrupt
+        raise Terminated(s)
+
+
+def pending_signal() -> int | None:
+    """The first signal :func:`raise_for_signal` noted since :func:`install_signal_handlers`, or None."""
+    return _PENDING[0] if _PENDING else None
+
+
+def forget_signals() -> None:
+    """Forget the noted signals (the command that received them has reported them)."""
+    _PENDING.clear()
+
+
 def install_signal_handlers() -> None:
-    """SIGTERM and SIGHUP raise :class:`Terminated` in the main thread (a no-op elsewhere)."""
+    """SIGTERM and SIGHUP raise :class:`Terminated`, SIGINT KeyboardInterrupt (where their handlers are Python's
+    defaults), each noted as pending (:func:`raise_for_signal`); forgets the signals an earlier command noted.
+    In the main thread only (a no-op elsewhere)."""
     if threading.current_thread() is not threading.main_thread():
         return
+    _PENDING.clear()
     for s in (signal.SIGTERM, signal.SIGHUP):
         if signal.getsignal(s) in (signal.SIG_DFL, None):
             signal.signal(s, _raise_terminated)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _raise_terminated)
 
 
 # ---- the output policy ------------------------------------------------------------------------------------
