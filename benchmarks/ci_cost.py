@@ -67,6 +67,7 @@ class _Meter:
 
 _TESTS: list[dict] = []
 _FIXTURES: list[dict] = []
+_FAILED: list[dict] = []  # which tests failed, in which phase, and the last line of why
 
 
 def _phase(item, phase: str):
@@ -110,11 +111,18 @@ if os.environ.get(_ENV_OUT):
                               "param": None if param is None else str(param),
                               "first_test": request.node.nodeid, **rec})
 
+    def pytest_runtest_logreport(report):
+        if report.failed:
+            crash = getattr(report.longrepr, "reprcrash", None)  # the assertion's or exception's own message
+            lines = str(report.longrepr).strip().splitlines()
+            why = crash.message if crash is not None else (lines[-1] if lines else "")
+            _FAILED.append({"test": report.nodeid, "when": report.when, "why": " ".join(why.split())[:300]})
+
     def pytest_sessionfinish(session, exitstatus):
         worker = os.environ.get("PYTEST_XDIST_WORKER")  # under xdist: one file per worker (and the controller's)
         cpu, child = _cpu()
         Path(os.environ[_ENV_OUT] + (f".{worker}" if worker else "")).write_text(json.dumps(
-            {"worker": worker, "tests": _TESTS, "fixtures": _FIXTURES, "exitstatus": int(exitstatus),
+            {"worker": worker, "tests": _TESTS, "fixtures": _FIXTURES, "failed": _FAILED, "exitstatus": int(exitstatus),
              "cpu_s": round(cpu + child, 1)}))
 
 
@@ -158,6 +166,7 @@ def _pytest(args: list[str], python: str) -> dict:
                 "workers": {r["worker"] or "main": {"cpu_s": r["cpu_s"], "n_tests": len(r["tests"])} for r in recs},
                 "tests": [t | {"worker": r["worker"]} for r in recs for t in r["tests"]],
                 "fixtures": [x for r in recs for x in r["fixtures"]],
+                "failed": [x for r in recs for x in r.get("failed", [])],
                 "builds": _manifests(cache) + _manifests(base)}
 
 
@@ -250,7 +259,8 @@ def _costliest(tests: list[dict], fixtures: list[dict]) -> dict:
 def summarise_files(files: dict[str, dict]) -> dict:
     """Each file run alone: per file (costliest first), the costliest tests and fixtures, repeated builds."""
     per_file = sorted(({"file": Path(f).name, "cpu_s": r["cpu_s"], "tests_cpu_s": round(sum(map(_test_cpu, r["tests"])), 1),
-                        "wall_s": r["wall_s"], "summary": r["summary"], "builds": len(r["builds"]),
+                        "wall_s": r["wall_s"], "summary": r["summary"], "failed": r.get("failed", []),
+                        "builds": len(r["builds"]),
                         "compile_s": round(sum(b["compile_time_s"] for b in r["builds"]), 1)}
                        for f, r in files.items()), key=lambda r: -r["cpu_s"])
     return {"files": per_file, "total_cpu_s": round(sum(r["cpu_s"] for r in per_file), 1),
@@ -269,8 +279,8 @@ def summarise_suite(r: dict) -> dict:
                         "worker": ts[0]["worker"], "n_tests": len(ts)} for f, ts in by_file.items()),
                       key=lambda x: -x["tests_cpu_s"])
     return {"complete": r["pytest_rc"] in (0, 1), "n_tests": len(r["tests"]),  # 2: interrupted (SIGINT)
-            "wall_s": r["wall_s"], "cpu_s": r["cpu_s"], "summary": r["summary"], "workers": r["workers"],
-            "builds": len(r["builds"]), "compile_s": round(sum(b["compile_time_s"] for b in r["builds"]), 1),
+            "wall_s": r["wall_s"], "cpu_s": r["cpu_s"], "summary": r["summary"], "failed": r.get("failed", []),
+            "workers": r["workers"], "builds": len(r["builds"]), "compile_s": round(sum(b["compile_time_s"] for b in r["builds"]), 1),
             "files": per_file, **_costliest(r["tests"], r["fixtures"]),
             "repeated_builds": _repeated([("", b) for b in r["builds"]]),
             "several_keys": _several_keys([("", b) for b in r["builds"]])}
