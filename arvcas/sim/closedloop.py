@@ -41,6 +41,7 @@ from arvcas.system.params import Layout as ParamLayout, default_layout, view
 from arvcas.sim.scenario import ScenarioConfig
 from arvcas.model.spatial import J, J_dot, J_inv
 from arvcas.model.uvms import ModelOptions, coupled_terms_scheduled
+from arvcas.util.files import check_signals
 
 __all__ = ["StateLayout", "RunSpec", "StepContext", "build_step", "build_run", "derived_constants", "nominal_inertia",
            "controller_memory", "controller_sample", "ControllerSample", "arm_truth", "controller_functions",
@@ -290,6 +291,7 @@ def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     cols = law.columns()
     ng = 6 * len(cols)
     rk4, pc_fn = _plant_substep(spec)
+    check_signals()  # a signal whose exception CasADi swallowed while the graph was built: stop here, not later
     n_thr = lay.structure.n_thrusters
     dyn = lay.structure.has_thruster_dynamics
     L = state_layout(law, ng, n_thr, pc_fn.size1_out(0), len(lay), cfg.ekf_vector.size, cfg.water_vector.size,
@@ -299,6 +301,7 @@ def step_parts(spec: RunSpec, trace: bool, firsts) -> StepParts:
     S = ca.vertcat(Sd, Kc)
     tk = ca.SX.sym("t_k")
     ctrls = [_controller_part(spec, L, S, [Sd, Kc], tk, first, trace) for first in firsts]
+    check_signals()
 
     # finalize: a run that diverges (non-finite state, error bound) is frozen with ok = 0, t_fail set
     # (C: the sample's new loop state without x). A branch, not an element-wise select:
@@ -747,6 +750,7 @@ def build_run(spec: RunSpec, trace: bool = False) -> ca.Function:
     ``trace=True``: also the per-sample trace.
     """
     (step0, step), L, pc_fn = _build_steps(spec, trace, (True, False))
+    check_signals()
     cfg, law = spec.cfg, spec.law
     n = scenario.n_samples(cfg)
     ng = 6 * len(law.columns())
