@@ -72,7 +72,7 @@ import casadi as ca
 
 from arvcas.build.batchloop import batch_loop_c
 from arvcas.build.progress import PROGRESS_AFTER_S, Progress as _Progress, report_progress  # noqa: F401 (re-exported)
-from arvcas.util.files import check_signals
+from arvcas.util.files import check_signals, private_dir
 
 __all__ = [
     "build_described",
@@ -505,8 +505,6 @@ def _publish(plan: _Plan, d: Path, so: Path, man: Path) -> dict:
 
 def _build_private(plan: _Plan, d: Path) -> ca.Function:
     """Build in a directory of this process outside the cache ``d`` (which may be read-only)."""
-    from arvcas.util.files import private_dir
-
     work = private_dir("build")
     with _LOCK:
         if not _PRIVATE_DIRS:
