@@ -36,8 +36,8 @@ import tomlkit  # noqa: E402
 
 from arvcas.util.files import TMP_MARK  # noqa: E402
 from studytext import short_scenario, small_study  # noqa: E402
-from trust_helpers import (GOOD_INITIAL, GOOD_STEP, HOSTILE, bad_law, chromium, page_faults,  # noqa: E402
-                           pose_log, snapshot)
+from trust_helpers import (GOOD_INITIAL, GOOD_STEP, HOSTILE, XACRO_EXPRESSIONS, XACRO_HEAD,  # noqa: E402
+                           XACRO_RECURSIVE, bad_law, chromium, page_faults, pose_log, snapshot, xacro_bomb)
 
 ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
 # a shell's defaults for the signals (a probe run under nohup would hand its children an ignored SIGHUP)
@@ -414,21 +414,15 @@ def _():
 
 # ---- 5: unbounded xacro --------------------------------------------------------------------------------
 
-XHEAD = '<?xml version="1.0"?>\n<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro">\n'
 XACROS = {
-    "2^40 elements (nested macros)": XHEAD + '  <xacro:macro name="m0"><link name="l"/></xacro:macro>\n' + "".join(
-        f'  <xacro:macro name="m{i}"><xacro:m{i - 1}/><xacro:m{i - 1}/></xacro:macro>\n' for i in range(1, 41))
-    + "  <xacro:m40/>\n</robot>\n",
-    "endless recursion": XHEAD + '  <xacro:macro name="r" params="n"><link name="l${n}"/><xacro:r n="${n+1}"/>'
-    '</xacro:macro>\n  <xacro:r n="0"/>\n</robot>\n',
-    "a property of 10^12 characters": XHEAD + '  <xacro:property name="a" value="${\'x\' * 10**12}"/>\n'
+    "2^40 elements (nested macros)": xacro_bomb(40),
+    "endless recursion": XACRO_RECURSIVE,
+    "a property of 10^12 characters": XACRO_HEAD + '  <xacro:property name="a" value="${\'x\' * 10**12}"/>\n'
     '  <link name="${a}"/>\n</robot>\n',
-    "a property that doubles 60 times": XHEAD + '  <xacro:property name="p0" value="xx"/>\n' + "".join(
-        f'  <xacro:property name="p{i}" value="${{p{i - 1}}}${{p{i - 1}}}"/>\n' for i in range(1, 61))
-    + '  <link name="${p60}"/>\n</robot>\n',
-    "an integer power tower (10**10**10)": XHEAD + '  <link name="${10**10**10}"/>\n</robot>\n',
-    "a file that includes itself": XHEAD + '  <xacro:include filename="$(cwd)/self.xacro"/>\n</robot>\n',
-    "a macro body of 2^40 links via xacro:loop-like insert_block": XHEAD +
+    "a property that doubles 60 times": XACRO_EXPRESSIONS["doubling"],
+    "an integer power tower (10**10**10)": XACRO_EXPRESSIONS["tower"],
+    "a file that includes itself": XACRO_HEAD + '  <xacro:include filename="$(cwd)/self.xacro"/>\n</robot>\n',
+    "a macro body of 2^40 links via xacro:loop-like insert_block": XACRO_HEAD +
     '  <xacro:macro name="b0" params="**x"><xacro:insert_block name="x"/><xacro:insert_block name="x"/>'
     '</xacro:macro>\n' + "".join(
         f'  <xacro:macro name="b{i}" params="**x"><xacro:b{i - 1}><xacro:b{i - 1}><xacro:insert_block name="x"/>'

@@ -1,6 +1,7 @@
 """Shared by tests/test_trust_*.py and the other tests of what a user gets wrong, and by the hostile probe
 (tests/probe_cases.py): run the CLI, snapshot a directory, a small synthetic front.h5, names that are markup,
-a page in headless Chromium, a plugin law that returns the wrong thing, an attitude log with its mapping."""
+a page in headless Chromium, a plugin law that returns the wrong thing, an attitude log with its mapping, xacro
+that expands without end."""
 
 from __future__ import annotations
 
@@ -244,3 +245,28 @@ quaternion_order = "{said_order}"
 quaternion = {{ columns = ["q0", "q1", "q2", "q3"] }}
 {acc}''')
     return d / "trial.log.toml"
+
+
+# xacro that expands without end (``import-system uuv`` stops each in one line): a macro bomb, a macro that calls
+# itself, and one expression that runs without end inside Python (no element is counted meanwhile): an integer
+# power tower, a property that doubles itself 60 times (2^61 characters), a repetition of 10^12 characters
+XACRO_HEAD = '<?xml version="1.0"?>\n<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro">\n'
+
+
+def xacro_bomb(levels: int) -> str:
+    """Macro i calls macro i-1 twice: 2^levels links."""
+    body = '  <xacro:macro name="m0"><link name="l"/></xacro:macro>\n'
+    body += "".join(f'  <xacro:macro name="m{i}"><xacro:m{i - 1}/><xacro:m{i - 1}/></xacro:macro>\n'
+                    for i in range(1, levels + 1))
+    return XACRO_HEAD + body + f"  <xacro:m{levels}/>\n</robot>\n"
+
+
+XACRO_RECURSIVE = XACRO_HEAD + ('  <xacro:macro name="r" params="n"><link name="l${n}"/><xacro:r n="${n+1}"/>'
+                                '</xacro:macro>\n  <xacro:r n="0"/>\n</robot>\n')
+XACRO_EXPRESSIONS = {
+    "tower": XACRO_HEAD + '  <link name="${10**10**10}"/>\n</robot>\n',
+    "doubling": XACRO_HEAD + '  <xacro:property name="p0" value="xx"/>\n' + "".join(
+        f'  <xacro:property name="p{i}" value="${{p{i - 1}}}${{p{i - 1}}}"/>\n' for i in range(1, 61))
+    + '  <link name="${p60}"/>\n</robot>\n',
+    "repeat": XACRO_HEAD + '  <link name="${\'x\' * 10**12}"/>\n</robot>\n',
+}
