@@ -18,7 +18,6 @@ shows every name as text and runs nothing. Needs a C compiler (item 6), Chromium
 from __future__ import annotations
 
 import argparse
-import gzip
 import json
 import os
 import re
@@ -27,15 +26,18 @@ import signal
 import subprocess
 import sys
 import tempfile
-import textwrap
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
-import numpy as np  # noqa: E402
 import tomlkit  # noqa: E402
+
+from arvcas.util.files import TMP_MARK  # noqa: E402
+from studytext import short_scenario, small_study  # noqa: E402
+from trust_helpers import (GOOD_INITIAL, GOOD_STEP, HOSTILE, XACRO_EXPRESSIONS, XACRO_HEAD,  # noqa: E402
+                           XACRO_RECURSIVE, bad_law, chromium, page_faults, pose_log, snapshot, xacro_bomb)
 
 ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
 # a shell's defaults for the signals (a probe run under nohup would hand its children an ignored SIGHUP)
@@ -43,9 +45,6 @@ ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PY
 PRE = "import signal; [signal.signal(s, signal.SIG_DFL) for s in (signal.SIGHUP, signal.SIGTERM)]; " \
       "signal.signal(signal.SIGINT, signal.default_int_handler); " \
       "import sys; from arvcas.cli import main; sys.exit(main())"
-HOSTILE = ("x<!--<script>y", "</script><script>document.body.setAttribute('data-pwned','1')</script>",
-           "<img src=x onerror=\"document.body.setAttribute('data-pwned','2')\">", "a&amp;b\"'<!--")
-TMP_MARK = ".arvcas-tmp-"
 
 CASES: list[tuple[int, str, object]] = []
 WORK: Path = Path()
@@ -83,10 +82,6 @@ def one_line(rc, err, *words, code=2) -> str:
     for w in words:
         need(w in lines[0], f"the line lacks {w!r}: {lines[0][:300]}")
     return lines[0]
-
-
-def snapshot(d: Path) -> dict:
-    return {str(p.relative_to(d)): (p.read_bytes(), p.stat().st_mtime_ns) for p in d.rglob("*") if p.is_file()}
 
 
 def nothing_changed(before: dict, d: Path):
@@ -139,22 +134,10 @@ def ident_inputs():
 # ---- 1: hostile names on the front page ----------------------------------------------------------------
 
 def chromium_check(page: Path, payload: str, shown: bool = True):
-    exe = shutil.which("chromium") or shutil.which("chromium-browser")
-    need(exe, "chromium is not installed")
-    with tempfile.TemporaryDirectory() as profile:
-        r = subprocess.run([exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-                            "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                            f"--user-data-dir={profile}", "--enable-logging=stderr", "--v=0",
-                            "--virtual-time-budget=5000", "--window-size=1280,1100", "--dump-dom", page.as_uri()],
-                           capture_output=True, text=True, timeout=180, stdin=subprocess.DEVNULL)
-    dom = r.stdout
-    console = [ln for ln in r.stderr.splitlines() if ":CONSOLE" in ln]
-    need(not console, f"console: {console[:1]}")
-    need('data-ready="1"' in dom, "the page's script did not run to the end (still loading)")
-    need(not re.search(r'data-pwned="\d"', dom), "a script the name carried ran")
-    import html
-
-    need(not shown or html.escape(payload, quote=False) in dom, "the name is not shown as text")
+    r = chromium(["--window-size=1280,1100", "--dump-dom", page.as_uri()], timeout=180)
+    need(r is not None, "chromium is not installed")
+    faults = page_faults(r.stdout, r.stderr, payload if shown else None)
+    need(not faults, "; ".join(faults))
 
 
 def explore_case(payload: str, where: str) -> str:
@@ -271,34 +254,11 @@ def _():
 
 
 def _study(d: Path) -> Path:
-    import arvcas
-    from dataclasses import replace
-    from arvcas.sim import scenario
-
     d.mkdir(parents=True, exist_ok=True)
-    s = arvcas.load_system("bluerov2_heavy_alpha5")
-    cfg = replace(scenario.load_scenario(s.params.default("scenario")), time_duration=20.0)
-    (d / "short.toml").write_text(cfg.to_toml(), encoding="utf-8")
-    (d / "study.toml").write_text(textwrap.dedent("""
-        [study]
-        name = "probe"
-        controllers = ["agsta"]
-        seed = 5
-        [variables]
-        scale = 3.0
-        [algorithm]
-        population = 6
-        [termination]
-        max_generations = 50
-        [objectives]
-        names = ["chat", "rmse"]
-        reference_point = [2.0, 2.0]
-        [evaluation]
-        system = "bluerov2_heavy_alpha5"
-        scenario = "short.toml"
-        [[evaluation.draws]]
-        noise_seed = 1
-        """), encoding="utf-8")
+    short_scenario(d, "bluerov2_heavy_alpha5", 20.0)
+    (d / "study.toml").write_text(small_study("probe", ["agsta"], seed=5, scale=3.0, population=6, generations=50,
+                                              system="bluerov2_heavy_alpha5", scenario="short.toml"),
+                                  encoding="utf-8")
     return d / "study.toml"
 
 
@@ -387,27 +347,6 @@ case(3, "identify --out elsewhere: a 60-character system name (+ '_identified')"
 
 # ---- 4: plugin laws returning the wrong thing ----------------------------------------------------------
 
-PLUGIN = '''\
-import casadi as ca
-import arvcas
-
-
-class Bad(arvcas.Controller):
-    name = "probe_{tag}"
-    gains = (arvcas.Gain("k", "1/s", "gain"),)
-    defaults = [1.0] * 6
-    defaults_block = "probe_{tag}"
-    state = (("w", 6),)
-
-    def initial(self, ctx, G):
-        {initial}
-
-    def step(self, ctx, G, x):
-        tau = -G["k"] * ctx.e
-        {step}
-'''
-GOOD_INITIAL = 'return {"w": ca.DM.zeros(6)}'
-GOOD_STEP = "return tau, x"
 LAWS = {
     "step returns None": (GOOD_INITIAL, "return None", "step returned NoneType None"),
     "step returns a string": (GOOD_INITIAL, 'return "tau"', "step returned str"),
@@ -429,7 +368,7 @@ def plugin_case(tag: str) -> str:
     slug = re.sub(r"\W+", "_", tag)
     law = WORK / "plugins" / f"{slug}.py"
     law.parent.mkdir(exist_ok=True)
-    law.write_text(PLUGIN.format(tag=slug, initial=initial, step=step))
+    law.write_text(bad_law(f"probe_{slug}", step=step, initial=initial))
     cache = WORK / "plugins" / f"cache_{slug}"
     env_cache = dict(ENV, ARVCAS_CACHE=str(cache))
     r = subprocess.run([sys.executable, "-c", PRE, "simulate", "--plugin", str(law), "--controller", f"probe_{slug}",
@@ -475,21 +414,15 @@ def _():
 
 # ---- 5: unbounded xacro --------------------------------------------------------------------------------
 
-XHEAD = '<?xml version="1.0"?>\n<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro">\n'
 XACROS = {
-    "2^40 elements (nested macros)": XHEAD + '  <xacro:macro name="m0"><link name="l"/></xacro:macro>\n' + "".join(
-        f'  <xacro:macro name="m{i}"><xacro:m{i - 1}/><xacro:m{i - 1}/></xacro:macro>\n' for i in range(1, 41))
-    + "  <xacro:m40/>\n</robot>\n",
-    "endless recursion": XHEAD + '  <xacro:macro name="r" params="n"><link name="l${n}"/><xacro:r n="${n+1}"/>'
-    '</xacro:macro>\n  <xacro:r n="0"/>\n</robot>\n',
-    "a property of 10^12 characters": XHEAD + '  <xacro:property name="a" value="${\'x\' * 10**12}"/>\n'
+    "2^40 elements (nested macros)": xacro_bomb(40),
+    "endless recursion": XACRO_RECURSIVE,
+    "a property of 10^12 characters": XACRO_HEAD + '  <xacro:property name="a" value="${\'x\' * 10**12}"/>\n'
     '  <link name="${a}"/>\n</robot>\n',
-    "a property that doubles 60 times": XHEAD + '  <xacro:property name="p0" value="xx"/>\n' + "".join(
-        f'  <xacro:property name="p{i}" value="${{p{i - 1}}}${{p{i - 1}}}"/>\n' for i in range(1, 61))
-    + '  <link name="${p60}"/>\n</robot>\n',
-    "an integer power tower (10**10**10)": XHEAD + '  <link name="${10**10**10}"/>\n</robot>\n',
-    "a file that includes itself": XHEAD + '  <xacro:include filename="$(cwd)/self.xacro"/>\n</robot>\n',
-    "a macro body of 2^40 links via xacro:loop-like insert_block": XHEAD +
+    "a property that doubles 60 times": XACRO_EXPRESSIONS["doubling"],
+    "an integer power tower (10**10**10)": XACRO_EXPRESSIONS["tower"],
+    "a file that includes itself": XACRO_HEAD + '  <xacro:include filename="$(cwd)/self.xacro"/>\n</robot>\n',
+    "a macro body of 2^40 links via xacro:loop-like insert_block": XACRO_HEAD +
     '  <xacro:macro name="b0" params="**x"><xacro:insert_block name="x"/><xacro:insert_block name="x"/>'
     '</xacro:macro>\n' + "".join(
         f'  <xacro:macro name="b{i}" params="**x"><xacro:b{i - 1}><xacro:b{i - 1}><xacro:insert_block name="x"/>'
@@ -746,45 +679,21 @@ for _k in ("arm waypoint after the end", "task entirely after the end", "task wa
 
 # the log readers: checked and reported only (their owner fixes them)
 
-def log_case(kind: str) -> str:
-    from scipy.spatial.transform import Rotation
+def _extra_field(data: bytes) -> bytes:
+    """A decimal comma in row 40: one field more than the header."""
+    lines = data.decode().splitlines(True)
+    lines[40] = lines[40].replace("0.", "0,", 1)
+    return "".join(lines).encode()
 
+
+def log_case(kind: str) -> str:
     path, _trials = ident_inputs()
     d = WORK / "logs_bad" / re.sub(r"\W+", "_", kind)
     d.mkdir(parents=True)
-    T = np.arange(0.0, 20.0 + 1e-9, 0.02)
-    e = np.stack([0.1 * np.sin(0.7 * T), 0.08 * np.cos(0.5 * T), 0.3 + 0.02 * T], axis=1)
-    Rm = Rotation.from_euler("ZYX", e[:, ::-1])
-    q = Rm.as_quat()  # x, y, z, w
-    f = -9.80665 * Rm.as_matrix()[:, 2, :] + 0.3 * np.random.default_rng(1).standard_normal((len(T), 3))
-    rows = np.column_stack([T, q[:, [3, 0, 1, 2]], f])  # the file holds w, x, y, z
-    text = "t,q0,q1,q2,q3,ax,ay,az\n" + "".join(",".join(f"{v:.12g}" for v in r) + "\n" for r in rows)
-    name, said = "pose.csv", "xyzw" if kind == "quaternion order wrong" else "wxyz"
-    if kind == "row with more fields than the header":
-        lines = text.splitlines(True)
-        lines[40] = lines[40].replace("0.", "0,", 1)
-        text = "".join(lines)
-    data = text.encode()
-    if kind == "corrupt gzip":
-        name = "pose.csv.gz"
-        raw = gzip.compress(data)
-        data = raw[: len(raw) // 2]
-    (d / name).write_bytes(data)
-    (d / "trial.log.toml").write_text(textwrap.dedent(f'''\
-        [log]
-        name = "trial"
-        passive = true
-        rate = 25.0
-
-        [[stream]]
-        file = "{name}"
-        time = "t"
-        world = "ned"
-        body = "frd"
-        quaternion_order = "{said}"
-        quaternion = {{ columns = ["q0", "q1", "q2", "q3"] }}
-        acceleration = {{ columns = ["ax", "ay", "az"], unit = "m/s^2" }}
-        '''))
+    said = "xyzw" if kind == "quaternion order wrong" else "wxyz"  # the file holds w, x, y, z
+    spoil = {"row with more fields than the header": _extra_field,
+             "corrupt gzip": lambda raw: raw[: len(raw) // 2]}.get(kind)
+    pose_log(d, 0.3, "wxyz", said, gz=kind == "corrupt gzip", spoil=spoil)
     rc, _o, err = cli("validate", "--system", path, d / "trial.log.toml", "--out", d / "v")
     word = {"quaternion order wrong": "quaternion", "row with more fields than the header": "row",
             "corrupt gzip": "gzip"}[kind]

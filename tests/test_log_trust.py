@@ -12,47 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
-from scipy.spatial.transform import Rotation
 
 from arvcas.ident import logs, streams
 from arvcas.ident.logs import LogError, load_log
 
-T = np.arange(0.0, 20.0 + 1e-9, 0.02)
-G = 9.80665
-
-
-def _pose(d: Path, yaw0: float, file_order: str, said_order: str, accel: bool, gz: bool = False) -> Path:
-    """A pose stream (NED, FRD) whose quaternion the file holds in ``file_order`` and the mapping calls
-    ``said_order``; with ``accel``, the accelerometer's specific force at rest plus 0.3 m/s^2 of motion."""
-    rng = np.random.default_rng(1)
-    e = np.stack([0.1 * np.sin(0.7 * T), 0.08 * np.cos(0.5 * T), yaw0 + 0.02 * T], axis=1)
-    Rm = Rotation.from_euler("ZYX", e[:, ::-1])
-    q = Rm.as_quat()
-    if file_order == "wxyz":
-        q = q[:, [3, 0, 1, 2]]
-    cols, hdr = [T, *q.T], ["t", "q0", "q1", "q2", "q3"]
-    if accel:
-        f = -G * Rm.as_matrix()[:, 2, :] + 0.3 * rng.standard_normal((len(T), 3))
-        cols += list(f.T)
-        hdr += ["ax", "ay", "az"]
-    name = "pose.csv.gz" if gz else "pose.csv"
-    text = ",".join(hdr) + "\n" + "\n".join(",".join(f"{v:.12g}" for v in row) for row in np.stack(cols, 1)) + "\n"
-    (d / name).write_bytes(gzip.compress(text.encode()) if gz else text.encode())
-    acc = 'acceleration = { columns = ["ax", "ay", "az"], unit = "m/s^2" }\n' if accel else ""
-    (d / "trial.log.toml").write_text(f'''[log]
-name = "trial"
-passive = true
-rate = 25.0
-
-[[stream]]
-file = "{name}"
-time = "t"
-world = "ned"
-body = "frd"
-quaternion_order = "{said_order}"
-quaternion = {{ columns = ["q0", "q1", "q2", "q3"] }}
-{acc}''')
-    return d / "trial.log.toml"
+from trust_helpers import pose_log
 
 
 @pytest.mark.parametrize("file_order, said", [("wxyz", "xyzw"), ("xyzw", "wxyz")])
@@ -61,14 +25,14 @@ def test_a_quaternion_in_the_other_order_is_found_by_the_accelerometer(tmp_path,
     with pytest.raises(LogError, match=rf'pose.csv: .*trial.log.toml stream\[1\].quaternion_order = "{said}" looks '
                                        rf"wrong: the accelerometer's gravity direction is \d+ deg from the attitude's "
                                        rf'\(median\); with "{file_order}" it is \d deg$'):
-        load_log(_pose(tmp_path, 2.3, file_order, said, accel=True))
-    assert load_log(_pose(tmp_path, 2.3, file_order, file_order, accel=True)).duration == pytest.approx(20.0)
+        load_log(pose_log(tmp_path, 2.3, file_order, said, accel=True))
+    assert load_log(pose_log(tmp_path, 2.3, file_order, file_order, accel=True)).duration == pytest.approx(20.0)
 
 
 def test_without_an_accelerometer_nothing_is_guessed(tmp_path):
     """The tilt alone is no evidence (a wrong body frame tilts the vehicle too): the frame check speaks."""
     with pytest.raises(LogError, match=r"the attitude's frame does not match: median roll"):
-        load_log(_pose(tmp_path, 0.4, "wxyz", "xyzw", accel=False))
+        load_log(pose_log(tmp_path, 0.4, "wxyz", "xyzw", accel=False))
 
 
 def _stream(tmp_path, text: bytes, name="s.csv") -> Path:

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import re
 import shutil
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,9 +14,10 @@ import pytest
 
 import arvcas
 from arvcas import cli
-from arvcas.sim import scenario
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning import load_study
+
+from studytext import short_scenario, small_study
 
 DATA = Path(arvcas.__file__).parent / "data"
 SYSTEM = "bluerov2_heavy_alpha5"
@@ -35,40 +35,20 @@ def system(tmp_path_factory):
         for dof in ("x", "y", "z", "phi", "theta", "psi")), g)
     assert n == 1
     (d / f"{SYSTEM}.gains.toml").write_text(g)
-    s = arvcas.load_system(str(d / f"{SYSTEM}.toml"))
-    cfg = replace(scenario.load_scenario(s.params.default("scenario")), time_duration=10.0)
-    (d / "short.toml").write_text(cfg.to_toml(), encoding="utf-8")
+    short_scenario(d, str(d / f"{SYSTEM}.toml"), 10.0)
     return d
 
 
 def _study(d: Path, name: str, controllers: str, objectives_extra: str = "") -> Path:
     p = d / f"{name}.toml"
-    p.write_text(f"""
-[study]
-name = "{name}"
-controllers = {controllers}
-seed = 2
-[variables]
-scale = 2.0
-[algorithm]
-population = 4
-[termination]
-max_generations = 1
-[objectives]
-names = ["chat", "rmse"]
-reference_point = [5.0, 5.0]
-{objectives_extra}
-[evaluation]
-system = "{SYSTEM}.toml"
-scenario = "short.toml"
-[[evaluation.draws]]
-noise_seed = 1
-""", encoding="utf-8")
+    p.write_text(small_study(name, controllers, seed=2, scale=2.0, population=4, generations=1,
+                             reference_point=(5.0, 5.0), objectives=tuple(objectives_extra.splitlines()),
+                             system=f"{SYSTEM}.toml", scenario="short.toml"), encoding="utf-8")
     return p
 
 
 def test_a_pid_study_runs_to_the_end_where_the_agsta_defaults_diverge(system, capsys):
-    study = _study(system, "pidonly", '"pid"')
+    study = _study(system, "pidonly", "pid")
     assert cli.main(["tune", str(study), "--out", str(system / "out")]) == 0
     out = capsys.readouterr().out
     said = "pid: objectives normalised by pid's value at the default gains of bluerov2_heavy_alpha5 on draw 1"
@@ -81,7 +61,7 @@ def test_a_pid_study_runs_to_the_end_where_the_agsta_defaults_diverge(system, ca
 
 def test_given_values_are_the_normalisation(system, capsys):
     chat, rmse = [0.5, 0.5, 0.7, 0.01, 0.01, 0.02], [0.01, 0.01, 0.01, 0.03, 0.04, 0.05]
-    study = _study(system, "given", '"pid"', f"normalisation_chat = {chat}\nnormalisation_rmse = {rmse}")
+    study = _study(system, "given", "pid", f"normalisation_chat = {chat}\nnormalisation_rmse = {rmse}")
     assert cli.main(["tune", str(study), "--out", str(system / "given")]) == 0
     c = ck.read_checkpoint(system / "given" / "front.h5")
     assert c.normalisation == "the study's objectives.normalisation_chat and normalisation_rmse"
@@ -94,7 +74,7 @@ def test_given_values_are_the_normalisation(system, capsys):
 
 
 def test_no_law_whose_defaults_run_is_one_line(system, capsys):
-    study = _study(system, "agstanorm", '"pid"', 'normalisation = "agsta"')
+    study = _study(system, "agstanorm", "pid", 'normalisation = "agsta"')
     assert cli.main(["tune", str(study), "--out", str(system / "none")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "objectives.normalisation: no normalisation for the objectives on draw 1" in err \
@@ -111,7 +91,7 @@ def test_no_law_whose_defaults_run_is_one_line(system, capsys):
     ("normalisation_chat = [1, 1, 1]\nnormalisation_rmse = [1, 1, 1, 1, 1, 1]", "normalisation_chat"),
 ])
 def test_bad_normalisation_keys_are_refused_naming_the_key(system, extra, key, capsys):
-    study = _study(system, "bad", '"pid"', extra)
+    study = _study(system, "bad", "pid", extra)
     assert cli.main(["tune", str(study), "--out", str(system / "bad")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"objectives.{key}" in err, err
@@ -155,28 +135,17 @@ def test_haidou1_named_or_not_is_one_study_and_a_changed_copy_is_its_own(tmp_pat
     from arvcas.system import result_ref
     from arvcas.tuning import run as tr
 
-    base = """
-[study]
-name = "h"
-controllers = ["agsta"]
-seed = 1
-[variables]
-scale = 2.0
-[algorithm]
-population = 4
-[termination]
-max_generations = 1
-[objectives]
-names = ["chat", "rmse"]
-reference_point = [5.0, 5.0]
-"""
-    draw = "[[evaluation.draws]]\nnoise_seed = 1\n"
-    (tmp_path / "none.toml").write_text(base + "[evaluation]\n" + draw, encoding="utf-8")
-    (tmp_path / "named.toml").write_text(base + '[evaluation]\nsystem = "haidou1"\n' + draw, encoding="utf-8")
+    def study(name: str, system: str | None) -> None:
+        (tmp_path / f"{name}.toml").write_text(small_study("h", ["agsta"], seed=1, scale=2.0, population=4,
+                                                           generations=1, reference_point=(5.0, 5.0),
+                                                           system=system), encoding="utf-8")
+
+    study("none", None)
+    study("named", "haidou1")
     copy = tmp_path / "mine.toml"
     for f in ("haidou1.toml", "scenario.toml", "gains.toml"):
         shutil.copy(DATA / f, tmp_path / ("mine.toml" if f == "haidou1.toml" else f))
-    (tmp_path / "copy.toml").write_text(base + '[evaluation]\nsystem = "mine.toml"\n' + draw, encoding="utf-8")
+    study("copy", "mine.toml")
     studies = {k: load_study(tmp_path / f"{k}.toml") for k in ("none", "named", "copy")}
     assert [result_ref(s.params) for s in studies.values()] == ["", "", str(copy.resolve())]
     for k in ("none", "named"):

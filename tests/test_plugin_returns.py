@@ -16,25 +16,7 @@ from arvcas import cli
 from arvcas.controllers import base
 from arvcas.sim import closedloop, scenario
 
-PLUGIN = '''\
-import casadi as ca
-import arvcas
-
-
-class Bad(arvcas.Controller):
-    name = "toy_bad_{tag}"
-    gains = (arvcas.Gain("k", "1/s", "gain"),)
-    defaults = [1.0] * 6
-    defaults_block = "toy_bad"
-    state = (("w", 6),)
-
-    def initial(self, ctx, G):
-        return {{"w": ca.DM.zeros(6)}}
-
-    def step(self, ctx, G, x):
-        tau = -G["k"] * ctx.e
-        {body}
-'''
+from trust_helpers import bad_law
 
 # (what the step does, words of the one line it must give)
 CASES = {
@@ -62,7 +44,7 @@ def test_a_plugin_law_that_returns_the_wrong_thing_is_one_line_before_any_compil
     monkeypatch.setenv("ARVCAS_CACHE", str(tmp_path / "cache"))
     body, words = CASES[tag]
     law = tmp_path / f"toy_bad_{tag}.py"
-    law.write_text(PLUGIN.format(tag=tag, body=body))
+    law.write_text(bad_law(f"toy_bad_{tag}", step=body, block="toy_bad"))
     rc = cli.main(["simulate", "--plugin", str(law), "--controller", f"toy_bad_{tag}",
                    "--out", str(tmp_path / "r.h5")])
     err = capsys.readouterr().err

@@ -8,7 +8,6 @@ import base64
 import json
 import re
 import shutil
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,34 +19,17 @@ from arvcas.sim import scenario
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning import load_study
 
+from studytext import short_scenario, small_study
+from trust_helpers import HOSTILE, chromium, page_faults
+
 
 @pytest.fixture(scope="module")
 def study_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("b2study")
-    s = arvcas.load_system("bluerov2_heavy_alpha5")
-    cfg = replace(scenario.load_scenario(s.params.default("scenario")), time_duration=20.0)
-    (d / "short.toml").write_text(cfg.to_toml(), encoding="utf-8")
-    (d / "study.toml").write_text("""
-[study]
-name = "b2tiny"
-controllers = ["proposed", "agsta"]
-seed = 5
-[variables]
-scale = 3.0
-[algorithm]
-population = 6
-include_table2 = true
-[termination]
-max_generations = 2
-[objectives]
-names = ["chat", "rmse"]
-reference_point = [2.0, 2.0]
-[evaluation]
-system = "bluerov2_heavy_alpha5"
-scenario = "short.toml"
-[[evaluation.draws]]
-noise_seed = 1
-""", encoding="utf-8")
+    short_scenario(d, "bluerov2_heavy_alpha5", 20.0)
+    (d / "study.toml").write_text(small_study("b2tiny", ["proposed", "agsta"], seed=5, scale=3.0, population=6,
+                                              generations=2, include_table2=True, system="bluerov2_heavy_alpha5",
+                                              scenario="short.toml"), encoding="utf-8")
     assert cli.main(["tune", str(d / "study.toml"), "--out", str(d / "out")]) == 0
     return d
 
@@ -113,20 +95,11 @@ def _unpack(p: dict, width: int) -> np.ndarray:
     return out
 
 
-def _chromium(args, timeout=120):
+def _chromium(args):
     """Headless Chromium (the Debian package) on a fresh profile; returns (stdout, stderr)."""
-    import subprocess
-    import tempfile
-
-    exe = shutil.which("chromium") or shutil.which("chromium-browser")
-    if exe is None:
+    r = chromium(args)
+    if r is None:
         pytest.skip("chromium is not installed (Debian: apt-get install chromium; .ci/run installs it)")
-    with tempfile.TemporaryDirectory() as profile:
-        r = subprocess.run([exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                            "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                            f"--user-data-dir={profile}", "--enable-logging=stderr", "--v=0",
-                            "--virtual-time-budget=5000", *args],
-                           capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL)
     assert r.returncode == 0, r.stderr[-2000:]
     return r.stdout, r.stderr
 
@@ -167,9 +140,7 @@ def test_explore_page_holds_every_front_and_the_members_own_responses(study_dir,
 def test_explore_page_loads_in_headless_chromium_without_console_errors(page, tmp_path):
     shot = tmp_path / "shot.png"
     dom, err = _chromium(["--window-size=1280,1100", f"--screenshot={shot}", "--dump-dom", page.as_uri()])
-    console = [ln for ln in err.splitlines() if ":CONSOLE" in ln]
-    assert not console, console  # the page logs nothing: no error, no warning, no uncaught exception
-    assert 'data-ready="1"' in dom and '<p id="status">ready</p>' in dom  # its script ran to the end
+    assert not page_faults(dom, err)  # no console line (error, warning, uncaught exception); its script ran to the end
     from matplotlib.image import imread
 
     img = (imread(shot)[..., :3] * 255).round()
@@ -182,10 +153,6 @@ def test_explore_page_loads_in_headless_chromium_without_console_errors(page, tm
         assert near > 150, (f["controller"], f["color"], near)  # every front is drawn in its colour
 
 
-# names a user controls (study, system, controller, objective, gain and file names, descriptions): each one is
-# text on the page, never markup; these break an inline script block or run code if they reach it unescaped
-HOSTILE = ("x<!--<script>y", "</script><script>document.body.setAttribute('data-pwned','1')</script>",
-           "<img src=x onerror=\"document.body.setAttribute('data-pwned','2')\">", "a&amp;b\"'<!--")
 _STRUCTURAL = {"q", "color", "dofs", "format", "format_version", "arvcas_version"}  # written by arvcas, not by users
 
 
@@ -201,13 +168,7 @@ def _hostile(doc, payload):
 
 def _check_hostile_page(page, payload):
     dom, err = _chromium(["--window-size=1280,1100", "--dump-dom", page.as_uri()])
-    console = [ln for ln in err.splitlines() if ":CONSOLE" in ln]
-    assert not console, console
-    assert 'data-ready="1"' in dom and '<p id="status">ready</p>' in dom  # the page's script ran to the end
-    assert not re.search(r"data-pwned=\"\d\"", dom)  # nothing the names carry ran (the names hold it as text)
-    import html as _html
-
-    assert _html.escape(payload, quote=False) in dom  # the name shown as text
+    assert not page_faults(dom, err, payload)  # loads, runs to the end, shows the name as text and runs nothing
 
 
 @pytest.mark.parametrize("payload", HOSTILE)
@@ -342,9 +303,7 @@ def test_explore_page_of_three_objectives_loads_in_headless_chromium(page3, tmp_
     _, page = page3
     shot = tmp_path / "shot.png"
     dom, err = _chromium(["--window-size=1280,1100", f"--screenshot={shot}", "--dump-dom", page.as_uri() + view])
-    console = [ln for ln in err.splitlines() if ":CONSOLE" in ln]
-    assert not console, console
-    assert 'data-ready="1"' in dom and '<p id="status">ready</p>' in dom
+    assert not page_faults(dom, err)
     assert f'data-axes="{"energy,chat" if view else "chat,rmse"}"' in dom  # the axes drawn
     assert dom.count("<option") == 6 and 'id="axis-x"' in dom and 'id="axis-y"' in dom  # the two selectors
     from matplotlib.image import imread

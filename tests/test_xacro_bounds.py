@@ -13,25 +13,14 @@ pytest.importorskip("xacro")
 from arvcas.cli import main  # noqa: E402
 from arvcas.system import rosfiles, uuv  # noqa: E402
 
+from trust_helpers import XACRO_EXPRESSIONS, XACRO_RECURSIVE, xacro_bomb  # noqa: E402
+
 DATA = Path(__file__).parent / "data" / "uuv_rexrov2"
-HEAD = '<?xml version="1.0"?>\n<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro">\n'
-
-
-def _bomb(levels: int) -> str:
-    """Macro i calls macro i-1 twice: 2^levels links."""
-    body = '  <xacro:macro name="m0"><link name="l"/></xacro:macro>\n'
-    body += "".join(f'  <xacro:macro name="m{i}"><xacro:m{i - 1}/><xacro:m{i - 1}/></xacro:macro>\n'
-                    for i in range(1, levels + 1))
-    return HEAD + body + f"  <xacro:m{levels}/>\n</robot>\n"
-
-
-RECURSIVE = HEAD + ('  <xacro:macro name="r" params="n"><link name="l${n}"/><xacro:r n="${n+1}"/></xacro:macro>\n'
-                    '  <xacro:r n="0"/>\n</robot>\n')
 
 
 @pytest.mark.parametrize("text, words", [
-    (_bomb(40), ["the expansion passed 20,000 elements", "MAX_XACRO_ELEMENTS"]),
-    (RECURSIVE, ["elements nested more than 100 deep", "MAX_XACRO_DEPTH"]),
+    (xacro_bomb(40), ["the expansion passed 20,000 elements", "MAX_XACRO_ELEMENTS"]),
+    (XACRO_RECURSIVE, ["elements nested more than 100 deep", "MAX_XACRO_DEPTH"]),
 ])
 def test_an_unbounded_expansion_is_one_line_and_writes_nothing(tmp_path, capsys, text, words):
     src = tmp_path / "bomb.xacro"
@@ -45,7 +34,7 @@ def test_an_unbounded_expansion_is_one_line_and_writes_nothing(tmp_path, capsys,
 
 def test_the_time_bound(tmp_path, monkeypatch):
     src = tmp_path / "small.xacro"
-    src.write_text(_bomb(3))
+    src.write_text(xacro_bomb(3))
     assert uuv.expand(src, {}, {})[0].count("<link") == 8  # 2^3 links: within every bound
     monkeypatch.setattr(rosfiles, "MAX_XACRO_SECONDS", 0.0)
     with pytest.raises(uuv.ImportError_, match=r"xacro: the expansion took more than 0 s after 1 elements; refused"):
@@ -56,7 +45,7 @@ def test_a_bounded_expansion_just_below_the_element_bound_and_the_real_descripti
     import xacro
 
     src = tmp_path / "b.xacro"
-    src.write_text(_bomb(6))  # 2^6 links
+    src.write_text(xacro_bomb(6))  # 2^6 links
     monkeypatch.setattr(rosfiles, "MAX_XACRO_ELEMENTS", 1000)
     assert uuv.expand(src, {}, {})[0].count("<link") == 64
     monkeypatch.setattr(rosfiles, "MAX_XACRO_ELEMENTS", 64)  # every link is one element: 64 are not enough
@@ -67,24 +56,13 @@ def test_a_bounded_expansion_just_below_the_element_bound_and_the_real_descripti
     assert "oberon7" in text and xacro.eval_all.__name__ == "eval_all"  # xacro is left as it was
 
 
-# one expression can run without end inside Python (no element is counted meanwhile): an integer power
-# tower, a property that doubles itself 60 times (2^61 characters), a repetition of 10^12 characters
-EXPRESSIONS = {
-    "tower": HEAD + '  <link name="${10**10**10}"/>\n</robot>\n',
-    "doubling": HEAD + '  <xacro:property name="p0" value="xx"/>\n' + "".join(
-        f'  <xacro:property name="p{i}" value="${{p{i - 1}}}${{p{i - 1}}}"/>\n' for i in range(1, 61))
-    + '  <link name="${p60}"/>\n</robot>\n',
-    "repeat": HEAD + '  <link name="${\'x\' * 10**12}"/>\n</robot>\n',
-}
-
-
-@pytest.mark.parametrize("tag", list(EXPRESSIONS))
+@pytest.mark.parametrize("tag", list(XACRO_EXPRESSIONS))
 def test_an_expression_without_end_is_stopped_by_the_time_and_memory_bounds(tmp_path, capsys, monkeypatch, tag):
     import time
 
     monkeypatch.setattr(rosfiles, "MAX_XACRO_SECONDS", 1.0)
     src = tmp_path / "expr.xacro"
-    src.write_text(EXPRESSIONS[tag])
+    src.write_text(XACRO_EXPRESSIONS[tag])
     out = tmp_path / "x.toml"
     t0 = time.monotonic()
     assert main(["import-system", "uuv", str(src), "--out", str(out), "--max-thrust", "100"]) == 2

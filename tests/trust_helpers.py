@@ -1,8 +1,17 @@
-"""Shared by tests/test_trust_*.py: run the CLI, snapshot a directory, a small synthetic front.h5."""
+"""Shared by tests/test_trust_*.py and the other tests of what a user gets wrong, and by the hostile probe
+(tests/probe_cases.py): run the CLI, snapshot a directory, a small synthetic front.h5, names that are markup,
+a page in headless Chromium, a plugin law that returns the wrong thing, an attitude log with its mapping, xacro
+that expands without end."""
 
 from __future__ import annotations
 
+import gzip
+import html
 import os
+import re
+import shutil
+import subprocess
+import tempfile
 import threading
 from pathlib import Path
 
@@ -129,3 +138,135 @@ def scenario_variant(tmp_path: Path, old: str, new: str, name: str = "s.toml") -
     p = tmp_path / name
     p.write_text(text.replace(old, new, 1))
     return p
+
+
+# names a user controls (study, system, controller, objective, gain and file names, descriptions): each one is
+# text on a page, never markup; these break an inline script block or run code if they reach it unescaped
+HOSTILE = ("x<!--<script>y", "</script><script>document.body.setAttribute('data-pwned','1')</script>",
+           "<img src=x onerror=\"document.body.setAttribute('data-pwned','2')\">", "a&amp;b\"'<!--")
+
+
+def chromium(args, timeout: float = 120.0):
+    """Headless Chromium (the Debian package) on a fresh profile with ``args``: the completed process, or None
+    when Chromium is not installed."""
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    if exe is None:
+        return None
+    with tempfile.TemporaryDirectory() as profile:
+        return subprocess.run([exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                               "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                               f"--user-data-dir={profile}", "--enable-logging=stderr", "--v=0",
+                               "--virtual-time-budget=5000", *args],
+                              capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+
+
+def page_faults(dom: str, stderr: str, payload: str | None = None) -> list[str]:
+    """What is wrong with a page Chromium loaded (its ``--dump-dom`` and its stderr): a console line, its script
+    not run to the end, a script that a name carried ran, ``payload`` (if given) not shown as text. Empty when
+    nothing is."""
+    console = [ln for ln in stderr.splitlines() if ":CONSOLE" in ln]
+    faults = [f"console: {console[:1]}"] if console else []
+    if 'data-ready="1"' not in dom or '<p id="status">ready</p>' not in dom:
+        faults.append("the page's script did not run to the end (still loading, or an error)")
+    if re.search(r'data-pwned="\d"', dom):
+        faults.append("a script the name carried ran")
+    if payload is not None and html.escape(payload, quote=False) not in dom:
+        faults.append("the name is not shown as text")
+    return faults
+
+
+# a plugin law whose initial or step returns what ``initial`` and ``step`` say (Python source of one line
+# each); the step's line is line 17 of the file (a raise there names it)
+BAD_LAW = '''\
+import casadi as ca
+import arvcas
+
+
+class Bad(arvcas.Controller):
+    name = "{name}"
+    gains = (arvcas.Gain("k", "1/s", "gain"),)
+    defaults = [1.0] * 6
+    defaults_block = "{block}"
+    state = (("w", 6),)
+
+    def initial(self, ctx, G):
+        {initial}
+
+    def step(self, ctx, G, x):
+        tau = -G["k"] * ctx.e
+        {step}
+'''
+GOOD_INITIAL = 'return {"w": ca.DM.zeros(6)}'
+GOOD_STEP = "return tau, x"
+
+
+def bad_law(name: str, step: str = GOOD_STEP, initial: str = GOOD_INITIAL, block: str | None = None) -> str:
+    """The source of the plugin law ``name`` (its gain table's block ``block``, default its name) whose
+    ``initial`` and ``step`` end in the given lines."""
+    return BAD_LAW.format(name=name, block=block or name, initial=initial, step=step)
+
+
+def pose_log(d: Path, yaw0: float, file_order: str, said_order: str, accel: bool = True, gz: bool = False,
+             spoil=None) -> Path:
+    """``d/trial.log.toml`` and its pose stream (NED, FRD; 20 s at 50 Hz, ``yaw0`` the heading at the start)
+    whose quaternion the file holds in ``file_order`` and the mapping calls ``said_order``; with ``accel``, the
+    accelerometer's specific force at rest plus 0.3 m/s^2 of motion. ``gz``: the stream gzip-compressed;
+    ``spoil``: a function of the stream file's bytes that returns the bytes written (a damaged file)."""
+    from scipy.spatial.transform import Rotation
+
+    t = np.arange(0.0, 20.0 + 1e-9, 0.02)
+    rng = np.random.default_rng(1)
+    e = np.stack([0.1 * np.sin(0.7 * t), 0.08 * np.cos(0.5 * t), yaw0 + 0.02 * t], axis=1)
+    Rm = Rotation.from_euler("ZYX", e[:, ::-1])
+    q = Rm.as_quat()  # x, y, z, w
+    if file_order == "wxyz":
+        q = q[:, [3, 0, 1, 2]]
+    cols, hdr = [t, *q.T], ["t", "q0", "q1", "q2", "q3"]
+    if accel:
+        f = -9.80665 * Rm.as_matrix()[:, 2, :] + 0.3 * rng.standard_normal((len(t), 3))
+        cols += list(f.T)
+        hdr += ["ax", "ay", "az"]
+    name = "pose.csv.gz" if gz else "pose.csv"
+    text = ",".join(hdr) + "\n" + "\n".join(",".join(f"{v:.12g}" for v in row) for row in np.stack(cols, 1)) + "\n"
+    data = gzip.compress(text.encode()) if gz else text.encode()
+    (d / name).write_bytes(spoil(data) if spoil else data)
+    acc = 'acceleration = { columns = ["ax", "ay", "az"], unit = "m/s^2" }\n' if accel else ""
+    (d / "trial.log.toml").write_text(f'''[log]
+name = "trial"
+passive = true
+rate = 25.0
+
+[[stream]]
+file = "{name}"
+time = "t"
+world = "ned"
+body = "frd"
+quaternion_order = "{said_order}"
+quaternion = {{ columns = ["q0", "q1", "q2", "q3"] }}
+{acc}''')
+    return d / "trial.log.toml"
+
+
+# xacro that expands without end (``import-system uuv`` stops each in one line): a macro bomb, a macro that calls
+# itself, and one expression that runs without end inside Python (no element is counted meanwhile): an integer
+# power tower, a property that doubles itself 60 times (2^61 characters), a repetition of 10^12 characters
+XACRO_HEAD = '<?xml version="1.0"?>\n<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro">\n'
+
+
+def xacro_bomb(levels: int) -> str:
+    """Macro i calls macro i-1 twice: 2^levels links."""
+    body = '  <xacro:macro name="m0"><link name="l"/></xacro:macro>\n'
+    body += "".join(f'  <xacro:macro name="m{i}"><xacro:m{i - 1}/><xacro:m{i - 1}/></xacro:macro>\n'
+                    for i in range(1, levels + 1))
+    return XACRO_HEAD + body + f"  <xacro:m{levels}/>\n</robot>\n"
+
+
+XACRO_RECURSIVE = XACRO_HEAD + ('  <xacro:macro name="r" params="n"><link name="l${n}"/><xacro:r n="${n+1}"/>'
+                                '</xacro:macro>\n  <xacro:r n="0"/>\n</robot>\n')
+XACRO_EXPRESSIONS = {
+    "tower": XACRO_HEAD + '  <link name="${10**10**10}"/>\n</robot>\n',
+    "doubling": XACRO_HEAD + '  <xacro:property name="p0" value="xx"/>\n' + "".join(
+        f'  <xacro:property name="p{i}" value="${{p{i - 1}}}${{p{i - 1}}}"/>\n' for i in range(1, 61))
+    + '  <link name="${p60}"/>\n</robot>\n',
+    "repeat": XACRO_HEAD + '  <link name="${\'x\' * 10**12}"/>\n</robot>\n',
+}

@@ -1,48 +1,30 @@
 """Write results/ardusub/README.md from the committed files of this folder: the fronts (<law>/front.h5: objectives,
 per-DOF CHAT and RMSE, the default gains on the same draw), compare.txt (hypervolumes) and the knee's .param file;
-ArduSub's defaults and ranges from arvcas/data/ardusub_params.toml. Run from the repository root:
+ArduSub's defaults and ranges from arvcas/data/ardusub_params.toml; what it shares with identified/render.py in
+page.py. Run from the repository root:
 
     python results/ardusub/render.py
 """
 
 from __future__ import annotations
 
-import tomllib
+import importlib.util
 from pathlib import Path
 
 import numpy as np
 
-import arvcas
-from arvcas.controllers import ardusub
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.front import read_front, resolve_front_path
 
 HERE = Path(__file__).resolve().parent
 LAWS = ("ardusub", "proposed", "agsta", "pid")
-DOFS = ("x", "y", "z", "phi", "theta", "psi")
 PARAM = HERE / "knee" / "bluerov2_heavy_ardusub.param"
-BETTER = HERE / "better_than_defaults" / "bluerov2_heavy_ardusub.param"  # the member of improvement() below
+BETTER = HERE / "better_than_defaults" / "bluerov2_heavy_ardusub.param"  # the member of page.improvement()
 
-
-def g(v, fmt=".3g"):
-    return format(float(v), fmt)
-
-
-def param_values(path: Path) -> dict[str, float]:
-    out = {}
-    for line in path.read_text().splitlines():
-        if line.strip() and not line.startswith("#"):
-            name, value = line.split()
-            out[name] = float(value)
-    return out
-
-
-def improvement(F: np.ndarray, d: np.ndarray) -> tuple[float, int]:
-    """The largest factor by which one front member improves on the point ``d`` in both objectives at once
-    (min over the objectives of d / f), and that member: > 1 means the member dominates ``d`` by that factor."""
-    k = np.min(d[None, :] / F, axis=1)
-    i = int(np.argmax(k))
-    return float(k[i]), i
+_spec = importlib.util.spec_from_file_location("arvcas_results_ardusub_page", HERE / "page.py")
+page = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(page)
+g, improvement, DOFS = page.g, page.improvement, page.DOFS
 
 
 def dominated_share(A: np.ndarray, B: np.ndarray) -> float:
@@ -55,13 +37,8 @@ def markdown() -> str:
     fronts = {c: read_front(HERE / c / "front.h5") for c in LAWS}
     cks = {c: ck.read_checkpoint(resolve_front_path(HERE / c / "front.h5")) for c in LAWS}
     fa = fronts["ardusub"]
-    table = tomllib.loads((Path(arvcas.__file__).parent / "data" / "ardusub_params.toml").read_text())["param"]
-    knee_vals = param_values(PARAM)
-    better_vals = param_values(BETTER)
-    fb, ib = improvement(fa.F, fa.table2_F)
-    assert f"\n# member: {ib}\n" in BETTER.read_text(), f"{BETTER} is not front member {ib}; export it again"
-    header = [ln for ln in PARAM.read_text().splitlines() if ln.startswith("#")]
-    compare = (HERE / "compare.txt").read_text().rstrip()
+    ex = page.exports(HERE, PARAM, BETTER, fa)
+    table, knee_vals, better_vals, fb, ib = ex.table, ex.knee, ex.better, ex.factor, ex.member
     c0 = cks["ardusub"]
     k = fa.knee()
     L = []
@@ -118,24 +95,13 @@ def markdown() -> str:
       f"largest: {best}). Share of the ArduSub front dominated by each other law's front: "
       + ", ".join(f"{c} {100 * v:.0f} %" for c, v in cover.items()) + ".")
     d = fa.table2_F
-    at_chat = fa.F[fa.F[:, 0] <= d[0]]
-    at_rmse = fa.F[fa.F[:, 1] <= d[1]]
     w(f"- ArduSub's defaults score (f_chat, f_rmse) = ({g(d[0])}, {g(d[1])}). The best front member beats them by a "
-      f"factor {fb:.2f} in both objectives at once (member {ib}). At no more f_chat than the defaults the front's lowest "
-      f"f_rmse is {g(at_chat[:, 1].min())} ({100 * (1 - at_chat[:, 1].min() / d[1]):.0f} % below the defaults'); at no "
-      f"more f_rmse the lowest f_chat is {g(at_rmse[:, 0].min())} ({100 * (1 - at_rmse[:, 0].min() / d[0]):.0f} % "
-      "below). That is how far the defaults sit from the tuned front.")
-    w(f"- The front spans f_chat {g(fa.F[:, 0].min())} to {g(fa.F[:, 0].max())} and f_rmse {g(fa.F[:, 1].min())} to "
-      f"{g(fa.F[:, 1].max())}: along it less chattering is bought with more error.")
+      f"factor {fb:.2f} in both objectives at once (member {ib}). " + page.beside_defaults(fa.F, d)
+      + " That is how far the defaults sit from the tuned front.")
+    w(f"- The front spans {page.span(fa.F)}: along it less chattering is bought with more error.")
     w("")
     w("## Hypervolumes (one reference point)")
-    w("")
-    w("```")
-    w(compare)
-    w("```")
-    w("")
-    w("![fronts](fronts.png)")
-    w("")
+    L.extend(page.hypervolumes(ex.compare))
     w("## The defaults against the tuned fronts")
     w("")
     w("*improvement*: the largest factor by which one front member is better than the defaults in both objectives")
@@ -166,18 +132,14 @@ def markdown() -> str:
       + ("the one to try first if you want the defaults' behaviour with less of both." if fb > 1 else
          "no member of this front beats the defaults in both objectives."))
     w("The knee's header reads:")
-    w("")
-    w("```")
-    w("\n".join(header))
-    w("```")
-    w("")
+    L.extend(page.fenced("\n".join(ex.header)))
     w("| parameter | ArduSub default | knee | knee / default | better than defaults | its / default | ArduSub range | what |")
     w("|---|---|---|---|---|---|---|---|")
     for n in sorted(knee_vals):
         p = table[n]
         w(f"| `{n}` | {g(p['default'], '.4g')} | {g(knee_vals[n], '.4g')} | {knee_vals[n] / p['default']:.2f} | "
           f"{g(better_vals[n], '.4g')} | {better_vals[n] / p['default']:.2f} | "
-          f"{g(p['range'][0])} - {g(p['range'][1])} | {p['description']} |")
+          f"{page.param_range(p)} | {p['description']} |")
     w("")
     w("## Per DOF (raw units): ArduSub's defaults and each law's knee")
     w("")

@@ -26,7 +26,7 @@ from arvcas.tuning.study import load_study
 HERE = Path(__file__).resolve().parent
 SEEDS = tuple(range(1, 9))  # other sensor-noise seeds than the studies' one (seed 0)
 ROOT = HERE.parents[2]
-# vehicle -> (its study, its ardusub front, the member better than the defaults: that of render.py's improvement)
+# vehicle -> (its study, its ardusub front, the member better than the defaults: that of ../page.py's improvement)
 VEHICLES = {
     "identified": (ROOT / "studies" / "ardusub_identified.toml", HERE / "front.h5",
                    HERE / "better_than_defaults" / "hinsdale_bluerov2_alpha5_identified_t200_ardusub.param"),

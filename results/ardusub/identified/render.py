@@ -1,7 +1,7 @@
 """Write results/ardusub/identified/README.md from the committed files of this folder (front.h5, compare.txt,
 the knee's and the better member's .param files) and of the shipped BlueROV2 Heavy study beside it
 (results/ardusub/: its ardusub front and knee .param); ArduSub's defaults and ranges from
-arvcas/data/ardusub_params.toml. Run from the repository root:
+arvcas/data/ardusub_params.toml; what it shares with that study's page in ../page.py. Run from the repository root:
 
     python results/ardusub/identified/render.py
 """
@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-import arvcas
 from arvcas.controllers import ardusub
+from arvcas.io.ardusub_params import read_param_file
 from arvcas.tuning import checkpoint as ck
 from arvcas.tuning.front import read_front, system_params
 
@@ -28,7 +28,6 @@ SYSTEM = "hinsdale_bluerov2_alpha5_identified_t200"
 PARAM = HERE / "knee" / f"{SYSTEM}_ardusub.param"
 BETTER = HERE / "better_than_defaults" / f"{SYSTEM}_ardusub.param"
 HEAVY_PARAM = HEAVY / "knee" / "bluerov2_heavy_ardusub.param"
-DOFS = ("x", "y", "z", "phi", "theta", "psi")
 # (label, unit, the value from a system's parameters by name): what sets the attitude and depth loops' plant
 PHYSICS = (
     ("mass", "kg", lambda d: d["vehicle.m"]),
@@ -46,12 +45,10 @@ PHYSICS = (
 )
 
 
-def _heavy_render():
-    """results/ardusub/render.py (its helpers: one definition of the improvement factor and the .param reader)."""
-    spec = importlib.util.spec_from_file_location("arvcas_results_ardusub", HEAVY / "render.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+_spec = importlib.util.spec_from_file_location("arvcas_results_ardusub_page", HEAVY / "page.py")
+page = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(page)
+g, improvement, DOFS = page.g, page.improvement, page.DOFS
 
 
 def ident_interval(name: str) -> str:
@@ -70,17 +67,12 @@ def oscillation(e: np.ndarray, h: float) -> tuple[float, float, float]:
 
 def markdown() -> str:
     """README.md's text, from the committed files (benchmarks/render_results.py checks it)."""
-    hr = _heavy_render()
-    g, param_values, improvement = hr.g, hr.param_values, hr.improvement
     fa, fh = read_front(HERE / "front.h5"), read_front(HEAVY / "ardusub" / "front.h5")
     ca_, ch = ck.read_checkpoint(HERE / "front.h5"), ck.read_checkpoint(HEAVY / "ardusub" / "front.h5")
-    table = tomllib.loads((Path(arvcas.__file__).parent / "data" / "ardusub_params.toml").read_text())["param"]
-    knee, better, heavy = param_values(PARAM), param_values(BETTER), param_values(HEAVY_PARAM)
-    better_h = param_values(HEAVY / "better_than_defaults" / "bluerov2_heavy_ardusub.param")
-    fb, ib = improvement(fa.F, fa.table2_F)
-    assert f"\n# member: {ib}\n" in BETTER.read_text(), f"{BETTER} is not front member {ib}; export it again"
-    header = [ln for ln in PARAM.read_text().splitlines() if ln.startswith("#")]
-    compare = (HERE / "compare.txt").read_text().rstrip()
+    ex = page.exports(HERE, PARAM, BETTER, fa)
+    table, knee, better, fb, ib = ex.table, ex.knee, ex.better, ex.factor, ex.member
+    heavy = read_param_file(HEAVY_PARAM)
+    better_h = read_param_file(HEAVY / "better_than_defaults" / "bluerov2_heavy_ardusub.param")
     k, kh = fa.knee(), fh.knee()
     d, dh = fa.table2_F, fh.table2_F
     L = []
@@ -159,8 +151,6 @@ def markdown() -> str:
       f"{ca_.table2_rmse[0][3] / ch.table2_rmse[0][3]:.2f}, {ca_.table2_rmse[0][4] / ch.table2_rmse[0][4]:.2f} and "
       f"{ca_.table2_rmse[0][5] / ch.table2_rmse[0][5]:.2f} times as large in depth, roll, pitch and yaw.")
     w("")
-    at_chat = fa.F[fa.F[:, 0] <= d[0]]
-    at_rmse = fa.F[fa.F[:, 1] <= d[1]]
     w("## The two vehicles")
     w("")
     w("What the depth and attitude loops act on, from the two studies' system files (the parameters each front")
@@ -179,43 +169,26 @@ def markdown() -> str:
     w("")
     w(f"- ArduSub's defaults score (f_chat, f_rmse) = ({g(d[0])}, {g(d[1])}) here (the Heavy: ({g(dh[0])}, "
       f"{g(dh[1])})). The best front member beats them by a factor {fb:.2f} in both objectives at once (member "
-      f"{ib}; on the Heavy: {improvement(fh.F, dh)[0]:.2f}). "
-      + (f"At no more f_chat than the defaults the front's lowest f_rmse is {g(at_chat[:, 1].min())} "
-         f"({100 * (1 - at_chat[:, 1].min() / d[1]):.0f} % below the defaults'); " if len(at_chat) else
-         "No member has as little f_chat as the defaults; ")
-      + (f"at no more f_rmse the lowest f_chat is {g(at_rmse[:, 0].min())} "
-         f"({100 * (1 - at_rmse[:, 0].min() / d[0]):.0f} % below)." if len(at_rmse) else
-         "no member has as little f_rmse as the defaults."))
-    w(f"- The front ({fa.size} members) spans f_chat {g(fa.F[:, 0].min())} to {g(fa.F[:, 0].max())} and f_rmse "
-      f"{g(fa.F[:, 1].min())} to {g(fa.F[:, 1].max())}. Hypervolume {fa.hv:.4f} against the Heavy's ArduSub front's "
-      f"{fh.hv:.4f} (reference point {tuple(float(v) for v in fa.reference_point)}; compare.txt below).")
+      f"{ib}; on the Heavy: {improvement(fh.F, dh)[0]:.2f}). " + page.beside_defaults(fa.F, d))
+    w(f"- The front ({fa.size} members) spans {page.span(fa.F)}. Hypervolume {fa.hv:.4f} against the Heavy's "
+      f"ArduSub front's {fh.hv:.4f} (reference point {tuple(float(v) for v in fa.reference_point)}; compare.txt below).")
     w(f"- The knee (member {k}: {fa.describe(k, '.3g')}) against the Heavy's knee (member {kh}: "
       f"{fh.describe(kh, '.3g')}): the gains in the table below.")
     summary_at = len(L)  # the findings of the sections below, filled in once they are computed
-    w("")
-    w("```")
-    w(compare)
-    w("```")
-    w("")
-    w("![fronts](fronts.png)")
-    w("")
+    L.extend(page.hypervolumes(ex.compare))
     w("## The gains a real identified vehicle wants")
     w("")
     w(f"The knee, [`knee/{PARAM.name}`](knee/{PARAM.name}), and the member better than the defaults in both")
     w(f"objectives, [`better_than_defaults/{BETTER.name}`](better_than_defaults/{BETTER.name}), beside the")
     w(f"Heavy study's knee ([`../knee/{HEAVY_PARAM.name}`](../knee/{HEAVY_PARAM.name})). The knee's header reads:")
-    w("")
-    w("```")
-    w("\n".join(header))
-    w("```")
-    w("")
+    L.extend(page.fenced("\n".join(ex.header)))
     w("| parameter | ArduSub default | range | identified: knee | knee / default | identified: better than "
       "defaults | Heavy: knee | identified knee / Heavy knee |")
     w("|---|---|---|---|---|---|---|---|")
     ratio = {n: knee[n] / heavy[n] for n in sorted(knee)}
     for n in sorted(knee):
         p = table[n]
-        w(f"| `{n}` | {g(p['default'], '.4g')} | {g(p['range'][0])} - {g(p['range'][1])} | {g(knee[n], '.4g')} | "
+        w(f"| `{n}` | {g(p['default'], '.4g')} | {page.param_range(p)} | {g(knee[n], '.4g')} | "
           f"{knee[n] / p['default']:.2f} | {g(better[n], '.4g')} | {g(heavy[n], '.4g')} | {ratio[n]:.2f} |")
     w("")
     slots = ardusub.slot_names()
