@@ -273,8 +273,10 @@ for _sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
     def _validate(s=_sig):
         path, trials = ident_inputs()
         out = WORK / f"val_{s.name}" / "keep.json"
-        return signalled(["validate", "--system", path, *trials, "--out", out.parent / "v", "--figures"], s, None,
-                         6.0, out, expect_rc=130 if s == signal.SIGINT else None)
+        # the signal once the first trial is validated (its line, unbuffered), before anything is written: a
+        # fixed delay raced the writes on a quiet machine
+        return signalled(["validate", "--system", path, *trials, "--out", out.parent / "v", "--figures"], s, "b0:",
+                         0, out, expect_rc=130 if s == signal.SIGINT else None, env=dict(ENV, PYTHONUNBUFFERED="1"))
     case(2, f"validate: {_sig.name} while it works: non-zero, one line, nothing replaced")(_validate)
 
 
