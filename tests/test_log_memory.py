@@ -149,8 +149,8 @@ def _quaternions(n, rng):
 
     q = rng.normal(size=(n, 4))
     k = rng.random(n) < 1 / 3
-    e = np.stack([rng.uniform(-np.pi, np.pi, n), np.pi / 2 - 10.0 ** rng.uniform(-9, -3, n), rng.uniform(-np.pi, np.pi, n)],
-                 axis=1)
+    e = np.stack([rng.uniform(-np.pi, np.pi, n), np.pi / 2 - 10.0 ** rng.uniform(-9, -3, n),
+                  rng.uniform(-np.pi, np.pi, n)], axis=1)  # yaw, pitch, roll
     e[::97, 1] = np.pi / 2
     e[1::2, 1] *= -1
     q[k] = Rotation.from_euler("ZYX", e[k]).as_quat()
@@ -172,7 +172,7 @@ def test_the_attitude_a_block_at_a_time_is_the_whole_arrays_to_the_bit(world, bo
     point = np.array([0.3, -0.1, 0.25])
     R = Cw @ f(x) @ Cb
     assert np.ptp(logs.euler_from_R(R)[:, 2]) > 4 * np.pi  # the unwrapping does work
-    for m, blocks in ((1500, (1, 7)), (n, (4096, logs.ATTITUDE_BLOCK, n + 5))):  # (rows, the block sizes tried)
+    for m, blocks in ((1500, (1, 7)), (n, (4096, logs.BLOCK_ROWS, n + 5))):  # (rows, the block sizes tried)
         whole, arm = logs.euler_from_R(R[:m]), np.einsum("nij,j->ni", R[:m], point)
         for block in blocks:
             e, a = logs._attitude(lambda s: x[s], m, f, Cw, Cb, point, block)

@@ -338,7 +338,7 @@ def _angles(R: np.ndarray) -> np.ndarray:
     return np.stack([roll, pitch, yaw], -1)
 
 
-ATTITUDE_BLOCK = 1 << 14  # rows of an attitude stream turned into rotation matrices and Euler angles at a time
+BLOCK_ROWS = 1 << 14  # rows of an attitude stream (its matrices, its angles), or of the time base, computed at a time
 
 
 def _slices(n: int, block: int):
@@ -346,7 +346,7 @@ def _slices(n: int, block: int):
 
 
 def _attitude(rows, n: int, f, Cw: np.ndarray, Cb: np.ndarray, point=None,
-              block: int = ATTITUDE_BLOCK) -> tuple[list[np.ndarray], np.ndarray | None]:
+              block: int = BLOCK_ROWS) -> tuple[list[np.ndarray], np.ndarray | None]:
     """The ZYX Euler angles roll, pitch, yaw (three arrays (n,)), unwrapped, of the rotations
     ``Cw @ f(rows(s)) @ Cb`` (``rows(s)``: the rotation's parameters of the rows ``s``, a slice) and, given
     ``point`` (3,), ``R @ point`` (n, 3), computed a block of rows at a time: what it costs is the angles,
@@ -366,7 +366,7 @@ def _attitude(rows, n: int, f, Cw: np.ndarray, Cb: np.ndarray, point=None,
     return e, arm
 
 
-def _unwrap(p: np.ndarray, block: int = ATTITUDE_BLOCK) -> np.ndarray:
+def _unwrap(p: np.ndarray, block: int = BLOCK_ROWS) -> np.ndarray:
     """``np.unwrap(p, axis=0)`` (period 2 pi) in place, a block of rows at a time: NumPy's steps (its phase
     corrections, then their running sum, which is sequential) with the last row and the sum carried over."""
     period = 2.0 * math.pi
@@ -393,7 +393,7 @@ def _unwrap(p: np.ndarray, block: int = ATTITUDE_BLOCK) -> np.ndarray:
 
 
 
-def _check_quaternion_order(sm, quaternions, n: int, acc, Cw, Cb, what: str, block: int = ATTITUDE_BLOCK) -> None:
+def _check_quaternion_order(sm, quaternions, n: int, acc, Cw, Cb, what: str, block: int = BLOCK_ROWS) -> None:
     """The quaternion's component order, checked against the accelerometer of the same stream (``acc``; no
     check without one): the direction of its specific force (at rest ``-R^T g``, up in the body: ``-R[2, :]``)
     against the attitude's, median over the rows. Refused when the order given is more than 20 deg off and
@@ -585,7 +585,7 @@ def _columns_of(sm: StreamMap) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-def _interp(tq: np.ndarray, t: np.ndarray, y: np.ndarray, block: int = ATTITUDE_BLOCK) -> np.ndarray:
+def _interp(tq: np.ndarray, t: np.ndarray, y: np.ndarray, block: int = BLOCK_ROWS) -> np.ndarray:
     """``np.interp`` of ``y`` (n,) or of each column of ``y`` (n, k) onto ``tq``, a block of ``tq`` at a time:
     NumPy's interp, given more points than samples, first computes every sample's slope (an array as long as
     the column); a block computes the slope of each point where it is used, the same expression: the same
