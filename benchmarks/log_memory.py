@@ -16,7 +16,10 @@ logs (seconds of data grow with the size asked):
   a camera at 5 Hz (100 kB images) and a scalar topic at 5 kHz (neither mapped);
 * ``bin``: an ArduSub-like DataFlash log: ATT at 50 Hz and IMU instance 0 at 400 Hz mapped, IMU instance 1,
   raw gyro and accelerometer samples (GYR, ACC) at 4 kHz and BARO not;
-* ``tlog``: a MAVLink telemetry log: ATTITUDE at 50 Hz mapped, among 20 times as many other frames.
+* ``tlog``: a MAVLink telemetry log: ATTITUDE at 50 Hz mapped, among 20 times as many other frames;
+* ``attitude``: a CSV of quaternions alone (t, x, y, z, w, all mapped) at the common time base's 50 Hz: the
+  attitude's conversion (rotation matrices, Euler angles, unwrapping) where the log is nothing else, and the
+  Log keeps as many samples as the file has (its t, roll, pitch, yaw: ``log_mb``).
 
 ``kept`` is the float64 size of what the mapping keeps (samples x (1 + columns mapped) x 8 bytes).
 """
@@ -38,8 +41,12 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "logs" / "memory.json"
-READERS = ("csv", "ros1", "ros2-sqlite3", "ros2-mcap", "bin", "tlog")
+READERS = ("csv", "ros1", "ros2-sqlite3", "ros2-mcap", "bin", "tlog", "attitude")
 MB = 1 << 20
+HOW = ("python benchmarks/log_memory.py (--label before --code <checkout of 369b6a1>); added_mb: peak resident memory "
+       "(VmHWM) of load_log minus the same after reading a small log of the same kind; kept_mb: float64 size of the "
+       "values mapped; log_mb: the Log's arrays (t and the signals); machine shared with other jobs (seconds are not "
+       "comparable)")
 
 
 # ---- CSV ---------------------------------------------------------------------------------------------------
@@ -60,6 +67,30 @@ def write_csv(d: Path, size: float) -> tuple[Path, int]:
     (d / "log.log.toml").write_text('[log]\npassive = true\nmax_gap = 1.0\n\n[[stream]]\nfile = "log.csv"\n'
                                     'time = "t"\nposition = { columns = ["x", "y", "z"], unit = "m" }\n')
     return d / "log.log.toml", n * 4 * 8
+
+
+# ---- quaternions (CSV) ------------------------------------------------------------------------------------
+
+ATTITUDE_HZ = 50  # the common time base's default rate: the Log keeps a sample for every row
+
+
+def write_attitude(d: Path, size: float) -> tuple[Path, int]:
+    """A CSV of ``size`` bytes or so: t and a unit quaternion (x, y, z, w) a row at :data:`ATTITUDE_HZ`, yaw
+    turning through every angle (unwrapped), roll and pitch swinging."""
+    line0 = f"{0.0:.2f},{0.0:.7f},{0.0:.7f},{0.0:.7f},{1.0:.7f}\n"
+    n = int(size / (len(line0) + 4))
+    with open(d / "log.csv", "w") as f:
+        f.write("t,qx,qy,qz,qw\n")
+        for a in range(0, n, 200_000):
+            t = np.arange(a, min(n, a + 200_000)) / ATTITUDE_HZ
+            r, p, y = 0.2 * np.sin(0.5 * t) / 2, 0.1 * np.cos(0.3 * t) / 2, 0.3 * t / 2  # half angles, ZYX
+            cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+            q = np.stack([t, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
+                          cr * cp * cy + sr * sp * sy], axis=1)
+            np.savetxt(f, q, fmt="%.2f,%.7f,%.7f,%.7f,%.7f")
+    (d / "log.log.toml").write_text(f'[log]\npassive = true\nrate = {ATTITUDE_HZ}\n\n[[stream]]\nfile = "log.csv"\n'
+                                    'time = "t"\nquaternion = { columns = ["qx", "qy", "qz", "qw"] }\n')
+    return d / "log.log.toml", n * 5 * 8
 
 
 # ---- ROS bags ----------------------------------------------------------------------------------------------
@@ -260,6 +291,8 @@ def write(reader: str, d: Path, size: float) -> tuple[Path, int]:
         return write_dataflash(d, size)
     if reader == "tlog":
         return write_tlog(d, size)
+    if reader == "attitude":
+        return write_attitude(d, size)
     raise ValueError(f"reader {reader!r}: one of {', '.join(READERS)}")
 
 
@@ -285,7 +318,8 @@ t0 = time.perf_counter()
 lg = logs.load_log(sys.argv[1])
 dt = time.perf_counter() - t0
 peak = hwm()
-print(json.dumps({"base_kib": base, "peak_kib": peak, "seconds": dt, "samples": int(lg.t.size)}))
+print(json.dumps({"base_kib": base, "peak_kib": peak, "seconds": dt, "samples": int(lg.t.size),
+                  "log_bytes": 8 * (lg.t.size + sum(v.size for v in lg.signals.values()))}))
 """
 
 
@@ -306,6 +340,26 @@ def log_size(mapping: Path) -> int:
     return sum(p.stat().st_size for p in d.rglob("*") if p.is_file() and p != mapping)
 
 
+def measure(reader: str, d: Path, size: float, small: float = 0.5 * MB, code: Path = ROOT,
+            block: int | None = None) -> dict:
+    """Write a log for ``reader`` of ``size`` bytes in ``d`` (and one of ``small`` bytes: the baseline) and
+    read it in a fresh process (:func:`peak`): its row of the results, in bytes (``file``, ``kept``: the
+    float64 values mapped, ``log``: the Log's arrays, ``added``: peak resident memory minus the baseline's),
+    and ``error`` where the read failed."""
+    (d / "big").mkdir()
+    (d / "small").mkdir()
+    mapping, kept = write(reader, d / "big", size)
+    small_mapping, _ = write(reader, d / "small", small)
+    row = {"file": log_size(mapping), "kept": kept}
+    try:
+        r = peak(mapping, small_mapping, code, block)
+    except RuntimeError as e:
+        return {**row, "error": str(e)}
+    return {**row, "base": r["base_kib"] * 1024, "peak": r["peak_kib"] * 1024,
+            "added": (r["peak_kib"] - r["base_kib"]) * 1024, "log": r["log_bytes"], "seconds": r["seconds"],
+            "samples": r["samples"]}
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", type=float, nargs="+", default=[50, 200], help="log sizes, MB")
@@ -313,6 +367,7 @@ def main(argv=None) -> None:
     ap.add_argument("--label", default="after", help="the key the figures are stored under")
     ap.add_argument("--code", type=Path, default=ROOT, help="the checkout whose arvcas reads the logs")
     ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--note", help="what the code measured is, stored with the label")
     a = ap.parse_args(argv)
     out = json.loads(a.out.read_text()) if a.out.is_file() else {}
     rows = out.setdefault(a.label, {})
@@ -321,27 +376,19 @@ def main(argv=None) -> None:
     for reader in a.readers:
         for size in a.sizes:
             with tempfile.TemporaryDirectory(prefix="arvcas-logmem-") as tmp:
-                t0 = time.perf_counter()
-                (Path(tmp) / "big").mkdir()
-                (Path(tmp) / "small").mkdir()
-                mapping, kept = write(reader, Path(tmp) / "big", size * MB)
-                small, _ = write(reader, Path(tmp) / "small", 0.5 * MB)
-                wrote = time.perf_counter() - t0
-                fs = log_size(mapping)
-                try:
-                    r = peak(mapping, small, a.code)
-                except RuntimeError as e:
-                    r = {"error": str(e)}
-                row = {"file_mb": round(fs / MB, 1), "kept_mb": round(kept / MB, 2)}
+                r = measure(reader, Path(tmp), size * MB, code=a.code)
+                row = {"file_mb": round(r["file"] / MB, 1), "kept_mb": round(r["kept"] / MB, 2)}
                 if "error" in r:
                     row["error"] = r["error"]
                 else:
-                    row.update(base_mb=round(r["base_kib"] / 1024, 1), peak_mb=round(r["peak_kib"] / 1024, 1),
-                               added_mb=round((r["peak_kib"] - r["base_kib"]) / 1024, 1),
+                    row.update(base_mb=round(r["base"] / MB, 1), peak_mb=round(r["peak"] / MB, 1),
+                               added_mb=round(r["added"] / MB, 1), log_mb=round(r["log"] / MB, 2),
                                seconds=round(r["seconds"], 2))
                 rows[f"{reader} {size:g}MB"] = row
-                print(f"{reader:13s} {size:5g} MB (written in {wrote:.0f} s): {row}", flush=True)
-    out.setdefault("about", {})[a.label] = {"code": commit, "python": sys.version.split()[0]}
+                print(f"{reader:13s} {size:5g} MB: {row}", flush=True)
+    about = out.setdefault("about", {})
+    about["how"] = HOW
+    about[a.label] = {"code": commit, "python": sys.version.split()[0], **({"note": a.note} if a.note else {})}
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(out, indent=1, sort_keys=True) + "\n")
 

@@ -326,36 +326,94 @@ def R_from_euler(e: np.ndarray) -> np.ndarray:
 
 def euler_from_R(R: np.ndarray) -> np.ndarray:
     """ZYX Euler angles (..., 3) roll, pitch, yaw (rad) of rotation matrices (..., 3, 3), unwrapped along axis 0."""
+    e = _angles(R)
+    return np.unwrap(e, axis=0) if e.ndim == 2 else e
+
+
+def _angles(R: np.ndarray) -> np.ndarray:
+    """:func:`euler_from_R` before the unwrapping: each in (-pi, pi]."""
     roll = np.arctan2(R[..., 2, 1], R[..., 2, 2])
     pitch = -np.arcsin(np.clip(R[..., 2, 0], -1.0, 1.0))
     yaw = np.arctan2(R[..., 1, 0], R[..., 0, 0])
-    e = np.stack([roll, pitch, yaw], -1)
-    return np.unwrap(e, axis=0) if e.ndim == 2 else e
+    return np.stack([roll, pitch, yaw], -1)
+
+
+BLOCK_ROWS = 1 << 14  # rows of an attitude stream (its matrices, its angles), or of the time base, computed at a time
+
+
+def _slices(n: int, block: int):
+    return (slice(i, min(n, i + block)) for i in range(0, n, block))
+
+
+def _attitude(rows, n: int, f, Cw: np.ndarray, Cb: np.ndarray, point=None,
+              block: int = BLOCK_ROWS) -> tuple[list[np.ndarray], np.ndarray | None]:
+    """The ZYX Euler angles roll, pitch, yaw (three arrays (n,)), unwrapped, of the rotations
+    ``Cw @ f(rows(s)) @ Cb`` (``rows(s)``: the rotation's parameters of the rows ``s``, a slice) and, given
+    ``point`` (3,), ``R @ point`` (n, 3), computed a block of rows at a time: what it costs is the angles,
+    not n matrices and a dozen temporaries of every row. To the bit :func:`euler_from_R` of the matrices
+    of every row at once (each row's matrix and angles are computed alone; the unwrapping carries its
+    running sum from block to block, :func:`_unwrap`). Three arrays, not one: each can go once used."""
+    e = [np.empty(n) for _ in range(3)]
+    arm = None if point is None else np.empty((n, 3))
+    for s in _slices(n, block):
+        R = Cw @ f(rows(s)) @ Cb
+        for k, a in enumerate(_angles(R).T):
+            e[k][s] = a
+        if arm is not None:
+            arm[s] = np.einsum("nij,j->ni", R, point)
+    for a in e:
+        _unwrap(a, block)
+    return e, arm
+
+
+def _unwrap(p: np.ndarray, block: int = BLOCK_ROWS) -> np.ndarray:
+    """``np.unwrap(p, axis=0)`` (period 2 pi) in place, a block of rows at a time: NumPy's steps (its phase
+    corrections, then their running sum, which is sequential) with the last row and the sum carried over."""
+    period = 2.0 * math.pi
+    high, low = period / 2, -period / 2
+    last, carry = p[0].copy(), None
+    for s in _slices(p.shape[0] - 1, block):
+        blk = p[s.start + 1:s.stop + 1]
+        dd = np.empty_like(blk)
+        dd[0] = blk[0] - last
+        np.subtract(blk[1:], blk[:-1], out=dd[1:])
+        ddmod = np.mod(dd - low, period) + low
+        np.copyto(ddmod, high, where=(ddmod == low) & (dd > 0))
+        ph = ddmod - dd
+        np.copyto(ph, 0, where=abs(dd) < high)
+        if carry is not None:
+            ph[0] += carry
+        np.cumsum(ph, axis=0, out=ph)
+        last, carry = blk[-1].copy(), ph[-1].copy()
+        blk += ph
+    return p
 
 
 # ---- reading a stream ---------------------------------------------------------------------------------
 
 
 
-def _check_quaternion_order(sm, q: np.ndarray, R: np.ndarray, acc, Cw, Cb, what: str) -> None:
+def _check_quaternion_order(sm, quaternions, n: int, acc, Cw, Cb, what: str, block: int = BLOCK_ROWS) -> None:
     """The quaternion's component order, checked against the accelerometer of the same stream (``acc``; no
     check without one): the direction of its specific force (at rest ``-R^T g``, up in the body: ``-R[2, :]``)
     against the attitude's, median over the rows. Refused when the order given is more than 20 deg off and
     the other order within 10 deg. (The tilt alone cannot tell: a body frame given wrong tilts the vehicle
-    too, and the other order can look level by chance.) ``q``: the unit quaternion as read, x, y, z, w."""
+    too, and the other order can look level by chance.) ``quaternions(s)``: the unit quaternions of the rows
+    ``s`` (a slice) as read, x, y, z, w; a block of rows at a time."""
     if acc is None:
         return
     other = "wxyz" if sm.quaternion_order == "xyzw" else "xyzw"
-    raw = q[:, [3, 0, 1, 2]] if sm.quaternion_order == "wxyz" else q  # the columns as the file has them
-    R_other = Cw @ R_from_quaternion(raw[:, [1, 2, 3, 0]] if other == "wxyz" else raw) @ Cb
     f = acc @ Cb.T
-    n = np.linalg.norm(f, axis=1)
-
-    def off(Rm: np.ndarray) -> float:
-        c = np.einsum("ni,ni->n", f, -Rm[:, 2, :]) / np.where(n > 0, n, 1.0)
-        return float(np.degrees(np.median(np.arccos(np.clip(c, -1.0, 1.0)))))
-
-    given, alt = off(R), off(R_other)
+    nf = np.linalg.norm(f, axis=1)
+    off = np.empty((2, n))  # rad: the order given, the other
+    for s in _slices(n, block):
+        q = quaternions(s)
+        raw = q[:, [3, 0, 1, 2]] if sm.quaternion_order == "wxyz" else q  # the columns as the file has them
+        for k, qk in enumerate((q, raw[:, [1, 2, 3, 0]] if other == "wxyz" else raw)):
+            Rm = Cw @ R_from_quaternion(qk) @ Cb
+            c = np.einsum("ni,ni->n", f[s], -Rm[:, 2, :]) / np.where(nf[s] > 0, nf[s], 1.0)
+            off[k, s] = np.arccos(np.clip(c, -1.0, 1.0))
+    given, alt = (float(np.degrees(np.median(o))) for o in off)
     if given > 20.0 and alt < 10.0:
         raise LogError(f"{what} = \"{sm.quaternion_order}\" looks wrong: the accelerometer's gravity direction is "
                        f"{given:.0f} deg from the attitude's (median); with \"{other}\" it is {alt:.0f} deg")
@@ -527,19 +585,19 @@ def _columns_of(sm: StreamMap) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-def _rotations(f, x: np.ndarray, Cw: np.ndarray, Cb: np.ndarray, block: int = 1 << 16) -> np.ndarray:
-    """``Cw @ f(x) @ Cb``, (n, 3, 3), a block of rows at a time: what it costs is the n matrices, not the
-    temporaries of ``f`` (a dozen arrays of every row)."""
-    R = np.empty((x.shape[0], 3, 3))
-    for i in range(0, x.shape[0], block):
-        R[i:i + block] = Cw @ f(x[i:i + block]) @ Cb
-    return R
-
-
-def _interp(tq: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:
-    if y.ndim == 1:
-        return np.interp(tq, t, y)
-    return np.stack([np.interp(tq, t, y[:, i]) for i in range(y.shape[1])], axis=1)
+def _interp(tq: np.ndarray, t: np.ndarray, y: np.ndarray, block: int = BLOCK_ROWS) -> np.ndarray:
+    """``np.interp`` of ``y`` (n,) or of each column of ``y`` (n, k) onto ``tq``, a block of ``tq`` at a time:
+    NumPy's interp, given more points than samples, first computes every sample's slope (an array as long as
+    the column); a block computes the slope of each point where it is used, the same expression: the same
+    bits. What it costs is the result, a column's copy when ``y``'s are strided, and a block."""
+    t = np.ascontiguousarray(t)
+    out = np.empty(tq.shape + y.shape[1:])
+    for i in range(1 if y.ndim == 1 else y.shape[1]):
+        yi = np.ascontiguousarray(y if y.ndim == 1 else y[:, i])
+        oi = out if y.ndim == 1 else out[:, i]
+        for s in _slices(tq.size, block):
+            oi[s] = np.interp(tq[s], t, yi)
+    return out
 
 
 def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tuple[str, ...] | None = None) -> Log:
@@ -672,40 +730,49 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
         key = f"stream[{i + 1}]"  # 1-based, as arvcas.system.config numbers [[tables]]
         Cw, Cb = WORLD_FRAMES[sm.world], BODY_FRAMES[sm.body]
 
-        def cols(k, sm=sm, tb=tb, key=key):
+        def cols(k, rows=slice(None), sm=sm, tb=tb, key=key):
             s = getattr(sm, k)
             f = _unit_factors(s, _KINDS[k][0], _KINDS[k][1], f"{key}.{k}", where)
-            return np.stack([tb.cols[c] for c in s.columns], axis=1) * f, (None if s.std is None else s.std * f[0])
+            v = np.stack([tb.cols[c][rows] for c in s.columns], axis=1, dtype=float)
+            v *= f
+            return v, (None if s.std is None else s.std * f[0])
 
-        R = None
-        if sm.quaternion is not None:
-            qv, _ = cols("quaternion")
+        def quaternions(rows, sm=sm, tb=tb):  # unit, x y z w; a row that is not a unit quaternion is refused
+            qv, _ = cols("quaternion", rows)
             if sm.quaternion_order == "wxyz":
                 qv = qv[:, [1, 2, 3, 0]]
             nrm = np.linalg.norm(qv, axis=1)
             bad = np.flatnonzero(np.abs(nrm - 1.0) > 0.05)
             if bad.size:
                 raise LogError(f"{tb.where}: columns {', '.join(sm.quaternion.columns)}: not a unit quaternion at "
-                               f"row {bad[0] + 2} (norm {nrm[bad[0]]:.4g})")
-            R = _rotations(R_from_quaternion, qv / nrm[:, None], Cw, Cb)
-            _check_quaternion_order(sm, qv / nrm[:, None], R, cols("acceleration")[0] if sm.acceleration is not None else None,
-                                    Cw, Cb, f"{tb.where}: {where} {key}.quaternion_order")
+                               f"row {(rows.start or 0) + bad[0] + 2} (norm {nrm[bad[0]]:.4g})")
+            qv /= nrm[:, None]
+            return qv
+
+        att = None  # (the parameters of rows, their rotation matrices' function)
+        n_tb = tb.time.size
+        if sm.quaternion is not None:
+            att = (quaternions, R_from_quaternion)
         elif sm.euler is not None:
-            ev, s_e = cols("euler")
-            R = _rotations(R_from_euler, ev, Cw, Cb)
-        if R is not None:
-            e = euler_from_R(R)
-            med = np.degrees(np.median(np.abs(e[:, 0])))
+            att = ((lambda rows, cols=cols: cols("euler", rows)[0]), R_from_euler)
+            s_e = cols("euler", slice(0, 1))[1]
+        arm = None  # R @ point, world frame
+        if att is not None:
+            rows, f_R = att
+            e, arm = _attitude(rows, n_tb, f_R, Cw, Cb, None if sm.position is None or sm.point is None
+                               else np.array(sm.point))
+            if sm.quaternion is not None:
+                _check_quaternion_order(sm, quaternions, n_tb, cols("acceleration")[0] if sm.acceleration is not None
+                                        else None, Cw, Cb, f"{tb.where}: {where} {key}.quaternion_order")
+            med = np.degrees(np.median(np.abs(e[0]), overwrite_input=True))
             if med > _ROLL_LIMIT_DEG:
                 other = "flu" if sm.body == "frd" else "frd"
-                Ro = Cw @ (R_from_quaternion(qv / nrm[:, None]) if sm.quaternion is not None else R_from_euler(ev)) \
-                    @ BODY_FRAMES[other]
-                alt = np.degrees(np.median(np.abs(euler_from_R(Ro)[:, 0])))
+                alt = np.degrees(np.median(np.abs(_attitude(rows, n_tb, f_R, Cw, BODY_FRAMES[other])[0][0])))
                 raise LogError(f"{tb.where}: the attitude's frame does not match: median roll {med:.0f} deg with "
                                f"body = \"{sm.body}\" in {where} {key} (body = \"{other}\" gives {alt:.0f} deg)")
-            e = _interp(grid, tb.time, e)
             for k, nm in enumerate(("roll", "pitch", "yaw")):
-                signals[nm] = e[:, k]
+                signals[nm] = _interp(grid, tb.time, e[k])
+                e[k] = None  # (gone once used)
             if sm.euler is not None and sm.euler.std is not None:
                 std.update(roll=s_e, pitch=s_e, yaw=s_e)
             if sm.quaternion is not None and sm.quaternion.std is not None:
@@ -714,9 +781,9 @@ def load_log(path: str | Path, n_joints: int | None = None, thruster_names: tupl
             pv, s_p = cols("position")
             pv = pv @ Cw.T
             if sm.point is not None:
-                if R is None:
+                if arm is None:
                     raise LogError(f"{where}: {key}.point: needs the attitude in the same stream")
-                pv = pv - np.einsum("nij,j->ni", R, np.array(sm.point))
+                pv = pv - arm
             pv = _interp(grid, tb.time, pv)
             for k, nm in enumerate(("x", "y", "z")):
                 signals[nm] = pv[:, k]
