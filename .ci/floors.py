@@ -2,15 +2,15 @@
 
     python .ci/floors.py [PYPROJECT]            print a pip constraints file: each dependency of
                                                 [project] dependencies pinned to its floor (casadi==3.7, ...)
-    python .ci/floors.py --test [PYPROJECT]     print the [test] extra's requirements that install beside
-                                                those floors (all but NOT_AT_FLOORS), for pip install -r
+    python .ci/floors.py --test [PYPROJECT]     print the requirements of the [test] extra that the floor
+                                                tests need (FLOOR_TEST_NEEDS), for pip install -r
     python .ci/floors.py --check [PYPROJECT]    exit 1 unless every dependency installed in this Python is
                                                 at its floor (after the install under those constraints)
 
 The floor of a requirement is the version of its ``>=`` (or ``==``, ``~=``) clause; a dependency without
 one is refused in one line, as is a floor that its own other clauses exclude (``>=3.9,<3.8``). The pins are
 exact under PEP 440: ``casadi==3.7`` is 3.7.0, not 3.7.1. Only ``[project] dependencies`` are pinned: the
-test extras are not arvcas's runtime floors and install at what pip picks under these pins. CI's floor job
+test requirements are not arvcas's runtime floors and install at what pip picks under these pins. CI's floor job
 (.ci/run, docs/testing.md) installs the wheel with them and runs the tests marked ``floor``.
 """
 
@@ -27,12 +27,10 @@ from packaging.version import Version
 
 FLOOR_OPS = (">=", "==", "~=")
 DEFAULT = Path(__file__).resolve().parents[1] / "pyproject.toml"
-# test requirements that no release installs beside the runtime floors (pip: ResolutionImpossible), and why;
-# no test marked `floor` imports them
-NOT_AT_FLOORS = {
-    "pin": "every release from 2.7 on needs cmeel-boost, which needs numpy ~= 1.26 (pin 2.7) or newer: "
-           "above numpy's floor",
-}
+# the test requirements (of the [test] extra, at its bounds) that the floor job installs: what the files holding
+# a floor test import at their top. Not the whole extra: it installs in 141 s against 35 s (docs/testing.md),
+# and pin cannot be installed beside numpy's floor (every release from 2.7 on needs numpy >= 1.26)
+FLOOR_TEST_NEEDS = ("pytest", "pytest-xdist")
 USAGE = "usage: python .ci/floors.py [--test | --check] [PYPROJECT]"
 
 
@@ -92,13 +90,15 @@ def constraints(pyproject: Path = DEFAULT) -> str:
 
 
 def extra_requirements(pyproject: Path = DEFAULT) -> str:
-    """The [test] extra's requirements less :data:`NOT_AT_FLOORS`, one a line (each one left out named in a
-    comment with its reason)."""
-    lines = [f"# written by .ci/floors.py from {pyproject.name}: the [test] extra beside the runtime floors"]
-    for text, req in _requirements(pyproject, "optional-dependencies.test"):
-        why = NOT_AT_FLOORS.get(canonicalize_name(req.name))
-        lines.append(f"# left out: {text}: {why}" if why else text)
-    return "\n".join(lines) + "\n"
+    """The requirements of the [test] extra named in :data:`FLOOR_TEST_NEEDS`, one a line, as the extra
+    gives them; one that the extra lacks is refused in one line."""
+    test = {canonicalize_name(r.name): text for text, r in _requirements(pyproject, "optional-dependencies.test")}
+    missing = [n for n in FLOOR_TEST_NEEDS if canonicalize_name(n) not in test]
+    if missing:
+        raise FloorError(f"{pyproject}: [project] optional-dependencies.test: no {', '.join(missing)} "
+                         f"(the floor job installs it: FLOOR_TEST_NEEDS of .ci/floors.py)")
+    lines = [f"# written by .ci/floors.py from {pyproject.name}: what the floor tests need of the [test] extra"]
+    return "\n".join(lines + [test[canonicalize_name(n)] for n in FLOOR_TEST_NEEDS]) + "\n"
 
 
 def check(pyproject: Path = DEFAULT) -> list[str]:

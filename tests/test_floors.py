@@ -51,16 +51,16 @@ def test_floor_clauses_and_markers(floors, tmp_path):
         "a==1.2", "B_c==3.0.1", "d==1.4", "e==1.1", 'f==1.0; python_version < "3"']
 
 
-def test_the_test_extra_less_what_cannot_install_beside_the_floors(floors, tmp_path):
+def test_the_test_requirements_of_the_floor_job_come_from_the_test_extra(floors, tmp_path):
     test = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]["test"]
-    text = floors.extra_requirements()
-    kept = [line for line in text.splitlines() if not line.startswith("#")]
-    left = [Requirement(t).name for t in test if Requirement(t).name in floors.NOT_AT_FLOORS]
-    assert kept == [t for t in test if Requirement(t).name not in floors.NOT_AT_FLOORS]
-    assert left == ["pin"] and "# left out: pin>=2.7: every release" in text
-    p = _pyproject(tmp_path, "numpy>=1.24", test=("pytest>=7", "Pin>=3", "x[y]>=1; python_version >= '3'"))
-    assert floors.extra_requirements(p).splitlines()[1:] == [
-        "pytest>=7", f"# left out: Pin>=3: {floors.NOT_AT_FLOORS['pin']}", "x[y]>=1; python_version >= '3'"]
+    kept = [line for line in floors.extra_requirements().splitlines() if not line.startswith("#")]
+    assert kept and set(kept) <= set(test) and [Requirement(k).name for k in kept] == list(floors.FLOOR_TEST_NEEDS)
+    p = _pyproject(tmp_path, "numpy>=1.24", test=("Pytest>=7", "pin>=2.7", "pytest_xdist>=3.8; python_version >= '3'"))
+    assert floors.extra_requirements(p).splitlines()[1:] == ["Pytest>=7", "pytest_xdist>=3.8; python_version >= '3'"]
+    p = _pyproject(tmp_path, "numpy>=1.24", test=("pin>=2.7",))
+    with pytest.raises(floors.FloorError, match=r"optional-dependencies.test: no pytest, pytest-xdist \(the floor"):
+        floors.extra_requirements(p)
+    assert floors.main(["--test", str(p)]) == 1
     assert floors.main(["--test", "--check"]) == 2 and floors.main(["--bad"]) == 2
 
 
