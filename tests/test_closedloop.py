@@ -25,6 +25,7 @@ def run_proposed(cfg):
     return simulate("proposed", seed=0, cfg=cfg)
 
 
+@pytest.mark.floor  # casadi.extract_parametric (its floor, pyproject.toml) hoists the run's constants
 def test_compiled_run_equals_vm(cfg):
     """The generated C of the whole run reproduces CasADi's VM on the same graph (docs/model.md §4)."""
     P = load_params()

@@ -242,6 +242,7 @@ def _estimate(system, free, values):
                               n_residuals=100, status="Solve_Succeeded", iterations=3, seconds=1.0, h=0.02)
 
 
+@pytest.mark.floor  # the identified file written with tomlkit at its floor
 def test_identified_file_loads_from_another_folder_with_a_long_name(tmp_path):
     """A system whose thrust table is a relative path beside it, identified into another folder, with a name
     of the loader's longest length."""

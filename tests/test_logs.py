@@ -98,6 +98,7 @@ def test_joint_map_and_spline_cutoff(tmp_path):
     assert np.max(np.abs(qdd[mid, 0] + 0.5 * np.sin(lg.t[mid] + lg.t0))) < 2e-2
 
 
+@pytest.mark.floor  # scipy's make_smoothing_spline (new in scipy 1.10, its floor)
 def test_spline_halves_amplitude_at_cutoff(tmp_path):
     """The stated smoothing: a sinusoid at f_c comes out at half its amplitude (transfer 1 / (1 + lam dt w^4))."""
     fc, dt = 2.0, 0.01

@@ -17,6 +17,8 @@ from arvcas.io import plots  # noqa: E402
 from arvcas.system.params import load as load_params  # noqa: E402
 from arvcas.sim.simulation import Result  # noqa: E402
 
+pytestmark = pytest.mark.floor  # the figures at matplotlib's floor (CI's floor job, docs/testing.md)
+
 N = 51  # 5 s at h = 0.1 s
 H = 0.1
 

@@ -29,6 +29,9 @@ from arvcas.export import controller as ctl_mod
 from arvcas.sim import scenario
 from arvcas.system import load_system
 
+# jinja2's floor, and the exported controller's casadi.extract_parametric (CI's floor job, docs/testing.md)
+pytestmark = pytest.mark.floor
+
 ROOT = Path(str(templating._environment().loader.searchpath[0]))
 TEMPLATES = sorted(p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*.j2"))
 

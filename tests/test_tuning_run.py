@@ -51,6 +51,7 @@ def reference(tmp_path_factory):
     return study, ck.read_checkpoint(out / "front.h5")
 
 
+@pytest.mark.floor  # pymoo's bounds (pyproject.toml): a study, its front file (h5py)
 def test_reference_study_is_complete(reference):
     _, c = reference
     assert c.status == "finished" and c.n_eval == 8 * GENS and c.X.shape == (8, 48)
@@ -63,6 +64,7 @@ def test_reference_study_is_complete(reference):
     assert np.isnan(c.F[~feas]).all() and np.isfinite(c.F[feas]).all()
 
 
+@pytest.mark.floor  # a resume writes pymoo's private state back (tuning/run.py, _restore)
 @pytest.mark.parametrize("stop_at", [1, 2])
 def test_resume_after_stop_is_identical(reference, tmp_path, stop_at):
     study, ref = reference
