@@ -45,9 +45,20 @@ def test_gauss_legendre_rule(n):
 
 
 def test_gauss_legendre_rejects_bad_n():
-    for bad in (0, -1, 2.0):
-        with pytest.raises(ValueError):
+    for bad in (0, -1, 2.0, True):
+        with pytest.raises(ValueError, match="n_quad"):
             hydro.gauss_legendre(bad)
+
+
+def test_shipped_rules_are_numpys_leggauss():
+    """The table (arvcas/data/gauss_legendre.toml) against the installed NumPy's leggauss: the same rules to a
+    few units in the last place (the bits may differ with the release, which is why it is a table), for every n."""
+    for n in range(1, hydro.MAX_NODES + 1):
+        x, w = hydro.leggauss(n)
+        X, W = np.polynomial.legendre.leggauss(n)
+        np.testing.assert_allclose(x, X, rtol=0, atol=1e-15, err_msg=f"n = {n}")
+        np.testing.assert_allclose(w, W, rtol=1e-13, atol=0, err_msg=f"n = {n}")
+        assert not x.flags.writeable and not w.flags.writeable
 
 
 # --- the drag integral on one link ---------------------------------------------------------------

@@ -50,6 +50,24 @@ def test_replays_refuse_another_model(tmp_path, capsys):
         assert "--allow-model-change" in err
 
 
+def test_a_front_of_another_casadi_release_says_so(tmp_path, capsys):
+    """A run digest that differs where the front records another CasADi release: the refusal names both
+    releases (CasADi's generated C differs between them), not a change of arvcas's model."""
+    import casadi
+
+    front = synthetic_front(tmp_path / "front.h5", run_digest=OLD)
+    with h5py.File(front, "r+") as f:
+        v = json.loads(f.attrs["versions"])
+        f.attrs["versions"] = json.dumps(v | {"casadi": "3.7.0"}, sort_keys=True)
+    err = assert_refused(["simulate", "--from-front", front, "--index", "0"], capsys, tmp_path,
+                         f"CasADi 3.7.0 computed it, {casadi.__version__} is installed")
+    assert "model code" not in err
+    (tmp_path / "same").mkdir()
+    same = synthetic_front(tmp_path / "same" / "front.h5", run_digest=OLD)  # the same release: the model changed
+    assert_refused(["simulate", "--from-front", same, "--index", "0"], capsys, tmp_path / "same",
+                   "the model code or data differ")
+
+
 def test_allowed_model_change_is_recorded(tmp_path, capsys):
     front = synthetic_front(tmp_path / "front.h5", model_hash=OLD)
     out = tmp_path / "r.h5"

@@ -8,21 +8,67 @@ Drag (paper eq. 9, generalised by docs/model.md §3): along the link axis ``u`` 
 
 from __future__ import annotations
 
+import tomllib
 from functools import lru_cache
+from importlib import resources
 
 import casadi as ca
 import numpy as np
 
-__all__ = ["gauss_legendre", "link_drag", "normal_basis", "planar_drag", "buoyancy_force"]
+__all__ = ["gauss_legendre", "leggauss", "MAX_NODES", "link_drag", "normal_basis", "planar_drag", "buoyancy_force"]
+
+MAX_NODES = 64  # the largest rule arvcas/data/gauss_legendre.toml holds
+_TABLE = "data/gauss_legendre.toml"
+
+
+@lru_cache(maxsize=None)
+def _table() -> dict:
+    with resources.files("arvcas").joinpath(_TABLE).open("rb") as f:
+        return tomllib.load(f)
+
+
+@lru_cache(maxsize=None)
+def leggauss(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes and weights of the n-point Gauss-Legendre rule on [-1, 1], as ``numpy.polynomial.legendre.leggauss(n)``
+    gives them: for n up to :data:`MAX_NODES` (every rule a run uses: ``ModelOptions.n_quad`` and
+    ``time.thrust_quadrature`` stay within it) from ``arvcas/data/gauss_legendre.toml``, a table, so that a run's
+    arithmetic (and the run digest of a committed front) does not depend on the NumPy release installed
+    (leggauss's last bits differ between releases); beyond it, NumPy's own. Read-only arrays."""
+    if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+        raise ValueError(f"n_quad: number of quadrature points must be an integer >= 1, got {n!r}")
+    if n > MAX_NODES:
+        x, w = np.polynomial.legendre.leggauss(n)
+    else:
+        rule = _table()[f"n{n}"]
+        x, w = np.array(rule["x"], dtype=float), np.array(rule["w"], dtype=float)
+    x.flags.writeable = w.flags.writeable = False
+    return x, w
 
 
 @lru_cache(maxsize=None)
 def gauss_legendre(n: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Nodes and weights of the n-point Gauss-Legendre rule on [0, 1] (exact for degree 2n-1)."""
-    if not isinstance(n, int) or n < 1:
-        raise ValueError(f"n_quad: number of quadrature points must be an integer >= 1, got {n!r}")
-    xi, wi = np.polynomial.legendre.leggauss(n)
+    """Nodes and weights of the n-point Gauss-Legendre rule on [0, 1] (exact for degree 2n-1; :func:`leggauss`)."""
+    xi, wi = leggauss(n)
     return tuple(0.5 * (xi + 1.0)), tuple(0.5 * wi)
+
+
+def leggauss_table_text() -> str:
+    """The text of ``arvcas/data/gauss_legendre.toml`` from the installed NumPy's leggauss (how it was written:
+    ``python -c "from arvcas.model.hydro import leggauss_table_text as t; print(t(), end='')"``)."""
+    out = [
+        "# Gauss-Legendre rules on [-1, 1]: nodes x and weights w of the n-point rule, n = 1..64, for the arm's link",
+        "# drag (ModelOptions.n_quad, arvcas.model.hydro) and the thrusters' forcing within a plant step",
+        "# (time.thrust_quadrature, arvcas.sim.thrust_forcing). Dimensionless.",
+        f"# Source: numpy.polynomial.legendre.leggauss(n) of NumPy {np.__version__} (arvcas.model.hydro.leggauss_table_text),",
+        "# each value in its shortest round-trip form (read back exactly). Kept as data because leggauss's last bits",
+        "# differ between NumPy releases (1.24.0 against 2.4.6), which changed every run's generated C and so the run",
+        "# digests of the committed fronts (docs/provenance.md). tests/test_hydro.py checks the rules' exactness and",
+        "# the table against the installed NumPy's leggauss.",
+    ]
+    for n in range(1, MAX_NODES + 1):
+        x, w = np.polynomial.legendre.leggauss(n)
+        out += ["", f"[n{n}]", f"x = [{', '.join(repr(float(v)) for v in x)}]", f"w = [{', '.join(repr(float(v)) for v in w)}]"]
+    return "\n".join(out) + "\n"
 
 
 def link_drag(rho, Cd, diameter, s, v, w, n_quad: int):

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import casadi as ca
 
 from arvcas.model import manipulator, thrusters, vehicle
+from arvcas.model.hydro import MAX_NODES
 from arvcas.model.linalg import lu_solve, solve_nopivot
 from arvcas.model.spatial import J
 
@@ -28,8 +29,8 @@ class ModelOptions:
     n_quad: int = 5  # Gauss-Legendre points per link for the drag integral (docs/model.md §3)
 
     def __post_init__(self):
-        if not isinstance(self.n_quad, int) or isinstance(self.n_quad, bool) or not 1 <= self.n_quad <= 64:
-            raise ValueError(f"ModelOptions.n_quad: must be an integer in [1, 64], got {self.n_quad!r}")
+        if not isinstance(self.n_quad, int) or isinstance(self.n_quad, bool) or not 1 <= self.n_quad <= MAX_NODES:
+            raise ValueError(f"ModelOptions.n_quad: must be an integer in [1, {MAX_NODES}], got {self.n_quad!r}")
 
     def tag(self) -> str:
         return f"nq{self.n_quad}"

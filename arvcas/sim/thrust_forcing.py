@@ -17,7 +17,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from arvcas.model import thrusters
+from arvcas.model import hydro, thrusters
 from arvcas.model.linalg import lu_solve
 from arvcas.model.spatial import J
 from arvcas.model.thruster_tables import IV, pchip_interval, pchip_newton, stage_intervals, table_grids, target_intervals
@@ -47,7 +47,7 @@ def lag_offsets(cfg: ScenarioConfig) -> list[float]:
     ng = quadrature(cfg)
     if ng is None:
         return stage_offsets(cfg)
-    gx = np.polynomial.legendre.leggauss(ng)[0]
+    gx = hydro.leggauss(ng)[0]
     hp = cfg.time_h_plant
     out = [float(i * hp + j * 0.5 * hp + 0.25 * hp * (x + 1)) for i in range(cfg.substeps) for j in range(2) for x in gx]
     return out + [stage_offsets(cfg)[-1]]
@@ -65,7 +65,7 @@ def moment_weights(cfg: ScenarioConfig) -> np.ndarray:
     sum_j A_j B int_a^tau (tau - t) l_j F dt``; column ``12 i + 3 k + j`` holds node weights of
     ``int l_j F`` for k = 0: w(a + hp/2), 1: w(a + hp), 2: omega(a + hp/2), 3: omega(a + hp)."""
     ng, hp, n_sub = quadrature(cfg), cfg.time_h_plant, cfg.substeps
-    gx, gw = np.polynomial.legendre.leggauss(ng)
+    gx, gw = hydro.leggauss(ng)
     C = np.zeros((2 * ng * n_sub, N_MOMENTS * n_sub))
     ts = (0.0, 0.5 * hp, hp)  # stage times, relative to a step's start
     for i in range(n_sub):

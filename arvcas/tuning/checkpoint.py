@@ -312,8 +312,13 @@ def provenance_diff(c: Checkpoint, params, where: str = "front") -> list[str]:
     if c.run_digest:
         now = run_digest(c, params)
         if now != c.run_digest:
+            import casadi
+
+            was = (c.versions or {}).get("casadi")
+            why = (f"CasADi {was} computed it, {casadi.__version__} is installed, and CasADi's generated C differs "
+                   f"between releases" if was and was != casadi.__version__ else "the model code or data differ")
             out.append(f"the compiled run changed (run digest {c.run_digest[:12]} in the file, {now[:12]} now: "
-                       f"the model code or data differ)")
+                       f"{why})")
     elif not c.model_hash:
         out.append("the file records no model hash (written by an older arvcas)")
     elif c.model_hash != model_hash():
