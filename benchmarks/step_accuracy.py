@@ -155,8 +155,9 @@ def plant_inputs(pv, r, layout=None) -> np.ndarray:
         return held_wrench(pv, r.thrust, lay)
     P = view(ca.DM(np.asarray(pv, float)), lay)
     maps = thrusters.thruster_maps(P)
-    return np.array([[float(thrusters.map_inverse(P, maps[i], ca.DM(row[i]))) for i in range(len(maps))]
-                     for row in r.thrust_cmd])
+    cmd = np.asarray(r.thrust_cmd, float)  # one inversion per thruster over all its samples (elementwise)
+    return np.stack([np.array(thrusters.map_inverse(P, m, ca.DM(cmd[:, i]))).ravel() for i, m in enumerate(maps)],
+                    axis=1)
 
 
 def scenario_n(cfg) -> int:
