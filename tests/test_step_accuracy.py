@@ -54,7 +54,7 @@ def test_reference_converged(case):
     fine = sa.cvodes_states(cfg, pv, x0, taus, ph, tol=1e-15, n_samples=N)
     assert ref.shape == (N + 1, 12) and np.isfinite(ref).all()
     assert np.abs(ref - x0).max() > 1e-3  # the state does move
-    assert np.abs(fine - ref).max() < 1e-11
+    assert 0 < np.abs(fine - ref).max() < 1e-11  # another integration (the reference is built per tolerance)
 
 
 def test_rk4_matches_cvodes_and_order_four(case):
