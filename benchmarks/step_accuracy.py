@@ -2,7 +2,9 @@
 
     python benchmarks/step_accuracy.py            # full, Haidou-1: writes results/step/step_accuracy.json and README.md
     python benchmarks/step_accuracy.py --system bluerov2_heavy_alpha5   # writes results/step/bluerov2_heavy_alpha5/
-    python benchmarks/step_accuracy.py --quick --out /tmp/step   # smoke run: proposed only, steps 0.01 and 0.1
+    python benchmarks/step_accuracy.py --quick --out /tmp/step   # smoke run: proposed only, steps 0.01 and 0.1,
+                                                                   # 3 Monte Carlo draws (the first traced),
+                                                                   # the front's batch without lockstep lanes
 
 ``--system NAME`` (a shipped system, :data:`SYSTEMS`; default haidou1) chooses the plant (its ``uvms_rhs``, its
 ``B_T`` with one column per thruster, its stow pose), its default scenario, its committed fronts, the
@@ -155,8 +157,9 @@ def plant_inputs(pv, r, layout=None) -> np.ndarray:
         return held_wrench(pv, r.thrust, lay)
     P = view(ca.DM(np.asarray(pv, float)), lay)
     maps = thrusters.thruster_maps(P)
-    return np.array([[float(thrusters.map_inverse(P, maps[i], ca.DM(row[i]))) for i in range(len(maps))]
-                     for row in r.thrust_cmd])
+    cmd = np.asarray(r.thrust_cmd, float)  # one inversion per thruster over all its samples (elementwise)
+    return np.stack([np.array(thrusters.map_inverse(P, m, ca.DM(cmd[:, i]))).ravel() for i, m in enumerate(maps)],
+                    axis=1)
 
 
 def scenario_n(cfg) -> int:
@@ -190,14 +193,37 @@ def cvodes_states(cfg, pv, x0, taus, phase, tol: float = CVODES_TOL, n_samples: 
     CVODES (Adams, functional iteration: the plant is not stiff, and the AD Jacobian of the drag term
     is NaN at zero relative velocity), abstol = reltol = ``tol``, restarted at every sample.
     """
-    x, s, par, xdot = _plant_ode(cfg, opts, layout)
-    o = dict(abstol=tol, reltol=tol, max_num_steps=1_000_000, linear_multistep_method="adams",
-             nonlinear_solver_iteration="functional")
-    F = ca.integrator("ref", "cvodes", {"x": x, "p": par, "t": s, "ode": xdot}, 0.0, [cfg.time_h], o)
+    x, F = _reference(cfg, np.asarray(pv, float), tol, opts, layout)
     P = _par_columns(cfg, pv, taus, phase)
     n = P.shape[1] if n_samples is None else int(n_samples)
     X = np.array(F.mapaccum(n)(x0=_x0(x0, x), p=P[:, :n])["xf"]).T
     return np.vstack([_x0(x0, x)[None, :], X])[:, :12]
+
+
+_REFERENCES: dict = {}  # the integrators built in this process, by everything their ODE is made of
+
+
+def _reference(cfg, pv, tol, opts, layout):
+    """(x, CVODES over one sample) for :func:`cvodes_states`, built once per scenario (any plant step),
+    parameters, tolerance, model options and system structure in a process (the plant with a 200-point thrust
+    table takes seconds to build).
+
+    The parameters are the same on every sample: numbers in the right-hand side (their arithmetic, the thrust
+    table's slopes among it, folded once instead of at every evaluation: about 2.5x faster with the T200 table)."""
+    from arvcas.system.params import default_layout
+
+    lay = layout or default_layout()
+    # the plant's step and thrust quadrature are the closed loop's, not the reference's: one integrator for all steps
+    same = dataclasses.replace(cfg, time_h_plant=cfg.time_h, time_thrust_quadrature=None)
+    key = (repr(same), pv.tobytes(), tol, repr(opts), repr(lay.structure), tuple(lay.names))
+    if key not in _REFERENCES:
+        x, s, par, xdot = _plant_ode(cfg, opts, lay)
+        xdot = ca.substitute(xdot, par[par.numel() - pv.size:], ca.DM(pv))
+        o = dict(abstol=tol, reltol=tol, max_num_steps=1_000_000, linear_multistep_method="adams",
+                 nonlinear_solver_iteration="functional")
+        _REFERENCES[key] = x, ca.integrator("ref", "cvodes", {"x": x, "p": par, "t": s, "ode": xdot}, 0.0,
+                                            [cfg.time_h], o)
+    return _REFERENCES[key]
 
 
 def rk4_states(cfg, pv, x0, taus, phase, h_plant: float, n_samples: int | None = None, opts=None, layout=None):
@@ -331,10 +357,12 @@ def _compare_metrics(metrics: dict, groups, hp, base) -> dict:
     return out
 
 
-def _front_args(fr) -> dict:
-    """A front's study draw (its noise seed, model factors, phases) for ``CompiledRun.batch``, one thread."""
+def _front_args(fr, quick: bool = False) -> dict:
+    """A front's study draw (its noise seed, model factors, phases) for ``CompiledRun.batch``, one thread.
+    ``quick``: the runs one at a time (the same bits as in lockstep lanes, whose library per step is not
+    compiled; the quick mode's speeds are not for the record)."""
     return dict(seed=int(fr.draw_seeds[0]), uncertainty=fr.draw_uncertainty[0], phase=fr.draw_phase[0],
-                n_threads=1, return_status=True)
+                n_threads=1, return_status=True, lockstep=False if quick else None)
 
 
 def _valid(r, h: float) -> int:
@@ -405,7 +433,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
             traced.append((f"{c} front[{i}]", c, fr.gains[i], int(fr.draw_seeds[0]), fr.draw_uncertainty[0],
                            fr.draw_phase[0]))
     for c in mc_ctrls:
-        for i in range(min(MC_TRACED, mc_runs)):
+        for i in range(min(1 if quick else MC_TRACED, mc_runs)):
             traced.append((f"{c} mc[{i}]", c, None, int(draws.noise_seed[i]), draws.factors[i], draws.phase[i]))
 
     per_step: dict = {}
@@ -438,7 +466,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
         rec["compile_and_first_call_s"] = time.perf_counter() - t_c
         # front members (metrics only); their batch is timed below, all steps interleaved
         for c, fr in fronts.items():
-            chat, rmse, ok, _tf = runs[c].batch(fr.gains, **_front_args(fr))
+            chat, rmse, ok, _tf = runs[c].batch(fr.gains, **_front_args(fr, quick))
             metrics[(f"{c} front", hp)] = (chat, rmse, ok)
             log(f"  {c} front: {fr.size} runs, ok {int(ok.sum())}/{ok.size}")
         for c in mc_ctrls:
@@ -458,7 +486,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
         for hp in order:
             for c, fr in fronts.items():
                 t0 = time.perf_counter()
-                compiled[hp][c].batch(fr.gains, **_front_args(fr))
+                compiled[hp][c].batch(fr.gains, **_front_args(fr, quick))
                 times[(hp, c)].append(time.perf_counter() - t0)
     for hp in steps:
         per_step[hp]["timing"] = {
@@ -483,7 +511,7 @@ def study(quick: bool = False, mc_runs: int = MC_RUNS, tol: float = CVODES_TOL, 
                 metrics[(f"{c} default (batch)", hp_)] = (chat, rmse, ok)
             bgroups.append(f"{c} default (batch)")
         for c, fr in fronts.items():
-            metrics[(f"{c} front", hf)] = runs_f[c].batch(fr.gains, **_front_args(fr))[0:3]
+            metrics[(f"{c} front", hf)] = runs_f[c].batch(fr.gains, **_front_args(fr, quick))[0:3]
             bgroups.append(f"{c} front")
         for c in mc_ctrls:
             metrics[(f"{c} mc", hf)] = runs_f[c].many(runs_f[c].default_gains(), draws.noise_seed,
@@ -872,7 +900,8 @@ def _worst_metric(row) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--system", default="haidou1", choices=tuple(SYSTEMS), help="shipped system (default haidou1)")
-    ap.add_argument("--quick", action="store_true", help="smoke run: proposed only, steps 0.01 and 0.1, 3 draws")
+    ap.add_argument("--quick", action="store_true", help="smoke run: proposed only, steps 0.01 and 0.1, 3 draws "
+                    "(one traced), the first front member traced, no lockstep lanes")
     ap.add_argument("--out", default=None, help="output directory (default: the system's, results/step[/NAME])")
     ap.add_argument("--mc-runs", type=int, default=MC_RUNS)
     ap.add_argument("--trace-every", type=int, default=TRACE_EVERY, help="trace every n-th front member")

@@ -8,7 +8,7 @@ agrees with CVODES to 1e-9 at h_plant = 0.01 s, and its error falls ~16x per hal
 its own controller, matches CVODES on its first 2 s: to 1e-9 at h_plant = 0.01 s, and to 1e-8 at the
 packaged step 0.05 s (results/step: 1.6e-8 m worst over 100 s and 52 runs; the rule 1e-6).
 (3) the study itself in its quick mode, for each shipped system, on a 3 s horizon: its reference
-machinery (CVODES at two tolerances, the textbook RK4 against the closed loop's own trajectory, with
+machinery (CVODES at two tolerances, 1e-12 and 1e-13, the textbook RK4 against the closed loop's own trajectory, with
 thruster dynamics driven by the lag's closed form, the closed loop against CVODES at 0.01 s) agrees and the
 report renders.
 Accuracy only: no timing is asserted.
@@ -54,7 +54,7 @@ def test_reference_converged(case):
     fine = sa.cvodes_states(cfg, pv, x0, taus, ph, tol=1e-15, n_samples=N)
     assert ref.shape == (N + 1, 12) and np.isfinite(ref).all()
     assert np.abs(ref - x0).max() > 1e-3  # the state does move
-    assert np.abs(fine - ref).max() < 1e-11
+    assert 0 < np.abs(fine - ref).max() < 1e-11  # another integration (the reference is built per tolerance)
 
 
 def test_rk4_matches_cvodes_and_order_four(case):
@@ -89,7 +89,9 @@ def test_closed_loop_matches_cvodes_on_its_own_thrust(params, h_plant, bound):
 def test_quick_study_per_system(system):
     import arvcas
 
-    res = sa.study(quick=True, system=system, duration=3.0, log=lambda *a: None)
+    # CVODES at 1e-12 (the study's default 1e-14): 7e-11 m, rad from the 1e-14 reference on the BlueROV2 over 1 s,
+    # far below the bounds on the plant's error below (1e-7, 1e-4), and 1.6x faster
+    res = sa.study(quick=True, system=system, duration=3.0, log=lambda *a: None, tol=1e-12)
     json.dumps(res)  # the JSON it writes
     sysm = arvcas.load_system(system)
     assert res["system"] == sysm.name and res["n_thrusters"] == sysm.n_thrusters and res["duration"] == 3.0
