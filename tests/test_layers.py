@@ -159,3 +159,15 @@ def test_exceptions_are_made_inside_a_function():
                 top += [f"{m}:{line} imports {t} at its top" for t, line, lazy in GRAPH[m]
                         if t == target and not lazy and t not in TOP_LEVEL_EXCEPTIONS]
     assert top == []
+
+
+MAX_MODULE_LINES = 900  # a module a reader can hold: split by what it does before it grows past this
+
+
+def test_no_module_over_900_lines():
+    """No module of the package or of benchmarks/ is longer than :data:`MAX_MODULE_LINES` lines."""
+    files = [*PKG.rglob("*.py"), *(ROOT / "benchmarks").rglob("*.py")]
+    assert len(files) > 60
+    long = {str(f.relative_to(ROOT)): n for f in files
+            if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES}
+    assert long == {}

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import arvcas
-from arvcas.ident import logs, streams
+from arvcas.ident import logs, rotations, streams
 from arvcas.ident.logs import LogError
 
 pytest.importorskip("pymavlink")
@@ -160,7 +160,7 @@ def _quaternions(n, rng):
 
 
 @pytest.mark.parametrize("world, body", [("ned", "frd"), ("enu", "flu"), ("nwu", "flu")])
-@pytest.mark.parametrize("f, width", [(logs.R_from_quaternion, 4), (logs.R_from_euler, 3)])
+@pytest.mark.parametrize("f, width", [(rotations.R_from_quaternion, 4), (rotations.R_from_euler, 3)])
 def test_the_attitude_a_block_at_a_time_is_the_whole_arrays_to_the_bit(world, body, f, width):
     """Euler angles and a point's offset computed a block of rows at a time equal those of every row's matrix
     at once (NumPy's unwrap of the whole array), bit for bit, at any block size."""
@@ -171,11 +171,11 @@ def test_the_attitude_a_block_at_a_time_is_the_whole_arrays_to_the_bit(world, bo
     Cw, Cb = logs.WORLD_FRAMES[world], logs.BODY_FRAMES[body]
     point = np.array([0.3, -0.1, 0.25])
     R = Cw @ f(x) @ Cb
-    assert np.ptp(logs.euler_from_R(R)[:, 2]) > 4 * np.pi  # the unwrapping does work
-    for m, blocks in ((1500, (1, 7)), (n, (4096, logs.BLOCK_ROWS, n + 5))):  # (rows, the block sizes tried)
-        whole, arm = logs.euler_from_R(R[:m]), np.einsum("nij,j->ni", R[:m], point)
+    assert np.ptp(rotations.euler_from_R(R)[:, 2]) > 4 * np.pi  # the unwrapping does work
+    for m, blocks in ((1500, (1, 7)), (n, (4096, rotations.BLOCK_ROWS, n + 5))):  # (rows, the block sizes tried)
+        whole, arm = rotations.euler_from_R(R[:m]), np.einsum("nij,j->ni", R[:m], point)
         for block in blocks:
-            e, a = logs._attitude(lambda s: x[s], m, f, Cw, Cb, point, block)
+            e, a = rotations._attitude(lambda s: x[s], m, f, Cw, Cb, point, block)
             assert np.array_equal(np.stack(e, axis=1), whole), block
             assert np.array_equal(a, arm), block
 
@@ -189,7 +189,7 @@ def test_the_attitude_against_scipy():
 
     q = _quaternions(30_000, np.random.default_rng(5))
     Cw, Cb = logs.WORLD_FRAMES["enu"], logs.BODY_FRAMES["flu"]
-    e = np.stack(logs._attitude(lambda s: q[s], q.shape[0], logs.R_from_quaternion, Cw, Cb, block=1000)[0], axis=1)
+    e = np.stack(rotations._attitude(lambda s: q[s], q.shape[0], rotations.R_from_quaternion, Cw, Cb, block=1000)[0], axis=1)
     rot = Rotation.from_matrix(Cw) * Rotation.from_quat(q) * Rotation.from_matrix(Cb)
     R = rot.as_matrix()
     gap = 1 - np.abs(R[:, 2, 0])  # ~ (90 deg - |pitch|)^2 / 2
@@ -199,11 +199,11 @@ def test_the_attitude_against_scipy():
         warnings.simplefilter("ignore")  # SciPy's gimbal-lock warning
         ref = rot[far].as_euler("ZYX")[:, ::-1]
     assert np.max(np.abs(np.angle(np.exp(1j * (e[far] - ref))))) < 1e-9
-    np.testing.assert_allclose(logs.R_from_euler(e[near]), R[near], rtol=0, atol=1e-7)
+    np.testing.assert_allclose(rotations.R_from_euler(e[near]), R[near], rtol=0, atol=1e-7)
 
 
 def test_unwrap_in_place_is_numpys():
-    """:func:`arvcas.ident.logs._unwrap` against ``np.unwrap`` bit for bit, with jumps of exactly +-pi
+    """:func:`arvcas.ident.rotations._unwrap` against ``np.unwrap`` bit for bit, with jumps of exactly +-pi
     (NumPy's boundary rule) and of several turns."""
     rng = np.random.default_rng(2)
     p = np.angle(np.exp(1j * np.cumsum(rng.normal(scale=1.2, size=(5000, 3)), axis=0)))
@@ -212,7 +212,7 @@ def test_unwrap_in_place_is_numpys():
     for block in (1, 3, 4096, 5000):
         for order in ("C", "F"):
             u = np.array(p, order=order)
-            assert np.array_equal(logs._unwrap(u, block), ref), (block, order)
+            assert np.array_equal(rotations._unwrap(u, block), ref), (block, order)
 
 
 def test_interpolation_a_block_at_a_time_is_numpys():
