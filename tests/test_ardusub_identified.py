@@ -7,7 +7,6 @@ of a system file outside arvcas records that file relative to itself
 
 from __future__ import annotations
 
-import importlib.util
 import shutil
 from pathlib import Path
 
@@ -15,6 +14,7 @@ import h5py
 
 import arvcas
 from arvcas.tuning import checkpoint as ck
+from script_helpers import load_script
 
 ROOT = Path(__file__).resolve().parents[1]
 SYSTEM = ROOT / "studies" / "systems" / "hinsdale_bluerov2_alpha5_identified_t200.toml"
@@ -22,10 +22,7 @@ IDENTIFIED = ROOT / "results" / "validation" / "hinsdale_bluerov2_alpha5_identif
 
 
 def _generator():
-    spec = importlib.util.spec_from_file_location("hinsdale_t200", SYSTEM.parent / "hinsdale_t200.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(SYSTEM.parent / "hinsdale_t200.py")
 
 
 def test_system_file_is_the_generators_output():

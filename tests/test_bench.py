@@ -15,6 +15,7 @@ from arvcas.cli import bench_module
 
 bench = bench_module()
 from arvcas.cli import main
+from script_helpers import load_script
 
 
 def _numbers(node, where=""):
@@ -76,13 +77,7 @@ def test_recommendation_rule():
 def test_lockstep_rewrite_is_bitwise_equal_and_refuses_what_it_cannot_rewrite(tmp_path):
     """benchmarks/lockstep.py: every lane of the rewritten plant step equals the scalar call to the bit
     (the script fails otherwise), and a line outside the rewrite's vocabulary stops it by name."""
-    import importlib.util
-    from pathlib import Path
-
-    # by its path: the checkout's benchmarks/ is not a package on sys.path when the suite runs against a wheel
-    spec = importlib.util.spec_from_file_location("lockstep", Path(__file__).resolve().parents[1] / "benchmarks/lockstep.py")
-    lockstep = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(lockstep)
+    lockstep = load_script("benchmarks/lockstep.py")
     r = lockstep.measure(tmp_path, evals=400, reps=1)
     assert r["lanes"] and all(v["bitwise_equal"] and v["lane_ns_min"] > 0 for v in r["lanes"].values())
     assert (tmp_path / "README.md").is_file() and json.loads((tmp_path / "lockstep.json").read_text())["lanes"]

@@ -8,7 +8,6 @@ hinsdale_bluerov2_alpha5 reproduces the real vehicle's static attitude at every 
 from __future__ import annotations
 
 import gzip
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +15,7 @@ import pytest
 from scipy.optimize import fsolve
 
 import arvcas
+from script_helpers import load_script
 
 DATA = Path(__file__).resolve().parents[1] / "studies" / "validation" / "hinsdale2023"
 HEADERS = {
@@ -27,10 +27,7 @@ HEADERS = {
 
 
 def _measure():
-    spec = importlib.util.spec_from_file_location("hinsdale_measure", DATA / "measure.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(DATA / "measure.py", "hinsdale_measure")
 
 
 M = _measure()

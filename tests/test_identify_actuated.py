@@ -8,23 +8,18 @@ vehicle's depth moved by the unmodelled force.
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import arvcas
 from arvcas.ident import logs
+from script_helpers import load_script
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _study():
-    spec = importlib.util.spec_from_file_location("actuated_run", ROOT / "studies/validation/actuated/run.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("studies/validation/actuated/run.py", "actuated_run")
 
 
 @pytest.fixture(scope="module")

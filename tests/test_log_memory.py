@@ -6,7 +6,6 @@ the setting, before its messages are read where the log has an index (bags, Data
 
 from __future__ import annotations
 
-import importlib.util
 import re
 import warnings
 from pathlib import Path
@@ -17,14 +16,12 @@ import pytest
 import arvcas
 from arvcas.ident import logs, rotations, streams
 from arvcas.ident.logs import LogError
+from script_helpers import load_script
 
 pytest.importorskip("pymavlink")
 pytest.importorskip("rosbags")
 
-_spec = importlib.util.spec_from_file_location(
-    "log_memory", Path(__file__).resolve().parents[1] / "benchmarks" / "log_memory.py")
-log_memory = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(log_memory)
+log_memory = load_script("benchmarks/log_memory.py")
 
 CODE = Path(arvcas.__file__).resolve().parents[1]
 MB = log_memory.MB

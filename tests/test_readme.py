@@ -13,7 +13,6 @@ README's code blocks run as written.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import re
@@ -24,15 +23,13 @@ import sys
 from pathlib import Path
 
 import pytest
+from script_helpers import load_script
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _renderer():
-    spec = importlib.util.spec_from_file_location("arvcas_readme_renderer", ROOT / "benchmarks" / "readme.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("benchmarks/readme.py", "arvcas_readme_renderer")
 
 
 def _blocks(lang: str) -> list[str]:

@@ -1,17 +1,11 @@
 """benchmarks/sample_cost.py: the Callgrind listing's parser and the page's arithmetic (the page itself is checked
 against its committed JSON by tests/test_readme.py)."""
 
-import importlib.util
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
+from script_helpers import load_script
 
 
 def _module():
-    spec = importlib.util.spec_from_file_location("sample_cost", ROOT / "benchmarks" / "sample_cost.py")
-    m = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(m)
-    return m
+    return load_script("benchmarks/sample_cost.py")
 
 
 LISTING = """\

@@ -17,19 +17,15 @@ Accuracy only: no timing is asserted.
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from arvcas.sim.scenario import load_scenario
+from script_helpers import load_script
 
-_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "step_accuracy.py"
-_spec = importlib.util.spec_from_file_location("step_accuracy", _PATH)
-sa = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(sa)
+sa = load_script("benchmarks/step_accuracy.py")
 
 N = 30  # samples of 0.1 s: a 3 s window
 

@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -26,15 +25,12 @@ from arvcas.build import codegen
 from arvcas.controllers import gains as gains_mod
 from arvcas.sim import closedloop, lockstep, scenario
 from arvcas.sim.run import Run, SimulationError
+from script_helpers import load_script
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _module(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
-    m = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(m)
-    return m
+    return load_script(f"benchmarks/{name}.py")
 
 
 @pytest.fixture(scope="module")

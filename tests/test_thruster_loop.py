@@ -24,6 +24,7 @@ from arvcas.io.results import read_result
 from arvcas.model import thruster_tables, thrusters
 from arvcas.system.params import view
 from arvcas.sim import scenario, schedule, thrust_forcing
+from script_helpers import load_script
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(arvcas.__file__).parent / "data"
@@ -87,11 +88,7 @@ def test_plant_equals_cvodes_with_the_rotor_states(short, blue):
     current and the tether: the scenario's plant step (h_plant = 0.01 s, the forcing by quadrature,
     ``time.thrust_quadrature = 5``) stays within 2e-7 m, rad (results/step's rule: 1e-6; plain RK4 with the
     thrust at its stage times and its own bound: tests/test_thrust_quadrature.py)."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("step_accuracy", ROOT / "benchmarks" / "step_accuracy.py")
-    sa = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(sa)
+    sa = load_script("benchmarks/step_accuracy.py")
     cfg, run, r = short
     pv, n = blue.params.vector(), 20
     X = np.hstack([r.eta, r.nu])
